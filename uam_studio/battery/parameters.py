@@ -1,0 +1,81 @@
+"""Parameters of the Daigle & Kulkarni (2013) Li-ion 18650 electrochemistry model.
+
+Values are the published 18650 parameters (Daigle & Kulkarni, "Electrochemistry-based
+Battery Modeling for Prognostics", PHM 2013, table 1), the same facts NASA progpy's
+``BatteryElectroChemEOD`` uses. The two health parameters of the paper are
+
+* ``q_max`` (C): mobile lithium charge, progpy's ``qMobile`` (default 7600 C);
+* ``r0`` (ohm): lumped ohmic resistance, progpy's ``Ro`` (default 0.117215 ohm).
+
+Everything else is fixed. Derived quantities (surface/bulk volumes, maximum
+charges) are properties so they can never go stale.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+GAS_CONSTANT = 8.3144621  # J/(mol K)
+FARADAY = 96487.0  # C/mol
+THERMAL_MASS = 37.04  # lumped m*C of the cell used by the thermal state (J/K)
+THERMAL_TAU_S = 100.0  # cooling time constant towards ambient (s)
+
+DEFAULT_Q_MAX = 7600.0  # C
+DEFAULT_R0 = 0.117215  # ohm
+DEFAULT_EOD_V = 3.0  # V
+
+# Redlich-Kister coefficients (J/mol) of the positive and negative electrode potentials.
+AP = (
+    -31593.7, 0.106747, 24606.4, -78561.9, 13317.9, 307387.0, 84916.1,
+    -1.07469e06, 2285.04, 990894.0, 283920.0, -161513.0, -469218.0,
+)
+AN = (86.19,) + (0.0,) * 12
+
+
+@dataclass(frozen=True)
+class CellParameters:
+    """Fixed (non-health) parameters of one 18650 cell. Units in comments."""
+
+    xn_max: float = 0.6  # max mole fraction, negative electrode (-)
+    xp_max: float = 1.0  # max mole fraction, positive electrode (-)
+    alpha: float = 0.5  # Butler-Volmer transfer coefficient (-)
+    sn: float = 0.000437545  # surface area, negative electrode (m^2)
+    sp: float = 0.00030962  # surface area, positive electrode (m^2)
+    kn: float = 2120.96  # Butler-Volmer rate constant, negative (A/m^2)
+    kp: float = 248898.0  # Butler-Volmer rate constant, positive (A/m^2)
+    vol: float = 2e-5  # half the interior volume (m^3)
+    vol_s_fraction: float = 0.1  # surface share of each electrode's volume (-)
+    t_diffusion_s: float = 7e6  # bulk-to-surface diffusion time constant (s)
+    t_ohmic_s: float = 6.08671  # ohmic voltage time constant (s)
+    t_sn_s: float = 1001.38  # negative surface overpotential time constant (s)
+    t_sp_s: float = 46.4311  # positive surface overpotential time constant (s)
+    u0p: float = 4.03  # reference potential, positive electrode (V)
+    u0n: float = 0.01  # reference potential, negative electrode (V)
+    ap: tuple[float, ...] = field(default=AP)
+    an: tuple[float, ...] = field(default=AN)
+    t_ambient_k: float = 292.1  # ambient and initial cell temperature (K)
+
+    @property
+    def xn_min(self) -> float:
+        return 1.0 - self.xp_max
+
+    @property
+    def xp_min(self) -> float:
+        return 1.0 - self.xn_max
+
+    @property
+    def vol_s(self) -> float:
+        """Surface volume (m^3)."""
+        return self.vol_s_fraction * self.vol
+
+    @property
+    def vol_b(self) -> float:
+        """Bulk volume (m^3)."""
+        return self.vol * (1.0 - self.vol_s_fraction)
+
+    def q_total(self, q_max):
+        """Total lithium charge qMax = q_max / (xn_max - xn_min) (C)."""
+        return q_max / (self.xn_max - self.xn_min)
+
+
+DEFAULT_CELL = CellParameters()

@@ -1,0 +1,269 @@
+"""Public battery simulation API: current (A) in, voltage (V) and end of discharge (s) out."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError, check_range
+from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0, CellParameters
+from .solver import integrate_current, output_voltage, step
+from .state import STATE_NAMES, BatteryState, full_charge
+
+Q_MAX_RANGE = (1.0, 20000.0)  # C; the paper trains on 5000-8000
+R0_RANGE = (0.0, 5.0)  # ohm; the paper trains on 0.017-0.45
+EOD_RANGE = (2.5, 4.0)  # V
+CURRENT_LIMIT_A = 50.0  # |current| above this is treated as a unit error (A given as mA, kW...)
+DT_RANGE = (1e-3, 60.0)  # s
+
+
+@dataclass(frozen=True)
+class SimulationResult:
+    """Result of :func:`simulate`. Arrays have the shape of the input profile ([T] or [B, T]).
+
+    time_s: end time of each step (s), shape [T]; sample k is the state after
+        ``current_a[k]`` has flowed for ``dt_s``.
+    voltage_v: terminal voltage (V). Never NaN: samples after EOD hold the
+        first sub-cut-off value (clipped to >= 0) and are flagged by ``valid``.
+    valid: False from the first sample below ``eod_v`` onwards.
+    eod_s: time of the first sample below ``eod_v`` (s); NaN where the profile
+        ends first. Scalar for a [T] input, shape [B] otherwise.
+    final_state: state after the last valid sample of each trajectory (to continue
+        a mission leg by leg), a :class:`BatteryState` of batch B.
+    eod_reached: bool, scalar or [B].
+    current_a: the current actually drawn (A), the input in current mode and P/V
+        in constant-power mode.
+    """
+
+    time_s: np.ndarray
+    voltage_v: np.ndarray
+    valid: np.ndarray
+    eod_s: float | np.ndarray
+    final_state: BatteryState
+    eod_reached: bool | np.ndarray
+    current_a: np.ndarray
+
+    @property
+    def min_voltage_v(self) -> float | np.ndarray:
+        """Lowest valid voltage (V) of each trajectory (the cut-off sample included)."""
+        v = np.where(self.valid, self.voltage_v, np.inf)
+        m = v.min(axis=-1)
+        first_bad = np.take_along_axis(
+            np.atleast_2d(self.voltage_v), np.atleast_1d(_first_invalid(np.atleast_2d(self.valid)))[:, None].clip(
+                max=self.voltage_v.shape[-1] - 1), axis=1)[:, 0]
+        m2 = np.where(np.atleast_1d(self.eod_reached), np.minimum(np.atleast_1d(m), first_bad), np.atleast_1d(m))
+        return float(m2[0]) if self.voltage_v.ndim == 1 else m2
+
+
+def _first_invalid(valid: np.ndarray) -> np.ndarray:
+    """Index of the first False per row (T where none)."""
+    t = valid.shape[-1]
+    any_bad = ~valid.all(axis=-1)
+    return np.where(any_bad, np.argmin(valid, axis=-1), t)
+
+
+def _as_batch(name: str, value, batch: int | None, lo: float, hi: float, unit: str) -> np.ndarray:
+    arr = np.atleast_1d(np.asarray(value, dtype=float))
+    if arr.ndim != 1:
+        raise InputError(name, f"expected a scalar or shape [B], got shape {arr.shape}")
+    bad = ~np.isfinite(arr) | (arr < lo) | (arr > hi)
+    if bad.any():
+        check_range(name, arr[bad][0], lo, hi, unit)
+    if batch is not None and arr.shape[0] not in (1, batch):
+        raise InputError(name, f"has {arr.shape[0]} values but the batch has {batch}")
+    return arr
+
+
+def _check_profile(name: str, profile, limit: float, unit: str) -> np.ndarray:
+    try:
+        arr = np.asarray(profile, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(name, "expected an array of numbers") from None
+    if arr.ndim not in (1, 2) or arr.shape[-1] == 0:
+        raise InputError(name, f"expected shape [T] or [B, T] with T >= 1, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(name, "contains NaN or inf; every sample must be finite")
+    if np.any(np.abs(arr) > limit):
+        raise InputError(name, f"|{name}| must be <= {limit:g}{unit}, got {np.abs(arr).max():g}")
+    return arr
+
+
+def _prepare(profile: np.ndarray, q_max, r0, initial_state: BatteryState | None):
+    batch_hint = profile.shape[0] if profile.ndim == 2 else None
+    q = _as_batch("q_max", q_max, batch_hint, *Q_MAX_RANGE, " C")
+    r = _as_batch("r0", r0, batch_hint, *R0_RANGE, " ohm")
+    sizes = {profile.shape[0] if profile.ndim == 2 else 1, q.shape[0], r.shape[0]}
+    if initial_state is not None:
+        if not isinstance(initial_state, BatteryState):
+            raise InputError("initial_state", "expected a BatteryState (e.g. a result's final_state)")
+        sizes.add(initial_state.batch_size)
+    sizes.discard(1)
+    if len(sizes) > 1:
+        raise InputError("batch", f"inconsistent batch sizes {sorted(sizes)} across current, q_max, r0, state")
+    b = sizes.pop() if sizes else 1
+    prof2 = np.broadcast_to(np.atleast_2d(profile), (b, profile.shape[-1]))
+    q = np.broadcast_to(q, (b,)).astype(float)
+    r = np.broadcast_to(r, (b,)).astype(float)
+    if initial_state is None:
+        x0 = full_charge(q)
+    else:
+        if initial_state.batch_size not in (1, b):
+            raise InputError("initial_state", f"batch {initial_state.batch_size} does not match {b}")
+        arr = np.broadcast_to(initial_state.as_array(), (b, len(STATE_NAMES)))
+        if not np.all(np.isfinite(arr)):
+            raise InputError("initial_state", "contains NaN or inf")
+        x0 = BatteryState.from_array(arr)
+    squeeze = profile.ndim == 1 and b == 1 and np.ndim(q_max) == 0 and np.ndim(r0) == 0
+    return prof2, q, r, x0, squeeze
+
+
+def _chunk_steps(batch: int) -> int:
+    """Steps integrated per pass: long for few trajectories (less overhead), short for
+    big batches (rows that reached EOD drop out sooner)."""
+    return 4096 if batch < 16 else 768
+
+
+def _integrate_until_eod(current, x0: BatteryState, q_total, r0, eod_v, dt, cell):
+    """Integrate in time chunks, dropping trajectories once they pass the cut-off.
+
+    Returns (voltage [B, T] with garbage after EOD, index of the first sample below
+    eod_v per row (T if none), state after the last valid sample [B, 8]).
+    """
+    b, t = current.shape
+    voltage = np.empty((b, t))
+    state = x0.as_array()
+    k_eod = np.full(b, t)
+    alive = np.arange(b)
+    chunk = _chunk_steps(b)
+    for start in range(0, t, chunk):
+        if alive.size == 0:
+            break
+        stop = min(t, start + chunk)
+        v, seq = integrate_current(current[alive, start:stop], BatteryState.from_array(state[alive]),
+                                   q_total[alive], r0[alive], dt, cell)
+        voltage[alive, start:stop] = v
+        below = ~(v >= eod_v)  # NaN counts as below
+        hit = below.any(axis=1)
+        first = np.where(hit, np.argmax(below, axis=1), stop - start)
+        last = first - 1  # last valid sample of this chunk, -1 if none
+        seq_arr = np.stack([seq[n] for n in STATE_NAMES], axis=-1)
+        picked = seq_arr[np.arange(alive.size), np.maximum(last, 0)]
+        state[alive] = np.where((last >= 0)[:, None], picked, state[alive])
+        k_eod[alive[hit]] = start + first[hit]
+        alive = alive[~hit]
+    return voltage, k_eod, state
+
+
+def _finish(time_s, voltage, k_eod, final_state_arr, current, squeeze) -> SimulationResult:
+    """Mask after EOD, remove NaN/inf, squeeze a single trajectory."""
+    b, t = voltage.shape
+    valid = np.arange(t)[None, :] < k_eod[:, None]
+    eod_reached = k_eod < t
+    eod_s = np.where(eod_reached, time_s[np.minimum(k_eod, t - 1)], np.nan)
+    # Invalid samples hold the first sub-cut-off value (finite, >= 0).
+    hold = np.nan_to_num(voltage[np.arange(b), np.minimum(k_eod, t - 1)], nan=0.0, posinf=0.0, neginf=0.0)
+    voltage = np.where(valid, voltage, np.clip(hold, 0.0, None)[:, None])
+    final_state = BatteryState.from_array(final_state_arr)
+    if squeeze:
+        return SimulationResult(time_s, voltage[0], valid[0], float(eod_s[0]), final_state,
+                                bool(eod_reached[0]), current[0])
+    return SimulationResult(time_s, voltage, valid, eod_s, final_state, eod_reached, current)
+
+
+def simulate(
+    current_a,
+    dt_s: float = 1.0,
+    q_max=DEFAULT_Q_MAX,
+    r0=DEFAULT_R0,
+    eod_v: float = DEFAULT_EOD_V,
+    initial_state: BatteryState | None = None,
+    cell: CellParameters = DEFAULT_CELL,
+) -> SimulationResult:
+    """Simulate one 18650 cell under a current profile (discharge positive).
+
+    :param current_a: per-cell current (A), shape [T] or [B, T]; ``current_a[k]``
+        flows during [k dt, (k+1) dt).
+    :param dt_s: step (s).
+    :param q_max: mobile Li charge (C), scalar or [B] (progpy's ``qMobile``).
+    :param r0: ohmic resistance (ohm), scalar or [B] (progpy's ``Ro``).
+    :param eod_v: end-of-discharge cut-off (V).
+    :param initial_state: continue from this state (e.g. ``result.final_state``);
+        default: fully charged and rested.
+    :return: :class:`SimulationResult`.
+    :raises InputError: on bad input, naming the field and its allowed range.
+    """
+    dt = check_range("dt_s", dt_s, *DT_RANGE, " s")
+    eod = check_range("eod_v", eod_v, *EOD_RANGE, " V")
+    profile = _check_profile("current_a", current_a, CURRENT_LIMIT_A, " A")
+    current, q, r, x0, squeeze = _prepare(profile, q_max, r0, initial_state)
+    current = np.ascontiguousarray(current)
+    q_total = cell.q_total(q)
+    with np.errstate(all="ignore"):
+        voltage, k_eod, final = _integrate_until_eod(current, x0, q_total, r, eod, dt, cell)
+    time_s = dt * np.arange(1, current.shape[1] + 1)
+    return _finish(time_s, voltage, k_eod, final, current, squeeze)
+
+
+def simulate_constant_power(
+    power_w,
+    dt_s: float = 1.0,
+    q_max=DEFAULT_Q_MAX,
+    r0=DEFAULT_R0,
+    eod_v: float = DEFAULT_EOD_V,
+    initial_state: BatteryState | None = None,
+    cell: CellParameters = DEFAULT_CELL,
+) -> SimulationResult:
+    """Like :func:`simulate`, but the load is a per-cell power (W): current = P / V.
+
+    The current of step k is P[k] divided by the terminal voltage at the start of
+    the step, so the cell draws more current as its voltage sags (a realistic
+    constant-power load; the paper's setting is the constant-current scaling).
+    """
+    dt = check_range("dt_s", dt_s, *DT_RANGE, " s")
+    eod = check_range("eod_v", eod_v, *EOD_RANGE, " V")
+    profile = _check_profile("power_w", power_w, CURRENT_LIMIT_A * 4.2, " W")
+    power, q, r, x0, squeeze = _prepare(profile, q_max, r0, initial_state)
+    q_total = cell.q_total(q)
+    b, t = power.shape
+    volts = np.empty((b, t))
+    current = np.empty((b, t))
+    seq = {n: np.empty((b, t)) for n in STATE_NAMES}
+    x = x0
+    with np.errstate(all="ignore"):
+        v = output_voltage(x.__dict__, q_total, cell)
+        for k in range(t):
+            i_k = np.where(v > 0.5, power[:, k] / np.maximum(v, 0.5), 0.0)
+            current[:, k] = i_k
+            x = step(x, i_k, q_total, r, dt, cell)
+            v = output_voltage(x.__dict__, q_total, cell)
+            volts[:, k] = v
+            for n in STATE_NAMES:
+                seq[n][:, k] = getattr(x, n)
+            if not np.any(v >= eod):
+                volts[:, k + 1:] = v[:, None]
+                current[:, k + 1:] = 0.0
+                for n in STATE_NAMES:
+                    seq[n][:, k + 1:] = seq[n][:, k:k + 1]
+                break
+    time_s = dt * np.arange(1, t + 1)
+    below = ~(volts >= eod)
+    k_eod = np.where(below.any(axis=1), np.argmax(below, axis=1), t)
+    seq_arr = np.stack([seq[n] for n in STATE_NAMES], axis=-1)
+    last = k_eod - 1
+    final = np.where((last >= 0)[:, None], seq_arr[np.arange(b), np.maximum(last, 0)], x0.as_array())
+    return _finish(time_s, volts, k_eod, final, current, squeeze)
+
+
+def rest_voltage(q_max=DEFAULT_Q_MAX, cell: CellParameters = DEFAULT_CELL) -> float | np.ndarray:
+    """Open-circuit voltage (V) of a fully charged, rested cell."""
+    q = np.atleast_1d(np.asarray(q_max, dtype=float))
+    x = full_charge(q, cell)
+    v = output_voltage(x.__dict__, cell.q_total(q), cell)
+    return float(v[0]) if np.ndim(q_max) == 0 else v
+
+
+def time_to_eod(result: SimulationResult) -> float:
+    """EOD time (s) of a single-trajectory result, or ``math.inf`` if not reached."""
+    return float(result.eod_s) if result.eod_reached else math.inf

@@ -1,0 +1,120 @@
+"""Batched time integration of the electrochemistry model (explicit Euler, like progpy).
+
+Current-driven profiles use a *time-vectorised* solver. With the current known in
+advance, the charge states and the ohmic voltage follow linear time-invariant
+recurrences, which ``scipy.signal.lfilter`` evaluates for all steps at once. The
+surface overpotentials depend on temperature and the temperature on the
+overpotentials (one step delayed); that weak loop is solved by a fixed-point
+(Picard) iteration over whole trajectories, which converges to round-off in a few
+passes. The result equals step-by-step Euler to ~1e-12 V (tested against
+:func:`step`, the plain step-by-step reference).
+
+Constant-power profiles (current = P / V) need the voltage before each step, so
+they use the step-by-step loop, batched over trajectories.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import lfilter
+
+from .electrochem import equilibrium_voltage, overpotential_gains, surface_fractions
+from .parameters import THERMAL_MASS, THERMAL_TAU_S, CellParameters
+from .state import BatteryState
+
+_PICARD_TOL_K = 1e-7  # K; 1e-7 K moves the voltage by ~1e-10 V
+_PICARD_MAX_ITER = 30
+
+
+def _lag(inputs: np.ndarray, x0: np.ndarray, tau_s: float, dt_s: float) -> np.ndarray:
+    """Euler first-order lag x[k+1] = x[k] + dt (u[k] - x[k]) / tau; returns x[1..T], shape [B, T]."""
+    a = 1.0 - dt_s / tau_s
+    b = dt_s / tau_s
+    out, _ = lfilter([b], [1.0, -a], inputs, axis=-1, zi=(a * x0)[:, None])
+    return out
+
+
+def _shift(seq_1_to_t: np.ndarray, x0: np.ndarray) -> np.ndarray:
+    """x[0..T-1] from x[1..T] and x[0]."""
+    return np.concatenate([x0[:, None], seq_1_to_t[:, :-1]], axis=1)
+
+
+def output_voltage(state_seq: dict, q_total, cell: CellParameters) -> np.ndarray:
+    """Terminal voltage (V) from (sequences of) states; q_total broadcastable against them."""
+    q_surface_max = q_total * cell.vol_s_fraction
+    xns, xps = surface_fractions(state_seq["qns"], state_seq["qps"], q_surface_max)
+    ocv = equilibrium_voltage(xns, xps, state_seq["tb"], cell)
+    return ocv - state_seq["vo"] - state_seq["vsn"] - state_seq["vsp"]
+
+
+def integrate_current(current: np.ndarray, x0: BatteryState, q_total: np.ndarray,
+                      r0: np.ndarray, dt_s: float, cell: CellParameters):
+    """Integrate a known current (A), shape [B, T]. Returns (voltage [B, T], states at 1..T)."""
+    dt = dt_s
+    tdiff = cell.t_diffusion_s
+    inv_vb, inv_vs = 1.0 / cell.vol_b, 1.0 / cell.vol_s
+    a_diff = 1.0 - dt / tdiff * (inv_vb + inv_vs)
+
+    # Bulk-minus-surface concentration gaps follow d[k+1] = a d[k] -/+ (dt/VolS) i[k].
+    gap_n0 = x0.qnb * inv_vb - x0.qns * inv_vs
+    gap_p0 = x0.qpb * inv_vb - x0.qps * inv_vs
+    gap_n, _ = lfilter([dt * inv_vs], [1.0, -a_diff], current, axis=-1, zi=(a_diff * gap_n0)[:, None])
+    gap_p, _ = lfilter([-dt * inv_vs], [1.0, -a_diff], current, axis=-1, zi=(a_diff * gap_p0)[:, None])
+    gap_n = _shift(gap_n, gap_n0)  # d[0..T-1]
+    gap_p = _shift(gap_p, gap_p0)
+    flux_n = dt * gap_n / tdiff
+    flux_p = dt * gap_p / tdiff
+    qnb = x0.qnb[:, None] - np.cumsum(flux_n, axis=1)
+    qns = x0.qns[:, None] + np.cumsum(flux_n - dt * current, axis=1)
+    qpb = x0.qpb[:, None] - np.cumsum(flux_p, axis=1)
+    qps = x0.qps[:, None] + np.cumsum(flux_p + dt * current, axis=1)
+
+    vo = _lag(current * r0[:, None], x0.vo, cell.t_ohmic_s, dt)
+
+    # Overpotential gains at the start of each step (they need x[k], k = 0..T-1).
+    q_surface_max = (q_total * cell.vol_s_fraction)[:, None]
+    xns_k, xps_k = surface_fractions(_shift(qns, x0.qns), _shift(qps, x0.qps), q_surface_max)
+    gn, gp = overpotential_gains(current, xns_k, xps_k, cell)
+    vo_k = _shift(vo, x0.vo)
+
+    tb_k = np.broadcast_to(x0.tb[:, None], current.shape).copy()
+    heat_scale = THERMAL_TAU_S / THERMAL_MASS
+    for _ in range(_PICARD_MAX_ITER):
+        vsn = _lag(gn * tb_k, x0.vsn, cell.t_sn_s, dt)
+        vsp = _lag(gp * tb_k, x0.vsp, cell.t_sp_s, dt)
+        eta_k = vo_k + _shift(vsn, x0.vsn) + _shift(vsp, x0.vsp)
+        tb = _lag(heat_scale * eta_k * current + cell.t_ambient_k, x0.tb, THERMAL_TAU_S, dt)
+        tb_next = _shift(tb, x0.tb)
+        change = np.abs(tb_next - tb_k)
+        tb_k = tb_next
+        if not np.any(change > _PICARD_TOL_K):  # NaN-safe: NaN compares False
+            break
+    # One last pass so vsn/vsp use the converged temperature.
+    vsn = _lag(gn * tb_k, x0.vsn, cell.t_sn_s, dt)
+    vsp = _lag(gp * tb_k, x0.vsp, cell.t_sp_s, dt)
+
+    states = {"tb": tb, "vo": vo, "vsn": vsn, "vsp": vsp, "qnb": qnb, "qns": qns, "qpb": qpb, "qps": qps}
+    voltage = output_voltage(states, q_total[:, None], cell)
+    return voltage, states
+
+
+def step(x: BatteryState, current: np.ndarray, q_total: np.ndarray, r0: np.ndarray,
+         dt_s: float, cell: CellParameters) -> BatteryState:
+    """One explicit-Euler step of all trajectories under current (A), shape [B]."""
+    inv_vb, inv_vs = 1.0 / cell.vol_b, 1.0 / cell.vol_s
+    diff_n = (x.qnb * inv_vb - x.qns * inv_vs) / cell.t_diffusion_s
+    diff_p = (x.qpb * inv_vb - x.qps * inv_vs) / cell.t_diffusion_s
+    xns, xps = surface_fractions(x.qns, x.qps, q_total * cell.vol_s_fraction)
+    gn, gp = overpotential_gains(current, xns, xps, cell)
+    eta = x.vo + x.vsn + x.vsp
+    dt = dt_s
+    return BatteryState(
+        tb=x.tb + dt * (eta * current / THERMAL_MASS + (cell.t_ambient_k - x.tb) / THERMAL_TAU_S),
+        vo=x.vo + dt * (current * r0 - x.vo) / cell.t_ohmic_s,
+        vsn=x.vsn + dt * (gn * x.tb - x.vsn) / cell.t_sn_s,
+        vsp=x.vsp + dt * (gp * x.tb - x.vsp) / cell.t_sp_s,
+        qnb=x.qnb - dt * diff_n,
+        qns=x.qns + dt * (diff_n - current),
+        qpb=x.qpb - dt * diff_p,
+        qps=x.qps + dt * (diff_p + current),
+    )

@@ -1,0 +1,57 @@
+"""Flight model: a leg (distance km, altitude m, wind kt) -> pack power (kW) -> per-cell current (A)."""
+
+from uam_studio.flight.profile import (
+    CLIMB_GROUND_SPEED_MPS,
+    PHASES,
+    InfeasibleLegError,
+    LegProfile,
+    leg_current,
+    leg_feasible,
+    leg_profile,
+    min_leg_distance_km,
+)
+from uam_studio.flight.scaling import (
+    EQUIVALENT_CELL_COUNT,
+    NOMINAL_CELL_VOLTAGE_V,
+    power_kw_to_cell_current_a,
+)
+from uam_studio.flight.tables import (
+    ALTITUDE_RANGE_M,
+    CRUISE_TABLE_DISTANCE_KM,
+    TABLE_PHASES,
+    WIND_RANGE_KTS,
+    cruise_airspeed_mps,
+    cruise_duration_s,
+    cruise_ground_speed_mps,
+    cruise_power_kw,
+    cruise_rows,
+    phase_duration_s,
+    phase_power_kw,
+    phase_rows,
+)
+
+__all__ = [
+    "ALTITUDE_RANGE_M",
+    "CLIMB_GROUND_SPEED_MPS",
+    "CRUISE_TABLE_DISTANCE_KM",
+    "EQUIVALENT_CELL_COUNT",
+    "NOMINAL_CELL_VOLTAGE_V",
+    "PHASES",
+    "TABLE_PHASES",
+    "WIND_RANGE_KTS",
+    "InfeasibleLegError",
+    "LegProfile",
+    "cruise_airspeed_mps",
+    "cruise_duration_s",
+    "cruise_ground_speed_mps",
+    "cruise_power_kw",
+    "cruise_rows",
+    "leg_current",
+    "leg_feasible",
+    "leg_profile",
+    "min_leg_distance_km",
+    "phase_duration_s",
+    "phase_power_kw",
+    "phase_rows",
+    "power_kw_to_cell_current_a",
+]

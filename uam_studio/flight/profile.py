@@ -1,0 +1,172 @@
+"""A flight leg as a piecewise-constant pack-power profile and its per-cell current.
+
+Phases, in order: vertical take-off, climb, cruise, 45 deg descent to 500 m,
+8 deg approach from 500 m, vertical landing, then an optional 0 kW dwell.
+Non-cruise phases come from the paper's phase table (a 30 nm flight), cruise
+from its wind table; see :mod:`uam_studio.flight.tables`. As in the paper, the
+cruise covers the whole leg distance (climb and approach distances are not
+subtracted), but a leg must be long enough to contain them: see
+:func:`min_leg_distance_km`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from uam_studio.errors import InputError, check_range
+from uam_studio.flight import tables
+from uam_studio.flight.scaling import power_kw_to_cell_current_a
+
+PHASES = (
+    "vertical_takeoff",
+    "climb",
+    "cruise",
+    "descent",
+    "approach",
+    "vertical_landing",
+)
+MAX_DISTANCE_KM = 500.0
+MAX_DT_S = 60.0
+MAX_DWELL_S = 86_400.0
+# Modelling assumption: the paper gives climb durations but no climb distances.
+CLIMB_GROUND_SPEED_MPS = 30.0
+APPROACH_START_ALTITUDE_M = 500.0
+APPROACH_ANGLE_DEG = 8.0
+DESCENT_ANGLE_DEG = 45.0
+
+_TABLE_NAME = {"descent": "descent_45deg", "approach": "approach_8deg"}
+
+
+class InfeasibleLegError(InputError):
+    """The leg is too short to climb to, and come down from, its cruise altitude."""
+
+
+def _check_open(field: str, value: float, hi: float, unit: str) -> float:
+    x = check_range(field, value, 0.0, hi, unit)
+    if x == 0.0:
+        raise InputError(field, f"{value!r} is out of range; allowed (0, {hi:g}]{unit}")
+    return x
+
+
+def min_leg_distance_km(altitude_m: float) -> float:
+    """Shortest leg (km) that fits climb, 45 deg descent and 8 deg approach at a cruise altitude (m).
+
+    Climb: table climb duration x ``CLIMB_GROUND_SPEED_MPS``; descent: ``h - 500 m``
+    horizontally; approach: ``500 m / tan 8 deg`` = 3.558 km. About 6.1 km at
+    500 m and 22.8 km at 3000 m.
+    """
+    h = check_range("altitude_m", altitude_m, *tables.ALTITUDE_RANGE_M, " m")
+    climb_m = tables.phase_duration_s("climb", h) * CLIMB_GROUND_SPEED_MPS
+    descent_m = (h - APPROACH_START_ALTITUDE_M) / math.tan(
+        math.radians(DESCENT_ANGLE_DEG)
+    )
+    approach_m = APPROACH_START_ALTITUDE_M / math.tan(math.radians(APPROACH_ANGLE_DEG))
+    return (climb_m + descent_m + approach_m) / 1000.0
+
+
+def leg_feasible(distance_km: float, altitude_m: float) -> bool:
+    """True if a leg of ``distance_km`` (km) can be flown at ``altitude_m`` (m)."""
+    d = _check_open("distance_km", distance_km, MAX_DISTANCE_KM, " km")
+    return d >= min_leg_distance_km(altitude_m)
+
+
+@dataclass(frozen=True, eq=False)
+class LegProfile:
+    """One leg: phases as ``(name, start_s, end_s, pack_power_kw)`` and sampled series.
+
+    ``time_s[k] = k * dt_s`` is the start of step k; ``power_kw[k]`` (pack, kW) and
+    ``current_a[k]`` (per cell, A) are exact averages over ``[k*dt, (k+1)*dt)``, so
+    energy and charge are conserved for any ``dt_s``.
+    """
+
+    distance_km: float
+    altitude_m: float
+    wind_kts: float
+    dt_s: float
+    dwell_s: float
+    phases: tuple[tuple[str, float, float, float], ...]
+    duration_s: float
+    time_s: np.ndarray
+    power_kw: np.ndarray
+    current_a: np.ndarray
+
+    @property
+    def energy_kwh(self) -> float:
+        """Pack energy of the leg (kWh)."""
+        return float(self.power_kw.sum() * self.dt_s / 3600.0)
+
+    @property
+    def charge_c(self) -> float:
+        """Charge drawn from one cell (C)."""
+        return float(self.current_a.sum() * self.dt_s)
+
+
+def leg_profile(
+    distance_km: float,
+    altitude_m: float,
+    wind_kts: float,
+    dt_s: float = 1.0,
+    dwell_s: float = 0.0,
+) -> LegProfile:
+    """Power profile of a leg of ``distance_km`` (km, (0, 500]) at ``altitude_m`` (m, [500, 3000])
+    in ``wind_kts`` (kt, [-39, 39], negative = tailwind), sampled every ``dt_s`` (s, (0, 60]),
+    followed by ``dwell_s`` (s, [0, 86400]) at 0 kW.
+
+    Raises :class:`InputError` for out-of-range inputs and :class:`InfeasibleLegError`
+    if the leg is shorter than :func:`min_leg_distance_km`.
+    """
+    d = _check_open("distance_km", distance_km, MAX_DISTANCE_KM, " km")
+    h = check_range("altitude_m", altitude_m, *tables.ALTITUDE_RANGE_M, " m")
+    w = check_range("wind_kts", wind_kts, *tables.WIND_RANGE_KTS, " kt")
+    dt = _check_open("dt_s", dt_s, MAX_DT_S, " s")
+    dwell = check_range("dwell_s", dwell_s, 0.0, MAX_DWELL_S, " s")
+    need = min_leg_distance_km(h)
+    if d < need:
+        raise InfeasibleLegError(
+            "distance_km",
+            f"{d:.1f} km is too short for cruise at {h:g} m; needs >= {math.ceil(need * 10) / 10:.1f} km",
+        )
+
+    specs: list[tuple[str, float, float]] = []
+    for name in PHASES:
+        if name == "cruise":
+            specs.append(
+                (name, tables.cruise_duration_s(d, h, w), tables.cruise_power_kw(h, w))
+            )
+        else:
+            key = _TABLE_NAME.get(name, name)
+            specs.append(
+                (name, tables.phase_duration_s(key, h), tables.phase_power_kw(key, h))
+            )
+    if dwell > 0:
+        specs.append(("dwell", dwell, 0.0))
+
+    phases, t = [], 0.0
+    for name, dur, p in specs:
+        phases.append((name, t, t + dur, p))
+        t += dur
+    duration = t
+
+    # Cumulative pack energy (kJ) at the phase boundaries; linear in between, flat after the end.
+    bounds = np.array([0.0] + [end for _, _, end, _ in phases])
+    energy = np.concatenate(
+        [[0.0], np.cumsum([p * (end - start) for _, start, end, p in phases])]
+    )
+    n = max(1, math.ceil(duration / dt - 1e-9))
+    edges = np.arange(n + 1) * dt
+    power = np.diff(np.interp(edges, bounds, energy)) / dt
+    current = np.asarray(power_kw_to_cell_current_a(power))
+    time = edges[:-1]
+    for arr in (time, power, current):
+        arr.setflags(write=False)
+    return LegProfile(d, h, w, dt, dwell, tuple(phases), duration, time, power, current)
+
+
+def leg_current(
+    distance_km: float, altitude_m: float, wind_kts: float, dt_s: float = 1.0
+) -> np.ndarray:
+    """Per-cell current (A) of a leg, one value per ``dt_s`` step (see :func:`leg_profile`)."""
+    return np.array(leg_profile(distance_km, altitude_m, wind_kts, dt_s).current_a)
