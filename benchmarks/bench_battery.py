@@ -43,7 +43,7 @@ def main() -> None:
     def naive():
         x = full_charge(q)
         alive = np.ones(b, bool)
-        for k in range(horizon):
+        for _ in range(horizon):
             x = step(x, amps, q_total, r, 1.0, DEFAULT_CELL)
             alive &= output_voltage(x.__dict__, q_total, DEFAULT_CELL) >= 3.0
             if not alive.any():
