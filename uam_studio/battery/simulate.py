@@ -148,8 +148,8 @@ def _integrate_until_eod(current, x0: BatteryState, q_total, r0, eod_v, dt, cell
         hit = below.any(axis=1)
         first = np.where(hit, np.argmax(below, axis=1), stop - start)
         last = first - 1  # last valid sample of this chunk, -1 if none
-        seq_arr = np.stack([seq[n] for n in STATE_NAMES], axis=-1)
-        picked = seq_arr[np.arange(alive.size), np.maximum(last, 0)]
+        rows, cols = np.arange(alive.size), np.maximum(last, 0)
+        picked = np.stack([seq[n][rows, cols] for n in STATE_NAMES], axis=-1)
         state[alive] = np.where((last >= 0)[:, None], picked, state[alive])
         k_eod[alive[hit]] = start + first[hit]
         alive = alive[~hit]

@@ -1,0 +1,360 @@
+"""Missions: a vertiport, destinations, a scenario and a battery, with a stable JSON format.
+
+JSON format (public and stable)::
+
+    {
+      "name": "Bay shuttle",
+      "vertiport": {"x_km": 0.0, "y_km": 0.0, "wind_kts": 8.0},
+      "destinations": [
+        {"name": "Richmond", "x_km": 14.0, "y_km": 16.0, "priority": 2, "wind_kts": 13.0,
+         "dwell_s": 300.0}
+      ],
+      "scenario": "single_charge",
+      "battery": {"q_max": 7600.0, "r0": 0.117215},
+      "eod_v": 3.0
+    }
+
+* coordinates ``x_km``/``y_km`` (km) in [-200, 200]; distances are euclidean;
+* ``wind_kts`` (kt, [-39, 39], negative = tailwind): a destination's wind applies to
+  legs flown *to* it, the vertiport's to legs flown back to the vertiport;
+* ``priority`` is an integer 1-3; ``dwell_s`` (s, optional, default 0) is the time
+  spent on the ground at a destination after landing;
+* ``scenario`` is one of :data:`SCENARIOS`; ``battery.q_max`` (C), ``battery.r0``
+  (ohm) and ``eod_v`` (V) use the ranges of :mod:`uam_studio.battery`.
+
+Destination names must be non-empty, unique, free of commas (the CLI separates
+route entries with commas) and must not be ``"vertiport"`` (any case), the name
+of the vertiport node. A mission with no destinations is valid; planners report it.
+Unknown keys are rejected, so a misspelt optional field never passes silently.
+
+Every validation error is an :class:`~uam_studio.errors.InputError` whose field is
+the JSON path, e.g. ``destinations[2].priority: 4 is out of range; allowed [1, 3]``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+import math
+import os
+import tempfile
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from uam_studio.battery import EOD_RANGE, Q_MAX_RANGE, R0_RANGE
+from uam_studio.errors import InputError, check_range
+from uam_studio.flight.profile import MAX_DWELL_S
+from uam_studio.flight.tables import WIND_RANGE_KTS
+
+VERTIPORT = "vertiport"
+SCENARIOS = ("single_flight", "single_charge", "multi_charge")
+COORD_RANGE_KM = (-200.0, 200.0)
+PRIORITY_RANGE = (1, 3)
+MAX_NAME_LEN = 64
+
+_NUMBER = (int, float)
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _join(prefix: str, name: str) -> str:
+    return f"{prefix}.{name}" if prefix else name
+
+
+@contextlib.contextmanager
+def _under(prefix: str) -> Iterator[None]:
+    """Re-raise an :class:`InputError` from inside with ``prefix.`` put before its field."""
+    try:
+        yield
+    except InputError as err:
+        if not prefix:
+            raise
+        message = str(err)[len(err.field) + 2:]
+        raise InputError(_join(prefix, err.field), message) from None
+
+
+def _number(field_name: str, value: Any, lo: float, hi: float, unit: str = "") -> float:
+    """A JSON number (not a bool, not a string) in [lo, hi]."""
+    if isinstance(value, bool) or not isinstance(value, _NUMBER):
+        raise InputError(field_name, f"expected a number in [{lo:g}, {hi:g}]{unit}, got {value!r}")
+    return check_range(field_name, value, lo, hi, unit)
+
+
+def _name(field_name: str, value: Any) -> str:
+    if not isinstance(value, str):
+        raise InputError(field_name, f"expected a string, got {value!r}")
+    if not value.strip():
+        raise InputError(field_name, "must not be empty")
+    if value != value.strip():
+        raise InputError(field_name, f"{value!r} has leading or trailing spaces")
+    if len(value) > MAX_NAME_LEN:
+        raise InputError(field_name, f"is {len(value)} characters long; at most {MAX_NAME_LEN} allowed")
+    return value
+
+
+def _check_keys(path: str, d: Any, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> None:
+    where = path or "mission"
+    if not isinstance(d, Mapping):
+        raise InputError(where, f"expected a JSON object, got {type(d).__name__}")
+    for key in required:
+        if key not in d:
+            raise InputError(_join(path, key), "missing required field")
+    allowed = required + optional
+    for key in d:
+        if key not in allowed:
+            raise InputError(
+                _join(path, str(key)), f"unknown field; allowed fields are {', '.join(allowed)}"
+            )
+
+
+# --------------------------------------------------------------------------- dataclasses
+
+
+@dataclass(frozen=True)
+class Vertiport:
+    """The base: position (km) and the wind (kt) on legs flown back to it."""
+
+    x_km: float
+    y_km: float
+    wind_kts: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "x_km", _number("x_km", self.x_km, *COORD_RANGE_KM, " km"))
+        object.__setattr__(self, "y_km", _number("y_km", self.y_km, *COORD_RANGE_KM, " km"))
+        object.__setattr__(self, "wind_kts", _number("wind_kts", self.wind_kts, *WIND_RANGE_KTS, " kt"))
+
+
+@dataclass(frozen=True)
+class Destination:
+    """A destination: position (km), priority 1-3, wind (kt) on legs flown to it, dwell (s)."""
+
+    name: str
+    x_km: float
+    y_km: float
+    priority: int
+    wind_kts: float = 0.0
+    dwell_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        name = _name("name", self.name)
+        if name.lower() == VERTIPORT:
+            raise InputError("name", f"{name!r} is reserved for the vertiport node")
+        if "," in name:
+            raise InputError("name", f"{name!r} contains a comma; route entries are comma-separated")
+        p = self.priority
+        if isinstance(p, float) and p.is_integer():
+            p = int(p)
+        if isinstance(p, bool) or not isinstance(p, int):
+            raise InputError("priority", f"expected an integer in [1, 3], got {self.priority!r}")
+        if not PRIORITY_RANGE[0] <= p <= PRIORITY_RANGE[1]:
+            raise InputError("priority", f"{p!r} is out of range; allowed [1, 3]")
+        object.__setattr__(self, "priority", p)
+        object.__setattr__(self, "x_km", _number("x_km", self.x_km, *COORD_RANGE_KM, " km"))
+        object.__setattr__(self, "y_km", _number("y_km", self.y_km, *COORD_RANGE_KM, " km"))
+        object.__setattr__(self, "wind_kts", _number("wind_kts", self.wind_kts, *WIND_RANGE_KTS, " kt"))
+        object.__setattr__(self, "dwell_s", _number("dwell_s", self.dwell_s, 0.0, MAX_DWELL_S, " s"))
+
+
+@dataclass(frozen=True)
+class Battery:
+    """Health parameters of the cell: ``q_max`` (C) and ``r0`` (ohm)."""
+
+    q_max: float = 7600.0
+    r0: float = 0.117215
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "q_max", _number("q_max", self.q_max, *Q_MAX_RANGE, " C"))
+        object.__setattr__(self, "r0", _number("r0", self.r0, *R0_RANGE, " ohm"))
+
+
+@dataclass(frozen=True)
+class Mission:
+    """A validated mission. Build one with :func:`mission_from_dict` or directly (also validated)."""
+
+    name: str
+    vertiport: Vertiport
+    destinations: tuple[Destination, ...] = field(default_factory=tuple)
+    scenario: str = "single_charge"
+    battery: Battery = field(default_factory=Battery)
+    eod_v: float = 3.0
+
+    def __post_init__(self) -> None:
+        _name("name", self.name)
+        if not isinstance(self.vertiport, Vertiport):
+            raise InputError("vertiport", f"expected a Vertiport, got {type(self.vertiport).__name__}")
+        dests = tuple(self.destinations)
+        seen: dict[str, int] = {}
+        for i, d in enumerate(dests):
+            if not isinstance(d, Destination):
+                raise InputError(f"destinations[{i}]", f"expected a Destination, got {type(d).__name__}")
+            if d.name in seen:
+                raise InputError(
+                    f"destinations[{i}].name",
+                    f"{d.name!r} is already used by destinations[{seen[d.name]}]; names must be unique",
+                )
+            seen[d.name] = i
+        object.__setattr__(self, "destinations", dests)
+        if self.scenario not in SCENARIOS:
+            raise InputError(
+                "scenario", f"{self.scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}"
+            )
+        if not isinstance(self.battery, Battery):
+            raise InputError("battery", f"expected a Battery, got {type(self.battery).__name__}")
+        object.__setattr__(self, "eod_v", _number("eod_v", self.eod_v, *EOD_RANGE, " V"))
+
+    # ----------------------------------------------------------------- nodes
+
+    @property
+    def node_names(self) -> tuple[str, ...]:
+        """``"vertiport"`` followed by the destination names, in file order."""
+        return (VERTIPORT,) + tuple(d.name for d in self.destinations)
+
+    def node(self, name: str) -> Vertiport | Destination:
+        """The vertiport (``"vertiport"``) or the destination called ``name``."""
+        if name == VERTIPORT:
+            return self.vertiport
+        for d in self.destinations:
+            if d.name == name:
+                return d
+        raise InputError("node", f"unknown node {name!r}; valid names: {', '.join(self.node_names)}")
+
+    def distance_km(self, a: str, b: str) -> float:
+        """Euclidean distance (km) between two named nodes."""
+        na, nb = self.node(a), self.node(b)
+        return math.hypot(na.x_km - nb.x_km, na.y_km - nb.y_km)
+
+    def leg_wind(self, to_name: str) -> float:
+        """Wind (kt, negative = tailwind) on a leg flown to ``to_name``."""
+        return self.node(to_name).wind_kts
+
+    def with_battery(self, q_max: float | None = None, r0: float | None = None) -> Mission:
+        """A copy with ``q_max`` (C) and/or ``r0`` (ohm) replaced (validated)."""
+        battery = Battery(
+            self.battery.q_max if q_max is None else q_max,
+            self.battery.r0 if r0 is None else r0,
+        )
+        return dataclasses.replace(self, battery=battery)
+
+
+# --------------------------------------------------------------------------- dict / JSON
+
+
+def _vertiport_from_dict(d: Any) -> Vertiport:
+    _check_keys("vertiport", d, ("x_km", "y_km", "wind_kts"))
+    with _under("vertiport"):
+        return Vertiport(d["x_km"], d["y_km"], d["wind_kts"])
+
+
+def _destination_from_dict(i: int, d: Any) -> Destination:
+    path = f"destinations[{i}]"
+    _check_keys(path, d, ("name", "x_km", "y_km", "priority", "wind_kts"), ("dwell_s",))
+    with _under(path):
+        return Destination(d["name"], d["x_km"], d["y_km"], d["priority"], d["wind_kts"], d.get("dwell_s", 0.0))
+
+
+def mission_from_dict(d: Any) -> Mission:
+    """Validate a mission in the JSON format (see the module docstring) and build it.
+
+    :raises InputError: naming the JSON path of the first bad field.
+    """
+    _check_keys("", d, ("name", "vertiport", "destinations", "scenario", "battery", "eod_v"))
+    name = _name("name", d["name"])
+    vertiport = _vertiport_from_dict(d["vertiport"])
+    raw = d["destinations"]
+    if not isinstance(raw, list):
+        raise InputError("destinations", f"expected a list, got {type(raw).__name__}")
+    destinations = tuple(_destination_from_dict(i, x) for i, x in enumerate(raw))
+    scenario = d["scenario"]
+    if not isinstance(scenario, str) or scenario not in SCENARIOS:
+        raise InputError("scenario", f"{scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}")
+    _check_keys("battery", d["battery"], ("q_max", "r0"))
+    with _under("battery"):
+        battery = Battery(d["battery"]["q_max"], d["battery"]["r0"])
+    return Mission(name, vertiport, destinations, scenario, battery, d["eod_v"])
+
+
+def mission_to_dict(m: Mission) -> dict[str, Any]:
+    """The JSON-format dict of a mission (``mission_from_dict(mission_to_dict(m)) == m``)."""
+    return {
+        "name": m.name,
+        "vertiport": {"x_km": m.vertiport.x_km, "y_km": m.vertiport.y_km, "wind_kts": m.vertiport.wind_kts},
+        "destinations": [
+            {
+                "name": d.name,
+                "x_km": d.x_km,
+                "y_km": d.y_km,
+                "priority": d.priority,
+                "wind_kts": d.wind_kts,
+                "dwell_s": d.dwell_s,
+            }
+            for d in m.destinations
+        ],
+        "scenario": m.scenario,
+        "battery": {"q_max": m.battery.q_max, "r0": m.battery.r0},
+        "eod_v": m.eod_v,
+    }
+
+
+def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise InputError("file", f"duplicate key {key!r} in a JSON object")
+        out[key] = value
+    return out
+
+
+def load_mission(path: str | os.PathLike[str]) -> Mission:
+    """Read and validate a mission JSON file.
+
+    :raises InputError: field ``"file"`` if the file cannot be read or is not valid JSON
+        (with line and column), else the JSON path of the first bad field.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError("file", f"{str(p)!r} does not exist") from None
+    except IsADirectoryError:
+        raise InputError("file", f"{str(p)!r} is a directory, expected a mission JSON file") from None
+    except UnicodeDecodeError as err:
+        raise InputError("file", f"{str(p)!r} is not UTF-8 text (byte {err.start})") from None
+    except OSError as err:
+        raise InputError("file", f"cannot read {str(p)!r}: {err.strerror or err}") from None
+    try:
+        data = json.loads(text, object_pairs_hook=_no_duplicate_keys)
+    except json.JSONDecodeError as err:
+        raise InputError(
+            "file", f"{str(p)!r} is not valid JSON: {err.msg} at line {err.lineno}, column {err.colno}"
+        ) from None
+    return mission_from_dict(data)
+
+
+def save_mission(m: Mission, path: str | os.PathLike[str]) -> None:
+    """Write ``m`` as JSON atomically: a temporary file in the same folder, then ``os.replace``.
+
+    Readers see either the old file or the complete new one, never a partial write.
+    An existing file's permission bits are kept (new files get 0o644).
+    """
+    p = Path(path)
+    text = json.dumps(mission_to_dict(m), indent=2, allow_nan=False) + "\n"
+    try:
+        mode = p.stat().st_mode & 0o7777
+    except FileNotFoundError:
+        mode = 0o644
+    fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, mode)
+        os.replace(tmp, p)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
