@@ -118,12 +118,68 @@ def _run_simulate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _add_train_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("model", choices=["dynaformer"], help="what to train")
+    p.add_argument("--out", default="runs/dynaformer", help="run folder (checkpoints, weights); default runs/dynaformer")
+    p.add_argument("--steps", type=int, default=None, help="optimiser steps (default 5000)")
+    p.add_argument("--n-train", type=int, default=None, help="synthetic training discharges (default 24000)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", default="auto", help="auto (CUDA when available), cpu or cuda")
+    p.add_argument("--no-resume", action="store_true", help="start from scratch even if a checkpoint exists")
+
+
+def _run_train(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from .dynaformer.train import TrainConfig, train
+
+    out = Path(args.out).resolve()
+    bundled = (Path(__file__).resolve().parent.parent / "pretrained").resolve()
+    if out == bundled or bundled in out.parents:
+        raise _CliExit("--out: must not be the bundled pretrained/ folder (copy weights there by hand)", EXIT_INPUT)
+    cfg = TrainConfig(seed=args.seed, device=args.device)
+    if args.steps is not None:
+        if args.steps < 1:
+            raise _CliExit("--steps: must be >= 1", EXIT_INPUT)
+        cfg.steps = args.steps
+    if args.n_train is not None:
+        if args.n_train < 64:
+            raise _CliExit("--n-train: must be >= 64", EXIT_INPUT)
+        cfg.n_train = args.n_train
+    weights = train(cfg, out, resume=not args.no_resume)
+    print(f"wrote {weights}")
+    return EXIT_OK
+
+
+def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("model", choices=["dynaformer"], help="what to evaluate")
+    p.add_argument("--weights", default=None, help="weights file (default: the bundled model)")
+    p.add_argument("--n", type=int, default=400, help="missions per held-out set (default 400)")
+    p.add_argument("--seed", type=int, default=12345)
+    p.add_argument("--json", action="store_true", help="print the metrics as JSON")
+
+
+def _run_evaluate(args: argparse.Namespace) -> int:
+    import json
+
+    from .dynaformer.evaluate import evaluate, format_report
+    from .dynaformer.predictor import load_predictor
+
+    if args.n < 10:
+        raise _CliExit("--n: must be >= 10", EXIT_INPUT)
+    metrics = evaluate(load_predictor(args.weights), n=args.n, seed=args.seed)
+    print(json.dumps(metrics, indent=2) if args.json else format_report(metrics))
+    return EXIT_OK
+
+
 COMMANDS: dict[str, Command] = {
     "simulate": Command(
         "fly a route of a mission and report voltage and end of discharge",
         _add_simulate_arguments,
         _run_simulate,
     ),
+    "train": Command("train a model (writes to a run folder, never over pretrained/)", _add_train_arguments, _run_train),
+    "evaluate": Command("evaluate a model on held-out synthetic data", _add_evaluate_arguments, _run_evaluate),
 }
 
 
