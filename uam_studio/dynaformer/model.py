@@ -51,8 +51,9 @@ def sinusoidal(pos: torch.Tensor, dim: int, max_period: float = 20000.0) -> torc
 
 
 class Dynaformer(nn.Module):
-    def __init__(self, cfg: DynaformerConfig = DynaformerConfig()) -> None:
+    def __init__(self, cfg: DynaformerConfig | None = None) -> None:
         super().__init__()
+        cfg = cfg or DynaformerConfig()
         self.cfg = cfg
         d = cfg.d_model
         self.enc_in = nn.Linear(4, d)

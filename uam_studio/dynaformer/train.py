@@ -101,7 +101,7 @@ def fit_pca(model: Dynaformer, ds: DischargeSet, device, context_s: int = DEFAUL
     return {"mean": mean.float(), "components": comps.float(), "scale": scale.float(), "explained": explained.float()}
 
 
-def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerConfig = DynaformerConfig(),
+def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerConfig | None = None,
           callback=None) -> Path:
     """Train from scratch (or resume from ``out_dir/checkpoint.pt``); write ``out_dir/dynaformer.pt``.
 
@@ -110,6 +110,7 @@ def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerC
     :param callback: optional ``f(step, loss)``.
     :return: path of the exported weights.
     """
+    model_cfg = model_cfg or DynaformerConfig()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if cfg.threads:
