@@ -1,0 +1,356 @@
+"""Training API for the masked DQN planner (used by the CLI and the Panel app).
+
+Public API:
+
+- :class:`DQNTrainConfig`: every setting of a training run (also what a model card records).
+- :func:`train_dqn`: train a :class:`~uam_studio.planning.dqn.MaskedDQN` on ``n_envs`` copies of an
+  env, streaming one :class:`EpisodeStats` per finished episode, stoppable with a ``threading.Event``.
+- :class:`EpisodeStatsCallback`, :class:`TqdmCallback`: the SB3 callbacks behind it.
+- :func:`save_agent` (atomic, with a model card inside the zip), :func:`load_agent`, :func:`load_card`.
+- :func:`greedy_action`: the deterministic masked action for one observation.
+
+Env convention (see :mod:`uam_studio.planning.dqn`): flat ``Box`` observations whose last
+``action_space.n`` entries are the action mask; ``info`` on each step has ``reached`` (list of
+destination names), ``charging_cycles`` (int), ``eod`` (bool), optionally ``reached_priority``.
+
+Loading runs SB3's deserialiser (cloudpickle): load only agent files you trust.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import tempfile
+import threading
+import zipfile
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from ..errors import InputError
+from .dqn import MaskedDQN, MaskedDQNPolicy
+
+__all__ = [
+    "CARD_NAME",
+    "DQNTrainConfig",
+    "EpisodeStats",
+    "EpisodeStatsCallback",
+    "TqdmCallback",
+    "greedy_action",
+    "load_agent",
+    "load_card",
+    "save_agent",
+    "train_dqn",
+]
+
+CARD_NAME = "card.json"
+"""Name of the model card inside an agent zip (SB3's loader ignores unknown zip entries)."""
+FORMAT = "uam_studio.dqn/1"
+
+
+@dataclass
+class DQNTrainConfig:
+    """Settings of one DQN training run.
+
+    Mission episodes are short (about 10 decisions), so the Atari defaults of SB3 (1e6 buffer, target
+    update every 1e4 steps, 10% exploration) are far off. These start from the rl-zoo CartPole DQN
+    settings (lr 2.3e-3, net 256x256, learning_starts 1000, gamma 0.99), scaled to ~10-step episodes.
+
+    ``scenario``, ``alpha``, ``beta``, ``gamma`` describe the environment (reward per destination times
+    priority, charging-stop penalty, EOD-breach penalty); the caller's ``env_fn`` builds it from them and
+    they are recorded in the model card. ``gamma_discount`` is the RL discount factor.
+    """
+
+    scenario: str = "single_charge"
+    steps: int = 50_000  # total env transitions (all envs together); ~5,000 episodes of ~10 steps
+    alpha: float = 1.0
+    beta: float = 1.0
+    gamma: float = 5.0
+    seed: int = 0
+    n_envs: int = 4  # DummyVecEnv copies: decorrelates consecutive samples at no process overhead
+    learning_rate: float = 1e-3  # Adam; rl-zoo CartPole uses 2.3e-3, a bit lower is steadier here
+    buffer_size: int = 50_000  # holds the whole run at the default budget: small episodes, no staleness issue
+    learning_starts: int = 1000  # ~100 random (masked) episodes before the first update
+    batch_size: int = 128
+    target_update_interval: int = 1000  # env transitions (SB3 divides by n_envs): ~100 episodes, not 10k
+    train_freq: int = 4  # vec-env steps between updates, i.e. 4 * n_envs transitions
+    gradient_steps: int = 4  # one gradient step per 4 transitions with n_envs=4
+    exploration_fraction: float = 0.3  # epsilon 1 -> final over the first 30% of steps
+    exploration_final_eps: float = 0.05
+    gamma_discount: float = 0.99  # ~10-step episodes: terminal rewards stay visible at the first decision
+    net_arch: tuple[int, ...] = (256, 256)
+    double_dqn: bool = True  # less over-estimation of the max; cheap
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["net_arch"] = list(self.net_arch)
+        return d
+
+
+@dataclass(frozen=True)
+class EpisodeStats:
+    """One finished training episode.
+
+    :param episode: 1-based episode counter over the run (all envs)
+    :param timestep: total env transitions when the episode ended
+    :param reward: undiscounted episode return
+    :param reached: number of destinations reached
+    :param reached_priority: sum of reached priorities (``info["reached_priority"]`` if the env gives it,
+        else the count)
+    :param charging_cycles: charging cycles used
+    :param eod_breach: the battery went below EOD at some step
+    :param length: number of steps
+    """
+
+    episode: int
+    timestep: int
+    reward: float
+    reached: int
+    reached_priority: float
+    charging_cycles: int
+    eod_breach: bool
+    length: int
+
+
+class EpisodeStatsCallback(BaseCallback):
+    """SB3 callback: one :class:`EpisodeStats` per finished episode, and a cooperative stop.
+
+    :param on_episode: called with each :class:`EpisodeStats` (or None)
+    :param stop_event: when set, training stops at the next env step (``_on_step`` returns False)
+    :param keep: keep the stats in :attr:`episodes` as well
+    """
+
+    def __init__(self, on_episode: Callable[[EpisodeStats], Any] | None = None,
+                 stop_event: threading.Event | None = None, keep: bool = True, verbose: int = 0) -> None:
+        super().__init__(verbose)
+        self.on_episode = on_episode
+        self.stop_event = stop_event
+        self.keep = keep
+        self.episodes: list[EpisodeStats] = []
+        self.n_episodes = 0
+        self._ret: np.ndarray | None = None
+        self._len: np.ndarray | None = None
+        self._eod: np.ndarray | None = None
+        self._reached: list[set[str]] = []
+
+    def _init_callback(self) -> None:
+        n = self.training_env.num_envs if self.training_env is not None else 1
+        self._ret = np.zeros(n)
+        self._len = np.zeros(n, dtype=int)
+        self._eod = np.zeros(n, dtype=bool)
+        self._reached = [set() for _ in range(n)]
+
+    def _on_step(self) -> bool:
+        rewards = np.asarray(self.locals["rewards"], dtype=float).reshape(-1)
+        dones = np.asarray(self.locals["dones"]).reshape(-1)
+        infos = self.locals["infos"]
+        assert self._ret is not None and self._len is not None and self._eod is not None
+        self._ret += rewards
+        self._len += 1
+        for i, info in enumerate(infos):
+            self._eod[i] |= bool(info.get("eod", False))
+            # Union over the episode: right whether the env reports cumulative or per-step names.
+            self._reached[i].update(info.get("reached", ()) or ())
+            if dones[i]:
+                self._finish(i, info)
+        return not (self.stop_event is not None and self.stop_event.is_set())
+
+    def _finish(self, i: int, info: dict[str, Any]) -> None:
+        assert self._ret is not None and self._len is not None and self._eod is not None
+        self.n_episodes += 1
+        reached = len(self._reached[i])
+        prio = info.get("reached_priority")
+        stats = EpisodeStats(
+            episode=self.n_episodes,
+            timestep=int(self.num_timesteps),
+            reward=float(self._ret[i]),
+            reached=reached,
+            reached_priority=float(prio) if prio is not None else float(reached),
+            charging_cycles=int(info.get("charging_cycles", 0)),
+            eod_breach=bool(self._eod[i]),
+            length=int(self._len[i]),
+        )
+        self._ret[i], self._len[i], self._eod[i] = 0.0, 0, False
+        self._reached[i] = set()
+        if self.keep:
+            self.episodes.append(stats)
+        if self.on_episode is not None:
+            self.on_episode(stats)
+
+
+class TqdmCallback(BaseCallback):
+    """A tqdm progress bar over env transitions (SB3's own ``progress_bar`` needs ``rich``)."""
+
+    def __init__(self, desc: str = "DQN") -> None:
+        super().__init__()
+        self.desc = desc
+        self.bar: Any = None
+
+    def _on_training_start(self) -> None:
+        from tqdm.auto import tqdm
+
+        total = int(self.locals.get("total_timesteps", 0)) - int(self.model.num_timesteps)
+        self.bar = tqdm(total=max(total, 0), desc=self.desc, unit="step")
+
+    def _on_step(self) -> bool:
+        if self.bar is not None:
+            self.bar.update(self.training_env.num_envs if self.training_env is not None else 1)
+        return True
+
+    def _on_training_end(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+def train_dqn(
+    config: DQNTrainConfig,
+    env_fn: Callable[[], gym.Env],
+    callback: Callable[[EpisodeStats], Any] | None = None,
+    stop_event: threading.Event | None = None,
+    progress_bar: bool = False,
+    verbose: int = 0,
+) -> MaskedDQN:
+    """Train a masked DQN on ``config.n_envs`` copies of ``env_fn()`` for ``config.steps`` transitions.
+
+    :param config: the run's settings
+    :param env_fn: builds one environment (called ``n_envs`` times; each copy gets seed ``config.seed + i``)
+    :param callback: called with an :class:`EpisodeStats` after every finished episode (in the training
+        thread; keep it quick)
+    :param stop_event: set it from another thread to stop training cleanly at the next env step; the
+        model trained so far is returned
+    :param progress_bar: show a tqdm progress bar
+    :param verbose: SB3 verbosity (0 silent, 1 rollout/train tables)
+    :return: the trained :class:`~uam_studio.planning.dqn.MaskedDQN` (greedy use: :func:`greedy_action`)
+    """
+    if config.steps < 1:
+        raise InputError("steps", f"{config.steps!r} is out of range; allowed >= 1")
+    if config.n_envs < 1:
+        raise InputError("n_envs", f"{config.n_envs!r} is out of range; allowed >= 1")
+    vec_env = make_vec_env(env_fn, n_envs=config.n_envs, seed=config.seed, vec_env_cls=DummyVecEnv)
+    model = MaskedDQN(
+        MaskedDQNPolicy,
+        vec_env,
+        learning_rate=config.learning_rate,
+        buffer_size=config.buffer_size,
+        learning_starts=config.learning_starts,
+        batch_size=config.batch_size,
+        gamma=config.gamma_discount,
+        train_freq=config.train_freq,
+        gradient_steps=config.gradient_steps,
+        target_update_interval=config.target_update_interval,
+        exploration_fraction=config.exploration_fraction,
+        exploration_final_eps=config.exploration_final_eps,
+        policy_kwargs={"net_arch": list(config.net_arch)},
+        double_dqn=config.double_dqn,
+        seed=config.seed,
+        device="cpu",
+        verbose=verbose,
+    )
+    callbacks: list[BaseCallback] = [EpisodeStatsCallback(callback, stop_event, keep=False)]
+    if progress_bar:
+        callbacks.append(TqdmCallback())
+    if stop_event is not None and stop_event.is_set():
+        return model
+    model.learn(total_timesteps=config.steps, callback=CallbackList(callbacks))
+    return model
+
+
+def greedy_action(model: MaskedDQN, obs: np.ndarray) -> int:
+    """The deterministic masked action for one observation ``(obs_dim,)``.
+
+    :raises ValueError: if the observation's mask has no valid action
+    """
+    obs = np.asarray(obs, dtype=np.float32)
+    n = int(model.action_space.n)  # type: ignore[attr-defined]
+    if not (obs.reshape(-1)[-n:] > 0.5).any():
+        raise ValueError("no valid action in this observation's mask")
+    action, _ = model.predict(obs, deterministic=True)
+    return int(np.asarray(action).reshape(-1)[0])
+
+
+def save_agent(model: MaskedDQN, path: str | os.PathLike[str], card: dict[str, Any]) -> None:
+    """Save ``model`` and its model ``card`` (JSON-serialisable dict) as one SB3 zip, atomically.
+
+    The SB3 zip is built in memory, the card is added as ``card.json``, and the bytes go to a temp file
+    in the destination folder which then replaces ``path`` (``os.replace``): a crash never leaves a
+    half-written agent. The replay buffer is not saved.
+    """
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    card_json = json.dumps({"format": FORMAT, **card}, indent=2, sort_keys=True, default=str)
+    buf = io.BytesIO()
+    model.save(buf)
+    with zipfile.ZipFile(buf, mode="a") as zf:
+        zf.writestr(CARD_NAME, card_json)
+    fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(buf.getvalue())
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, p)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _read_agent_bytes(path: str | os.PathLike[str]) -> tuple[Path, bytes]:
+    p = Path(path)
+    if not p.is_file():
+        raise InputError("agent", f"{p}: file not found")
+    data = p.read_bytes()
+    if not zipfile.is_zipfile(io.BytesIO(data)):
+        raise InputError("agent", f"{p}: not a DQN agent file (not a zip archive)")
+    return p, data
+
+
+def load_card(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """The model card saved with an agent by :func:`save_agent` (``{}`` for a plain SB3 zip).
+
+    :raises InputError: (field ``agent``) for a missing or unreadable file
+    """
+    p, data = _read_agent_bytes(path)
+    try:
+        with zipfile.ZipFile(io.BytesIO(data)) as zf:
+            if CARD_NAME not in zf.namelist():
+                return {}
+            card = json.loads(zf.read(CARD_NAME).decode())
+    except Exception as exc:
+        raise InputError("agent", f"{p}: unreadable model card ({type(exc).__name__})") from None
+    if not isinstance(card, dict):
+        raise InputError("agent", f"{p}: model card is not a JSON object")
+    return card
+
+
+def load_agent(path: str | os.PathLike[str], env: gym.Env | None = None) -> MaskedDQN:
+    """Load an agent saved by :func:`save_agent` (on CPU).
+
+    :param path: the agent zip
+    :param env: optional env to check the agent against (same observation and action spaces)
+    :raises InputError: (field ``agent``) for a missing, corrupted or incompatible file
+    """
+    p, data = _read_agent_bytes(path)
+    try:
+        model = MaskedDQN.load(io.BytesIO(data), device="cpu")
+    except Exception as exc:
+        msg = " ".join(str(exc).split())[:100]
+        raise InputError("agent", f"{p}: corrupted or incompatible agent file ({type(exc).__name__}: {msg})") \
+            from None
+    if not isinstance(model.policy, MaskedDQNPolicy):
+        raise InputError("agent", f"{p}: incompatible agent (policy {type(model.policy).__name__}, "
+                                  "expected MaskedDQNPolicy)")
+    if env is not None and (env.observation_space != model.observation_space
+                            or env.action_space != model.action_space):
+        raise InputError("agent", f"{p}: incompatible with this environment (agent expects observations "
+                                  f"{model.observation_space.shape} and {model.action_space}; env has "
+                                  f"{env.observation_space.shape} and {env.action_space})")
+    return model
