@@ -4,8 +4,29 @@ Public API: :class:`Mission` (with :class:`Vertiport`, :class:`Destination`,
 :class:`Battery`), :func:`mission_from_dict`, :func:`mission_to_dict`,
 :func:`load_mission`, :func:`save_mission`, :func:`simulate_route`
 (-> :class:`RouteSimulation` with :class:`LegResult` per leg).
+
+Planning: the action space (:mod:`~uam_studio.planning.actions`: ``N_MAX``, ``ALTITUDES_M``,
+``N_ACTIONS``, :func:`encode_action`, :func:`decode_action`), the Gymnasium environment
+:class:`UAMPlanningEnv` (:func:`make_env`), random and held-out missions
+(:func:`random_mission`, :func:`held_out_missions`), planners returning a :class:`Plan`
+(:func:`oracle_plan`, exact; :func:`greedy_plan`, baseline) and the physics check
+:func:`check_plan` (-> :class:`PlanCheck`).
+
+``env``, ``oracle`` and ``greedy`` are imported lazily (attribute access), so
+``import uam_studio.planning`` stays light.
 """
 
+import importlib
+
+from uam_studio.planning.actions import (
+    ALTITUDES_M,
+    N_ACTIONS,
+    N_MAX,
+    decode_action,
+    encode_action,
+)
+from uam_studio.planning.check import Plan, PlanCheck, check_plan, make_plan
+from uam_studio.planning.generate import held_out_missions, random_mission
 from uam_studio.planning.mission import (
     COORD_RANGE_KM,
     SCENARIOS,
@@ -21,7 +42,36 @@ from uam_studio.planning.mission import (
 )
 from uam_studio.planning.route import LegResult, RouteSimulation, simulate_route
 
+_LAZY = {
+    "UAMPlanningEnv": "env",
+    "make_env": "env",
+    "oracle_plan": "oracle",
+    "greedy_plan": "greedy",
+}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        return getattr(importlib.import_module(f"uam_studio.planning.{_LAZY[name]}"), name)
+    raise AttributeError(f"module 'uam_studio.planning' has no attribute {name!r}")
+
+
 __all__ = [
+    "ALTITUDES_M",
+    "N_ACTIONS",
+    "N_MAX",
+    "Plan",
+    "PlanCheck",
+    "UAMPlanningEnv",
+    "check_plan",
+    "decode_action",
+    "encode_action",
+    "greedy_plan",
+    "held_out_missions",
+    "make_env",
+    "make_plan",
+    "oracle_plan",
+    "random_mission",
     "COORD_RANGE_KM",
     "SCENARIOS",
     "VERTIPORT",

@@ -1,0 +1,127 @@
+"""The discrete action space shared by the environment, the DQN, the oracle and the baselines.
+
+An action picks the next node and the cruise altitude of the leg to it::
+
+    a = target * len(ALTITUDES_M) + altitude_index
+
+``target`` 0..N_MAX-1 is a destination slot (``mission.destinations[target]``),
+``target == N_MAX`` is the vertiport; ``altitude_index`` indexes
+:data:`ALTITUDES_M`, the paper's four cruise levels (the flight model itself
+accepts any altitude in [500, 3000] m). With ``N_MAX = 8`` there are
+``(8 + 1) * 4 = 36`` actions.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from uam_studio.errors import InputError
+from uam_studio.flight import leg_profile, min_leg_distance_km
+from uam_studio.flight.profile import MAX_DISTANCE_KM
+
+if TYPE_CHECKING:
+    from uam_studio.planning.mission import Mission
+
+N_MAX = 8  # destination slots
+ALTITUDES_M = (500.0, 1000.0, 2000.0, 3000.0)  # the paper's cruise levels (m)
+N_ALTITUDES = len(ALTITUDES_M)
+VERTIPORT_SLOT = N_MAX  # target index of the vertiport
+N_TARGETS = N_MAX + 1
+N_ACTIONS = N_TARGETS * N_ALTITUDES  # 36
+MIN_LEG_KM = tuple(min_leg_distance_km(h) for h in ALTITUDES_M)  # shortest leg per level (km)
+DT_S = 1.0  # sample step of every leg current (s)
+
+
+def encode_action(target: int, alt_idx: int) -> int:
+    """Action index for ``target`` (0..N_MAX-1 destination slot, N_MAX vertiport) and altitude index."""
+    if not 0 <= int(target) <= N_MAX:
+        raise InputError("target", f"{target!r} is out of range; allowed [0, {N_MAX}] ({N_MAX} = vertiport)")
+    if not 0 <= int(alt_idx) < N_ALTITUDES:
+        raise InputError("alt_idx", f"{alt_idx!r} is out of range; allowed [0, {N_ALTITUDES - 1}]")
+    return int(target) * N_ALTITUDES + int(alt_idx)
+
+
+def decode_action(a: int) -> tuple[int, int]:
+    """``(target, alt_idx)`` of action ``a`` (0..N_ACTIONS-1); target N_MAX is the vertiport."""
+    a = int(a)
+    if not 0 <= a < N_ACTIONS:
+        raise InputError("action", f"{a!r} is out of range; allowed [0, {N_ACTIONS - 1}]")
+    return a // N_ALTITUDES, a % N_ALTITUDES
+
+
+@functools.cache
+def takeoff_current() -> np.ndarray:
+    """Per-cell current (A, 1 s samples) of the vertical take-off and climb to 500 m (about 101 s).
+
+    Every leg starts like this (higher levels climb longer at about the same power), so a cell
+    that cannot fly it above the cut-off cannot fly any leg.
+    """
+    p = leg_profile(MIN_LEG_KM[0] + 1.0, ALTITUDES_M[0], 0.0, DT_S)
+    end = next(e for name, _, e, _ in p.phases if name == "climb")
+    cur = np.array(p.current_a[: math.ceil(end / DT_S)])
+    cur.setflags(write=False)
+    return cur
+
+
+class LegTable:
+    """The legs of one mission over the discrete action space, with cached per-cell currents.
+
+    Node index ``k < N_MAX`` is ``mission.destinations[k]``, ``N_MAX`` the vertiport.
+    ``feasible[i, j, a]`` is True if the leg i -> j exists (both nodes present, i != j) and
+    its length fits altitude ``ALTITUDES_M[a]`` (:func:`uam_studio.flight.min_leg_distance_km`,
+    at most 500 km). :meth:`current` is the leg's per-cell current (A, 1 s samples) exactly as
+    :func:`uam_studio.planning.route.simulate_route` flies it: the wind and dwell of the node
+    flown to. Profiles are computed on first use and cached.
+    """
+
+    def __init__(self, mission: Mission) -> None:
+        dests = mission.destinations
+        if len(dests) > N_MAX:
+            raise InputError("mission.destinations", f"has {len(dests)} destinations; at most {N_MAX} allowed")
+        self.mission = mission
+        self.n = len(dests)
+        self.names = tuple(d.name for d in dests) + ("vertiport",)
+        nodes = [*dests, mission.vertiport]
+        idx = list(range(self.n)) + [N_MAX]
+        self.index = idx  # node index of nodes[k]
+        self.present = np.zeros(N_TARGETS, dtype=bool)
+        self.present[idx] = True
+        self.pos = np.zeros((N_TARGETS, 2))
+        self.wind = np.zeros(N_TARGETS)
+        self.dwell = np.zeros(N_TARGETS)
+        self.priority = np.zeros(N_TARGETS, dtype=int)
+        for k, node in zip(idx, nodes):
+            self.pos[k] = (node.x_km, node.y_km)
+            self.wind[k] = node.wind_kts
+            self.dwell[k] = getattr(node, "dwell_s", 0.0)
+            self.priority[k] = getattr(node, "priority", 0)
+        self.dist = np.zeros((N_TARGETS, N_TARGETS))
+        for i in idx:
+            for j in idx:
+                # math.hypot, as Mission.distance_km, so feasibility matches simulate_route exactly
+                self.dist[i, j] = math.hypot(self.pos[i, 0] - self.pos[j, 0], self.pos[i, 1] - self.pos[j, 1])
+        ok = self.present[:, None] & self.present[None, :] & ~np.eye(N_TARGETS, dtype=bool)
+        ok &= self.dist <= MAX_DISTANCE_KM
+        self.feasible = ok[:, :, None] & (self.dist[:, :, None] >= np.asarray(MIN_LEG_KM)[None, None, :])
+        self._cache: dict[tuple[int, int, int], np.ndarray] = {}
+
+    def current(self, i: int, j: int, a: int) -> np.ndarray:
+        """Per-cell current (A) of leg i -> j at ``ALTITUDES_M[a]`` (read-only; must be feasible)."""
+        key = (i, j, a)
+        cur = self._cache.get(key)
+        if cur is None:
+            cur = leg_profile(self.dist[i, j], ALTITUDES_M[a], self.wind[j], DT_S, self.dwell[j]).current_a
+            self._cache[key] = cur
+        return cur
+
+    def charge(self, i: int, j: int, a: int) -> float:
+        """Charge (C) one cell gives on leg i -> j at ``ALTITUDES_M[a]``."""
+        return float(self.current(i, j, a).sum() * DT_S)
+
+    def name(self, k: int) -> str:
+        """Node name of index ``k`` (``"vertiport"`` for N_MAX)."""
+        return self.names[-1] if k == N_MAX else self.names[k]

@@ -1,0 +1,651 @@
+"""Gymnasium environment of the paper's health-aware eVTOL mission planning (DQN training).
+
+See :class:`UAMPlanningEnv` for the spaces, rewards and episode rules, and
+:class:`PhysicsBattery` / :class:`DynaformerBattery` for the two battery backends.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import functools
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from uam_studio.battery import (
+    DEFAULT_CELL,
+    EOD_RANGE,
+    STATE_NAMES,
+    BatteryState,
+    full_charge,
+    rest_voltage,
+    simulate,
+)
+from uam_studio.battery.solver import integrate_current
+from uam_studio.errors import InputError, check_positive, check_range
+from uam_studio.flight.tables import WIND_RANGE_KTS
+from uam_studio.planning.actions import (
+    ALTITUDES_M,
+    DT_S,
+    MIN_LEG_KM,
+    N_ACTIONS,
+    N_ALTITUDES,
+    N_MAX,
+    N_TARGETS,
+    VERTIPORT_SLOT,
+    LegTable,
+    takeoff_current,
+)
+from uam_studio.planning.check import Plan
+from uam_studio.planning.generate import DEFAULT_Q_RANGE, DEFAULT_R0_RANGE, DEFAULT_RADIUS_KM, random_mission
+from uam_studio.planning.mission import SCENARIOS, Mission
+
+CONTEXT_S = 20  # s of take-off observed to infer the health (the paper's 20 s)
+MAX_EPISODE_STEPS = 2 * N_MAX + 2
+HEALTH_CLIP = 5.0
+FEATURE_BOUND = 10.0
+
+# ----------------------------------------------------------------------------- observation layout
+
+_SLOT_FEATURES = ("present", "dx", "dy", "dist", "priority", "visited", "wind")
+FEATURE_NAMES: tuple[str, ...] = (
+    ("health_pc1", "health_pc2", "voltage", "x", "y", "n_reached", "charge_used")
+    + tuple(f"slot{k}_{f}" for k in range(N_MAX) for f in _SLOT_FEATURES)
+    + ("vertiport_dx", "vertiport_dy", "vertiport_dist", "vertiport_wind")
+    + tuple(f"scenario_{s}" for s in SCENARIOS)
+    + ("eod_v",)
+)
+N_FEATURES = len(FEATURE_NAMES)  # 71
+OBS_DIM = N_FEATURES + N_ACTIONS  # 107
+_SLOT0 = 7
+_VP = _SLOT0 + 7 * N_MAX
+_SCEN = _VP + 4
+_EOD = _SCEN + 3
+_SLOT_IDX = _SLOT0 + 7 * np.arange(N_MAX)  # start of each slot's block
+
+V_CENTER, V_SCALE = 3.6, 0.5
+POS_SCALE_KM = 100.0
+CHARGE_SCALE_C = 8000.0
+WIND_SCALE_KT = WIND_RANGE_KTS[1]
+
+
+# ----------------------------------------------------------------------------- health observation
+
+
+@functools.cache
+def takeoff_context_current() -> np.ndarray:
+    """Per-cell current (A) of the first 20 s of a take-off (vertical take-off, then climb at 500 m).
+
+    The first 20 s are the same for every leg flown at 500 m, and within 1 % for the other levels.
+    """
+    cur = np.array(takeoff_current()[:CONTEXT_S])
+    cur.setflags(write=False)
+    return cur
+
+
+def observe_takeoff(q_max: float, r0: float) -> tuple[np.ndarray, np.ndarray]:
+    """The 20 s observation of a take-off by a fresh cell (physics model): (current A, voltage V)."""
+    return np.array(takeoff_context_current()), np.array(_takeoff_voltage(float(q_max), float(r0)))
+
+
+@functools.lru_cache(maxsize=4096)
+def _takeoff_voltage(q_max: float, r0: float) -> np.ndarray:
+    v = np.array(simulate(takeoff_context_current(), DT_S, q_max, r0, eod_v=EOD_RANGE[0]).voltage_v)
+    v.setflags(write=False)
+    return v
+
+
+@functools.cache
+def _fallback_calibration() -> tuple[float, ...]:
+    """Constants of :func:`fallback_health`, fitted once on a 7 x 7 grid of simulated cells."""
+    q, r = np.meshgrid(np.linspace(5000.0, 8000.0, 7), np.linspace(0.017, 0.45, 7))
+    cur = takeoff_context_current()
+    v = simulate(np.tile(cur, (q.size, 1)), DT_S, q.ravel(), r.ravel(), eod_v=EOD_RANGE[0]).voltage_v
+    f1 = (v[:, 0] - v[:, -1]) / cur.mean()
+    f2 = v[:, -6] - v[:, -1]
+    coef = np.polyfit(f1, f2, 2)
+    resid = f2 - np.polyval(coef, f1)
+    return (float(f1.mean()), float(f1.std()), *map(float, coef), float(resid.std()))
+
+
+def fallback_health(context_current_a: np.ndarray, context_voltage_v: np.ndarray) -> np.ndarray:
+    """Two PC-like health features from the 20 s take-off observation alone (no Dynaformer).
+
+    * ``h1``: standardised voltage drop over the window per ampere, ``(v[0] - v[-1]) / mean(i)``
+      (rises with R0, like the Dynaformer's PC1);
+    * ``h2``: standardised slope of the last 5 s, ``v[-6] - v[-1]``, minus its quadratic fit on
+      ``h1``'s raw value (falls with q_max, like PC2: a smaller cell sags faster).
+
+    Only observable quantities enter; the standardising constants are fitted once on a grid of
+    simulated cells (q_max 5000-8000 C, R0 0.017-0.45 ohm), never on the episode's own cell.
+    """
+    i = np.asarray(context_current_a, dtype=float).reshape(-1)
+    v = np.asarray(context_voltage_v, dtype=float).reshape(-1)
+    m1, s1, c2, c1, c0, s2 = _fallback_calibration()
+    f1 = (v[0] - v[-1]) / max(float(i.mean()), 1e-6)
+    f2 = v[-6] - v[-1] if v.size >= 6 else 0.0
+    h = np.array([(f1 - m1) / s1, (f2 - (c2 * f1 * f1 + c1 * f1 + c0)) / s2])
+    return np.clip(np.nan_to_num(h), -HEALTH_CLIP, HEALTH_CLIP)
+
+
+# ----------------------------------------------------------------------------- battery backends
+
+
+@dataclass(frozen=True)
+class LegOutcome:
+    """What one leg did to the battery.
+
+    ``voltage_v``: the leg's voltage samples (V), up to and including the first one below the
+    cut-off if ``eod``; ``min_voltage_v`` and ``end_voltage_v`` (V) of those samples.
+    """
+
+    voltage_v: np.ndarray
+    eod: bool
+    min_voltage_v: float
+    end_voltage_v: float
+
+
+class BatteryBackend(ABC):
+    """The environment's battery: reset once per episode, then fly legs; recharge at the vertiport."""
+
+    name = "backend"
+
+    @abstractmethod
+    def reset(self, q_max: float, r0: float, eod_v: float, context_current_a: np.ndarray,
+              context_voltage_v: np.ndarray) -> None:
+        """Start an episode with a fresh cell of health (q_max C, r0 ohm) and cut-off eod_v (V).
+
+        The context is the episode's 20 s take-off observation.
+        """
+
+    @abstractmethod
+    def fly_leg(self, current_a: np.ndarray) -> LegOutcome:
+        """Fly one leg with per-cell current ``current_a`` (A, 1 s samples) from the present state."""
+
+    @abstractmethod
+    def recharge(self) -> None:
+        """Full charge (landing at the vertiport in multi-charge missions)."""
+
+
+class PhysicsBattery(BatteryBackend):
+    """Ground truth: the electrochemistry model, leg by leg from the previous leg's final state.
+
+    Same solver and numbers as :func:`uam_studio.battery.simulate` (it calls the solver directly to
+    skip the per-call input checks: the environment's currents are valid by construction).
+    """
+
+    name = "physics"
+
+    def reset(self, q_max, r0, eod_v, context_current_a=None, context_voltage_v=None) -> None:
+        self.q_max, self.r0, self.eod_v = float(q_max), float(r0), float(eod_v)
+        self._q_total = np.array([DEFAULT_CELL.q_total(self.q_max)])
+        self._r0 = np.array([self.r0])
+        self.recharge()
+
+    def recharge(self) -> None:
+        self.state = full_charge(self.q_max)
+
+    def fly_leg(self, current_a: np.ndarray) -> LegOutcome:
+        cur = np.asarray(current_a, dtype=float)[None, :]
+        with np.errstate(all="ignore"):
+            v, seq = integrate_current(cur, self.state, self._q_total, self._r0, DT_S, DEFAULT_CELL)
+        v = v[0]
+        below = ~(v >= self.eod_v)  # NaN counts as below
+        if below.any():
+            v = np.nan_to_num(v[: int(np.argmax(below)) + 1], nan=0.0, posinf=0.0, neginf=0.0)
+            return LegOutcome(v, True, float(v.min()), float(v[-1]))
+        self.state = BatteryState(**{n: seq[n][:, -1].copy() for n in STATE_NAMES})
+        return LegOutcome(v, False, float(v.min()), float(v[-1]))
+
+
+class DynaformerBattery(BatteryBackend):
+    """The paper's setting: the learned model is the battery.
+
+    ``predictor.predict(context_current_a, context_voltage_v, current_a, dt_s=1.0)`` returns the
+    voltage (V) for ``current_a``, the whole profile flown since the last (re)charge; the context is
+    the episode's 20 s take-off observation. Each leg re-predicts the sortie so far plus the new leg;
+    the leg ends in EOD at its first predicted sample below the cut-off (the earlier legs of the
+    sortie were already flown and are not re-judged).
+    """
+
+    name = "dynaformer"
+
+    def __init__(self, predictor: Any) -> None:
+        if not callable(getattr(predictor, "predict", None)):
+            raise InputError("predictor", "expected an object with predict(context_current_a, "
+                                          "context_voltage_v, current_a, dt_s)")
+        self.predictor = predictor
+        self._sortie = np.zeros(0)
+
+    def reset(self, q_max, r0, eod_v, context_current_a=None, context_voltage_v=None) -> None:
+        self.eod_v = float(eod_v)
+        self.context = (np.asarray(context_current_a, dtype=float), np.asarray(context_voltage_v, dtype=float))
+        self.recharge()
+
+    def recharge(self) -> None:
+        self._sortie = np.zeros(0)
+
+    def fly_leg(self, current_a: np.ndarray) -> LegOutcome:
+        profile = np.concatenate([self._sortie, np.asarray(current_a, dtype=float)])
+        pred = np.asarray(self.predictor.predict(*self.context, profile, dt_s=DT_S), dtype=float).reshape(-1)
+        v = np.nan_to_num(pred[self._sortie.size: profile.size], nan=0.0, posinf=0.0, neginf=0.0)
+        below = v < self.eod_v
+        if below.any():
+            v = v[: int(np.argmax(below)) + 1]
+            return LegOutcome(v, True, float(v.min()), float(v[-1]))
+        self._sortie = profile
+        return LegOutcome(v, False, float(v.min()), float(v[-1]))
+
+
+# ----------------------------------------------------------------------------- environment
+
+
+class UAMPlanningEnv(gym.Env):
+    """Health-aware eVTOL mission planning: pick the next node and the cruise altitude.
+
+    An aircraft with one (equivalent) 18650 cell starts fully charged at the vertiport and serves
+    up to ``N_MAX = 8`` destinations (priority 1-3). Each step flies one leg through the flight
+    model and the battery backend (physics ground truth or the Dynaformer).
+
+    ## Action space
+
+    ``Discrete(36)``: ``a = target * 4 + altitude_index``; ``target`` 0-7 is a destination slot
+    (``mission.destinations[target]``), 8 the vertiport; the altitude is
+    ``ALTITUDES_M[altitude_index]`` = 500, 1000, 2000, 3000 m (:mod:`uam_studio.planning.actions`).
+    An invalid action (see the mask) ends the episode with reward ``-gamma`` and
+    ``info["invalid_action"] = True``; a masked agent never takes one.
+
+    ## Observation space
+
+    ``Box(float32)`` of shape (107,): 71 features (bounds +-10, clipped), then the 36-entry action
+    mask (bounds [0, 1]; 1.0 valid, 0.0 invalid); :meth:`action_masks` returns the same mask as
+    booleans. Names in :data:`FEATURE_NAMES`.
+
+    | index | feature |
+    |-------|---------|
+    | 0-1   | health PC1, PC2: ``health_fn(current, voltage)`` of the 20 s take-off observation
+    |       | (the Dynaformer's principal components), else :func:`fallback_health`; clipped to +-5 |
+    | 2     | voltage now, ``(V - 3.6) / 0.5`` (at rest after a (re)charge) |
+    | 3-4   | aircraft position ``(x, y)`` relative to the vertiport, / 100 km |
+    | 5     | destinations reached / 8 |
+    | 6     | charge drawn since the last (re)charge / 8000 C |
+    | 7-62  | per slot k (7 values): present, dx, dy (relative to the aircraft, / 100 km), distance / 100 km, |
+    |       | priority / 3, visited, wind on legs to it / 39 kt (negative = tailwind); zeros for empty slots |
+    | 63-66 | vertiport: dx, dy, distance (/ 100 km), wind on legs to it / 39 kt |
+    | 67-69 | scenario one-hot (single_flight, single_charge, multi_charge) |
+    | 70    | EOD cut-off, ``(eod_v - 3.0) / 0.5`` |
+    | 71-106| action mask |
+
+    Mask: invalid are empty slots, visited destinations, destinations that cannot be flown to
+    and back at any level (closer than 6.1 km to the vertiport: every reachable destination must
+    leave a way home), legs too short for an altitude (:func:`uam_studio.flight.min_leg_distance_km`),
+    the vertiport while at the vertiport, and in single_flight everything except
+    ``destinations[0]``. While the episode runs there is always at least one valid action; once it
+    terminates the mask is all zeros (a truncated episode's last observation keeps its mask).
+
+    ## Rewards (the paper's eq. "reward")
+
+    * ``+alpha * priority`` for each destination reached with the voltage never below the cut-off;
+    * ``-beta`` for each safe landing at the vertiport (a charging stop);
+    * ``-gamma`` if the voltage falls below the cut-off (EOD) on a leg; the episode terminates.
+
+    Defaults ``alpha=1, beta=1, gamma=5`` as in the paper's figures.
+
+    ## Starting state
+
+    At the vertiport, fully charged. The episode's mission is ``mission`` (optionally with a random
+    cell and winds, ``randomize_battery``/``randomize_wind``), ``options["mission"]`` of
+    :meth:`reset`, or a fresh :func:`uam_studio.planning.generate.random_mission` (1-8 destinations
+    8-60 km out, priorities 1-3, winds U[-39, 39] kt, q_max U[5000, 8000] C, r0 U[0.017, 0.35] ohm).
+    The health features come from the first 20 s of a take-off at 500 m simulated with the physics
+    model for the episode's cell; ``health_fn`` is called once per episode.
+
+    ## Episode end
+
+    * single_flight: after the one leg to ``destinations[0]`` (reward ``alpha * priority`` or ``-gamma``);
+    * single_charge: when the aircraft lands back at the vertiport, or at EOD;
+    * multi_charge: landing at the vertiport recharges (``-beta``); ends when every reachable
+      destination is visited and the aircraft is back at the vertiport, or at EOD;
+    * truncation after ``max_steps`` (default ``2 * N_MAX + 2 = 18``) steps.
+
+    ``info`` (reset and every step): ``reached`` (names, cumulative), ``reached_priority``,
+    ``charging_cycles``, ``eod``, ``invalid_action``, ``leg_min_voltage_v`` (None before a leg),
+    ``route`` and ``altitudes_m`` so far, ``health`` (the two health features).
+
+    ## Arguments
+
+    :param mission: a fixed :class:`Mission` (the paper's per-map training), or None for a random
+        mission every episode.
+    :param scenario: ``single_flight``, ``single_charge`` or ``multi_charge``; default: the mission's
+        scenario, or ``single_charge`` for random missions.
+    :param n_dest: destinations per random mission, int or inclusive ``(lo, hi)``.
+    :param backend: ``"physics"``, ``"dynaformer"`` (needs ``predictor``) or a :class:`BatteryBackend`.
+    :param predictor: the Dynaformer predictor (``predict`` and, optionally, ``health``).
+    :param health_fn: ``f(context_current_a, context_voltage_v) -> [PC1, PC2]``; default
+        ``predictor.health`` if the predictor has one, else :func:`fallback_health`.
+    :param alpha, beta, gamma: reward weights (>= 0).
+    :param randomize_battery: with a fixed mission, draw q_max and r0 from ``q_range``/``r0_range``
+        each episode.
+    :param randomize_wind: with a fixed mission, draw every node's wind from U[-39, 39] kt each episode.
+    :param r0_range, q_range, radius_km: ranges for random cells and missions
+        (:mod:`uam_studio.planning.generate` explains the 0.35 ohm default).
+    :param max_steps: truncation length.
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(
+        self,
+        mission: Mission | None = None,
+        scenario: str | None = None,
+        n_dest=(1, N_MAX),
+        backend: str | BatteryBackend = "physics",
+        predictor: Any = None,
+        health_fn: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+        alpha: float = 1.0,
+        beta: float = 1.0,
+        gamma: float = 5.0,
+        randomize_battery: bool = False,
+        randomize_wind: bool = False,
+        r0_range=DEFAULT_R0_RANGE,
+        q_range=DEFAULT_Q_RANGE,
+        radius_km=DEFAULT_RADIUS_KM,
+        max_steps: int = MAX_EPISODE_STEPS,
+    ) -> None:
+        super().__init__()
+        if mission is not None and not isinstance(mission, Mission):
+            raise InputError("mission", f"expected a Mission or None, got {type(mission).__name__}")
+        scenario = scenario or (mission.scenario if mission is not None else "single_charge")
+        if scenario not in SCENARIOS:
+            raise InputError("scenario", f"{scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}")
+        self.scenario = scenario
+        if isinstance(backend, BatteryBackend):
+            self.backend = backend
+        elif backend == "physics":
+            self.backend = PhysicsBattery()
+        elif backend == "dynaformer":
+            if predictor is None:
+                raise InputError("predictor", "the dynaformer backend needs a predictor")
+            self.backend = DynaformerBattery(predictor)
+        else:
+            raise InputError("backend", f"{backend!r} is not a backend; allowed: physics, dynaformer")
+        if health_fn is None and predictor is not None and callable(getattr(predictor, "health", None)):
+            health_fn = predictor.health
+        self.health_fn = health_fn
+        self.alpha = check_range("alpha", alpha, 0.0, 1e6)
+        self.beta = check_range("beta", beta, 0.0, 1e6)
+        self.gamma = check_range("gamma", gamma, 0.0, 1e6)
+        self.max_steps = int(check_positive("max_steps", max_steps))
+        self.n_dest = n_dest
+        self.randomize_battery = bool(randomize_battery)
+        self.randomize_wind = bool(randomize_wind)
+        self.r0_range = tuple(float(x) for x in r0_range)
+        self.q_range = tuple(float(x) for x in q_range)
+        self.radius_km = tuple(float(x) for x in radius_km)
+        self._fixed = mission
+        if mission is not None:
+            self._check_mission(mission)
+        else:
+            random_mission(np.random.default_rng(0), n_dest, scenario, self.r0_range, self.q_range,
+                           self.radius_km)  # validates n_dest and the ranges now
+
+        low = np.full(OBS_DIM, -FEATURE_BOUND, dtype=np.float32)
+        high = np.full(OBS_DIM, FEATURE_BOUND, dtype=np.float32)
+        low[N_FEATURES:], high[N_FEATURES:] = 0.0, 1.0
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self.action_space = spaces.Discrete(N_ACTIONS)
+        self.mission: Mission | None = None
+        self._mask = np.zeros(N_ACTIONS, dtype=bool)
+        self._obs = np.zeros(OBS_DIM, dtype=np.float32)
+        self._done = True
+
+    # ------------------------------------------------------------------ mission checks
+
+    def _check_mission(self, mission: Mission) -> None:
+        n = len(mission.destinations)
+        if n == 0:
+            raise InputError("mission.destinations", "is empty; the environment needs 1 to 8 destinations")
+        if n > N_MAX:
+            raise InputError("mission.destinations", f"has {n} destinations; the environment has {N_MAX} slots")
+        if not self._servable(LegTable(mission)).any():
+            what = "destinations[0]" if self.scenario == "single_flight" else "every destination"
+            raise InputError("mission.destinations", f"{what} is too close to the vertiport to fly to "
+                                                     f"(a leg needs >= {MIN_LEG_KM[0]:.1f} km)")
+
+    def _servable(self, legs: LegTable) -> np.ndarray:
+        """Slots the aircraft may ever fly to: from the vertiport (and back) at 500 m at least."""
+        out = legs.feasible[VERTIPORT_SLOT, :N_MAX, 0].copy()
+        if self.scenario == "single_flight":
+            out[1:] = False
+        return out
+
+    # ------------------------------------------------------------------ gym API
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        rng = self.np_random
+        mission = (options or {}).get("mission")
+        if mission is not None:
+            if not isinstance(mission, Mission):
+                raise InputError("options.mission", f"expected a Mission, got {type(mission).__name__}")
+            self._check_mission(mission)
+        elif self._fixed is not None:
+            mission = self._fixed
+            if self.randomize_battery:
+                mission = mission.with_battery(float(rng.uniform(*self.q_range)), float(rng.uniform(*self.r0_range)))
+            if self.randomize_wind:
+                lo, hi = WIND_RANGE_KTS
+                mission = dataclasses.replace(
+                    mission,
+                    vertiport=dataclasses.replace(mission.vertiport, wind_kts=float(rng.uniform(lo, hi))),
+                    destinations=tuple(dataclasses.replace(d, wind_kts=float(rng.uniform(lo, hi)))
+                                       for d in mission.destinations))
+        else:
+            mission = random_mission(rng, self.n_dest, self.scenario, self.r0_range, self.q_range, self.radius_km)
+        self.mission = mission
+        legs = self._legs = LegTable(mission)
+        self._servable_slots = self._servable(legs)
+        q, r0, eod = mission.battery.q_max, mission.battery.r0, mission.eod_v
+        ci, cv = observe_takeoff(q, r0)
+        if self.health_fn is not None:
+            health = np.asarray(self.health_fn(ci, cv), dtype=float).reshape(-1)[:2]
+            health = np.clip(np.nan_to_num(health), -HEALTH_CLIP, HEALTH_CLIP)
+        else:
+            health = fallback_health(ci, cv)
+        self._health = health
+        self.backend.reset(q, r0, eod, ci, cv)
+        self._v_rest = float(rest_voltage(q))
+
+        # episode state
+        self._node = VERTIPORT_SLOT
+        self._visited = np.zeros(N_MAX, dtype=bool)
+        self._voltage = self._v_rest
+        self._charge = 0.0
+        self._steps = 0
+        self._cycles = 0
+        self._route: list[str] = []
+        self._alts: list[float] = []
+        self._reached: list[str] = []
+        self._reached_priority = 0
+        self._return = 0.0
+        self._eod = False
+        self._invalid = False
+        self._leg_min_v: float | None = None
+        self._done = False
+
+        # static part of the observation
+        base = np.zeros(N_FEATURES)
+        base[0:2] = health
+        present = legs.present[:N_MAX]
+        base[_SLOT_IDX] = present
+        base[_SLOT_IDX + 4] = legs.priority[:N_MAX] / 3.0
+        base[_SLOT_IDX + 6] = legs.wind[:N_MAX] / WIND_SCALE_KT
+        base[_VP + 3] = legs.wind[VERTIPORT_SLOT] / WIND_SCALE_KT
+        base[_SCEN + SCENARIOS.index(self.scenario)] = 1.0
+        base[_EOD] = (eod - 3.0) / 0.5
+        self._base = base
+        # relative position blocks, per node the aircraft can be at: [from, to, (dx, dy, dist)]
+        rel = np.zeros((N_TARGETS, N_TARGETS, 3))
+        rel[:, :, 0] = (legs.pos[None, :, 0] - legs.pos[:, None, 0]) / POS_SCALE_KM
+        rel[:, :, 1] = (legs.pos[None, :, 1] - legs.pos[:, None, 1]) / POS_SCALE_KM
+        rel[:, :, 2] = legs.dist / POS_SCALE_KM
+        rel[:, :N_MAX] *= legs.present[None, :N_MAX, None]
+        self._rel = rel
+        self._update_mask()
+        return self._observe(), self._info()
+
+    def step(self, action):
+        if self._done:
+            raise RuntimeError("step() called after the episode ended; call reset()")
+        a = int(action)
+        self._steps += 1
+        if not (0 <= a < N_ACTIONS and self._mask[a]):
+            self._invalid = True
+            return self._finish(-self.gamma, terminated=True)
+        target, ai = divmod(a, N_ALTITUDES)
+        legs = self._legs
+        cur = legs.current(self._node, target, ai)
+        out = self.backend.fly_leg(cur)
+        self._route.append(legs.name(target))
+        self._alts.append(ALTITUDES_M[ai])
+        self._leg_min_v = out.min_voltage_v
+        self._voltage = out.end_voltage_v
+        if out.eod:
+            self._eod = True
+            return self._finish(-self.gamma, terminated=True)
+        self._charge += float(cur.sum()) * DT_S
+        self._node = target
+        if target == VERTIPORT_SLOT:
+            self._cycles += 1
+            reward = -self.beta
+            if self.scenario == "multi_charge":
+                self.backend.recharge()
+                self._charge = 0.0
+                self._voltage = self._v_rest
+                terminated = bool(self._visited[self._servable_slots].all())
+            else:
+                terminated = True
+        else:
+            self._visited[target] = True
+            name = legs.names[target]
+            self._reached.append(name)
+            prio = int(legs.priority[target])
+            self._reached_priority += prio
+            reward = self.alpha * prio
+            terminated = self.scenario == "single_flight"
+        return self._finish(reward, terminated)
+
+    def _finish(self, reward: float, terminated: bool):
+        self._return += reward
+        truncated = not terminated and self._steps >= self.max_steps
+        self._done = bool(terminated or truncated)
+        if terminated:
+            self._mask[:] = False
+        else:  # a truncated state keeps its mask: learners bootstrap from it
+            self._update_mask()
+        return self._observe(), float(reward), bool(terminated), bool(truncated), self._info()
+
+    def _update_mask(self) -> None:
+        node = self._node
+        ok_target = np.zeros(N_TARGETS, dtype=bool)
+        ok_target[:N_MAX] = self._servable_slots & ~self._visited
+        ok_target[VERTIPORT_SLOT] = node != VERTIPORT_SLOT and self.scenario != "single_flight"
+        self._mask = (self._legs.feasible[node] & ok_target[:, None]).reshape(-1)
+
+    def _observe(self) -> np.ndarray:
+        f = self._base.copy()
+        legs = self._legs
+        node = self._node
+        f[2] = (self._voltage - V_CENTER) / V_SCALE
+        f[3:5] = (legs.pos[node] - legs.pos[VERTIPORT_SLOT]) / POS_SCALE_KM
+        f[5] = len(self._reached) / N_MAX
+        f[6] = self._charge / CHARGE_SCALE_C
+        rel = self._rel[node]
+        f[_SLOT_IDX + 1] = rel[:N_MAX, 0]
+        f[_SLOT_IDX + 2] = rel[:N_MAX, 1]
+        f[_SLOT_IDX + 3] = rel[:N_MAX, 2]
+        f[_SLOT_IDX + 5] = self._visited
+        f[_VP:_VP + 3] = rel[VERTIPORT_SLOT]
+        obs = self._obs
+        np.clip(f, -FEATURE_BOUND, FEATURE_BOUND, out=f)
+        obs[:N_FEATURES] = f
+        obs[N_FEATURES:] = self._mask
+        return obs.copy()
+
+    def _info(self) -> dict[str, Any]:
+        return {
+            "reached": list(self._reached),
+            "reached_priority": self._reached_priority,
+            "charging_cycles": self._cycles,
+            "eod": self._eod,
+            "invalid_action": self._invalid,
+            "leg_min_voltage_v": self._leg_min_v,
+            "route": list(self._route),
+            "altitudes_m": list(self._alts),
+            "health": self._health.copy(),
+        }
+
+    # ------------------------------------------------------------------ helpers
+
+    def action_masks(self) -> np.ndarray:
+        """Boolean valid-action mask, shape (36,) (the sb3-contrib ``MaskablePPO`` convention)."""
+        return self._mask.copy()
+
+    def episode_plan(self, policy: str = "dqn") -> Plan:
+        """The episode so far as a :class:`Plan` (as this env's backend saw it; check it with
+        :func:`uam_studio.planning.check.check_plan` for the physics verdict)."""
+        msgs = []
+        if self._eod:
+            msgs.append(f"end of discharge on leg {len(self._route)} to {self._route[-1]} "
+                        f"({self.backend.name} battery)")
+        if self._invalid:
+            msgs.append("the policy chose an invalid action")
+        missed = [d.name for d, seen in zip(self.mission.destinations, self._visited) if not seen]
+        if missed and self.scenario != "single_flight":
+            msgs.append(f"not visited: {', '.join(missed)}")
+        stats = {"return": self._return, "steps": self._steps, "backend": self.backend.name,
+                 "scenario": self.scenario, "health": [float(h) for h in self._health]}
+        return Plan(policy, tuple(self._route), tuple(self._alts), tuple(self._reached),
+                    self._reached_priority, self._cycles, tuple(msgs), stats)
+
+
+def make_env(**kwargs: Any) -> Callable[[], UAMPlanningEnv]:
+    """A no-argument factory of :class:`UAMPlanningEnv` (for ``make_vec_env`` / ``DummyVecEnv``).
+
+    ``make_env(mission=m, scenario="multi_charge")()`` builds one environment; the vector-env
+    helpers call it once per copy and seed each copy through ``reset(seed=...)``. A backend given
+    as an instance is shallow-copied per environment (the predictor is shared, the state is not).
+    """
+    UAMPlanningEnv(**kwargs)  # fail early, in the caller, on bad arguments
+
+    def _factory() -> UAMPlanningEnv:
+        kw = dict(kwargs)
+        if isinstance(kw.get("backend"), BatteryBackend):
+            kw["backend"] = copy.copy(kw["backend"])  # each copy keeps its own battery state
+        return UAMPlanningEnv(**kw)
+
+    return _factory
+
+
+__all__ = [
+    "CONTEXT_S",
+    "FEATURE_NAMES",
+    "MAX_EPISODE_STEPS",
+    "N_FEATURES",
+    "OBS_DIM",
+    "BatteryBackend",
+    "DynaformerBattery",
+    "LegOutcome",
+    "PhysicsBattery",
+    "UAMPlanningEnv",
+    "fallback_health",
+    "make_env",
+    "observe_takeoff",
+    "takeoff_context_current",
+]

@@ -1,0 +1,116 @@
+"""Greedy baseline planner (physics battery, the same actions and :class:`Plan` as the oracle).
+
+From where the aircraft is, try the unvisited destinations in order of priority / distance
+(best first). Fly each leg at its lowest-charge level (of the four ``ALTITUDES_M``). Take the
+first destination that the cell can reach *and* leave again for the vertiport (both legs
+simulated with the physics model from the present state). When none fits: single_charge flies
+home and stops; multi_charge flies home, recharges and starts a new sortie, until a fresh cell
+cannot fit any remaining destination. single_flight flies to ``destinations[0]`` at its
+lowest-charge level. Every move is checked before it is made, so greedy plans are always safe.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from uam_studio.battery import full_charge
+from uam_studio.planning.actions import ALTITUDES_M, N_ALTITUDES, N_MAX, VERTIPORT_SLOT, LegTable
+from uam_studio.planning.check import Plan, make_plan
+from uam_studio.planning.mission import SCENARIOS, VERTIPORT, Mission
+from uam_studio.planning.oracle import _as_mission, _too_close, fly_batch, takeoff_failure
+
+
+def _cheapest_level(legs: LegTable, i: int, j: int) -> int | None:
+    levels = [a for a in range(N_ALTITUDES) if legs.feasible[i, j, a]]
+    return min(levels, key=lambda a: legs.charge(i, j, a)) if levels else None
+
+
+def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
+    """Greedy plan of ``mission`` (see the module docstring). Never raises for hard missions."""
+    t0 = time.perf_counter()
+    mission, msgs = _as_mission(mission)
+    if mission is None:
+        return Plan("greedy", messages=msgs)
+    scenario = scenario or mission.scenario
+    if scenario not in SCENARIOS:
+        return Plan("greedy", messages=[f"scenario: {scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}"])
+    stats: dict[str, Any] = {"scenario": scenario}
+    dests = mission.destinations
+    if not dests:
+        return Plan("greedy", messages=["the mission has no destinations"], stats=stats)
+    full_mission = mission
+    if len(dests) > N_MAX:
+        extra = ", ".join(d.name for d in dests[N_MAX:])
+        msgs.append(f"the planner handles at most {N_MAX} destinations; not planned: {extra}")
+        mission = Mission(mission.name, mission.vertiport, dests[:N_MAX], mission.scenario, mission.battery,
+                          mission.eod_v)
+        dests = mission.destinations
+    legs = LegTable(mission)
+    q, r0, eod = mission.battery.q_max, mission.battery.r0, mission.eod_v
+    fail = takeoff_failure(q, r0, eod)
+    if fail is not None:
+        return Plan("greedy", messages=msgs + [fail], stats=stats)
+    fresh = full_charge(q).as_array()
+
+    def fly(i: int, j: int, a: int, x: np.ndarray) -> tuple[bool, np.ndarray]:
+        ok, x_end, _ = fly_batch([legs.current(i, j, a)], x, q, r0, eod)
+        return bool(ok[0]), x_end
+
+    route: list[str] = []
+    alts: list[float] = []
+    n = len(dests)
+    for k in range(n):
+        reason = _too_close(legs, k)
+        if reason is not None:
+            msgs.append(reason)
+    if scenario == "single_flight":
+        if n > 1:
+            msgs.append(f"single flight: planning the leg to {dests[0].name} only")
+        a = _cheapest_level(legs, VERTIPORT_SLOT, 0)
+        if a is not None and fly(VERTIPORT_SLOT, 0, a, fresh)[0]:
+            route, alts = [dests[0].name], [ALTITUDES_M[a]]
+        elif a is not None:
+            msgs.append(f"cannot reach {dests[0].name} at its lowest-charge level ({ALTITUDES_M[a]:g} m)")
+        stats["time_s"] = round(time.perf_counter() - t0, 4)
+        return make_plan(full_mission, "greedy", route, alts, msgs, stats)
+
+    servable = legs.feasible[VERTIPORT_SLOT, :N_MAX].any(axis=1)
+    visited = np.zeros(N_MAX, dtype=bool)
+    at, x = VERTIPORT_SLOT, fresh
+    while True:
+        cands = [k for k in range(n) if servable[k] and not visited[k]]
+        cands.sort(key=lambda k: -legs.priority[k] / legs.dist[at, k])
+        moved = False
+        for k in cands:
+            a = _cheapest_level(legs, at, k)
+            b = _cheapest_level(legs, k, VERTIPORT_SLOT)
+            if a is None or b is None:
+                continue
+            ok, x1 = fly(at, k, a, x)
+            if not ok or not fly(k, VERTIPORT_SLOT, b, x1)[0]:
+                continue
+            route.append(dests[k].name)
+            alts.append(ALTITUDES_M[a])
+            visited[k] = True
+            at, x, moved = k, x1, True
+            break
+        if moved:
+            continue
+        if at == VERTIPORT_SLOT:  # a fresh cell fits nothing more
+            break
+        route.append(VERTIPORT)
+        alts.append(ALTITUDES_M[_cheapest_level(legs, at, VERTIPORT_SLOT)])
+        at, x = VERTIPORT_SLOT, fresh
+        if scenario == "single_charge":
+            break
+    left = [dests[k].name for k in range(n) if servable[k] and not visited[k]]
+    if left:
+        msgs.append(f"greedy found no safe place for: {', '.join(left)}")
+    stats["time_s"] = round(time.perf_counter() - t0, 4)
+    return make_plan(full_mission, "greedy", route, alts, msgs, stats)
+
+
+__all__ = ["greedy_plan"]
