@@ -5,7 +5,9 @@ arguments to its own sub-parser and handles the parsed namespace, returning an e
 code. Bad input of any kind (an :class:`~uam_studio.errors.InputError`, or a value
 argparse rejects) prints one line ``error: ...`` to stderr and exits with code 2.
 
-Commands: ``simulate`` (fly a route of a mission file and report voltage and EOD).
+Commands: ``simulate`` (fly a route of a mission file and report voltage and EOD), ``plan`` (plan
+a mission with the DQN agent, the oracle or the greedy baseline; physics-checked), ``train``
+(``dynaformer`` or ``dqn``; never into ``pretrained/``) and ``evaluate``.
 """
 
 from __future__ import annotations
@@ -118,26 +120,117 @@ def _run_simulate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# --------------------------------------------------------------------------- plan
+
+
+def _add_plan_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("mission", metavar="MISSION.json", help="mission file (see assets/example_mission.json)")
+    p.add_argument("--policy", choices=["dqn", "oracle", "greedy"], default="dqn",
+                   help="dqn (trained agent, default), oracle (exact, knows the cell) or greedy (baseline)")
+    p.add_argument("--agent", default=None, metavar="FILE",
+                   help="DQN agent zip (default: the bundled pretrained/dqn_<scenario>.zip)")
+    p.add_argument("--q-max", type=float, default=None, help="override the mission's q_max (C)")
+    p.add_argument("--r0", type=float, default=None, help="override the mission's r0 (ohm)")
+    p.add_argument("--json", action="store_true", help="print the plan as JSON")
+
+
+def _run_plan(args: argparse.Namespace) -> int:
+    from uam_studio.planning import load_mission
+    from uam_studio.planning.policy import plan_mission
+
+    if args.agent is not None and args.policy != "dqn":
+        raise _CliExit(f"--agent: only used with --policy dqn (not {args.policy})", EXIT_INPUT)
+    mission = load_mission(args.mission)
+    res = plan_mission(mission, args.policy, q_max=args.q_max, r0=args.r0, agent_path=args.agent)
+    if args.json:
+        json.dump(res, sys.stdout, allow_nan=False)
+        sys.stdout.write("\n")
+        return EXIT_OK
+    battery = mission.with_battery(args.q_max, args.r0).battery
+    print(f"{mission.name} ({mission.scenario}), policy {res['policy']}: q_max {battery.q_max:g} C, "
+          f"r0 {battery.r0:g} ohm, EOD {mission.eod_v:g} V")
+    if res["route"]:
+        legs = " -> ".join(f"{n} ({a:g} m)" for n, a in zip(res["route"], res["altitudes_m"]))
+        print(f"route: vertiport -> {legs}")
+    else:
+        print("route: none (nothing is flown)")
+    reached = ", ".join(res["reached"]) or "none"
+    print(f"reached: {reached} (priority {res['reached_priority']})")
+    print(f"charging cycles: {res['charging_cycles']}")
+    if not res["route"]:
+        print("safe: yes (empty route)")
+    elif res["safe"]:
+        print(f"safe: yes, min {res['min_voltage_v']:.3f} V")
+    else:
+        print(f"safe: NO, end of discharge at {res['physics']['eod_s']:.0f} s (min {res['min_voltage_v']:.3f} V)")
+    if res["predicted"] is not None and res["predicted"]["voltage_v"]:
+        print(f"Dynaformer: predicted min {min(res['predicted']['voltage_v']):.3f} V")
+    for m in res["messages"]:
+        print(f"note: {m}")
+    return EXIT_OK
+
+
+# --------------------------------------------------------------------------- train
+
+_DYNAFORMER_ONLY = ("n_train", "device", "no_resume")
+_DQN_ONLY = ("scenario", "mission", "alpha", "beta", "gamma")
+DQN_REWARD_DEFAULTS = {"alpha": 1.0, "beta": 1.0, "gamma": 5.0}  # the paper's figures (as UAMPlanningEnv)
+
+
 def _add_train_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", choices=["dynaformer"], help="what to train")
-    p.add_argument("--out", default="runs/dynaformer", help="run folder (checkpoints, weights); default runs/dynaformer")
-    p.add_argument("--steps", type=int, default=None, help="optimiser steps (default 5000)")
-    p.add_argument("--n-train", type=int, default=None, help="synthetic training discharges (default 24000)")
+    p.add_argument("model", choices=["dynaformer", "dqn"], help="what to train")
+    p.add_argument("--out", default=None,
+                   help="run folder; default runs/dynaformer (dynaformer), runs/dqn_<scenario> (dqn: writes "
+                        "agent.zip and card.json; a path ending in .zip names the agent file itself)")
+    p.add_argument("--steps", type=int, default=None,
+                   help="optimiser steps (dynaformer, default 5000) or env transitions (dqn, default 50000)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--device", default="auto", help="auto (CUDA when available), cpu or cuda")
-    p.add_argument("--no-resume", action="store_true", help="start from scratch even if a checkpoint exists")
+    g = p.add_argument_group("dynaformer only")
+    g.add_argument("--n-train", type=int, default=None, help="synthetic training discharges (default 24000)")
+    g.add_argument("--device", default=None, help="auto (CUDA when available, default), cpu or cuda")
+    g.add_argument("--no-resume", action="store_true", default=None,
+                   help="start from scratch even if a checkpoint exists")
+    g = p.add_argument_group("dqn only")
+    g.add_argument("--scenario", default=None,
+                   help="single_flight, single_charge or multi_charge; default: the mission's, else single_charge")
+    g.add_argument("--mission", default=None, metavar="FILE",
+                   help="train on this mission's map (battery health drawn at random each episode); "
+                        "default: a random mission every episode")
+    g.add_argument("--alpha", type=float, default=None, help="reward per reached destination x priority (default 1)")
+    g.add_argument("--beta", type=float, default=None, help="penalty per charging stop (default 1)")
+    g.add_argument("--gamma", type=float, default=None, help="penalty for an end of discharge (default 5)")
+
+
+def _refuse_bundled(out) -> None:
+    from pathlib import Path
+
+    bundled = (Path(__file__).resolve().parent.parent / "pretrained").resolve()
+    out = Path(out).resolve()
+    if out == bundled or bundled in out.parents:
+        raise _CliExit("--out: must not be the bundled pretrained/ folder (copy weights there by hand)", EXIT_INPUT)
+
+
+def _reject_options(args: argparse.Namespace, names: tuple[str, ...], model: str) -> None:
+    for name in names:
+        if getattr(args, name) is not None:
+            flag = "--" + name.replace("_", "-")
+            raise _CliExit(f"{flag}: not an option of 'train {args.model}' (only of 'train {model}')", EXIT_INPUT)
 
 
 def _run_train(args: argparse.Namespace) -> int:
-    from pathlib import Path
+    if args.model == "dqn":
+        _reject_options(args, _DYNAFORMER_ONLY, "dynaformer")
+        return _run_train_dqn(args)
+    _reject_options(args, _DQN_ONLY, "dqn")
+    return _run_train_dynaformer(args)
 
+
+def _run_train_dynaformer(args: argparse.Namespace) -> int:
     from .dynaformer.train import TrainConfig, train
 
-    out = Path(args.out).resolve()
-    bundled = (Path(__file__).resolve().parent.parent / "pretrained").resolve()
-    if out == bundled or bundled in out.parents:
-        raise _CliExit("--out: must not be the bundled pretrained/ folder (copy weights there by hand)", EXIT_INPUT)
-    cfg = TrainConfig(seed=args.seed, device=args.device)
+    out = args.out or "runs/dynaformer"
+    _refuse_bundled(out)
+    cfg = TrainConfig(seed=args.seed, device=args.device or "auto")
     if args.steps is not None:
         if args.steps < 1:
             raise _CliExit("--steps: must be >= 1", EXIT_INPUT)
@@ -148,6 +241,81 @@ def _run_train(args: argparse.Namespace) -> int:
         cfg.n_train = args.n_train
     weights = train(cfg, out, resume=not args.no_resume)
     print(f"wrote {weights}")
+    return EXIT_OK
+
+
+def _run_train_dqn(args: argparse.Namespace) -> int:
+    import datetime
+    import time
+    from pathlib import Path
+
+    from uam_studio.errors import check_range
+    from uam_studio.planning import SCENARIOS, load_mission
+
+    if args.scenario is not None and args.scenario not in SCENARIOS:
+        raise _CliExit(f"--scenario: {args.scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}",
+                       EXIT_INPUT)
+    mission = load_mission(args.mission) if args.mission is not None else None
+    scenario = args.scenario or (mission.scenario if mission is not None else "single_charge")
+    out = Path(args.out or f"runs/dqn_{scenario}")
+    agent = out if out.suffix == ".zip" else out / "agent.zip"
+    _refuse_bundled(agent)
+    if agent.exists() and not agent.is_file():
+        raise _CliExit(f"--out: {agent} exists and is not a file", EXIT_INPUT)
+    if args.steps is not None and args.steps < 1:
+        raise _CliExit("--steps: must be >= 1", EXIT_INPUT)
+    defaults = DQN_REWARD_DEFAULTS
+    weights = {name: check_range(f"--{name}", default if getattr(args, name) is None else getattr(args, name),
+                                 0.0, 1e6)
+               for name, default in defaults.items()}
+
+    from uam_studio import __version__ as version
+    from uam_studio.planning.env import OBS_DIM, make_env
+    from uam_studio.planning.mission import mission_to_dict
+    from uam_studio.planning.training import DQNTrainConfig, save_agent, train_dqn
+
+    cfg = DQNTrainConfig(scenario=scenario, seed=args.seed, **weights)
+    if args.steps is not None:
+        cfg.steps = args.steps
+    env_kwargs = {"scenario": scenario, "backend": "physics", **weights}
+    if mission is not None:
+        env_kwargs.update(mission=mission, randomize_battery=True)
+    env_fn = make_env(**env_kwargs)  # bad missions (no destinations...) fail here, before training
+    episodes = []
+    started = datetime.datetime.now(datetime.timezone.utc)
+    t0 = time.perf_counter()
+    model = train_dqn(cfg, env_fn, callback=episodes.append, progress_bar=True)
+    wall_s = time.perf_counter() - t0
+    last = episodes[-100:]
+    final = {
+        "episodes": len(episodes),
+        "timesteps": int(model.num_timesteps),
+        "last_episodes": len(last),
+        "mean_reward": float(sum(e.reward for e in last) / len(last)) if last else None,
+        "mean_reached": float(sum(e.reached for e in last) / len(last)) if last else None,
+        "mean_reached_priority": float(sum(e.reached_priority for e in last) / len(last)) if last else None,
+        "mean_charging_cycles": float(sum(e.charging_cycles for e in last) / len(last)) if last else None,
+        "eod_rate": float(sum(e.eod_breach for e in last) / len(last)) if last else None,
+    }
+    card = {
+        "model": "dqn",
+        "uam_studio_version": version,
+        "scenario": scenario,
+        "health": "fallback",  # physics-only health features (no Dynaformer), see planning.env.fallback_health
+        "config": cfg.to_dict(),
+        "env": {"mission": mission_to_dict(mission) if mission is not None else None,
+                "randomize_battery": mission is not None, "backend": "physics",
+                "obs_dim": OBS_DIM},
+        "timing": {"started_utc": started.isoformat(timespec="seconds"), "wall_s": round(wall_s, 2),
+                   "steps_per_s": round(model.num_timesteps / wall_s, 1) if wall_s > 0 else None},
+        "final_stats": final,
+    }
+    save_agent(model, agent, card)
+    card_path = agent.with_name("card.json") if agent.name == "agent.zip" else agent.with_suffix(".card.json")
+    card_path.write_text(json.dumps(card, indent=2, default=str) + "\n")
+    summary = (f"{final['episodes']} episodes; last {final['last_episodes']}: mean reward "
+               f"{final['mean_reward']:.2f}, EOD rate {final['eod_rate']:.0%}" if last else "no finished episode")
+    print(f"wrote {agent} ({summary}; {wall_s:.0f} s)")
     return EXIT_OK
 
 
@@ -177,6 +345,11 @@ COMMANDS: dict[str, Command] = {
         "fly a route of a mission and report voltage and end of discharge",
         _add_simulate_arguments,
         _run_simulate,
+    ),
+    "plan": Command(
+        "plan a mission with a policy (dqn, oracle, greedy), checked with the physics model",
+        _add_plan_arguments,
+        _run_plan,
     ),
     "train": Command("train a model (writes to a run folder, never over pretrained/)", _add_train_arguments, _run_train),
     "evaluate": Command("evaluate a model on held-out synthetic data", _add_evaluate_arguments, _run_evaluate),

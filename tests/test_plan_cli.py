@@ -1,0 +1,221 @@
+"""Tests for ``uam-studio plan``, ``uam-studio train dqn`` and :func:`uam_studio.planning.policy.plan_mission`.
+
+Everything runs in-process through ``main()`` (one interpreter start-up for the whole file); the
+DQN agent is trained once per module for 300 transitions (no gradient step: it only has to load
+and roll out).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from uam_studio.cli import main
+from uam_studio.planning.policy import MAX_POINTS, plan_mission
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "assets" / "example_mission.json"
+KEYS = {"policy", "route", "altitudes_m", "charging_cycles", "reached", "reached_priority", "predicted",
+        "physics", "safe", "min_voltage_v", "messages"}
+
+
+def _example() -> dict:
+    return json.loads(EXAMPLE.read_text())
+
+
+def _write(tmp: Path, name: str, d: dict) -> str:
+    p = tmp / name
+    p.write_text(json.dumps(d))
+    return str(p)
+
+
+def _plan_json(capsys, *args: str) -> dict:
+    code = main(["plan", *args, "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    return json.loads(out)
+
+
+def _check_result(res: dict, mission: dict) -> None:
+    """Keys, plain types, and consistency with the physics check."""
+    assert set(res) == KEYS
+    names = {"vertiport"} | {d["name"] for d in mission["destinations"]}
+    assert isinstance(res["policy"], str)
+    assert all(isinstance(n, str) and n in names for n in res["route"])
+    assert len(res["altitudes_m"]) == len(res["route"])
+    assert all(type(a) is float for a in res["altitudes_m"])
+    assert type(res["charging_cycles"]) is int and type(res["reached_priority"]) is int
+    assert set(res["reached"]) <= set(res["route"]) - {"vertiport"}
+    prio = {d["name"]: d["priority"] for d in mission["destinations"]}
+    assert res["reached_priority"] == sum(prio[n] for n in res["reached"])
+    assert type(res["safe"]) is bool
+    assert all(isinstance(m, str) for m in res["messages"])
+    phys = res["physics"]
+    assert set(phys) == {"time_s", "voltage_v", "eod_s"}
+    assert len(phys["time_s"]) == len(phys["voltage_v"]) <= MAX_POINTS
+    assert all(type(x) is float for x in phys["voltage_v"])
+    assert res["safe"] == (phys["eod_s"] is None)
+    if res["route"]:
+        assert res["min_voltage_v"] == pytest.approx(min(phys["voltage_v"]))
+    else:
+        assert res["min_voltage_v"] is None and phys["time_s"] == []
+    if res["predicted"] is not None:
+        assert set(res["predicted"]) == {"time_s", "voltage_v"}
+        assert res["predicted"]["time_s"] == phys["time_s"]
+        assert len(res["predicted"]["voltage_v"]) == len(phys["time_s"])
+    json.dumps(res, allow_nan=False)
+
+
+@pytest.fixture(scope="module")
+def agent(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("dqn")
+    assert main(["train", "dqn", "--steps", "300", "--out", str(out), "--seed", "1"]) == 0
+    assert (out / "agent.zip").is_file()
+    card = json.loads((out / "card.json").read_text())
+    assert card["config"]["steps"] == 300 and card["scenario"] == "single_charge"
+    assert card["final_stats"]["timesteps"] >= 300 and card["timing"]["wall_s"] >= 0
+    return out / "agent.zip"
+
+
+# --------------------------------------------------------------------------- plan
+
+
+def test_plan_oracle_json(capsys):
+    res = _plan_json(capsys, str(EXAMPLE), "--policy", "oracle")
+    _check_result(res, _example())
+    assert res["policy"] == "oracle" and res["safe"] is True
+    assert res["route"][-1] == "vertiport" and res["charging_cycles"] == 1
+    assert len(res["reached"]) >= 1 and res["physics"]["eod_s"] is None
+
+
+def test_plan_greedy_json_and_table(capsys):
+    res = _plan_json(capsys, str(EXAMPLE), "--policy", "greedy", "--q-max", "7000")
+    _check_result(res, _example())
+    assert res["policy"] == "greedy" and res["safe"] and res["reached"]
+    assert main(["plan", str(EXAMPLE), "--policy", "greedy"]) == 0
+    out = capsys.readouterr().out
+    assert "route: vertiport -> " in out and "safe: yes" in out and "charging cycles: 1" in out
+
+
+@pytest.mark.parametrize("policy", ["oracle", "greedy", "dqn"])
+def test_zero_destinations_is_a_message(capsys, tmp_path, policy):
+    d = _example()
+    d["destinations"] = []
+    res = _plan_json(capsys, _write(tmp_path, "empty.json", d), "--policy", policy)
+    _check_result(res, d)
+    assert res["route"] == [] and res["safe"] and res["predicted"] is None
+    assert any("no destinations" in m for m in res["messages"])
+
+
+def test_missing_agent_exits_2_naming_agent(capsys):
+    code = main(["plan", str(EXAMPLE), "--policy", "dqn", "--agent", "/nonexistent.zip"])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == ""
+    assert len(err.splitlines()) == 1 and err.startswith("error: agent")
+
+
+def test_missing_bundled_agent_is_a_message(monkeypatch, tmp_path):
+    import uam_studio.planning.policy as policy
+
+    monkeypatch.setattr(policy, "BUNDLED_DIR", tmp_path)
+    res = plan_mission(_example(), "dqn", predictor=False)
+    assert res["route"] == [] and res["predicted"] is None
+    assert any(m.startswith("no bundled DQN agent for scenario single_charge; use --policy oracle or greedy")
+               for m in res["messages"])
+
+
+def test_trained_agent_plans_and_is_physics_checked(capsys, agent):
+    res = _plan_json(capsys, str(EXAMPLE), "--policy", "dqn", "--agent", str(agent))
+    _check_result(res, _example())
+    assert res["policy"] == "dqn" and res["route"]
+    # a weaker cell: the agent's route may now fail; the physics check must say so consistently
+    res = _plan_json(capsys, str(EXAMPLE), "--agent", str(agent), "--q-max", "5000", "--r0", "0.3")
+    _check_result(res, _example())
+    if not res["safe"]:
+        assert any(m.startswith("unsafe: voltage falls below") for m in res["messages"])
+
+
+def test_train_into_pretrained_is_refused(capsys):
+    target = ROOT / "pretrained" / "dqn_test_refused"
+    code = main(["train", "dqn", "--steps", "10", "--out", str(target)])
+    err = capsys.readouterr().err
+    assert code == 2 and "pretrained" in err and len(err.splitlines()) == 1
+    assert not target.exists()
+    assert main(["train", "dqn", "--steps", "10", "--out", str(ROOT / "pretrained" / "x.zip")]) == 2
+    assert main(["train", "dynaformer", "--alpha", "2"]) == 2
+    assert main(["train", "dqn", "--n-train", "100"]) == 2
+    capsys.readouterr()
+
+
+def test_plan_argument_errors(capsys):
+    assert main(["plan", str(EXAMPLE), "--policy", "astar"]) == 2
+    assert main(["plan", str(EXAMPLE), "--policy", "oracle", "--r0", "9"]) == 2
+    assert main(["plan", str(EXAMPLE), "--policy", "oracle", "--agent", "a.zip"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 3 and "r0" in err[1] and "--agent" in err[2]
+
+
+# --------------------------------------------------------------------------- library: hard missions
+
+
+def _dest(name: str, x: float, y: float, priority: int = 1) -> dict:
+    return {"name": name, "x_km": x, "y_km": y, "priority": priority, "wind_kts": 0.0}
+
+
+@pytest.mark.parametrize("policy", ["greedy", "dqn"])
+def test_more_than_eight_destinations(policy, agent):
+    d = _example()
+    angles = np.linspace(0, 2 * np.pi, 9, endpoint=False)
+    d["destinations"] = [_dest(f"D{k}", 20 * np.cos(a), 20 * np.sin(a)) for k, a in enumerate(angles)]
+    res = plan_mission(d, policy, agent_path=agent if policy == "dqn" else None, predictor=False)
+    _check_result(res, d)
+    assert "D8" not in res["route"]
+    assert any("at most 8 destinations" in m and "D8" in m for m in res["messages"])
+
+
+@pytest.mark.parametrize("policy", ["oracle", "greedy", "dqn"])
+def test_unreachable_destinations_and_dead_cell(policy, agent):
+    path = agent if policy == "dqn" else None
+    d = _example()
+    d["destinations"] = [_dest("Near", 2.0, 1.0)]
+    res = plan_mission(d, policy, agent_path=path, predictor=False)
+    _check_result(res, d)
+    assert res["route"] == [] and any("cannot reach Near" in m for m in res["messages"])
+    res = plan_mission(_example(), policy, r0=0.45, agent_path=path, predictor=False)
+    _check_result(res, _example())
+    assert res["route"] == [] and any("cannot finish takeoff" in m for m in res["messages"])
+
+
+class _StubPredictor:
+    """Stands in for the Dynaformer: records the calls, returns a voltage falling with the charge drawn."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def predict(self, context_current_a, context_voltage_v, current_a, dt_s=1.0):
+        self.calls.append((np.asarray(context_current_a), np.asarray(context_voltage_v), np.asarray(current_a)))
+        return 4.1 - np.cumsum(current_a) * dt_s / 8000.0
+
+
+def test_prediction_is_per_sortie_with_takeoff_context():
+    from uam_studio.planning.env import takeoff_context_current
+
+    d = _example()
+    d["scenario"] = "multi_charge"
+    stub = _StubPredictor()
+    res = plan_mission(d, "greedy", predictor=stub)
+    _check_result(res, d)
+    assert res["charging_cycles"] >= 2 and len(stub.calls) == res["charging_cycles"]
+    for ci, cv, cur in stub.calls:
+        assert ci.shape == cv.shape == (20,)
+        np.testing.assert_allclose(ci, takeoff_context_current())
+        np.testing.assert_allclose(cur[:20], ci)  # each sortie starts with a take-off
+        assert 3.5 < cv[-1] < cv[0] <= 4.3  # physics take-off voltage of this cell
+    n = sum(c[2].size for c in stub.calls)
+    assert n > MAX_POINTS and len(res["predicted"]["voltage_v"]) <= MAX_POINTS
+    # the stub recharges each sortie: its lowest value (kept by the thinning) is the sortie's end
+    lowest = min(4.1 - c[2].sum() / 8000.0 for c in stub.calls)
+    assert min(res["predicted"]["voltage_v"]) == pytest.approx(lowest, abs=1e-4)
