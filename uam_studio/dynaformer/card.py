@@ -1,0 +1,64 @@
+"""Write a Dynaformer model card (Markdown) from training metadata and measured metrics."""
+
+from __future__ import annotations
+
+import json
+import platform
+
+import torch
+
+from .evaluate import format_report
+
+
+def model_card(meta: dict, metrics: dict, command: str, n_params: int, size_bytes: int) -> str:
+    tc = meta.get("train_config", {})
+    cpu = platform.processor() or platform.machine()
+    return f"""# Dynaformer model card (`pretrained/dynaformer.pt`)
+
+**What**: a small transformer that reads about 20 s of observed per-cell current and
+voltage at takeoff, infers the battery's health with no access to q_max or R0, and
+predicts the voltage for a whole planned current profile on a 1 s grid.
+Architecture: `uam_studio/dynaformer/model.py` (torch.nn Transformer encoder and
+causal decoder, {n_params:,} parameters, {size_bytes / 1e6:.2f} MB file). The health
+embedding is an {meta.get('latent_dim', 8)}-dimensional latent; PCA (2 components,
+fitted on the training contexts) is stored in the same file.
+
+**Reproduce** (from the repository root; writes to `runs/`, never to `pretrained/`):
+
+    {command}
+    cp runs/dynaformer/dynaformer.pt pretrained/dynaformer.pt
+
+**Data**: {tc.get('n_train')} synthetic discharges from our own flight and battery
+models (`uam_studio/dynaformer/data.py`, seed {tc.get('seed')}): 70% random 1-6 leg
+missions (distance, altitude 500-3000 m, wind +/-39 kt, optional dwell), 30%
+constant and piecewise-constant loads of 0.05-3 A. Health: q_max ~ U[5000, 8000] C,
+r0 ~ U[0.017, 0.45] ohm. Targets are simulated down to 2.5 V, at most
+{tc.get('max_len')} s. Context: 20 s (60%) or 20-600 s, with voltage noise of
+0-10 mV on half the samples.
+
+**Training**: {tc.get('steps')} AdamW steps, batch {tc.get('batch')}, lr {tc.get('lr')}
+(warm-up and cosine decay), on {meta.get('device')} with {meta.get('torch_threads')}
+torch threads ({cpu}). The loss is MSE with 4x weight for true voltages in
+(2.8, 3.3) V. Wall time: {meta.get('data_seconds')} s of data generation plus
+{meta.get('train_seconds')} s of training.
+
+**Measured metrics** (`uam-studio evaluate dynaformer`, held-out seeds disjoint from
+training; EOD at 3.0 V; RTE = |t_pred - t_true| / t_true):
+
+```
+{format_report(metrics)}
+```
+
+**Limits**: it is trained on our synthetic physics, not on measured cells. The
+extrapolation band is q_max in [4000, 5000] or [8000, 9000] C, or r0 in
+[0.45, 0.5] ohm. Cells with r0 above about 0.38 ohm fall below 3.0 V during the
+3 A takeoff, so their flight "EOD" is a few seconds and the RTE there is noisy.
+torch {torch.__version__}.
+
+<details><summary>raw metrics</summary>
+
+```json
+{json.dumps(metrics, indent=1)}
+```
+</details>
+"""
