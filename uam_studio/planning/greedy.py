@@ -12,15 +12,14 @@ lowest-charge level. Every move is checked before it is made, so greedy plans ar
 from __future__ import annotations
 
 import time
-from typing import Any
 
 import numpy as np
 
 from uam_studio.battery import full_charge
 from uam_studio.planning.actions import ALTITUDES_M, N_ALTITUDES, N_MAX, VERTIPORT_SLOT, LegTable
 from uam_studio.planning.check import Plan, make_plan
-from uam_studio.planning.mission import SCENARIOS, VERTIPORT, Mission
-from uam_studio.planning.oracle import _as_mission, _too_close, fly_batch, takeoff_failure
+from uam_studio.planning.mission import VERTIPORT, Mission
+from uam_studio.planning.oracle import _too_close, fly_batch, prepare_mission, takeoff_failure
 
 
 def _cheapest_level(legs: LegTable, i: int, j: int) -> int | None:
@@ -31,23 +30,10 @@ def _cheapest_level(legs: LegTable, i: int, j: int) -> int | None:
 def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
     """Greedy plan of ``mission`` (see the module docstring). Never raises for hard missions."""
     t0 = time.perf_counter()
-    mission, msgs = _as_mission(mission)
-    if mission is None:
-        return Plan("greedy", messages=msgs)
-    scenario = scenario or mission.scenario
-    if scenario not in SCENARIOS:
-        return Plan("greedy", messages=[f"scenario: {scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}"])
-    stats: dict[str, Any] = {"scenario": scenario}
+    mission, full_mission, scenario, msgs, stats, early = prepare_mission(mission, scenario, "greedy")
+    if early is not None:
+        return early
     dests = mission.destinations
-    if not dests:
-        return Plan("greedy", messages=["the mission has no destinations"], stats=stats)
-    full_mission = mission
-    if len(dests) > N_MAX:
-        extra = ", ".join(d.name for d in dests[N_MAX:])
-        msgs.append(f"the planner handles at most {N_MAX} destinations; not planned: {extra}")
-        mission = Mission(mission.name, mission.vertiport, dests[:N_MAX], mission.scenario, mission.battery,
-                          mission.eod_v)
-        dests = mission.destinations
     legs = LegTable(mission)
     q, r0, eod = mission.battery.q_max, mission.battery.r0, mission.eod_v
     fail = takeoff_failure(q, r0, eod)

@@ -337,6 +337,33 @@ def _too_close(legs: LegTable, k: int) -> str | None:
     return None
 
 
+def prepare_mission(mission: Any, scenario: str | None, policy: str):
+    """The planners' shared preamble: validate the mission, pick the scenario, keep at most N_MAX destinations.
+
+    :return: (mission capped at N_MAX destinations, the full mission, scenario, messages, stats,
+        early) where ``early`` is a finished :class:`Plan` (with messages) when there is nothing to plan.
+    """
+    mission, msgs = _as_mission(mission)
+    if mission is None:
+        return None, None, scenario, msgs, {}, Plan(policy, messages=msgs)
+    scenario = scenario or mission.scenario
+    if scenario not in SCENARIOS:
+        msg = f"scenario: {scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}"
+        return mission, mission, scenario, msgs, {}, Plan(policy, messages=[msg])
+    stats: dict[str, Any] = {"scenario": scenario}
+    dests = mission.destinations
+    if not dests:
+        return mission, mission, scenario, msgs, stats, Plan(policy, messages=["the mission has no destinations"],
+                                                             stats=stats)
+    full_mission = mission
+    if len(dests) > N_MAX:
+        extra = ", ".join(d.name for d in dests[N_MAX:])
+        msgs.append(f"the planner handles at most {N_MAX} destinations; not planned: {extra}")
+        mission = Mission(mission.name, mission.vertiport, dests[:N_MAX], mission.scenario, mission.battery,
+                          mission.eod_v)
+    return mission, full_mission, scenario, msgs, stats, None
+
+
 def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iterable[int] = range(N_ALTITUDES),
                 dominance: bool = True) -> Plan:
     """The exact optimal plan of ``mission`` (see the module docstring) as a :class:`Plan`.
@@ -347,23 +374,10 @@ def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iter
     :param dominance: label pruning (False: exhaustive, for tests on small missions).
     """
     t0 = time.perf_counter()
-    mission, msgs = _as_mission(mission)
-    if mission is None:
-        return Plan("oracle", messages=msgs)
-    scenario = scenario or mission.scenario
-    if scenario not in SCENARIOS:
-        return Plan("oracle", messages=[f"scenario: {scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}"])
-    stats: dict[str, Any] = {"scenario": scenario}
+    mission, full_mission, scenario, msgs, stats, early = prepare_mission(mission, scenario, "oracle")
+    if early is not None:
+        return early
     dests = mission.destinations
-    if not dests:
-        return Plan("oracle", messages=["the mission has no destinations"], stats=stats)
-    if len(dests) > N_MAX:
-        extra = ", ".join(d.name for d in dests[N_MAX:])
-        msgs.append(f"the planner handles at most {N_MAX} destinations; not planned: {extra}")
-        mission = Mission(mission.name, mission.vertiport, dests[:N_MAX], mission.scenario, mission.battery,
-                          mission.eod_v)
-        dests = mission.destinations
-    full_mission = mission
     legs = LegTable(mission)
     q, r0, eod = mission.battery.q_max, mission.battery.r0, mission.eod_v
     fail = takeoff_failure(q, r0, eod)
