@@ -19,7 +19,7 @@ from uam_studio.battery import full_charge
 from uam_studio.planning.actions import ALTITUDES_M, N_ALTITUDES, N_MAX, VERTIPORT_SLOT, LegTable
 from uam_studio.planning.check import Plan, make_plan
 from uam_studio.planning.mission import VERTIPORT, Mission
-from uam_studio.planning.oracle import _too_close, fly_batch, prepare_mission, takeoff_failure
+from uam_studio.planning.oracle import _too_close, fly_batch, prepare_mission
 
 
 def _cheapest_level(legs: LegTable, i: int, j: int) -> int | None:
@@ -30,15 +30,13 @@ def _cheapest_level(legs: LegTable, i: int, j: int) -> int | None:
 def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
     """Greedy plan of ``mission`` (see the module docstring). Never raises for hard missions."""
     t0 = time.perf_counter()
-    mission, full_mission, scenario, msgs, stats, early = prepare_mission(mission, scenario, "greedy")
-    if early is not None:
-        return early
+    setup = prepare_mission(mission, scenario, "greedy")
+    if setup.early is not None:
+        return setup.early
+    mission, full_mission, scenario, msgs, stats, legs = (setup.mission, setup.full_mission, setup.scenario,
+                                                          setup.messages, setup.stats, setup.legs)
     dests = mission.destinations
-    legs = LegTable(mission)
     q, r0, eod = mission.battery.q_max, mission.battery.r0, mission.eod_v
-    fail = takeoff_failure(q, r0, eod)
-    if fail is not None:
-        return Plan("greedy", messages=msgs + [fail], stats=stats)
     fresh = full_charge(q).as_array()
 
     def fly(i: int, j: int, a: int, x: np.ndarray) -> tuple[bool, np.ndarray]:

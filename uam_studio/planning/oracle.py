@@ -337,31 +337,47 @@ def _too_close(legs: LegTable, k: int) -> str | None:
     return None
 
 
-def prepare_mission(mission: Any, scenario: str | None, policy: str):
-    """The planners' shared preamble: validate the mission, pick the scenario, keep at most N_MAX destinations.
+@dataclass
+class PlanSetup:
+    """What the planners share before searching: the mission capped at N_MAX destinations,
+    the user's full mission (plans are checked against it), scenario, messages, stats and the
+    leg table; ``early`` is a finished :class:`Plan` when there is nothing to plan."""
 
-    :return: (mission capped at N_MAX destinations, the full mission, scenario, messages, stats,
-        early) where ``early`` is a finished :class:`Plan` (with messages) when there is nothing to plan.
-    """
+    mission: Mission | None
+    full_mission: Mission | None
+    scenario: str | None
+    messages: list[str]
+    stats: dict[str, Any]
+    legs: LegTable | None = None
+    early: Plan | None = None
+
+
+def prepare_mission(mission: Any, scenario: str | None, policy: str) -> PlanSetup:
+    """The planners' shared preamble: validate the mission, pick the scenario, keep at most
+    N_MAX destinations, build the leg table and stop early if the battery cannot finish takeoff."""
     mission, msgs = _as_mission(mission)
     if mission is None:
-        return None, None, scenario, msgs, {}, Plan(policy, messages=msgs)
+        return PlanSetup(None, None, scenario, msgs, {}, early=Plan(policy, messages=msgs))
     scenario = scenario or mission.scenario
     if scenario not in SCENARIOS:
         msg = f"scenario: {scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}"
-        return mission, mission, scenario, msgs, {}, Plan(policy, messages=[msg])
+        return PlanSetup(mission, mission, scenario, msgs, {}, early=Plan(policy, messages=[msg]))
     stats: dict[str, Any] = {"scenario": scenario}
     dests = mission.destinations
     if not dests:
-        return mission, mission, scenario, msgs, stats, Plan(policy, messages=["the mission has no destinations"],
-                                                             stats=stats)
+        return PlanSetup(mission, mission, scenario, msgs, stats,
+                         early=Plan(policy, messages=["the mission has no destinations"], stats=stats))
     full_mission = mission
     if len(dests) > N_MAX:
         extra = ", ".join(d.name for d in dests[N_MAX:])
         msgs.append(f"the planner handles at most {N_MAX} destinations; not planned: {extra}")
         mission = Mission(mission.name, mission.vertiport, dests[:N_MAX], mission.scenario, mission.battery,
                           mission.eod_v)
-    return mission, full_mission, scenario, msgs, stats, None
+    setup = PlanSetup(mission, full_mission, scenario, msgs, stats, legs=LegTable(mission))
+    fail = takeoff_failure(mission.battery.q_max, mission.battery.r0, mission.eod_v)
+    if fail is not None:
+        setup.early = Plan(policy, messages=msgs + [fail], stats=stats)
+    return setup
 
 
 def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iterable[int] = range(N_ALTITUDES),
@@ -374,15 +390,13 @@ def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iter
     :param dominance: label pruning (False: exhaustive, for tests on small missions).
     """
     t0 = time.perf_counter()
-    mission, full_mission, scenario, msgs, stats, early = prepare_mission(mission, scenario, "oracle")
-    if early is not None:
-        return early
+    setup = prepare_mission(mission, scenario, "oracle")
+    if setup.early is not None:
+        return setup.early
+    mission, full_mission, scenario, msgs, stats, legs = (setup.mission, setup.full_mission, setup.scenario,
+                                                          setup.messages, setup.stats, setup.legs)
     dests = mission.destinations
-    legs = LegTable(mission)
     q, r0, eod = mission.battery.q_max, mission.battery.r0, mission.eod_v
-    fail = takeoff_failure(q, r0, eod)
-    if fail is not None:
-        return Plan("oracle", messages=msgs + [fail], stats=stats)
 
     def done(route: list[str], alts: list[float]) -> Plan:
         stats["time_s"] = round(time.perf_counter() - t0, 4)
