@@ -22,6 +22,7 @@ raises :class:`~uam_studio.errors.InputError`.
 
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 from typing import Any
@@ -30,7 +31,7 @@ import numpy as np
 
 from uam_studio.errors import InputError
 from uam_studio.planning.actions import N_MAX
-from uam_studio.planning.check import PlanCheck, check_plan
+from uam_studio.planning.check import Plan, PlanCheck, check_plan
 from uam_studio.planning.mission import SCENARIOS, VERTIPORT, Mission, load_mission, mission_from_dict
 
 POLICIES = ("dqn", "oracle", "greedy")
@@ -38,7 +39,8 @@ BUNDLED_DIR = Path(__file__).resolve().parents[2] / "pretrained"
 MAX_POINTS = 2000  # samples per series in the result (JSON size)
 DECIMALS = 4
 
-__all__ = ["BUNDLED_DIR", "MAX_POINTS", "POLICIES", "bundled_agent_path", "plan_mission"]
+__all__ = ["BUNDLED_DIR", "MAX_POINTS", "POLICIES", "bundled_agent_path", "load_agent_cached", "plan_mission",
+           "rollout_agent"]
 
 
 def bundled_agent_path(scenario: str) -> Path:
@@ -132,33 +134,70 @@ def _dqn_route(mission: Mission, agent_path: str | os.PathLike[str] | None, pred
     else:
         path = Path(agent_path)
 
-    from uam_studio.planning.env import UAMPlanningEnv
-    from uam_studio.planning.training import greedy_action, load_agent, load_card
+    plan = rollout_agent(mission, path, predictor, messages)
+    messages.extend(m for m in plan.messages if not m.startswith("end of discharge"))  # physics check says it
+    return list(plan.route), list(plan.altitudes_m)
 
-    card = load_card(path)
+
+@functools.lru_cache(maxsize=8)
+def _cached_agent(path: str, mtime_ns: int, size: int) -> tuple[Any, dict[str, Any]]:
+    from uam_studio.planning.training import load_agent, load_card
+
+    return load_agent(path), load_card(path)
+
+
+def load_agent_cached(path: str | os.PathLike[str]) -> tuple[Any, dict[str, Any]]:
+    """The agent at ``path`` and its model card, loaded once per file version (path, mtime, size).
+
+    The app replans on every slider move; loading an SB3 zip takes tens of ms, so it is cached.
+    :raises InputError: the file is missing or not an agent.
+    """
+    p = Path(path)
+    try:
+        st = p.stat()
+    except OSError as err:
+        raise InputError("agent", f"cannot read {p}: {err.strerror or err}") from None
+    return _cached_agent(str(p.resolve()), st.st_mtime_ns, st.st_size)
+
+
+def rollout_agent(mission: Mission, agent_path: str | os.PathLike[str], predictor: Any = None,
+                  messages: list[str] | None = None) -> Plan:
+    """Fly the DQN agent at ``agent_path`` greedily on ``mission`` (physics battery) and return its plan.
+
+    The mission must already be servable (at most ``N_MAX`` destinations, a cell that finishes the
+    take-off); :func:`plan_mission` checks that first. Health features: the predictor's ``health``
+    if the agent was trained on Dynaformer features, else the physics-only fallback.
+    ``messages`` (if given) receives notes about mismatches; the plan's own messages are in the plan.
+    """
+    from uam_studio.planning.env import UAMPlanningEnv
+    from uam_studio.planning.training import greedy_action
+
+    notes = messages if messages is not None else []
+    model, card = load_agent_cached(agent_path)
+    scenario = mission.scenario
     health_fn = None
     if card.get("health") == "dynaformer":
         if predictor is not None and callable(getattr(predictor, "health", None)):
             health_fn = predictor.health
         else:
-            messages.append("the agent was trained on Dynaformer health features but no Dynaformer is "
-                            "loaded; using the physics-only health features")
+            notes.append("the agent was trained on Dynaformer health features but no Dynaformer is "
+                         "loaded; using the physics-only health features")
     trained_for = card.get("scenario")
     if trained_for is not None and trained_for != scenario:
-        messages.append(f"note: the agent was trained for scenario {trained_for}, the mission is {scenario}")
+        notes.append(f"note: the agent was trained for scenario {trained_for}, the mission is {scenario}")
     env = UAMPlanningEnv(mission=mission, scenario=scenario, backend="physics", health_fn=health_fn)
-    model = load_agent(path, env)
+    if env.observation_space != model.observation_space or env.action_space != model.action_space:
+        raise InputError("agent", f"{agent_path}: incompatible with this environment (agent expects "
+                                  f"observations {model.observation_space.shape} and {model.action_space})")
     obs, _ = env.reset(seed=0)
-    done = False
-    truncated = False
+    done = truncated = False
     while not done:
         obs, _, terminated, truncated, _ = env.step(greedy_action(model, obs))
         done = terminated or truncated
     plan = env.episode_plan("dqn")
-    messages.extend(m for m in plan.messages if not m.startswith("end of discharge"))  # physics check says it
     if truncated:
-        messages.append(f"the agent did not finish within {env.max_steps} legs")
-    return list(plan.route), list(plan.altitudes_m)
+        notes.append(f"the agent did not finish within {env.max_steps} legs")
+    return plan
 
 
 # ----------------------------------------------------------------------------- Dynaformer prediction
