@@ -1,0 +1,45 @@
+"""Classroom helpers: the fast-mode switch, asset paths and the shared figures."""
+
+from __future__ import annotations
+
+import pytest
+
+from uam_studio.classroom import FAST_ENV_VAR, asset_path, fast_mode, pick
+from uam_studio.errors import InputError
+
+
+@pytest.mark.parametrize("value,expected", [("1", True), ("true", True), (" YES ", True), ("on", True),
+                                            ("", False), ("0", False), ("false", False), ("off", False)])
+def test_fast_mode_values(monkeypatch, value, expected):
+    monkeypatch.setenv(FAST_ENV_VAR, value)
+    assert fast_mode() is expected
+    assert pick(fast="f", full="F") == ("f" if expected else "F")
+
+
+def test_fast_mode_unset_and_typo(monkeypatch):
+    monkeypatch.delenv(FAST_ENV_VAR, raising=False)
+    assert fast_mode() is False
+    monkeypatch.setenv(FAST_ENV_VAR, "fats")
+    with pytest.raises(InputError, match="UAM_FAST"):
+        fast_mode()
+
+
+def test_asset_path_points_at_the_bundled_missions():
+    assert asset_path("example_mission.json").is_file()
+    assert asset_path("classroom_single_charge.json").is_file()
+    assert asset_path("classroom_multi_charge.json").is_file()
+
+
+def test_mission_map_and_sorties():
+    hv = pytest.importorskip("holoviews")
+    from uam_studio.classroom.plots import curves, mission_map, sorties
+    from uam_studio.planning import load_mission
+
+    assert sorties(["A", "B", "vertiport", "C"]) == [["vertiport", "A", "B", "vertiport"], ["vertiport", "C"]]
+    assert sorties([]) == []
+    m = load_mission(asset_path("classroom_multi_charge.json"))
+    fig = mission_map(m, ["D3", "D2", "vertiport", "D7", "vertiport"])
+    assert isinstance(fig, hv.Overlay)
+    assert sum(isinstance(el, hv.Curve) for el in fig) == 2  # one line per charging cycle
+    ov = curves({"a": ([0, 1], [3.5, 3.2]), "b": ([0, 1], [3.6, 3.1])}, "t", "V", hline=3.0)
+    assert len(ov) == 3

@@ -1,0 +1,83 @@
+"""HoloViews figures shared by the classroom notebooks (bokeh backend).
+
+Call ``hv.extension("bokeh")`` (or ``pn.extension()``) in the notebook first. Every function returns a
+HoloViews object that a notebook displays or combines with ``+`` and ``*``.
+
+- :func:`mission_map`: vertiport, destinations with their priority stars, and optionally a route,
+  coloured by charging cycle (the paper's mission maps).
+- :func:`curves`: several labelled (x, y) series in one overlay, with an optional horizontal line
+  (e.g. the EOD cut-off).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import holoviews as hv
+import holoviews.plotting.bokeh  # noqa: F401  (registers the bokeh backend, so .opts() works before hv.extension)
+import numpy as np
+
+from uam_studio.planning.mission import VERTIPORT, Mission
+
+__all__ = ["curves", "mission_map", "sorties"]
+
+PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
+
+
+def sorties(route: Sequence[str]) -> list[list[str]]:
+    """Split a route into sorties: each starts at the vertiport and ends at the next landing there
+    (the last one may end elsewhere). ``["A", "B", "vertiport", "C"]`` -> ``[["vertiport", "A", "B",
+    "vertiport"], ["vertiport", "C"]]``."""
+    out: list[list[str]] = []
+    cur = [VERTIPORT]
+    for name in route:
+        cur.append(name)
+        if name == VERTIPORT:
+            out.append(cur)
+            cur = [VERTIPORT]
+    if len(cur) > 1:
+        out.append(cur)
+    return out
+
+
+def mission_map(mission: Mission, route: Sequence[str] | None = None, title: str | None = None,
+                width: int = 480, height: int = 420) -> hv.Overlay:
+    """Map of ``mission`` (x, y in km): the vertiport (black square), destinations (size and label by
+    priority, stars), and ``route`` as straight legs, one colour per charging cycle."""
+    xs = [d.x_km for d in mission.destinations]
+    ys = [d.y_km for d in mission.destinations]
+    labels = [f"{d.name} {'*' * d.priority}" for d in mission.destinations]
+    prio = [d.priority for d in mission.destinations]
+    wind = [d.wind_kts for d in mission.destinations]
+    dests = hv.Points((xs, ys, prio, wind, labels), kdims=["x_km", "y_km"],
+                      vdims=["priority", "wind_kts", "name"], label="destinations").opts(
+        size=hv.dim("priority") * 5 + 6, color="priority", cmap="Oranges", clim=(0, 3),
+        line_color="black", tools=["hover"], show_legend=False)
+    text = hv.Labels((xs, ys, labels), kdims=["x_km", "y_km"], vdims="name").opts(
+        yoffset=3.0, text_font_size="9pt", text_color="black")
+    vp = hv.Points([(mission.vertiport.x_km, mission.vertiport.y_km)], kdims=["x_km", "y_km"],
+                   label="vertiport").opts(marker="square", size=14, color="black")
+    layers: list[Any] = []
+    for k, sortie in enumerate(sorties(route or [])):
+        pts = [(mission.node(n).x_km, mission.node(n).y_km) for n in sortie]
+        layers.append(hv.Curve(pts, "x_km", "y_km", label=f"charge {k + 1}").opts(
+            color=PALETTE[k % len(PALETTE)], line_width=2.5, alpha=0.8))
+    all_x = np.array(xs + [mission.vertiport.x_km])
+    all_y = np.array(ys + [mission.vertiport.y_km])
+    pad = 8.0
+    return hv.Overlay([*layers, vp, dests, text]).opts(
+        title=title or mission.name, width=width, height=height, data_aspect=1, legend_position="right",
+        xlim=(all_x.min() - pad, all_x.max() + pad), ylim=(all_y.min() - pad, all_y.max() + pad))
+
+
+def curves(series: Mapping[str, tuple[Sequence[float], Sequence[float]]], xlabel: str, ylabel: str,
+           hline: float | None = None, title: str = "", width: int = 700, height: int = 320,
+           **opts: Any) -> hv.Overlay:
+    """One ``hv.Curve`` per labelled ``(x, y)`` series, overlaid; ``hline`` draws a dashed
+    horizontal line (for example the 3.0 V cut-off)."""
+    items: list[Any] = [hv.Curve((np.asarray(x), np.asarray(y)), xlabel, ylabel, label=str(name)).opts(
+        tools=["hover"]) for name, (x, y) in series.items()]
+    if hline is not None:
+        items.append(hv.HLine(hline).opts(color="gray", line_dash="dashed", line_width=1))
+    return hv.Overlay(items).opts(title=title, width=width, height=height, legend_position="right", **opts)
