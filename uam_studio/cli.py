@@ -5,7 +5,7 @@ arguments to its own sub-parser and handles the parsed namespace, returning an e
 code. Bad input of any kind (an :class:`~uam_studio.errors.InputError`, or a value
 argparse rejects) prints one line ``error: ...`` to stderr and exits with code 2.
 
-Commands: ``simulate`` (fly a route of a mission file and report voltage and EOD), ``plan`` (plan
+Commands: ``serve`` (start the Panel app), ``simulate`` (fly a route of a mission file and report voltage and EOD), ``plan`` (plan
 a mission with the DQN agent, the oracle or the greedy baseline; physics-checked), ``train``
 (``dynaformer`` or ``dqn``; never into ``pretrained/``) and ``evaluate``.
 """
@@ -174,7 +174,6 @@ def _run_plan(args: argparse.Namespace) -> int:
 
 _DYNAFORMER_ONLY = ("n_train", "device", "no_resume")
 _DQN_ONLY = ("scenario", "mission", "alpha", "beta", "gamma")
-DQN_REWARD_DEFAULTS = {"alpha": 1.0, "beta": 1.0, "gamma": 5.0}  # the paper's figures (as UAMPlanningEnv)
 
 
 def _add_train_arguments(p: argparse.ArgumentParser) -> None:
@@ -245,12 +244,10 @@ def _run_train_dynaformer(args: argparse.Namespace) -> int:
 
 
 def _run_train_dqn(args: argparse.Namespace) -> int:
-    import datetime
-    import time
     from pathlib import Path
 
-    from uam_studio.errors import check_range
     from uam_studio.planning import SCENARIOS, load_mission
+    from uam_studio.planning.retrain import retrain_dqn, training_setup
 
     if args.scenario is not None and args.scenario not in SCENARIOS:
         raise _CliExit(f"--scenario: {args.scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}",
@@ -264,58 +261,16 @@ def _run_train_dqn(args: argparse.Namespace) -> int:
         raise _CliExit(f"--out: {agent} exists and is not a file", EXIT_INPUT)
     if args.steps is not None and args.steps < 1:
         raise _CliExit("--steps: must be >= 1", EXIT_INPUT)
-    defaults = DQN_REWARD_DEFAULTS
-    weights = {name: check_range(f"--{name}", default if getattr(args, name) is None else getattr(args, name),
-                                 0.0, 1e6)
-               for name, default in defaults.items()}
-
-    from uam_studio import __version__ as version
-    from uam_studio.planning.env import OBS_DIM, make_env
-    from uam_studio.planning.mission import mission_to_dict
-    from uam_studio.planning.training import DQNTrainConfig, save_agent, train_dqn
-
-    cfg = DQNTrainConfig(scenario=scenario, seed=args.seed, **weights)
-    if args.steps is not None:
-        cfg.steps = args.steps
-    env_kwargs = {"scenario": scenario, "backend": "physics", **weights}
-    if mission is not None:
-        env_kwargs.update(mission=mission, randomize_battery=True)
-    env_fn = make_env(**env_kwargs)  # bad missions (no destinations...) fail here, before training
-    episodes = []
-    started = datetime.datetime.now(datetime.timezone.utc)
-    t0 = time.perf_counter()
-    model = train_dqn(cfg, env_fn, callback=episodes.append, progress_bar=True)
-    wall_s = time.perf_counter() - t0
-    last = episodes[-100:]
-    final = {
-        "episodes": len(episodes),
-        "timesteps": int(model.num_timesteps),
-        "last_episodes": len(last),
-        "mean_reward": float(sum(e.reward for e in last) / len(last)) if last else None,
-        "mean_reached": float(sum(e.reached for e in last) / len(last)) if last else None,
-        "mean_reached_priority": float(sum(e.reached_priority for e in last) / len(last)) if last else None,
-        "mean_charging_cycles": float(sum(e.charging_cycles for e in last) / len(last)) if last else None,
-        "eod_rate": float(sum(e.eod_breach for e in last) / len(last)) if last else None,
-    }
-    card = {
-        "model": "dqn",
-        "uam_studio_version": version,
-        "scenario": scenario,
-        "health": "fallback",  # physics-only health features (no Dynaformer), see planning.env.fallback_health
-        "config": cfg.to_dict(),
-        "env": {"mission": mission_to_dict(mission) if mission is not None else None,
-                "randomize_battery": mission is not None, "backend": "physics",
-                "obs_dim": OBS_DIM},
-        "timing": {"started_utc": started.isoformat(timespec="seconds"), "wall_s": round(wall_s, 2),
-                   "steps_per_s": round(model.num_timesteps / wall_s, 1) if wall_s > 0 else None},
-        "final_stats": final,
-    }
-    save_agent(model, agent, card)
+    # Shared with the app's Retrain tab: validation, env, card and atomic save live in the library.
+    cfg, env_fn = training_setup(scenario, mission, args.alpha, args.beta, args.gamma, args.steps, args.seed)
+    res = retrain_dqn(cfg, env_fn, agent, mission=mission, progress_bar=True, source="cli")
+    card, final = res.card, res.card["final_stats"]
     card_path = agent.with_name("card.json") if agent.name == "agent.zip" else agent.with_suffix(".card.json")
     card_path.write_text(json.dumps(card, indent=2, default=str) + "\n")
     summary = (f"{final['episodes']} episodes; last {final['last_episodes']}: mean reward "
-               f"{final['mean_reward']:.2f}, EOD rate {final['eod_rate']:.0%}" if last else "no finished episode")
-    print(f"wrote {agent} ({summary}; {wall_s:.0f} s)")
+               f"{final['mean_reward']:.2f}, EOD rate {final['eod_rate']:.0%}" if final["last_episodes"]
+               else "no finished episode")
+    print(f"wrote {agent} ({summary}; {card['timing']['wall_s']:.0f} s)")
     return EXIT_OK
 
 
@@ -340,6 +295,31 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# --------------------------------------------------------------------------- serve
+
+
+def _add_serve_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--port", type=int, default=5006, help="port to listen on (default 5006)")
+    p.add_argument("--address", default=None, help="address to listen on (default: all interfaces)")
+    p.add_argument("--show", action=argparse.BooleanOptionalAction, default=True,
+                   help="open the app in a browser (default: yes)")
+
+
+def _run_serve(args: argparse.Namespace) -> int:
+    if not 0 <= args.port <= 65535:
+        raise _CliExit(f"--port: {args.port} is out of range; allowed [0, 65535]", EXIT_INPUT)
+    try:
+        from uam_studio.app.serve import serve
+    except ImportError as err:
+        raise _CliExit(f"serve: the app needs panel and holoviews ({err})", EXIT_INPUT) from None
+    try:
+        serve(port=args.port, show=args.show, address=args.address)
+    except OSError as err:
+        raise _CliExit(f"--port: cannot listen on {args.address or '*'}:{args.port} "
+                       f"({err.strerror or err})", EXIT_INPUT) from None
+    return EXIT_OK
+
+
 COMMANDS: dict[str, Command] = {
     "simulate": Command(
         "fly a route of a mission and report voltage and end of discharge",
@@ -353,6 +333,8 @@ COMMANDS: dict[str, Command] = {
     ),
     "train": Command("train a model (writes to a run folder, never over pretrained/)", _add_train_arguments, _run_train),
     "evaluate": Command("evaluate a model on held-out synthetic data", _add_evaluate_arguments, _run_evaluate),
+    "serve": Command("start the app (planner, battery lab, retraining) in a browser", _add_serve_arguments,
+                     _run_serve),
 }
 
 

@@ -1,0 +1,333 @@
+"""The app's state models (no browser, no server): validation, files, replanning, retraining, battery lab.
+
+Planning uses the greedy policy (tens of ms); the retraining cases train for a few hundred steps.
+Every test runs with ``UAM_STUDIO_HOME`` in a temporary folder.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from uam_studio.app.state import (
+    EXAMPLE_MISSION,
+    BatteryLabState,
+    PlannerState,
+    RetrainState,
+    population,
+    registry,
+)
+from uam_studio.planning import load_mission, mission_from_dict
+from uam_studio.planning.retrain import (
+    agents_dir,
+    is_bundled,
+    list_agents,
+    new_agent_path,
+    retrain_dqn,
+    training_setup,
+    user_home,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "assets" / "example_mission.json"
+
+
+@pytest.fixture(autouse=True)
+def home(tmp_path, monkeypatch) -> Path:
+    monkeypatch.setenv("UAM_STUDIO_HOME", str(tmp_path / "home"))
+    registry().refresh()
+    yield tmp_path / "home"
+    registry().refresh()
+
+
+def _state(**kw) -> PlannerState:
+    s = PlannerState(**kw)
+    if s.policy == "dqn" and kw.get("policy") is None:
+        s.apply(policy="greedy")
+    return s
+
+
+def _rows(s: PlannerState) -> list[dict]:
+    return s.destination_rows()
+
+
+# ----------------------------------------------------------------------------- planning state
+
+
+def test_example_matches_the_bundled_file_and_plans():
+    assert mission_from_dict(EXAMPLE_MISSION) == load_mission(EXAMPLE)
+    s = _state()
+    assert s.plan is not None and s.plan_error == "" and s.error == ""
+    names = {d.name for d in s.destinations}
+    assert s.plan["route"] and set(s.plan["route"]) <= names | {"vertiport"}
+    assert s.plan_request.mission == s.mission
+    assert s.health is not None and len(s.health) == 2
+
+
+def test_slider_change_replans_with_the_new_cell():
+    s = _state()
+    before = s.plan_count
+    assert s.apply(r0=0.2, q_max=6000)
+    assert s.plan_count == before + 1  # one replan for a batch of changes
+    assert s.plan_request.mission.battery.r0 == 0.2 and s.plan_request.mission.battery.q_max == 6000
+    assert s.plan["route"] and s.plan["min_voltage_v"] is not None
+
+
+@pytest.mark.parametrize("change, field, allowed", [
+    ({"r0": 0.9}, "r0", "[0.017, 0.45]"),
+    ({"q_max": 100.0}, "q_max", "[5000, 8000]"),
+    ({"eod_v": 5.0}, "eod_v", "[2.5, 3.5]"),
+    ({"return_wind": 60}, "return_wind", "[-39, 39]"),
+    ({"policy": "astar"}, "policy", "greedy"),
+    ({"scenario": "tour"}, "scenario", "single_charge"),
+])
+def test_out_of_range_is_a_message_and_keeps_the_mission(change, field, allowed):
+    s = _state()
+    mission, count = s.mission, s.plan_count
+    assert not s.apply(**change)
+    assert s.error.startswith(field) and allowed in s.error and "\n" not in s.error
+    assert s.mission == mission and s.plan_count == count
+    assert s.apply(r0=0.2) and s.error == ""  # the next good edit clears the message
+
+
+def test_zero_and_too_many_destinations_are_refused():
+    s = _state()
+    mission = s.mission
+    assert not s.set_destinations([])
+    assert "at least 1 destination" in s.error and s.mission == mission
+    rows = [{"name": f"P{k}", "x_km": 10.0 + 8 * k, "y_km": 30.0, "priority": 1, "wind_kts": 0} for k in range(9)]
+    assert not s.set_destinations(rows)
+    assert "at most 8" in s.error and s.mission == mission
+    assert s.set_destinations(rows[:8]) and len(s.destinations) == 8
+
+
+def test_new_map_point_gets_a_name_and_priority():
+    s = _state()
+    rows = _rows(s) + [{"name": None, "x_km": 30.04, "y_km": 29.96, "priority": 0, "wind_kts": float("nan"),
+                        "dwell_s": None}]
+    assert s.set_destinations(rows), s.error
+    d = s.destinations[-1]
+    assert (d.name, d.x_km, d.y_km, d.priority, d.wind_kts, d.dwell_s) == ("D1", 30.0, 30.0, 1, 0.0, 0.0)
+    # a second new point takes the next free name
+    assert s.set_destinations(_rows(s) + [{"x_km": -30.0, "y_km": 10.0}])
+    assert s.destinations[-1].name == "D2"
+
+
+def test_table_edits_priority_and_wind_replan():
+    s = _state()
+    rows = _rows(s)
+    rows[0]["priority"] = 3
+    rows[1]["wind_kts"] = -30.0
+    count = s.plan_count
+    assert s.set_destinations(rows)
+    assert s.destinations[0].priority == 3 and s.destinations[1].wind_kts == -30.0
+    assert s.plan_count == count + 1
+    assert s.set_destinations(_rows(s)) and s.plan_count == count + 1  # unchanged rows: no replan
+
+
+@pytest.mark.parametrize("key, value, expect", [
+    ("wind_kts", 50.0, "destinations[1] (Hayward).wind_kts: 50.0 is out of range; allowed [-39, 39] kt"),
+    ("priority", 4, "destinations[1] (Hayward).priority: 4 is out of range; allowed [1, 3]"),
+    ("x_km", 500.0, "destinations[1] (Hayward).x_km"),
+    ("name", "vertiport", "reserved for the vertiport"),
+    ("name", "Richmond", "already used"),
+])
+def test_bad_row_values_name_the_field(key, value, expect):
+    s = _state()
+    mission = s.mission
+    rows = _rows(s)
+    rows[1][key] = value
+    assert not s.set_destinations(rows)
+    assert expect in s.error and s.mission == mission
+
+
+def test_json_round_trip_in_the_cli_format(tmp_path):
+    s = _state()
+    assert s.apply(q_max=6000.0, r0=0.2, eod_v=3.1, return_wind=-5.0, scenario="multi_charge")
+    text = s.to_json()
+    p = tmp_path / "m.json"
+    p.write_text(text)
+    assert load_mission(p) == s.mission  # the CLI's reader
+    t = _state()
+    assert t.load_json(text.encode(), "m.json") and t.error == ""
+    assert t.mission == s.mission and "loaded m.json" in t.notice
+
+
+@pytest.mark.parametrize("content, expect", [
+    (b"{not json", "file bad.json: is not valid JSON"),
+    (b"", "file bad.json: is empty"),
+    (b"\xff\xfe", "not UTF-8"),
+    (json.dumps({**EXAMPLE_MISSION, "destinations": []}).encode(), "at least 1 destination"),
+    (json.dumps({**EXAMPLE_MISSION, "battery": {"q_max": 7600, "r0": 0.9}}).encode(), "r0"),
+    (json.dumps({**EXAMPLE_MISSION, "eod_v": "3"}).encode(), "eod_v"),
+    (json.dumps({**EXAMPLE_MISSION, "extra": 1}).encode(), "extra: unknown field"),
+    (json.dumps([1, 2]).encode(), "expected a JSON object"),
+    (b'{"name": "a", "name": "b"}', "duplicate key"),
+])
+def test_invalid_file_is_a_message_and_keeps_the_mission(content, expect):
+    s = _state()
+    assert s.apply(r0=0.25)
+    mission = s.mission
+    assert not s.load_json(content, "bad.json")
+    assert s.error.startswith("file bad.json") and expect in s.error and "\n" not in s.error
+    assert s.mission == mission
+
+
+def test_too_many_destinations_in_a_file():
+    d = dict(EXAMPLE_MISSION)
+    d["destinations"] = [{"name": f"P{k}", "x_km": 10.0 + 8 * k, "y_km": 30.0, "priority": 1, "wind_kts": 0}
+                         for k in range(9)]
+    s = _state()
+    assert not s.load_json(json.dumps(d), "nine.json") and "at most 8" in s.error
+
+
+def test_reset_example():
+    s = _state()
+    assert s.set_destinations(_rows(s)[:1])
+    s.reset_example()
+    assert s.mission == mission_from_dict(EXAMPLE_MISSION)
+
+
+def test_missing_bundled_agent_is_a_message_not_an_error(monkeypatch, tmp_path):
+    import uam_studio.planning.policy as policy
+
+    monkeypatch.setattr(policy, "BUNDLED_DIR", tmp_path)
+    s = _state()
+    assert s.apply(policy="dqn")
+    assert s.plan_error == "" and s.plan["route"] == []
+    assert any("no bundled DQN agent" in m for m in s.plan["messages"])
+
+
+def test_background_replanning_keeps_only_the_latest():
+    applied = []
+
+    def dispatch(cb):  # what the server does: hand the result to the session's thread
+        applied.append(threading.current_thread().name)
+        cb()
+
+    s = PlannerState(background=True, dispatch=dispatch, policy="greedy")
+    assert s.wait_idle(60)
+    for r0 in (0.05, 0.1, 0.15, 0.2, 0.25):
+        s.apply(r0=r0)
+    assert s.wait_idle(60) and not s.busy
+    assert s.plan_request.mission.battery.r0 == 0.25  # the last request wins
+    assert s.plan_count <= 6 and all(n.startswith("uam-plan") for n in applied)
+
+
+# ----------------------------------------------------------------------------- user folder, agents
+
+
+def test_user_folder_from_env(home):
+    assert user_home() == home and agents_dir() == home / "agents"
+    p = new_agent_path("single_charge", "map")
+    assert p.parent == home / "agents" and p.suffix == ".zip" and not is_bundled(p)
+    assert is_bundled(ROOT / "pretrained" / "x.zip")
+    assert list_agents() == []
+
+
+def test_retrain_into_pretrained_is_refused():
+    cfg, env_fn = training_setup(steps=10)
+    with pytest.raises(Exception, match="pretrained"):
+        retrain_dqn(cfg, env_fn, ROOT / "pretrained" / "refused.zip")
+    assert not (ROOT / "pretrained" / "refused.zip").exists()
+
+
+@pytest.mark.parametrize("kw, field", [({"alpha": -1}, "alpha"), ({"steps": 0}, "steps"),
+                                       ({"scenario": "tour"}, "scenario")])
+def test_training_setup_errors(kw, field):
+    from uam_studio.errors import InputError
+
+    with pytest.raises(InputError) as err:
+        training_setup(**kw)
+    assert err.value.field == field
+
+
+def test_retrain_state_trains_saves_and_the_planner_can_use_it(home):
+    planner = _state()
+    rs = RetrainState(source="map", scenario="single_charge", steps=300, seed=1)
+    assert rs.start(planner.mission), rs.error
+    assert rs.running and not rs.start(planner.mission)  # one run at a time
+    assert "already going" in rs.error
+    rs.join(120)
+    rows = rs.poll()
+    assert not rs.running and rs.error == "" and rs.timesteps >= 300
+    assert rows and rs.episodes == len(rows) and rows[-1]["episode"] == len(rows)
+    assert set(rows[0]) == {"episode", "reached", "cycles", "reached_ma", "cycles_ma"}
+    path = Path(rs.agent_path)
+    assert path.parent == home / "agents" and path.is_file() and "saved" in rs.status
+    card = json.loads(zipfile.ZipFile(path).read("card.json"))
+    assert card["source"] == "app" and card["env"]["mission"]["name"] == planner.mission.name
+    assert card["stopped_early"] is False and card["final_stats"]["timesteps"] >= 300
+
+    registry().refresh()
+    value = f"agent:{path}"
+    assert value in planner.policy_objects.values()
+    assert planner.apply(policy=value), planner.error
+    assert planner.plan_error == "" and planner.plan["policy"] == "dqn" and planner.plan["route"]
+    planner.close()
+
+
+def test_retrain_stop_saves_the_agent_so_far(home):
+    rs = RetrainState(source="random", steps=200_000)
+    assert rs.start(None), rs.error
+    while rs.running and rs.episodes < 3:
+        rs.poll()
+        rs.join(0.2)
+    rs.stop()
+    rs.join(60)
+    rs.poll()
+    assert not rs.running and rs.status.startswith("stopped") and rs.timesteps < 200_000
+    card = json.loads(zipfile.ZipFile(rs.agent_path).read("card.json"))
+    assert card["stopped_early"] is True and card["env"]["mission"] is None
+
+
+def test_retrain_on_a_bad_map_is_a_message():
+    planner = _state()
+    assert planner.set_destinations([{"name": "Near", "x_km": 2.0, "y_km": 1.0, "priority": 1, "wind_kts": 0}])
+    rs = RetrainState(source="map")
+    assert not rs.start(planner.mission)
+    assert rs.error.startswith("training (current map)") and "too close" in rs.error and not rs.running
+
+
+def test_list_agents_skips_files_that_are_not_agents(home):
+    d = home / "agents"
+    d.mkdir(parents=True)
+    (d / "junk.zip").write_bytes(b"not a zip")
+    with zipfile.ZipFile(d / "other.zip", "w") as zf:
+        zf.writestr("card.json", json.dumps({"model": "dynaformer"}))
+    assert list_agents() == []
+
+
+# ----------------------------------------------------------------------------- battery lab, health
+
+
+@pytest.mark.parametrize("vary", ["altitude", "wind", "R0", "q_max"])
+def test_battery_lab_families(vary):
+    lab = BatteryLabState(vary=vary, legs=4)
+    c = lab.curves()
+    assert c["error"] == "" and len(c["setting"]) == 1 and len(c["family"]) >= 4
+    for curve in c["family"] + c["setting"]:
+        assert curve["current_a"].size == curve["time_s"].size >= curve["voltage_v"].size > 0
+        assert np.all(np.isfinite(curve["voltage_v"]))
+
+
+def test_battery_lab_r0_shortens_the_flight_and_short_legs_are_skipped():
+    lab = BatteryLabState(vary="R0", legs=10)
+    eods = [c["eod_s"] for c in lab.curves()["family"]]
+    assert all(e is not None for e in eods) and eods == sorted(eods, reverse=True)
+    lab = BatteryLabState(vary="altitude", distance_km=12.0, altitude_m=500.0)
+    c = lab.curves()
+    assert c["error"] == "" and c["skipped"] and "too short" in c["skipped"][0]
+    lab.altitude_m = 3000.0
+    assert "too short" in lab.curves()["error"]
+
+
+def test_health_population_is_cached_and_pc1_tracks_r0():
+    pop = population()
+    assert pop is population() and len(pop) == 300
+    assert abs(np.corrcoef(pop.pc1, pop.r0)[0, 1]) > 0.9

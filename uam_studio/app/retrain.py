@@ -1,0 +1,137 @@
+"""The Retrain tab: retrain a DQN agent on the current map or on random missions, live.
+
+Training runs in a background thread (:class:`~uam_studio.app.state.RetrainState`). This view
+drains its episode queue on a periodic callback of the session (so every widget and plot update
+happens on the session's own thread) and streams the rows into a :class:`holoviews.streams.Buffer`
+behind the learning curves. A finished (or stopped) agent is saved in the user folder and appears
+in every session's Planner policy list.
+"""
+
+from __future__ import annotations
+
+import html
+from typing import Any
+
+import holoviews as hv
+import pandas as pd
+import panel as pn
+import param
+
+from uam_studio.app.state import PlannerState, RetrainState, registry
+from uam_studio.planning.mission import SCENARIOS
+from uam_studio.planning.retrain import agents_dir
+
+POLL_MS = 300
+CURVE_COLUMNS = ["episode", "reached", "cycles", "reached_ma", "cycles_ma"]
+
+
+class RetrainView(pn.viewable.Viewer):
+    """Settings, Start/Stop, progress and learning curves of a :class:`RetrainState`."""
+
+    state = param.ClassSelector(class_=RetrainState)
+    planner = param.ClassSelector(class_=PlannerState)
+
+    def __init__(self, state: RetrainState, planner: PlannerState, **params: Any) -> None:
+        super().__init__(state=state, planner=planner, **params)
+        s = state
+        s.scenario = planner.scenario
+        w = 280
+        self.source = pn.widgets.RadioButtonGroup(
+            name="Missions", options={"Current map": "map", "Random missions": "random"}, value=s.source, width=w)
+        self.scenario = pn.widgets.Select(name="Scenario", options=list(SCENARIOS), value=s.scenario, width=w)
+        self.alpha = pn.widgets.FloatInput(name="alpha (reward per destination x priority)", value=s.alpha,
+                                           start=0, end=100, step=0.5, width=w)
+        self.beta = pn.widgets.FloatInput(name="beta (penalty per charging stop)", value=s.beta, start=0, end=100,
+                                          step=0.5, width=w)
+        self.gamma = pn.widgets.FloatInput(name="gamma (penalty for end of discharge)", value=s.gamma, start=0,
+                                           end=100, step=0.5, width=w)
+        self.steps = pn.widgets.IntInput(name="Steps (environment transitions)", value=s.steps, start=100,
+                                         end=1_000_000, step=500, width=w)
+        self.seed = pn.widgets.IntInput(name="Seed", value=s.seed, start=0, width=w)
+        for key in ("source", "scenario", "alpha", "beta", "gamma", "steps", "seed"):
+            getattr(self, key).link(s, value=key)
+        planner.param.watch(lambda ev: setattr(self.scenario, "value", ev.new), "scenario")
+
+        self.start = pn.widgets.Button(name="Start", button_type="success", width=135,
+                                       css_classes=["uam-train-start"])
+        self.stop = pn.widgets.Button(name="Stop", button_type="danger", width=135, disabled=True,
+                                      css_classes=["uam-train-stop"])
+        self.start.on_click(self._on_start)
+        self.stop.on_click(lambda _ev: s.stop())
+        self.progress = pn.indicators.Progress(name="progress", value=0, max=1000, width=w, bar_color="success",
+                                               css_classes=["uam-train-progress"])
+        self.status = pn.pane.HTML("", css_classes=["uam-train-status"], sizing_mode="stretch_width")
+        self.error = pn.pane.Alert("", alert_type="danger", visible=False, css_classes=["uam-error"])
+
+        self.buffer = hv.streams.Buffer(pd.DataFrame({c: [] for c in CURVE_COLUMNS}), length=200_000, index=False)
+        self.reached_plot = pn.pane.HoloViews(hv.DynamicMap(self._reached_element, streams=[self.buffer]),
+                                              linked_axes=False, css_classes=["uam-curve-reached"])
+        self.cycles_plot = pn.pane.HoloViews(hv.DynamicMap(self._cycles_element, streams=[self.buffer]),
+                                             linked_axes=False, css_classes=["uam-curve-cycles"])
+        self._poller = None
+        s.param.watch(self._on_status, ["running", "status", "error", "timesteps", "episodes", "agent_path"])
+        self._on_status()
+
+    def __panel__(self) -> pn.viewable.Viewable:
+        intro = pn.pane.Markdown(
+            "Retrain the masked DQN agent. *Current map* trains on the Planner's destinations with a random "
+            "cell (q_max, R0) each episode; *random missions* draws a new mission every episode. "
+            f"Agents are saved in `{html.escape(str(agents_dir()))}` (set `UAM_STUDIO_HOME` to move it), "
+            "never over the bundled ones, and appear in the Planner's policy list.")
+        controls = pn.Column("### Settings", self.source, self.scenario, self.alpha, self.beta, self.gamma,
+                             self.steps, self.seed, pn.Row(self.start, self.stop), self.progress, width=310)
+        return pn.Column(intro, self.error, pn.Row(controls, pn.Column(self.status, self.reached_plot,
+                                                                       self.cycles_plot)))
+
+    # ------------------------------------------------------------------ actions
+
+    def _on_start(self, _event: Any) -> None:
+        self.buffer.clear()
+        if self.state.start(self.planner.mission):
+            if self._poller is None:
+                self._poller = pn.state.add_periodic_callback(self._poll, period=POLL_MS, start=False)
+            self._poller.start()
+
+    def _poll(self) -> None:
+        rows = self.state.poll()
+        if rows:
+            self.buffer.send(pd.DataFrame(rows, columns=CURVE_COLUMNS))
+        if not self.state.running and self._poller is not None:
+            self._poller.stop()
+            registry().refresh()  # the new agent appears in every session's Planner
+
+    def _on_status(self, *events: Any) -> None:
+        s = self.state
+        self.start.disabled = s.running
+        self.stop.disabled = not s.running
+        self.progress.value = int(round(1000 * s.progress))
+        self.error.object = html.escape(s.error)
+        self.error.visible = bool(s.error)
+        episodes = f"episodes: <b class='uam-episodes'>{s.episodes}</b>, steps: {s.timesteps}"
+        self.status.object = f"<p>{html.escape(s.status)}</p><p>{episodes}</p>"
+
+    def close(self) -> None:
+        """The session ended: stop the run (the agent so far is still saved) and the poller."""
+        self.state.stop()
+        if self._poller is not None:
+            self._poller.stop()
+
+    # ------------------------------------------------------------------ plots
+
+    @staticmethod
+    def _reached_element(data: pd.DataFrame) -> hv.Overlay:
+        raw = hv.Curve(data, "episode", "reached", label="per episode").opts(color="#9ecae1", line_width=1)
+        ma = hv.Curve(data, "episode", "reached_ma", label=f"moving average ({RetrainState.MA_WINDOW})").opts(
+            color="#08519c", line_width=2.5)
+        return (raw * ma).opts(width=620, height=260, title="Destinations reached per episode",
+                               ylabel="destinations reached", legend_position="bottom_right", show_grid=True,
+                               framewise=True)
+
+    @staticmethod
+    def _cycles_element(data: pd.DataFrame) -> hv.Overlay:
+        raw = hv.Curve(data, "episode", "cycles", label="per episode").opts(color="#fdae6b", line_width=1)
+        ma = hv.Curve(data, "episode", "cycles_ma", label=f"moving average ({RetrainState.MA_WINDOW})").opts(
+            color="#a63603", line_width=2.5)
+        return (raw * ma).opts(width=620, height=260, title="Charging cycles per episode",
+                               ylabel="charging cycles", legend_position="bottom_right", show_grid=True,
+                               framewise=True)

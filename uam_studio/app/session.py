@@ -1,0 +1,53 @@
+"""Where a session runs: served (a Bokeh document with a server session) or not (Jupyter, tests)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import panel as pn
+
+
+def in_server_session() -> bool:
+    """True while building a session of a Panel/Bokeh server (not in Jupyter or plain Python)."""
+    doc = pn.state.curdoc
+    return doc is not None and doc.session_context is not None
+
+
+def configure_server_threads() -> None:
+    """One torch thread per call in the server process.
+
+    The sessions, the planning pool and any retraining share the machine's cores. With torch's
+    default intra-op threads, a Dynaformer prediction on a busy 2-core machine took about 0.5 s
+    instead of about 5 ms (threads spinning against each other), so the served app runs torch
+    single-threaded and gets its parallelism from the sessions instead.
+    """
+    import torch
+
+    if torch.get_num_threads() != 1:
+        torch.set_num_threads(1)
+
+
+def session_dispatcher() -> Callable[[Callable[[], None]], None] | None:
+    """A function that runs a callback on this session's event loop with the document lock held
+    (``doc.add_next_tick_callback``, safe to call from any thread), or None outside a server session.
+
+    Worker threads (planning, training) hand their results back through it, so every change to
+    widgets, panes and plots happens on the session's own thread.
+    """
+    if not in_server_session():
+        return None
+    from panel.io.state import set_curdoc
+
+    doc = pn.state.curdoc
+
+    def dispatch(cb: Callable[[], None]) -> None:
+        def run() -> None:
+            with set_curdoc(doc):
+                cb()
+
+        try:
+            doc.add_next_tick_callback(run)
+        except Exception:  # the session has gone: nothing to update
+            pass
+
+    return dispatch

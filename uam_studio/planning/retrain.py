@@ -1,0 +1,266 @@
+"""Retraining a DQN agent and keeping retrained agents in the user's folder.
+
+Shared by ``uam-studio train dqn`` and the app's Retrain tab:
+
+- :func:`training_setup`: validate the settings and build the :class:`DQNTrainConfig` and the env
+  factory (a fixed map with a random cell each episode, or a random mission every episode);
+- :func:`retrain_dqn`: train (stoppable, streaming :class:`EpisodeStats`), build the model card and
+  save the agent atomically (never into the bundled ``pretrained/`` folder);
+- :func:`user_home`, :func:`agents_dir`, :func:`list_agents`, :func:`new_agent_path`: the user folder,
+  ``$UAM_STUDIO_HOME`` or ``~/.uam_studio``, whose ``agents/`` subfolder holds retrained agents.
+"""
+
+from __future__ import annotations
+
+import datetime
+import os
+import re
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from uam_studio.errors import InputError, check_range
+from uam_studio.planning.mission import SCENARIOS, Mission, mission_to_dict
+from uam_studio.planning.policy import BUNDLED_DIR
+
+__all__ = [
+    "DQN_REWARD_DEFAULTS",
+    "HOME_ENV",
+    "AgentInfo",
+    "RetrainResult",
+    "agents_dir",
+    "is_bundled",
+    "list_agents",
+    "new_agent_path",
+    "retrain_dqn",
+    "training_setup",
+    "user_home",
+]
+
+HOME_ENV = "UAM_STUDIO_HOME"
+DQN_REWARD_DEFAULTS = {"alpha": 1.0, "beta": 1.0, "gamma": 5.0}  # the paper's figures (as UAMPlanningEnv)
+STATS_WINDOW = 100  # final_stats average the last 100 episodes
+MAX_STEPS = 10_000_000
+
+
+# ----------------------------------------------------------------------------- user folder
+
+
+def user_home() -> Path:
+    """The user folder: ``$UAM_STUDIO_HOME`` if set, else ``~/.uam_studio`` (not created here)."""
+    env = os.environ.get(HOME_ENV, "").strip()
+    return Path(env).expanduser() if env else Path.home() / ".uam_studio"
+
+
+def agents_dir() -> Path:
+    """Where retrained agents are saved: ``<user_home()>/agents``."""
+    return user_home() / "agents"
+
+
+def is_bundled(path: str | os.PathLike[str]) -> bool:
+    """True if ``path`` is the bundled ``pretrained/`` folder or inside it."""
+    bundled = BUNDLED_DIR.resolve()
+    p = Path(path).resolve()
+    return p == bundled or bundled in p.parents
+
+
+@dataclass(frozen=True)
+class AgentInfo:
+    """A retrained agent file and what its model card says."""
+
+    path: Path
+    name: str  # file stem
+    scenario: str | None
+    card: dict[str, Any] = field(repr=False)
+
+    @property
+    def label(self) -> str:
+        return f"{self.name} ({self.scenario})" if self.scenario else self.name
+
+
+def list_agents(folder: str | os.PathLike[str] | None = None) -> list[AgentInfo]:
+    """The agents (``*.zip`` with a readable model card) in ``folder`` (default :func:`agents_dir`),
+    newest first. Unreadable files are skipped (they are not agents); a missing folder gives ``[]``."""
+    from uam_studio.planning.training import load_card
+
+    d = Path(folder) if folder is not None else agents_dir()
+    if not d.is_dir():
+        return []
+    out: list[tuple[float, AgentInfo]] = []
+    for p in d.glob("*.zip"):
+        try:
+            card = load_card(p)
+            mtime = p.stat().st_mtime
+        except (InputError, OSError):
+            continue
+        if card.get("model") != "dqn":
+            continue
+        scenario = card.get("scenario") if card.get("scenario") in SCENARIOS else None
+        out.append((mtime, AgentInfo(p, p.stem, scenario, card)))
+    out.sort(key=lambda t: (-t[0], t[1].name))
+    return [a for _, a in out]
+
+
+_SAFE = re.compile(r"[^A-Za-z0-9_.-]+")
+
+
+def new_agent_path(scenario: str, source: str, folder: str | os.PathLike[str] | None = None) -> Path:
+    """A fresh file name ``<scenario>-<source>-<UTC time>.zip`` in ``folder`` (default :func:`agents_dir`)."""
+    d = Path(folder) if folder is not None else agents_dir()
+    stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%d-%H%M%S")
+    base = _SAFE.sub("_", f"{scenario}-{source}-{stamp}")
+    p, k = d / f"{base}.zip", 1
+    while p.exists():
+        k += 1
+        p = d / f"{base}-{k}.zip"
+    return p
+
+
+# ----------------------------------------------------------------------------- training
+
+
+def training_setup(
+    scenario: str | None = None,
+    mission: Mission | None = None,
+    alpha: float | None = None,
+    beta: float | None = None,
+    gamma: float | None = None,
+    steps: int | None = None,
+    seed: int = 0,
+) -> tuple[Any, Callable[[], Any]]:
+    """Validate the settings of a DQN retraining and build ``(DQNTrainConfig, env_fn)``.
+
+    :param scenario: default: the mission's, else ``single_charge``.
+    :param mission: train on this map (the cell's q_max and R0 drawn at random each episode), or
+        None for a random mission every episode.
+    :param alpha, beta, gamma: reward weights (default :data:`DQN_REWARD_DEFAULTS`), in [0, 1e6].
+    :param steps: env transitions (default: :class:`DQNTrainConfig`'s), in [1, 1e7].
+    :raises InputError: bad settings, or a map the environment cannot use (no destinations, more
+        than 8, none far enough from the vertiport).
+    """
+    from uam_studio.planning.env import make_env
+    from uam_studio.planning.training import DQNTrainConfig
+
+    if scenario is not None and scenario not in SCENARIOS:
+        raise InputError("scenario", f"{scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}")
+    scenario = scenario or (mission.scenario if mission is not None else "single_charge")
+    given = {"alpha": alpha, "beta": beta, "gamma": gamma}
+    weights = {k: check_range(k, DQN_REWARD_DEFAULTS[k] if v is None else v, 0.0, 1e6) for k, v in given.items()}
+    cfg = DQNTrainConfig(scenario=scenario, seed=int(seed), **weights)
+    if steps is not None:
+        if isinstance(steps, bool) or int(steps) != steps or not 1 <= int(steps) <= MAX_STEPS:
+            raise InputError("steps", f"{steps!r} is out of range; allowed integers in [1, {MAX_STEPS:g}]")
+        cfg.steps = int(steps)
+    env_kwargs: dict[str, Any] = {"scenario": scenario, "backend": "physics", **weights}
+    if mission is not None:
+        env_kwargs.update(mission=mission, randomize_battery=True)
+    env_fn = make_env(**env_kwargs)  # bad maps fail here, before training
+    return cfg, env_fn
+
+
+@dataclass
+class RetrainResult:
+    """What :func:`retrain_dqn` produced."""
+
+    path: Path
+    card: dict[str, Any]
+    episodes: int
+    timesteps: int
+    stopped: bool  # stopped early by the stop event
+    model: Any = field(repr=False, default=None)
+
+
+class _Tally:
+    """Running count and the last :data:`STATS_WINDOW` episodes."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.last: deque = deque(maxlen=STATS_WINDOW)
+
+    def add(self, e) -> None:
+        self.n += 1
+        self.last.append(e)
+
+    def final(self, timesteps: int) -> dict[str, Any]:
+        last = list(self.last)
+        k = len(last)
+
+        def mean(f) -> float | None:
+            return float(sum(f(e) for e in last) / k) if k else None
+
+        return {
+            "episodes": self.n,
+            "timesteps": int(timesteps),
+            "last_episodes": k,
+            "mean_reward": mean(lambda e: e.reward),
+            "mean_reached": mean(lambda e: e.reached),
+            "mean_reached_priority": mean(lambda e: e.reached_priority),
+            "mean_charging_cycles": mean(lambda e: e.charging_cycles),
+            "eod_rate": mean(lambda e: float(e.eod_breach)),
+        }
+
+
+def retrain_dqn(
+    config: Any,
+    env_fn: Callable[[], Any],
+    agent_path: str | os.PathLike[str],
+    mission: Mission | None = None,
+    on_episode: Callable[[Any], Any] | None = None,
+    stop_event: threading.Event | None = None,
+    progress_bar: bool = False,
+    source: str | None = None,
+) -> RetrainResult:
+    """Train a DQN agent (:func:`~uam_studio.planning.training.train_dqn`) and save it with its card.
+
+    :param config: a :class:`~uam_studio.planning.training.DQNTrainConfig` (see :func:`training_setup`).
+    :param env_fn: the env factory from :func:`training_setup`.
+    :param agent_path: the agent zip to write (atomically); never inside ``pretrained/``.
+    :param mission: the map trained on (recorded in the card), or None for random missions.
+    :param on_episode: called with each :class:`~uam_studio.planning.training.EpisodeStats`, in the
+        training thread.
+    :param stop_event: set it to stop early; the agent trained so far is saved, with
+        ``"stopped_early": true`` in its card.
+    :param source: a short note on where the run came from (``"cli"``, ``"app"``), kept in the card.
+    :raises InputError: ``agent_path`` inside ``pretrained/``.
+    """
+    from uam_studio import __version__ as version
+    from uam_studio.planning.env import OBS_DIM
+    from uam_studio.planning.training import save_agent, train_dqn
+
+    agent = Path(agent_path)
+    if is_bundled(agent):
+        raise InputError("agent_path", f"{agent}: must not be in the bundled pretrained/ folder")
+    tally = _Tally()
+
+    def _on_episode(e) -> None:
+        tally.add(e)
+        if on_episode is not None:
+            on_episode(e)
+
+    started = datetime.datetime.now(datetime.timezone.utc)
+    t0 = time.perf_counter()
+    model = train_dqn(config, env_fn, callback=_on_episode, stop_event=stop_event, progress_bar=progress_bar)
+    wall_s = time.perf_counter() - t0
+    stopped = bool(stop_event is not None and stop_event.is_set() and model.num_timesteps < config.steps)
+    card = {
+        "model": "dqn",
+        "uam_studio_version": version,
+        "scenario": config.scenario,
+        "health": "fallback",  # physics-only health features (no Dynaformer), see planning.env.fallback_health
+        "config": config.to_dict(),
+        "env": {"mission": mission_to_dict(mission) if mission is not None else None,
+                "randomize_battery": mission is not None, "backend": "physics",
+                "obs_dim": OBS_DIM},
+        "timing": {"started_utc": started.isoformat(timespec="seconds"), "wall_s": round(wall_s, 2),
+                   "steps_per_s": round(model.num_timesteps / wall_s, 1) if wall_s > 0 else None},
+        "final_stats": tally.final(model.num_timesteps),
+        "stopped_early": stopped,
+    }
+    if source is not None:
+        card["source"] = source
+    save_agent(model, agent, card)
+    return RetrainResult(agent, card, tally.n, int(model.num_timesteps), stopped, model)
