@@ -160,9 +160,12 @@ def load_agent_cached(path: str | os.PathLike[str]) -> tuple[Any, dict[str, Any]
     return _cached_agent(str(p.resolve()), st.st_mtime_ns, st.st_size)
 
 
-def rollout_agent(mission: Mission, agent_path: str | os.PathLike[str], predictor: Any = None,
+def rollout_agent(mission: Mission, agent: Any, predictor: Any = None,
                   messages: list[str] | None = None) -> Plan:
-    """Fly the DQN agent at ``agent_path`` greedily on ``mission`` (physics battery) and return its plan.
+    """Fly a DQN agent greedily on ``mission`` (physics battery) and return its plan.
+
+    :param agent: an agent zip path, or a trained :class:`~uam_studio.planning.dqn.MaskedDQN` (its
+        health features are taken to be the physics-only fallback, as in ``uam-studio train dqn``)
 
     The mission must already be servable (at most ``N_MAX`` destinations, a cell that finishes the
     take-off); :func:`plan_mission` checks that first. Health features: the predictor's ``health``
@@ -173,7 +176,10 @@ def rollout_agent(mission: Mission, agent_path: str | os.PathLike[str], predicto
     from uam_studio.planning.training import greedy_action
 
     notes = messages if messages is not None else []
-    model, card = load_agent_cached(agent_path)
+    if isinstance(agent, (str, os.PathLike)):
+        model, card = load_agent_cached(agent)
+    else:
+        model, card = agent, {}
     scenario = mission.scenario
     health_fn = None
     if card.get("health") == "dynaformer":
@@ -187,7 +193,7 @@ def rollout_agent(mission: Mission, agent_path: str | os.PathLike[str], predicto
         notes.append(f"note: the agent was trained for scenario {trained_for}, the mission is {scenario}")
     env = UAMPlanningEnv(mission=mission, scenario=scenario, backend="physics", health_fn=health_fn)
     if env.observation_space != model.observation_space or env.action_space != model.action_space:
-        raise InputError("agent", f"{agent_path}: incompatible with this environment (agent expects "
+        raise InputError("agent", f"{agent}: incompatible with this environment (agent expects "
                                   f"observations {model.observation_space.shape} and {model.action_space})")
     obs, _ = env.reset(seed=0)
     done = truncated = False

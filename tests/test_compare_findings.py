@@ -1,0 +1,88 @@
+"""Planner comparison against the oracle, and the paper's qualitative findings as library functions."""
+
+import numpy as np
+import pytest
+
+from uam_studio.errors import InputError
+from uam_studio.planning import ALTITUDES_M, held_out_missions
+from uam_studio.planning.compare import compare_planners, summarize
+from uam_studio.planning.findings import altitude_by_distance, fixed_altitude_reach, reward_sweep, with_wind
+from uam_studio.planning.training import DQNTrainConfig, train_dqn
+
+
+@pytest.fixture(scope="module")
+def tiny_agent():
+    from uam_studio.planning.env import make_env
+
+    cfg = DQNTrainConfig(steps=1500, learning_starts=200, seed=3)
+    return train_dqn(cfg, make_env(scenario="single_charge", n_dest=(2, 4)))
+
+
+def test_oracle_bounds_every_policy(tiny_agent):
+    missions = held_out_missions(3, 31337, n_dest=(3, 4))
+    scores = compare_planners(missions, tiny_agent)
+    assert len(scores) == 9
+    by = {(s.mission, s.policy): s for s in scores}
+    for m in missions:
+        ref = by[(m.name, "oracle")]
+        assert ref.safe
+        for p in ("greedy", "dqn"):
+            s = by[(m.name, p)]
+            assert s.reached_priority <= ref.reached_priority, (m.name, p)
+            if not s.safe:
+                assert s.reached_priority == 0  # an unsafe plan scores nothing
+    summ = summarize(scores)
+    assert summ["oracle"]["mean_gap"] == 0.0
+    assert summ["oracle"]["eod_breach_rate"] == 0.0
+    assert 0.0 <= summ["greedy"]["mean_gap"] <= 1.0
+    assert summ["dqn"]["missions"] == 3
+
+
+def test_compare_rejects_bad_policy():
+    with pytest.raises(InputError, match="policies"):
+        compare_planners(held_out_missions(1, 1), policies=("random",))
+    with pytest.raises(InputError, match="agent_path"):
+        compare_planners(held_out_missions(1, 1), policies=("dqn",))
+
+
+def test_altitude_by_distance_rows():
+    rows = altitude_by_distance([30.0, 55.56], wind_kts=0.0)
+    assert [r["distance_km"] for r in rows] == [30.0, 55.56]
+    for r in rows:
+        charges = [r["by_altitude"][a]["charge_c"] for a in ALTITUDES_M]
+        assert np.all(np.diff(charges) > 0)  # higher climbs cost more charge on these legs
+        assert r["least_charge_m"] in ALTITUDES_M
+        assert all(0 < v["min_voltage_v"] < 4.3 for v in r["by_altitude"].values())
+    # 20 km is too short for 3000 m (needs 22.8 km): that altitude is simply absent
+    assert 3000.0 not in altitude_by_distance([20.0])[0]["by_altitude"]
+
+
+def test_fixed_altitude_reach_never_beats_full_oracle():
+    from uam_studio.planning.oracle import oracle_plan
+
+    missions = held_out_missions(2, 99, n_dest=(3, 3))
+    rows = fixed_altitude_reach(missions, (1000.0, 3000.0), wind_kts=39.0)
+    for m, r in zip(missions, rows):
+        full = oracle_plan(with_wind(m, 39.0))
+        assert max(r["priority"].values()) <= full.reached_priority
+    with pytest.raises(InputError, match="altitudes_m"):
+        fixed_altitude_reach(missions, (1500.0,))
+
+
+def test_with_wind_sets_every_leg():
+    m = with_wind(held_out_missions(1, 5)[0], -20.0)
+    assert m.vertiport.wind_kts == -20.0
+    assert all(d.wind_kts == -20.0 for d in m.destinations)
+
+
+def test_reward_sweep_rows():
+    seen = []
+    rows = reward_sweep("gamma", [0.0, 10.0], steps=600, eval_missions=held_out_missions(2, 8, n_dest=(3, 3)),
+                        on_episode=lambda v, ep: seen.append(v))
+    assert [r["gamma"] for r in rows] == [0.0, 10.0]
+    for r in rows:
+        assert 0.0 <= r["eod_breach_rate"] <= 1.0
+        assert r["episodes"] > 0
+    assert {0.0, 10.0} <= set(seen)
+    with pytest.raises(InputError, match="name"):
+        reward_sweep("delta", [1.0])
