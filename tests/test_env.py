@@ -80,7 +80,7 @@ def test_env_checker_fixed_mission_and_dynaformer_backend():
 def test_observation_layout_and_mask_in_observation():
     env = UAMPlanningEnv(hand_mission())
     obs, info = env.reset(seed=0)
-    assert len(FEATURE_NAMES) == N_FEATURES == 71 and OBS_DIM == 107 and obs.shape == (OBS_DIM,)
+    assert len(FEATURE_NAMES) == N_FEATURES == 80 and OBS_DIM == 116 and obs.shape == (OBS_DIM,)
     assert obs.dtype == np.float32 and env.observation_space.contains(obs)
     np.testing.assert_array_equal(obs[-N_ACTIONS:] > 0.5, env.action_masks())
     f = dict(zip(FEATURE_NAMES, obs[:N_FEATURES]))

@@ -66,13 +66,31 @@ def route_legs(plan: dict[str, Any] | None, state_rows: list[dict[str, Any]], ve
     return pd.DataFrame(rows, columns=cols)
 
 
+def _same_frame(a: pd.DataFrame, b: pd.DataFrame) -> bool:
+    """Same rows and values (numbers compared as floats)."""
+    if list(a.columns) != list(b.columns) or len(a) != len(b):
+        return False
+    for c in a.columns:
+        x, y = a[c].tolist(), b[c].tolist()
+        if c == "name":
+            if x != y:
+                return False
+        elif not np.allclose(np.asarray(x, float), np.asarray(y, float), equal_nan=True):
+            return False
+    return True
+
+
 def _fmt_v(x: float | None) -> str:
     return "-" if x is None else f"{x:.3f} V"
 
 
 def summary_html(state: PlannerState) -> str:
-    """The summary pane: route (names), altitudes, minimum predicted and physics voltage, margin to
-    EOD, safety, and the planner's notes."""
+    """The summary pane (``<div class="uam-plan-summary">``): route (names), altitudes, minimum
+    predicted and physics voltage, margin to EOD, safety, and the planner's notes."""
+    return f"<div class='uam-plan-summary'>{_summary_body(state)}</div>"
+
+
+def _summary_body(state: PlannerState) -> str:
     plan, req = state.plan, state.plan_request
     e = html.escape
     if state.plan_error:
@@ -194,8 +212,9 @@ class PlannerView(pn.viewable.Viewer):
             hv.DynamicMap(self._voltage_element, streams=[self._voltage_pipe]), linked_axes=False)
         self.health_plot = pn.pane.HoloViews(self._population_element() * hv.DynamicMap(
             self._health_element, streams=[self._health_pipe]), linked_axes=False)
-        self.summary = pn.pane.HTML(summary_html(s), css_classes=["uam-plan-summary"], sizing_mode="stretch_width",
-                                    min_height=160)
+        # The class sits on the content (inside the pane's shadow root), so that a locator for
+        # ".uam-plan-summary" finds exactly one element whose text is the summary.
+        self.summary = pn.pane.HTML(summary_html(s), sizing_mode="stretch_width", min_height=160)
         self.busy = pn.indicators.LoadingSpinner(value=s.busy, size=20, name="planning..." if s.busy else "",
                                                  css_classes=["uam-busy"])
         s.param.watch(self._on_plan, ["plan", "plan_error", "plan_request"])
@@ -247,7 +266,8 @@ class PlannerView(pn.viewable.Viewer):
         df = self._frame()
         self._syncing = True
         try:
-            self.table.value = df
+            if not _same_frame(self.table.value, df):
+                self.table.value = df
             self._points_pipe.send(df)
         finally:
             self._syncing = False
@@ -257,7 +277,15 @@ class PlannerView(pn.viewable.Viewer):
         self._route_pipe.send(self._route_data())
 
     def _on_plan(self, *events: param.parameterized.Event) -> None:
+        import sys
+        import threading
+        doc = pn.state.curdoc
+        print("ONPLAN", threading.current_thread().name, doc is not None and pn.state._unblocked(doc),
+              pn.state._thread_id, pn.state._current_thread, doc and pn.state._connected.get(doc),
+              file=sys.stderr, flush=True)
+        print("SUMMARY", summary_html(self.state).split("no safe place for:")[-1][:40], id(self.summary), file=sys.stderr, flush=True)
         self.summary.object = summary_html(self.state)
+        print("SUMMARY-SET", self.summary.object.split("no safe place for:")[-1][:40], self.summary._models.keys(), file=sys.stderr, flush=True)
         self._route_pipe.send(self._route_data())
         self._voltage_pipe.send(self._voltage_data())
         self._health_pipe.send(self._health_data())
@@ -289,7 +317,17 @@ class PlannerView(pn.viewable.Viewer):
     def _on_table_edit(self, event: Any) -> None:
         if self._syncing:
             return
-        rows = self.table.value.to_dict("records")
+        # Apply the edit itself to the state's rows: the table's own value may be patched after
+        # this event arrives, so it is not read here. Rows are indexed as the state orders them.
+        rows = self.state.destination_rows()
+        i = int(event.row)
+        if event.column not in COLUMNS or not 0 <= i < len(rows):
+            self._sync_destinations()
+            return
+        value = event.value
+        if hasattr(value, "item"):  # numpy scalar from the frame
+            value = value.item()
+        rows[i][event.column] = value
         self.state.notice = ""
         if not self.state.set_destinations(rows):
             self._sync_destinations()

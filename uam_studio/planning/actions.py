@@ -122,6 +122,12 @@ class LegTable:
         """Charge (C) one cell gives on leg i -> j at ``ALTITUDES_M[a]``."""
         return float(self.current(i, j, a).sum() * DT_S)
 
+    def cheapest_charge(self, i: int, j: int) -> float:
+        """Charge (C) of leg i -> j at its lowest feasible level (the cheapest one in the paper's
+        tables: climbing costs more than the cruise saves), ``inf`` if no level is feasible."""
+        levels = np.flatnonzero(self.feasible[i, j])
+        return self.charge(i, j, int(levels[0])) if levels.size else float("inf")
+
     def name(self, k: int) -> str:
         """Node name of index ``k`` (``"vertiport"`` for N_MAX)."""
         return self.names[-1] if k == N_MAX else self.names[k]

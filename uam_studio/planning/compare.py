@@ -62,7 +62,7 @@ class PlanScore:
         return asdict(self)
 
 
-def _score(mission: Mission, plan: Plan, plan_s: float) -> PlanScore:
+def _score(mission: Mission, plan: Plan, plan_s: float, policy: str) -> PlanScore:
     check = check_plan(mission, plan.route, plan.altitudes_m)
     prio = {d.name: d.priority for d in mission.destinations}
     reached: list[str] = []
@@ -71,7 +71,7 @@ def _score(mission: Mission, plan: Plan, plan_s: float) -> PlanScore:
             if leg.to in prio and leg.to not in reached:
                 reached.append(leg.to)
     cycles = int(check.sim.charging_cycles) if check.sim is not None else 0
-    return PlanScore(mission.name, plan.policy, int(sum(prio[n] for n in reached)), len(reached), cycles,
+    return PlanScore(mission.name, policy, int(sum(prio[n] for n in reached)), len(reached), cycles,
                      bool(check.safe), check.min_voltage_v, float(plan_s))
 
 
@@ -84,8 +84,10 @@ def compare_planners(
     """Plan every mission with every policy and score the plans with the physics model.
 
     :param missions: the missions (their own scenario, battery and cut-off are used)
-    :param agent_path: DQN agent zip, needed when ``"dqn"`` is in ``policies``
-    :param policies: any of ``"oracle"``, ``"greedy"``, ``"dqn"``
+    :param agent_path: DQN agent (zip path or trained model), needed for the ``dqn`` policies
+    :param policies: any of ``"oracle"``, ``"greedy"``, ``"dqn"`` (the agent with the safety filter of
+        :func:`~uam_studio.planning.policy.rollout_agent`, as ``uam-studio plan`` runs it) and
+        ``"dqn_raw"`` (the agent's own greedy choices, the paper's setting)
     :param progress: called with the number of missions done so far (e.g. a tqdm ``update``)
     :return: one :class:`PlanScore` per mission and policy, missions in order
     """
@@ -94,12 +96,13 @@ def compare_planners(
     from uam_studio.planning.oracle import oracle_plan
     from uam_studio.planning.policy import rollout_agent
 
-    if "dqn" in policies and agent_path is None:
+    if any(p.startswith("dqn") for p in policies) and agent_path is None:
         raise InputError("agent_path", "needed to compare the dqn policy")
     planners: dict[str, Callable[[Mission], Plan]] = {
         "oracle": oracle_plan,
         "greedy": greedy_plan,
-        "dqn": lambda m: rollout_agent(m, agent_path),
+        "dqn": lambda m: rollout_agent(m, agent_path, shield=True),
+        "dqn_raw": lambda m: rollout_agent(m, agent_path, shield=False),
     }
     for p in policies:
         if p not in planners:
@@ -109,7 +112,7 @@ def compare_planners(
         for p in policies:
             t0 = time.perf_counter()
             plan = planners[p](mission)
-            scores.append(_score(mission, plan, time.perf_counter() - t0))
+            scores.append(_score(mission, plan, time.perf_counter() - t0, p))
         if progress is not None:
             progress(i + 1)
     return scores

@@ -60,13 +60,16 @@ FEATURE_NAMES: tuple[str, ...] = (
     + ("vertiport_dx", "vertiport_dy", "vertiport_dist", "vertiport_wind")
     + tuple(f"scenario_{s}" for s in SCENARIOS)
     + ("eod_v",)
+    + tuple(f"slot{k}_round_trip_charge" for k in range(N_MAX))
+    + ("home_charge",)
 )
-N_FEATURES = len(FEATURE_NAMES)  # 71
-OBS_DIM = N_FEATURES + N_ACTIONS  # 107
+N_FEATURES = len(FEATURE_NAMES)  # 80
+OBS_DIM = N_FEATURES + N_ACTIONS  # 116
 _SLOT0 = 7
 _VP = _SLOT0 + 7 * N_MAX
 _SCEN = _VP + 4
 _EOD = _SCEN + 3
+_TRIP = _EOD + 1  # per-slot round-trip charge, then the charge to get home
 _SLOT_IDX = _SLOT0 + 7 * np.arange(N_MAX)  # start of each slot's block
 
 V_CENTER, V_SCALE = 3.6, 0.5
@@ -263,7 +266,7 @@ class UAMPlanningEnv(gym.Env):
 
     ## Observation space
 
-    ``Box(float32)`` of shape (107,): 71 features (bounds +-10, clipped), then the 36-entry action
+    ``Box(float32)`` of shape (116,): 80 features (bounds +-10, clipped), then the 36-entry action
     mask (bounds [0, 1]; 1.0 valid, 0.0 invalid); :meth:`action_masks` returns the same mask as
     booleans. Names in :data:`FEATURE_NAMES`.
 
@@ -280,7 +283,10 @@ class UAMPlanningEnv(gym.Env):
     | 63-66 | vertiport: dx, dy, distance (/ 100 km), wind on legs to it / 39 kt |
     | 67-69 | scenario one-hot (single_flight, single_charge, multi_charge) |
     | 70    | EOD cut-off, ``(eod_v - 3.0) / 0.5`` |
-    | 71-106| action mask |
+    | 71-78 | per slot: charge of the round trip aircraft -> slot -> vertiport at the lowest feasible |
+    |       | levels / 8000 C (0 for visited or empty slots): what the paper's tables say, no battery |
+    | 79    | charge to fly home from here / 8000 C (0 at the vertiport) |
+    | 80-115| action mask |
 
     Mask: invalid are empty slots, visited destinations, destinations that cannot be flown to
     and back at any level (closer than 6.1 km to the vertiport: every reachable destination must
@@ -572,6 +578,11 @@ class UAMPlanningEnv(gym.Env):
         f[_SLOT_IDX + 3] = rel[:N_MAX, 2]
         f[_SLOT_IDX + 5] = self._visited
         f[_VP:_VP + 3] = rel[VERTIPORT_SLOT]
+        vp = VERTIPORT_SLOT
+        for k in np.flatnonzero(self._servable_slots & ~self._visited):
+            trip = legs.cheapest_charge(node, k) + legs.cheapest_charge(k, vp) if k != node else 0.0
+            f[_TRIP + k] = trip / CHARGE_SCALE_C if np.isfinite(trip) else FEATURE_BOUND
+        f[_TRIP + N_MAX] = 0.0 if node == vp else legs.cheapest_charge(node, vp) / CHARGE_SCALE_C
         obs = self._obs
         np.clip(f, -FEATURE_BOUND, FEATURE_BOUND, out=f)
         obs[:N_FEATURES] = f
@@ -592,6 +603,30 @@ class UAMPlanningEnv(gym.Env):
         }
 
     # ------------------------------------------------------------------ helpers
+
+    def lookahead_safe(self, action: int) -> bool:
+        """Would this env's battery fly ``action``'s leg and then the way home, never below the cut-off?
+
+        The way home is the leg from the target back to the vertiport at its least-charge feasible
+        level (nothing more for an action that lands at the vertiport). It is flown on a copy of the
+        backend (physics or Dynaformer: what this env believes), so the episode is not changed. A
+        planner uses it as a safety filter (:func:`uam_studio.planning.policy.rollout_agent`).
+        """
+        a = int(action)
+        if self._done or not (0 <= a < N_ACTIONS and self._mask[a]):
+            return False
+        target, ai = divmod(a, N_ALTITUDES)
+        legs = self._legs
+        probe = copy.copy(self.backend)
+        if probe.fly_leg(legs.current(self._node, target, ai)).eod:
+            return False
+        if target == VERTIPORT_SLOT:
+            return True
+        levels = [k for k in range(N_ALTITUDES) if legs.feasible[target, VERTIPORT_SLOT, k]]
+        if not levels:
+            return False
+        home = min(levels, key=lambda k: legs.charge(target, VERTIPORT_SLOT, k))
+        return not probe.fly_leg(legs.current(target, VERTIPORT_SLOT, home)).eod
 
     def action_masks(self) -> np.ndarray:
         """Boolean valid-action mask, shape (36,) (the sb3-contrib ``MaskablePPO`` convention)."""

@@ -161,19 +161,25 @@ def load_agent_cached(path: str | os.PathLike[str]) -> tuple[Any, dict[str, Any]
 
 
 def rollout_agent(mission: Mission, agent: Any, predictor: Any = None,
-                  messages: list[str] | None = None) -> Plan:
+                  messages: list[str] | None = None, shield: bool = True) -> Plan:
     """Fly a DQN agent greedily on ``mission`` (physics battery) and return its plan.
 
     :param agent: an agent zip path, or a trained :class:`~uam_studio.planning.dqn.MaskedDQN` (its
         health features are taken to be the physics-only fallback, as in ``uam-studio train dqn``)
+
+    With ``shield`` (default) the agent's actions are filtered: at each step it takes its best-Q
+    valid action whose leg *and* the way home stay above the cut-off on the planning battery
+    (:meth:`UAMPlanningEnv.lookahead_safe`; here the physics model of the mission's cell), and
+    returns home (or stops) when none is. Without it, the raw greedy policy (the paper's setting).
 
     The mission must already be servable (at most ``N_MAX`` destinations, a cell that finishes the
     take-off); :func:`plan_mission` checks that first. Health features: the predictor's ``health``
     if the agent was trained on Dynaformer features, else the physics-only fallback.
     ``messages`` (if given) receives notes about mismatches; the plan's own messages are in the plan.
     """
+    from uam_studio.planning.actions import N_ALTITUDES, VERTIPORT_SLOT
     from uam_studio.planning.env import UAMPlanningEnv
-    from uam_studio.planning.training import greedy_action
+    from uam_studio.planning.training import greedy_action, ranked_actions
 
     notes = messages if messages is not None else []
     if isinstance(agent, (str, os.PathLike)):
@@ -197,10 +203,28 @@ def rollout_agent(mission: Mission, agent: Any, predictor: Any = None,
                                   f"observations {model.observation_space.shape} and {model.action_space})")
     obs, _ = env.reset(seed=0)
     done = truncated = False
+    filtered = 0
     while not done:
-        obs, _, terminated, truncated, _ = env.step(greedy_action(model, obs))
+        if not shield:
+            action = greedy_action(model, obs)
+        else:
+            ranked = ranked_actions(model, obs)
+            safe = [a for a in ranked[:1] if env.lookahead_safe(a)]  # the agent's own choice first
+            if not safe:
+                filtered += 1
+                safe = [a for a in ranked[1:] if env.lookahead_safe(a)][:1]
+            if not safe:  # nothing safe: head home at the cheapest level, or stop at the vertiport
+                home = [a for a in ranked if a // N_ALTITUDES == VERTIPORT_SLOT]
+                if not home:
+                    break
+                safe = home[:1]
+            action = int(safe[0])
+        obs, _, terminated, truncated, _ = env.step(action)
         done = terminated or truncated
-    plan = env.episode_plan("dqn")
+    plan = env.episode_plan("dqn+shield" if shield else "dqn")
+    if filtered:
+        notes.append(f"safety filter: {filtered} of the agent's choices would not have left a safe way home; "
+                     "replaced by its next-best safe choice")
     if truncated:
         notes.append(f"the agent did not finish within {env.max_steps} legs")
     return plan

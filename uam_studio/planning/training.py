@@ -45,6 +45,7 @@ __all__ = [
     "EpisodeStatsCallback",
     "TqdmCallback",
     "greedy_action",
+    "ranked_actions",
     "load_agent",
     "load_card",
     "save_agent",
@@ -275,6 +276,18 @@ def greedy_action(model: MaskedDQN, obs: np.ndarray) -> int:
         raise ValueError("no valid action in this observation's mask")
     action, _ = model.predict(obs, deterministic=True)
     return int(np.asarray(action).reshape(-1)[0])
+
+
+def ranked_actions(model: MaskedDQN, obs: np.ndarray) -> np.ndarray:
+    """The valid actions of one observation ``(obs_dim,)``, best Q-value first (empty if none is valid)."""
+    import torch as th
+
+    obs = np.asarray(obs, dtype=np.float32).reshape(1, -1)
+    n = int(model.action_space.n)  # type: ignore[attr-defined]
+    valid = np.flatnonzero(obs[0, -n:] > 0.5)
+    with th.no_grad():
+        q = model.policy.q_net(th.as_tensor(obs, device=model.device)).cpu().numpy()[0]
+    return valid[np.argsort(-q[valid], kind="stable")]
 
 
 def save_agent(model: MaskedDQN, path: str | os.PathLike[str], card: dict[str, Any]) -> None:

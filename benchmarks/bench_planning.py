@@ -1,0 +1,221 @@
+"""Planning benchmarks (issue #4): env throughput, DQN/greedy vs the exact oracle, per-mission retraining.
+
+    python benchmarks/bench_planning.py throughput            # env steps/s: physics, dynaformer, naive loop
+    python benchmarks/bench_planning.py gap --n 200           # bundled DQN and greedy vs oracle, 200 missions
+    python benchmarks/bench_planning.py retrain --budget 180  # per-mission training on 8-destination maps
+    python benchmarks/bench_planning.py findings              # the paper's qualitative findings
+
+Every part measures its reference in the same run: the naive loop for throughput (the same env with
+a per-sample explicit-Euler battery written as a plain Python loop), the exact oracle for plan quality.
+Results go to stdout and, with ``--json FILE``, to a JSON file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from uam_studio.battery import DEFAULT_CELL, STATE_NAMES, BatteryState, full_charge  # noqa: E402
+from uam_studio.battery.solver import output_voltage, step  # noqa: E402
+from uam_studio.planning import held_out_missions  # noqa: E402
+from uam_studio.planning.env import BatteryBackend, LegOutcome, UAMPlanningEnv  # noqa: E402
+
+
+class NaiveEulerBattery(BatteryBackend):
+    """Reference: the same model stepped one sample at a time in Python (no time vectorisation)."""
+
+    name = "naive"
+
+    def reset(self, q_max, r0, eod_v, context_current_a=None, context_voltage_v=None) -> None:
+        self.q_max, self.eod_v = float(q_max), float(eod_v)
+        self.q_total = np.array([DEFAULT_CELL.q_total(self.q_max)])
+        self.r0 = np.array([float(r0)])
+        self.recharge()
+
+    def recharge(self) -> None:
+        self.state = full_charge(self.q_max)
+
+    def fly_leg(self, current_a: np.ndarray) -> LegOutcome:
+        x = self.state
+        out = []
+        for i in np.asarray(current_a, dtype=float):
+            x = step(x, np.array([i]), self.q_total, self.r0, 1.0, DEFAULT_CELL)
+            v = float(output_voltage({n: getattr(x, n) for n in STATE_NAMES}, self.q_total, DEFAULT_CELL)[0])
+            out.append(v)
+            if not v >= self.eod_v:
+                return LegOutcome(np.array(out), True, min(out), v)
+        self.state = BatteryState(**{n: getattr(x, n).copy() for n in STATE_NAMES})
+        return LegOutcome(np.array(out), False, min(out), out[-1])
+
+
+def _steps_per_s(env: UAMPlanningEnv, seconds: float, seed: int = 0) -> tuple[float, int]:
+    rng = np.random.default_rng(seed)
+    env.reset(seed=seed)
+    n = 0
+    t0 = time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        valid = np.flatnonzero(env.action_masks())
+        _, _, term, trunc, _ = env.step(int(rng.choice(valid)))
+        n += 1
+        if term or trunc:
+            env.reset()
+    return n / (time.perf_counter() - t0), n
+
+
+def throughput(seconds: float) -> dict:
+    from uam_studio.dynaformer import load_pretrained
+
+    res = {}
+    res["physics"], _ = _steps_per_s(UAMPlanningEnv(backend="physics"), seconds)
+    res["dynaformer"], _ = _steps_per_s(UAMPlanningEnv(backend="dynaformer", predictor=load_pretrained()), seconds)
+    res["naive_loop"], _ = _steps_per_s(UAMPlanningEnv(backend=NaiveEulerBattery()), seconds)
+    print(f"env steps/s (random masked actions, random 1-8 destination missions, {seconds:.0f} s each):")
+    print(f"  physics backend     {res['physics']:8.0f}   (goal >= 1000)")
+    print(f"  dynaformer backend  {res['dynaformer']:8.0f}   (goal >= 200)")
+    print(f"  naive Euler loop    {res['naive_loop']:8.1f}   -> physics is {res['physics'] / res['naive_loop']:.0f}x faster")
+    return res
+
+
+def gap(n: int, seed: int, agents: dict[str, str | None]) -> dict:
+    from tqdm import tqdm
+
+    from uam_studio.planning.compare import compare_planners, summarize
+
+    out = {}
+    for scenario, agent in agents.items():
+        missions = held_out_missions(n, seed, scenario=scenario)
+        policies = ("oracle", "greedy") + (("dqn", "dqn_raw") if agent else ())
+        t0 = time.perf_counter()
+        with tqdm(total=n, desc=scenario, file=sys.stderr) as bar:
+            scores = compare_planners(missions, agent, policies, progress=lambda k: bar.update(1))
+        s = summarize(scores)
+        out[scenario] = {"summary": s, "wall_s": time.perf_counter() - t0, "agent": agent,
+                         "scores": [x.to_dict() for x in scores]}
+        print(f"\n{scenario}: {n} held-out missions (seed {seed}, 6-8 destinations), agent {agent}")
+        print("  policy   mean prio  mean gap  p90 gap  worst  same cycles  mean cycles  EOD breach  median plan")
+        for p, r in s.items():
+            print(f"  {p:7s} {r['mean_priority']:9.2f} {100 * r['mean_gap']:8.1f}% {100 * r['p90_gap']:7.1f}% "
+                  f"{100 * r['worst_gap']:5.0f}% {100 * r['same_cycles']:10.1f}% {r['mean_cycles']:11.2f} "
+                  f"{100 * r['eod_breach_rate']:10.1f}% {1000 * r['median_plan_s']:9.1f} ms")
+    return out
+
+
+def retrain(n_maps: int, budget_s: float, seed: int) -> dict:
+    """Per-mission training (the paper's per-map setting) against the oracle on 8-destination maps."""
+    from uam_studio.planning.env import make_env
+    from uam_studio.planning.oracle import oracle_plan
+    from uam_studio.planning.policy import rollout_agent
+    from uam_studio.planning.training import DQNTrainConfig, train_dqn
+
+    rows = []
+    for k, m in enumerate(held_out_missions(n_maps, seed, n_dest=(8, 8))):
+        ref = oracle_plan(m)
+        stop = threading.Event()
+        timer = threading.Timer(budget_s, stop.set)
+        cfg = DQNTrainConfig(scenario="single_charge", steps=10**7, seed=k, learning_starts=500,
+                             exploration_fraction=0.05, buffer_size=100_000)
+        best = {"prio": -1, "t": None}
+        t0 = time.perf_counter()
+        timer.start()
+        model = train_dqn(cfg, make_env(mission=m, scenario="single_charge"), stop_event=stop)
+        wall = time.perf_counter() - t0
+        timer.cancel()
+        plan = rollout_agent(m, model)
+        from uam_studio.planning.check import check_plan
+
+        check = check_plan(m, plan.route, plan.altitudes_m)
+        prio = plan.reached_priority if check.safe else 0
+        g = (ref.reached_priority - prio) / ref.reached_priority if ref.reached_priority else 0.0
+        rows.append({"mission": m.name, "oracle": ref.reached_priority, "dqn": prio, "safe": check.safe,
+                     "gap": g, "train_s": wall, "timesteps": int(model.num_timesteps)})
+        print(f"  {m.name}: oracle {ref.reached_priority}, DQN {prio} (safe {check.safe}), gap {100 * g:.1f}%, "
+              f"{wall:.0f} s, {model.num_timesteps} steps")
+        del best
+    print(f"per-mission training, {budget_s:.0f} s budget: mean gap {100 * np.mean([r['gap'] for r in rows]):.1f}%, "
+          f"within 5% on {sum(r['gap'] <= 0.05 for r in rows)}/{len(rows)} maps")
+    return {"rows": rows}
+
+
+def findings(quick: bool) -> dict:
+    from uam_studio.planning.findings import altitude_by_distance, fixed_altitude_reach, reward_sweep
+
+    out: dict = {}
+    print("1. best altitude by leg length (fresh cell; charge C per altitude 500/1000/2000/3000 m)")
+    out["altitude"] = []
+    for wind in (-39.0, 0.0, 39.0):
+        rows = altitude_by_distance([25, 40, 55.56, 80, 100], wind_kts=wind)
+        out["altitude"] += rows
+        for r in rows:
+            ch = " ".join(f"{r['by_altitude'][a]['charge_c']:5.0f}" if a in r["by_altitude"] else "    -"
+                          for a in (500.0, 1000.0, 2000.0, 3000.0))
+            print(f"   wind {wind:+5.0f} kt, {r['distance_km']:6.2f} km: {ch}  least charge {r['least_charge_m']}, "
+                  f"highest min voltage {r['best_voltage_m']}")
+    n = 10 if quick else 40
+    rows = fixed_altitude_reach(held_out_missions(n, 2024), (1000.0, 3000.0), wind_kts=39.0)
+    r1 = np.mean([r["reached"][1000.0] for r in rows])
+    r3 = np.mean([r["reached"][3000.0] for r in rows])
+    more = sum(r["reached"][1000.0] > r["reached"][3000.0] for r in rows)
+    print(f"2. 39 kt headwind, every leg at one level (oracle), {n} missions: mean destinations 1000 m {r1:.2f}, "
+          f"3000 m {r3:.2f}; 1000 m reaches more on {more}/{n}, fewer on "
+          f"{sum(r['reached'][1000.0] < r['reached'][3000.0] for r in rows)}")
+    out["headwind"] = {"rows": rows, "mean_1000": r1, "mean_3000": r3}
+    steps = 20_000 if quick else 80_000
+    ev = 30 if quick else 100
+    g = reward_sweep("gamma", [0.0, 5.0, 50.0], "single_charge", steps=steps, n_eval=ev)
+    print(f"3. gamma sweep (single charge, {steps} steps each, {ev} held-out missions):")
+    for r in g:
+        print(f"   gamma {r['gamma']:5.1f}: EOD breach {100 * r['eod_breach_rate']:5.1f}% (training tail "
+              f"{100 * r['train_eod_rate']:5.1f}%), mean destinations {r['mean_reached']:.2f}, "
+              f"margin {1000 * r['mean_margin_v']:.0f} mV")
+    out["gamma"] = g
+    b = reward_sweep("beta", [0.0, 1.0, 5.0], "multi_charge", steps=steps, n_eval=ev)
+    print(f"4. beta sweep (multi charge, {steps} steps each, {ev} held-out missions):")
+    for r in b:
+        print(f"   beta {r['beta']:4.1f}: charging cycles per destination {r['cycles_per_destination']:.2f}, "
+              f"mean cycles {r['mean_cycles']:.2f}, destinations {r['mean_reached']:.2f}, "
+              f"EOD breach {100 * r['eod_breach_rate']:.1f}%")
+    out["beta"] = b
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("part", choices=["throughput", "gap", "retrain", "findings"])
+    ap.add_argument("--seconds", type=float, default=10.0, help="throughput: seconds per backend")
+    ap.add_argument("--n", type=int, default=200, help="gap: missions per scenario; retrain: maps")
+    ap.add_argument("--seed", type=int, default=20261121, help="held-out mission seed (never used in training)")
+    ap.add_argument("--scenarios", default="single_charge,multi_charge")
+    ap.add_argument("--agent-dir", default="pretrained", help="gap: folder with dqn_<scenario>.zip")
+    ap.add_argument("--budget", type=float, default=180.0, help="retrain: training seconds per map")
+    ap.add_argument("--quick", action="store_true", help="findings: fewer steps and missions")
+    ap.add_argument("--json", help="write the results here")
+    a = ap.parse_args()
+    if a.part == "throughput":
+        res = throughput(a.seconds)
+    elif a.part == "gap":
+        agents = {}
+        for s in a.scenarios.split(","):
+            p = Path(a.agent_dir) / f"dqn_{s}.zip"
+            agents[s] = str(p) if p.is_file() else None
+            if agents[s] is None:
+                print(f"note: no agent {p}; oracle and greedy only")
+        res = gap(a.n, a.seed, agents)
+    elif a.part == "retrain":
+        res = retrain(a.n, a.budget, a.seed)
+    else:
+        res = findings(a.quick)
+    if a.json:
+        Path(a.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(a.json).write_text(json.dumps(res, indent=1, default=float))
+
+
+if __name__ == "__main__":
+    main()
