@@ -86,3 +86,29 @@ def test_reward_sweep_rows():
     assert {0.0, 10.0} <= set(seen)
     with pytest.raises(InputError, match="name"):
         reward_sweep("delta", [1.0])
+
+
+def test_safety_filter_makes_every_plan_safe(tiny_agent):
+    from uam_studio.planning.check import check_plan
+    from uam_studio.planning.policy import rollout_agent
+
+    missions = held_out_missions(6, 4040, n_dest=(5, 8))
+    for m in missions:
+        plan = rollout_agent(m, tiny_agent, shield=True)
+        assert check_plan(m, plan.route, plan.altitudes_m).safe, m.name
+
+
+def test_ranked_actions_are_valid_and_sorted(tiny_agent):
+    import torch as th
+
+    from uam_studio.planning.env import UAMPlanningEnv
+    from uam_studio.planning.training import ranked_actions
+
+    env = UAMPlanningEnv(mission=held_out_missions(1, 12)[0])
+    obs, _ = env.reset(seed=0)
+    ranked = ranked_actions(tiny_agent, obs)
+    assert set(ranked) == set(np.flatnonzero(env.action_masks()))
+    with th.no_grad():
+        q = tiny_agent.policy.q_net(th.as_tensor(obs[None])).numpy()[0]
+    assert np.all(np.diff(q[ranked]) <= 0)
+    assert env.lookahead_safe(-1) is False
