@@ -219,3 +219,21 @@ def test_prediction_is_per_sortie_with_takeoff_context():
     # the stub recharges each sortie: its lowest value (kept by the thinning) is the sortie's end
     lowest = min(4.1 - c[2].sum() / 8000.0 for c in stub.calls)
     assert min(res["predicted"]["voltage_v"]) == pytest.approx(lowest, abs=1e-4)
+
+
+@pytest.mark.parametrize("scenario", ["single_flight", "single_charge", "multi_charge"])
+def test_bundled_agents_plan_any_map_safely(scenario):
+    """The bundled agents load, plan maps they never saw (with the safety filter) and pass physics."""
+    from uam_studio.planning import held_out_missions
+    from uam_studio.planning.policy import bundled_agent_path, load_agent_cached
+
+    path = bundled_agent_path(scenario)
+    assert path.is_file(), f"missing bundled agent {path}"
+    assert path.stat().st_size < 3_000_000
+    _, card = load_agent_cached(path)
+    assert card["scenario"] == scenario and card["env"]["obs_dim"] == 116
+    for m in held_out_missions(3, 515, scenario=scenario):
+        res = plan_mission(m, "dqn", predictor=False)
+        assert res["safe"], (m.name, res["messages"])
+        if scenario != "single_flight":
+            assert res["reached"], (m.name, res["messages"])
