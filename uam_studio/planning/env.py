@@ -608,7 +608,8 @@ class UAMPlanningEnv(gym.Env):
         """Would this env's battery fly ``action``'s leg and then the way home, never below the cut-off?
 
         The way home is the leg from the target back to the vertiport at its least-charge feasible
-        level (nothing more for an action that lands at the vertiport). It is flown on a copy of the
+        level (nothing more for an action that lands at the vertiport, or in single flight, which
+        ends at the destination). It is flown on a copy of the
         backend (physics or Dynaformer: what this env believes), so the episode is not changed. A
         planner uses it as a safety filter (:func:`uam_studio.planning.policy.rollout_agent`).
         """
@@ -620,7 +621,7 @@ class UAMPlanningEnv(gym.Env):
         probe = copy.copy(self.backend)
         if probe.fly_leg(legs.current(self._node, target, ai)).eod:
             return False
-        if target == VERTIPORT_SLOT:
+        if target == VERTIPORT_SLOT or self.scenario == "single_flight":  # single flight: no way back
             return True
         levels = [k for k in range(N_ALTITUDES) if legs.feasible[target, VERTIPORT_SLOT, k]]
         if not levels:
