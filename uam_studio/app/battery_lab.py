@@ -15,6 +15,7 @@ import numpy as np
 import panel as pn
 import param
 
+from uam_studio.app.session import ensure_bokeh_backend
 from uam_studio.app.state import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE, VARY, BatteryLabState
 from uam_studio.flight.tables import ALTITUDE_RANGE_M, WIND_RANGE_KTS
 
@@ -27,6 +28,7 @@ class BatteryLabView(pn.viewable.Viewer):
     state = param.ClassSelector(class_=BatteryLabState)
 
     def __init__(self, state: BatteryLabState | None = None, **params: Any) -> None:
+        ensure_bokeh_backend()
         super().__init__(state=state or BatteryLabState(), **params)
         s = self.state
         w = 280

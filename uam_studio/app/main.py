@@ -31,8 +31,7 @@ def create_app(template: bool | None = None) -> pn.viewable.Viewable:
     served = in_server_session()
     if served:
         configure_server_threads()
-    import os
-    planner_state = PlannerState(background=served, dispatch=None if os.environ.get("UAM_DIRECT") else session_dispatcher())
+    planner_state = PlannerState(background=served, dispatch=session_dispatcher())
     planner = PlannerView(planner_state)
     lab = BatteryLabView(BatteryLabState())
     retrain = RetrainView(RetrainState(), planner_state)
@@ -44,8 +43,6 @@ def create_app(template: bool | None = None) -> pn.viewable.Viewable:
             retrain.close()
 
         pn.state.on_session_destroyed(_cleanup)
-    if os.environ.get("UAM_NOTEMPLATE"):
-        template = False
     if template if template is not None else served:
         return pn.template.BootstrapTemplate(title=TITLE, main=[tabs], header_background="#1f4e79")
     return tabs

@@ -19,6 +19,7 @@ import pandas as pd
 import panel as pn
 import param
 
+from uam_studio.app.session import ensure_bokeh_backend
 from uam_studio.app.state import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE, PlannerState, population
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.mission import COORD_RANGE_KM, SCENARIOS, VERTIPORT
@@ -37,17 +38,20 @@ def cycle_color(k: int) -> str:
 # ----------------------------------------------------------------------------- pure helpers
 
 
+LEG_COLUMNS = ("leg", "from", "to", "x0", "y0", "x1", "y1", "altitude_m", "cycle", "color", "completed", "label")
+
+
 def route_legs(plan: dict[str, Any] | None, state_rows: list[dict[str, Any]], vertiport: tuple[float, float]) \
-        -> pd.DataFrame:
-    """One row per leg of ``plan``: from/to names and coordinates, altitude, charging cycle (1-based),
-    colour, and whether it was completed (physics check)."""
-    cols = ["leg", "from", "to", "x0", "y0", "x1", "y1", "altitude_m", "cycle", "color", "completed", "label"]
+        -> dict[str, list]:
+    """The legs of ``plan`` as columns (one entry per leg): from/to names and coordinates, altitude,
+    charging cycle (1-based), colour, whether it was completed (physics check) and a label."""
+    out: dict[str, list] = {c: [] for c in LEG_COLUMNS}
     if not plan or not plan.get("route"):
-        return pd.DataFrame({c: [] for c in cols})
+        return out
     pos = {r["name"]: (r["x_km"], r["y_km"]) for r in state_rows}
     pos[VERTIPORT] = vertiport
     reached = set(plan.get("reached", []))
-    rows, prev, cycle, failed = [], VERTIPORT, 1, False
+    prev, cycle, failed = VERTIPORT, 1, False
     for i, (to, alt) in enumerate(zip(plan["route"], plan["altitudes_m"]), 1):
         if to not in pos:  # the mission changed under this plan; draw what is known
             break
@@ -56,14 +60,30 @@ def route_legs(plan: dict[str, Any] | None, state_rows: list[dict[str, Any]], ve
         if not failed and to == VERTIPORT and i == len(plan["route"]) and not plan.get("safe", True):
             failed = True
         (x0, y0), (x1, y1) = pos[prev], pos[to]
-        rows.append({"leg": f"{i}: {'V' if prev == VERTIPORT else prev}\u2192{'V' if to == VERTIPORT else to}",
-                     "from": prev, "to": to, "x0": x0, "y0": y0, "x1": x1, "y1": y1, "altitude_m": float(alt),
-                     "cycle": cycle, "color": FAILED_COLOR if failed else cycle_color(cycle),
-                     "completed": not failed, "label": f"{alt:g} m"})
+        row = {"leg": f"{i}: {'V' if prev == VERTIPORT else prev}\u2192{'V' if to == VERTIPORT else to}",
+               "from": prev, "to": to, "x0": x0, "y0": y0, "x1": x1, "y1": y1, "altitude_m": float(alt),
+               "cycle": cycle, "color": FAILED_COLOR if failed else cycle_color(cycle),
+               "completed": not failed, "label": f"{alt:g} m"}
+        for c in LEG_COLUMNS:
+            out[c].append(row[c])
         if to == VERTIPORT:
             cycle += 1
         prev = to
-    return pd.DataFrame(rows, columns=cols)
+    return out
+
+
+def _equal(a: Any, b: Any) -> bool:
+    """Deep equality of plot data (dicts, lists, tuples, arrays, numbers)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_equal(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple, np.ndarray)) and isinstance(b, (list, tuple, np.ndarray)):
+        if len(a) != len(b):
+            return False
+        if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+            x, y = np.asarray(a), np.asarray(b)
+            return x.shape == y.shape and x.dtype == y.dtype and bool(np.array_equal(x, y))
+        return all(_equal(x, y) for x, y in zip(a, b))
+    return type(a) is type(b) and a == b
 
 
 def _same_frame(a: pd.DataFrame, b: pd.DataFrame) -> bool:
@@ -86,8 +106,24 @@ def _fmt_v(x: float | None) -> str:
 
 def summary_html(state: PlannerState) -> str:
     """The summary pane (``<div class="uam-plan-summary">``): route (names), altitudes, minimum
-    predicted and physics voltage, margin to EOD, safety, and the planner's notes."""
-    return f"<div class='uam-plan-summary'>{_summary_body(state)}</div>"
+    predicted and physics voltage, margin to EOD, safety, and the planner's notes.
+
+    Attributes: ``data-busy`` ("true" while a newer plan is being computed) and ``data-inputs``
+    (:func:`request_digest` of the request the shown plan was computed for)."""
+    req = state.plan_request
+    inputs = "" if req is None else request_digest(req)
+    return (f"<div class='uam-plan-summary' data-busy='{str(bool(state.busy)).lower()}' "
+            f"data-inputs='{html.escape(inputs, quote=True)}'>{_summary_body(state)}</div>")
+
+
+def request_digest(req: Any) -> str:
+    """What a plan was computed for, compactly (the summary's ``data-inputs`` attribute): policy,
+    scenario, cell, EOD, return wind and ``name:priority:wind`` of each destination. Lets a test or a
+    script wait for the plan of a given edit."""
+    m = req.mission
+    dests = "|".join(f"{d.name}:{d.priority}:{d.wind_kts:g}" for d in m.destinations)
+    return (f"{req.policy};{m.scenario};q_max={m.battery.q_max:g};r0={m.battery.r0:g};eod={m.eod_v:g};"
+            f"return_wind={m.vertiport.wind_kts:g};{dests}")
 
 
 def _summary_body(state: PlannerState) -> str:
@@ -140,6 +176,7 @@ class PlannerView(pn.viewable.Viewer):
     state = param.ClassSelector(class_=PlannerState)
 
     def __init__(self, state: PlannerState, **params: Any) -> None:
+        ensure_bokeh_backend()
         super().__init__(state=state, **params)
         s = state
         self._syncing = False
@@ -195,14 +232,16 @@ class PlannerView(pn.viewable.Viewer):
         self._route_pipe = hv.streams.Pipe(data=self._route_data())
         self._voltage_pipe = hv.streams.Pipe(data=self._voltage_data())
         self._health_pipe = hv.streams.Pipe(data=self._health_data())
+        self._sent: dict[str, Any] = {}  # last data sent on each pipe (unchanged data is not re-sent)
         points = hv.DynamicMap(self._points_element, streams=[self._points_pipe])
         self._draw = hv.streams.PointDraw(source=points, drag=True, add=True, empty_value=0,
                                           tooltip="Click to add a destination, drag to move, select + Backspace "
                                                   "to delete")
         self._draw.add_subscriber(self._on_draw)
         route = hv.DynamicMap(self._route_element, streams=[self._route_pipe])
+        names = hv.DynamicMap(self._names_element, streams=[self._points_pipe])
         h = MAP_HALF_KM
-        self.map = pn.pane.HoloViews((route * points).opts(
+        self.map = pn.pane.HoloViews((route * names * points).opts(
             hv.opts.Overlay(frame_width=500, frame_height=460, title="Map (km); route colour = charging cycle",
                             show_grid=True, xlim=(-h, h), ylim=(-h, h), xlabel="x (km)", ylabel="y (km)")),
             css_classes=["uam-map"], linked_axes=False)
@@ -273,24 +312,27 @@ class PlannerView(pn.viewable.Viewer):
             self._syncing = False
 
     def _on_destinations(self, *events: param.parameterized.Event) -> None:
-        self._sync_destinations()
-        self._route_pipe.send(self._route_data())
+        with pn.io.hold():
+            self._sync_destinations()
+            self._send("route", self._route_pipe, self._route_data())
 
     def _on_plan(self, *events: param.parameterized.Event) -> None:
-        import sys
-        import threading
-        doc = pn.state.curdoc
-        print("ONPLAN", threading.current_thread().name, doc is not None and pn.state._unblocked(doc),
-              pn.state._thread_id, pn.state._current_thread, doc and pn.state._connected.get(doc),
-              file=sys.stderr, flush=True)
-        print("SUMMARY", summary_html(self.state).split("no safe place for:")[-1][:40], id(self.summary), file=sys.stderr, flush=True)
-        self.summary.object = summary_html(self.state)
-        print("SUMMARY-SET", self.summary.object.split("no safe place for:")[-1][:40], self.summary._models.keys(), file=sys.stderr, flush=True)
-        self._route_pipe.send(self._route_data())
-        self._voltage_pipe.send(self._voltage_data())
-        self._health_pipe.send(self._health_data())
+        with pn.io.hold():  # one batch of model changes per plan
+            self.summary.object = summary_html(self.state)
+            self._send("route", self._route_pipe, self._route_data())
+            self._send("voltage", self._voltage_pipe, self._voltage_data())
+            self._send("health", self._health_pipe, self._health_data())
+
+    def _send(self, key: str, pipe: hv.streams.Pipe, data: Any) -> None:
+        """Send ``data`` on ``pipe`` unless it equals the last data sent there (re-rendering a plot
+        costs tens of ms)."""
+        if key in self._sent and _equal(self._sent[key], data):
+            return
+        self._sent[key] = data
+        pipe.send(data)
 
     def _on_busy(self, event: param.parameterized.Event) -> None:
+        self.summary.object = summary_html(self.state)  # data-busy
         self.busy.value = bool(event.new)
         self.busy.name = "planning..." if event.new else ""
 
@@ -366,7 +408,7 @@ class PlannerView(pn.viewable.Viewer):
 
     # ------------------------------------------------------------------ plots
 
-    def _route_data(self) -> pd.DataFrame:
+    def _route_data(self) -> dict[str, list]:
         s = self.state
         return route_legs(s.plan, s.destination_rows(), (s.vertiport_x_km, s.vertiport_y_km))
 
@@ -377,41 +419,46 @@ class PlannerView(pn.viewable.Viewer):
             active_tools=["point_draw", "wheel_zoom"],
         )
 
-    def _route_element(self, data: pd.DataFrame) -> hv.Overlay:
+    def _names_element(self, data: pd.DataFrame) -> hv.Overlay:
         s = self.state
-        done = data[data["completed"]] if len(data) else data
-        failed = data[~data["completed"].astype(bool)] if len(data) else data
-        seg_kw = dict(kdims=["x0", "y0", "x1", "y1"], vdims=["color", "leg", "altitude_m"])
-        legs = hv.Segments(done, **seg_kw).opts(color="color", line_width=4, alpha=0.85, tools=["hover"])
-        lost = hv.Segments(failed, **seg_kw).opts(color=FAILED_COLOR, line_width=3, line_dash="dashed")
-        mid = pd.DataFrame({"x": (data["x0"] + data["x1"]) / 2 if len(data) else [],
-                            "y": (data["y0"] + data["y1"]) / 2 if len(data) else [],
-                            "text": data["label"] if len(data) else []})
-        alt_labels = hv.Labels(mid, kdims=["x", "y"], vdims="text").opts(text_font_size="8pt",
-                                                                        text_color="#333333")
         rows = s.destination_rows()
-        names = hv.Labels(pd.DataFrame({"x": [r["x_km"] for r in rows], "y": [r["y_km"] + 3.5 for r in rows],
-                                        "text": [f"{r['name']} {'*' * int(r['priority'])}" for r in rows]}),
+        names = hv.Labels({"x": [r["x_km"] for r in rows], "y": [r["y_km"] + 3.5 for r in rows],
+                           "text": [f"{r['name']} {'*' * int(r['priority'])}" for r in rows]},
                           kdims=["x", "y"], vdims="text").opts(text_font_size="9pt", text_font_style="bold",
-                                                             text_color="#222222")
+                                                               text_color="#222222")
         vp = hv.Points([(s.vertiport_x_km, s.vertiport_y_km)], kdims=["x_km", "y_km"]).opts(
             marker="square", size=16, color="#d62728")
         vp_label = hv.Labels([(s.vertiport_x_km, s.vertiport_y_km - 5.0, "vertiport")], kdims=["x", "y"],
                              vdims="text").opts(text_font_size="9pt", text_color="#d62728")
-        return legs * lost * alt_labels * names * vp * vp_label
+        return names * vp * vp_label
 
     @staticmethod
-    def _altitude_element(data: pd.DataFrame) -> hv.Overlay:
+    def _route_element(data: dict[str, list]) -> hv.Overlay:
+        done = np.asarray(data["completed"], dtype=bool)
+        cols = ("x0", "y0", "x1", "y1", "color", "leg", "altitude_m")
+
+        def pick(mask: np.ndarray) -> dict[str, Any]:
+            return {c: [v for v, k in zip(data[c], mask) if k] for c in cols}
+
+        seg_kw = dict(kdims=["x0", "y0", "x1", "y1"], vdims=["color", "leg", "altitude_m"])
+        legs = hv.Segments(pick(done), **seg_kw).opts(color="color", line_width=4, alpha=0.85, tools=["hover"])
+        lost = hv.Segments(pick(~done), **seg_kw).opts(color=FAILED_COLOR, line_width=3, line_dash="dashed")
+        x0, y0, x1, y1 = (np.asarray(data[c], dtype=float) for c in ("x0", "y0", "x1", "y1"))
+        alt_labels = hv.Labels({"x": (x0 + x1) / 2, "y": (y0 + y1) / 2, "text": list(data["label"])},
+                               kdims=["x", "y"], vdims="text").opts(text_font_size="8pt", text_color="#333333")
+        return legs * lost * alt_labels
+
+    @staticmethod
+    def _altitude_element(data: dict[str, list]) -> hv.Overlay:
         # Numeric x (leg number) with tick labels: categorical axes do not survive empty -> full updates.
-        n = len(data)
+        n = len(data["leg"])
         idx = np.arange(1, n + 1, dtype=float)
-        alt = data["altitude_m"].to_numpy(float) if n else np.zeros(0)
-        rects = pd.DataFrame({"x0": idx - 0.38, "y0": np.zeros(n), "x1": idx + 0.38, "y1": alt,
-                              "color": data["color"].to_list() if n else [], "leg": data["leg"].to_list() if n else [],
-                              "altitude_m": alt})
-        bars = hv.Rectangles(rects, kdims=["x0", "y0", "x1", "y1"], vdims=["color", "leg", "altitude_m"]).opts(
+        alt = np.asarray(data["altitude_m"], dtype=float)
+        bars = hv.Rectangles({"x0": idx - 0.38, "y0": np.zeros(n), "x1": idx + 0.38, "y1": alt,
+                              "color": list(data["color"]), "leg": list(data["leg"]), "altitude_m": alt},
+                             kdims=["x0", "y0", "x1", "y1"], vdims=["color", "leg", "altitude_m"]).opts(
             color="color", line_color="white", tools=["hover"])
-        labels = hv.Labels(pd.DataFrame({"x": idx, "y": alt + 120, "text": [f"{a:g}" for a in alt]}),
+        labels = hv.Labels({"x": idx, "y": alt + 120, "text": [f"{a:g}" for a in alt]},
                            kdims=["x", "y"], vdims="text").opts(text_font_size="8pt", text_color="#222222")
         ticks = [(float(i), str(lbl)) for i, lbl in zip(idx, data["leg"])] if n else [(1.0, "")]
         return (bars * labels).opts(

@@ -17,6 +17,7 @@ import pandas as pd
 import panel as pn
 import param
 
+from uam_studio.app.session import ensure_bokeh_backend
 from uam_studio.app.state import PlannerState, RetrainState, registry
 from uam_studio.planning.mission import SCENARIOS
 from uam_studio.planning.retrain import agents_dir
@@ -32,6 +33,7 @@ class RetrainView(pn.viewable.Viewer):
     planner = param.ClassSelector(class_=PlannerState)
 
     def __init__(self, state: RetrainState, planner: PlannerState, **params: Any) -> None:
+        ensure_bokeh_backend()
         super().__init__(state=state, planner=planner, **params)
         s = state
         s.scenario = planner.scenario

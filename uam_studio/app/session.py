@@ -13,6 +13,17 @@ def in_server_session() -> bool:
     return doc is not None and doc.session_context is not None
 
 
+def ensure_bokeh_backend() -> None:
+    """Load HoloViews' Bokeh plotting backend (no notebook output), so that views can be built
+    anywhere: in a served session, in Jupyter, in tests and benchmarks."""
+    import holoviews as hv
+
+    if "bokeh" not in hv.Store.renderers:
+        hv.renderer("bokeh")
+    if hv.Store.current_backend != "bokeh":
+        hv.Store.set_current_backend("bokeh")
+
+
 def configure_server_threads() -> None:
     """One torch thread per call in the server process.
 
@@ -51,3 +62,5 @@ def session_dispatcher() -> Callable[[Callable[[], None]], None] | None:
             pass
 
     return dispatch
+
+

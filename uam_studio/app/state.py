@@ -305,8 +305,8 @@ class PlannerState(param.Parameterized):
         reg = registry()
         self._update_policy_options(reg.agents)
         self._agents_watcher = reg.param.watch(self._on_agents, "agents")
-        if self.param["policy"].default == self.policy and _bundled_exists(self.scenario):
-            self.policy = "dqn"
+        if "policy" not in params and _bundled_exists(self.scenario):
+            self.policy = "dqn"  # the bundled agent is the default planner where there is one
         self.param.watch(self._on_inputs, list(self.INPUTS))
         if self.auto:
             self.request_plan()
@@ -383,8 +383,7 @@ class PlannerState(param.Parameterized):
         return True
 
     def set_destinations(self, rows: list[dict[str, Any]]) -> bool:
-        import sys
-        print("SETDEST", rows, file=sys.stderr, flush=True)
+
         """Replace the destinations from table or map rows (``name``, ``x_km``, ``y_km``, ``priority``,
         ``wind_kts``, ``dwell_s``). Rows fresh from the map may lack values: a missing name becomes
         the first free ``D<k>``, a missing or 0 priority 1 (PointDraw's empty value), wind and dwell 0.
@@ -557,9 +556,7 @@ class PlannerState(param.Parameterized):
             return
 
     def _apply(self, seq: int, res: dict[str, Any]) -> None:
-        import sys
-        print("APPLY", seq, self._seq, self._applied_seq, res["plan"] and res["plan"]["route"],
-              [(d.name, d.priority, d.wind_kts) for d in res["request"].mission.destinations], file=sys.stderr, flush=True)
+
         with self._lock:
             if seq < self._applied_seq:
                 return

@@ -1,0 +1,289 @@
+"""App benchmarks (issue #5): replanning latency, first page load, and a training session beside a planning one.
+
+    python benchmarks/bench_app.py latency      # slider change -> updated plan and views, in process (server side)
+    python benchmarks/bench_app.py pageload     # browser: first page loads of a served app
+    python benchmarks/bench_app.py concurrency  # browser: two sessions, one retraining, the other replanning
+    python benchmarks/bench_app.py all --append benchmarks/RESULTS.md
+
+latency: the 8-destination single-charge mission below, the Planner's state and views built on a
+Bokeh document as in a session, and the R0 slider moved ``--n`` times; each sample is the time from
+the widget change to the plan and every view (summary, map, plots) updated. Reference, in the same
+run: the bare library call ``plan_mission`` for the same inputs. Policies: the bundled DQN (if
+``pretrained/dqn_single_charge.zip`` exists; otherwise that is reported), greedy and the oracle.
+
+pageload and concurrency serve the app with ``panel serve uam_studio/app/main.py --warm`` in a
+subprocess and drive Debian's chromium (``/usr/bin/chromium``) with playwright. The page load is the
+time from ``goto`` to the first plan shown in the summary. Concurrency: session B moves the q_max
+slider with the keyboard (one 50 C step at a time) and waits for the summary of that exact input;
+first with nothing else running, then while session A retrains a DQN agent.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import shutil
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # this checkout's uam_studio, whatever the installed one points to
+sys.path.insert(0, str(Path(__file__).parent))
+from _timing import percentile_ms  # noqa: E402
+
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+
+# An 8-destination single-charge mission within reach of a healthy cell (about 15-40 km out).
+MISSION = {
+    "name": "bench 8",
+    "vertiport": {"x_km": 0.0, "y_km": 0.0, "wind_kts": 5.0},
+    "destinations": [
+        {"name": f"P{k + 1}", "x_km": round(r * np.cos(a), 1), "y_km": round(r * np.sin(a), 1),
+         "priority": int(1 + k % 3), "wind_kts": float(w)}
+        for k, (r, a, w) in enumerate(zip([15, 22, 30, 18, 35, 26, 40, 20],
+                                          np.linspace(0.2, 2 * np.pi - 0.4, 8),
+                                          [10, -5, 0, 13, -13, 5, 20, -10]))
+    ],
+    "scenario": "single_charge",
+    "battery": {"q_max": 7600.0, "r0": 0.117215},
+    "eod_v": 3.0,
+}
+
+
+def _stats(samples: list[float]) -> str:
+    return (f"p50 {percentile_ms(samples, 50):.0f} ms, p95 {percentile_ms(samples, 95):.0f} ms, "
+            f"max {1000 * max(samples):.0f} ms (n={len(samples)})")
+
+
+def _load() -> str:
+    return " ".join(f"{x:.1f}" for x in os.getloadavg())
+
+
+# ----------------------------------------------------------------------------- latency (server side)
+
+
+def bench_latency(n: int, n_oracle: int) -> list[str]:
+    import torch
+    from bokeh.document import Document
+
+    from uam_studio.app.planner import PlannerView
+    from uam_studio.app.session import configure_server_threads
+    from uam_studio.app.state import PlannerState, predictor
+    from uam_studio.planning import mission_from_dict
+    from uam_studio.planning.policy import bundled_agent_path, plan_mission
+
+    configure_server_threads()  # as the served app: one torch thread
+    mission = mission_from_dict(MISSION)
+    pred = predictor()
+    lines = [f"latency: 8-destination single-charge mission, torch threads {torch.get_num_threads()}, "
+             f"load average before {_load()}"]
+    policies = ["dqn", "greedy", "oracle"]
+    if not bundled_agent_path("single_charge").is_file():
+        lines.append("  dqn: no bundled agent pretrained/dqn_single_charge.zip, not measured")
+        policies.remove("dqn")
+    for policy in policies:
+        count = n_oracle if policy == "oracle" else n
+        r0s = list(np.round(np.linspace(0.05, 0.25, count), 4))
+        state = PlannerState(mission=mission, background=True, policy=policy)
+        view = PlannerView(state)
+        view.__panel__().get_root(Document())  # the views' Bokeh models, as in a session
+        assert state.wait_idle(600)
+        view.r0.value = 0.3
+        assert state.wait_idle(600)  # warm (agent loaded, caches filled)
+        app, bare = [], []
+        for r0 in r0s:
+            t0 = time.perf_counter()
+            view.r0.value = float(r0)
+            assert state.wait_idle(600)
+            app.append(time.perf_counter() - t0)
+            assert state.plan_request.mission.battery.r0 == r0 and state.plan_error == "", state.plan_error
+        for r0 in r0s:
+            t0 = time.perf_counter()
+            plan_mission(mission, policy, r0=float(r0), predictor=pred)
+            bare.append(time.perf_counter() - t0)
+        route = " ".join(state.plan["route"])
+        ratio = percentile_ms(app, 95) / percentile_ms(bare, 95)
+        lines.append(f"  {policy:6s} app: {_stats(app)}")
+        lines.append(f"  {policy:6s} bare plan_mission: {_stats(bare)}; RATIO app/bare p95 {ratio:.2f}x "
+                     f"(last route: {route})")
+        state.close()
+    lines.append(f"  load average after {_load()}")
+    return lines
+
+
+# ----------------------------------------------------------------------------- served app + browser
+
+
+class Served:
+    """``panel serve uam_studio/app/main.py --warm`` on a free port, with a temporary user folder."""
+
+    def __enter__(self) -> Served:
+        s = socket.socket()
+        s.bind(("127.0.0.1", 0))
+        self.port = s.getsockname()[1]
+        s.close()
+        self.home = tempfile.mkdtemp(prefix="uam_bench_home_")
+        self.log = open(Path(self.home) / "serve.log", "w")  # noqa: SIM115
+        env = {**os.environ, "UAM_STUDIO_HOME": self.home}
+        self.t_start = time.perf_counter()
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "panel", "serve", "uam_studio/app/main.py", "--port", str(self.port),
+             "--address", "127.0.0.1", "--allow-websocket-origin", f"127.0.0.1:{self.port}", "--warm",
+             "--liveness"], cwd=ROOT, env=env, stdout=self.log, stderr=subprocess.STDOUT)
+        deadline = time.monotonic() + 300
+        while True:
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{self.port}/liveness", timeout=10) as r:
+                    if r.status == 200:
+                        break
+            except OSError:
+                pass
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError("panel serve did not start")
+            time.sleep(0.25)
+        self.startup_s = time.perf_counter() - self.t_start
+        self.url = f"http://127.0.0.1:{self.port}/main"
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.proc.terminate()
+        try:
+            self.proc.wait(20)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+        self.log.close()
+        shutil.rmtree(self.home, ignore_errors=True)
+
+
+def _browser(p):
+    return p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+
+
+def _first_plan(page, timeout_ms: int = 120_000) -> None:
+    page.locator(".uam-plan-summary[data-busy='false']").get_by_text("Route:").wait_for(timeout=timeout_ms)
+
+
+def bench_pageload(n: int) -> list[str]:
+    from playwright.sync_api import sync_playwright
+
+    lines = [f"pageload: load average before {_load()}"]
+    with Served() as srv, sync_playwright() as p:
+        lines.append(f"  server start with --warm (imports, one app build): {srv.startup_s:.1f} s")
+        browser = _browser(p)
+        loads, dom = [], []
+        outside: list[str] = []
+        for _ in range(n):
+            ctx = browser.new_context(viewport={"width": 1500, "height": 1100})
+            page = ctx.new_page()
+            page.on("request", lambda r: outside.append(r.url)
+                    if not r.url.startswith(("http://127.0.0.1", "ws://127.0.0.1", "data:", "blob:")) else None)
+            t0 = time.perf_counter()
+            page.goto(srv.url, wait_until="load")
+            dom.append(time.perf_counter() - t0)
+            _first_plan(page)
+            loads.append(time.perf_counter() - t0)
+            ctx.close()
+        browser.close()
+    lines.append(f"  first page load (goto -> first plan in the summary): {loads[0]:.2f} s; "
+                 f"later loads median {statistics.median(loads[1:] or loads):.2f} s, max {max(loads):.2f} s "
+                 f"(n={n})")
+    lines.append(f"  document 'load' event: first {dom[0]:.2f} s, median {statistics.median(dom):.2f} s")
+    lines.append(f"  requests outside the server (CDN etc.): {len(outside)}")
+    lines.append(f"  load average after {_load()}")
+    return lines
+
+
+def _replan_times(page, k: int) -> list[float]:
+    """Move the q_max slider k times by one step (alternating direction) and time each updated plan."""
+    handle = page.locator(".bk-input-group", has=page.get_by_text("q_max (C)")).locator(".noUi-handle")
+    summary = page.locator(".uam-plan-summary")
+    q = float(summary.get_attribute("data-inputs").split(";q_max=")[1].split(";")[0])
+    out = []
+    for i in range(k):
+        key, dq = ("ArrowLeft", -50.0) if i % 2 == 0 else ("ArrowRight", 50.0)
+        q += dq
+        handle.focus()
+        t0 = time.perf_counter()
+        handle.press(key)
+        page.locator(f".uam-plan-summary[data-busy='false'][data-inputs*=';q_max={q:g};']").wait_for(
+            timeout=120_000)
+        out.append(time.perf_counter() - t0)
+    return out
+
+
+def bench_concurrency(k: int, steps: int) -> list[str]:
+    from playwright.sync_api import sync_playwright
+
+    js_len = """() => { for (const v of window.Bokeh.index.all_views()) { const m = v.model;
+      if (m.title && m.title.text && m.title.text.startsWith('Destinations reached'))
+        for (const r of m.renderers) if (r.glyph && r.glyph.type === 'Line') return r.data_source.get_length();
+      } return -1; }"""
+    lines = [f"concurrency: load average before {_load()}"]
+    with Served() as srv, sync_playwright() as p:
+        browser = _browser(p)
+        a = browser.new_page(viewport={"width": 1500, "height": 1100})
+        b = browser.new_page(viewport={"width": 1500, "height": 1100})
+        for page in (a, b):
+            page.goto(srv.url)
+            _first_plan(page)
+        policy = b.locator(".uam-plan-summary").get_attribute("data-inputs").split(";")[0]
+        _replan_times(b, 2)  # warm
+        idle = _replan_times(b, k)
+        a.locator(".bk-tab", has_text="Retrain").click()
+        box = a.locator(".bk-input-group", has=a.get_by_text("Steps (environment transitions)")).locator("input")
+        box.fill(str(steps))
+        box.press("Enter")
+        a.locator(".uam-train-start button").click()
+        a.wait_for_function(f"() => ({js_len})() > 0", timeout=120_000)
+        n0 = a.evaluate(js_len)
+        busy = _replan_times(b, k)
+        n1 = a.evaluate(js_len)
+        a.locator(".uam-train-stop button").click()
+        browser.close()
+    r50 = statistics.median(busy) / statistics.median(idle)
+    r95 = percentile_ms(busy, 95) / percentile_ms(idle, 95)
+    lines.append(f"  session B ({policy}) replan, idle:            {_stats(idle)}")
+    lines.append(f"  session B ({policy}) replan, A retraining:    {_stats(busy)}; A's curve grew "
+                 f"{n0} -> {n1} episodes meanwhile")
+    lines.append(f"  RATIO training/idle: median {r50:.2f}x, p95 {r95:.2f}x (goal <= 2x)")
+    lines.append(f"  load average after {_load()}")
+    return lines
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("what", choices=["latency", "pageload", "concurrency", "all"], nargs="?", default="all")
+    ap.add_argument("--n", type=int, default=40, help="slider changes per policy (latency)")
+    ap.add_argument("--n-oracle", type=int, default=8, help="slider changes for the oracle (seconds each)")
+    ap.add_argument("--loads", type=int, default=5, help="page loads (pageload)")
+    ap.add_argument("--k", type=int, default=15, help="replans per phase (concurrency)")
+    ap.add_argument("--steps", type=int, default=200_000, help="training steps of session A (concurrency)")
+    ap.add_argument("--append", default=None, metavar="FILE", help="append the results as a section to FILE")
+    args = ap.parse_args()
+    lines: list[str] = []
+    if args.what in ("latency", "all"):
+        lines += bench_latency(args.n, args.n_oracle)
+    if args.what in ("pageload", "all"):
+        lines += bench_pageload(args.loads)
+    if args.what in ("concurrency", "all"):
+        lines += bench_concurrency(args.k, args.steps)
+    print("\n".join(lines))
+    if args.append:
+        cmd = "python benchmarks/bench_app.py " + " ".join(sys.argv[1:])
+        day = datetime.date.today().isoformat()
+        block = "\n".join("    " + s for s in lines)
+        with open(args.append, "a") as f:
+            f.write(f"\n## App (`{cmd}`)\n\nMeasured {day}, {os.cpu_count()} CPU cores:\n\n{block}\n")
+
+
+if __name__ == "__main__":
+    main()

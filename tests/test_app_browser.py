@@ -1,0 +1,276 @@
+"""Browser tests of the served app (pytest-playwright, Debian's chromium).
+
+One ``panel serve uam_studio/app/main.py`` subprocess serves the whole module, with
+``UAM_STUDIO_HOME`` in a temporary folder. Each test opens its own page (its own session).
+The tests are skipped only if no chromium is installed.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("playwright")
+
+ROOT = Path(__file__).resolve().parents[1]
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+TIMEOUT_MS = 60_000
+
+pytestmark = pytest.mark.skipif(not Path(CHROMIUM).exists(), reason="chromium is not installed")
+
+# The figure's frame in page pixels and its data ranges, found through BokehJS's view index.
+JS_FRAME = """(title) => {
+  for (const v of window.Bokeh.index.all_views()) {
+    const m = v.model;
+    if ((m.type === 'Figure' || m.type === 'Plot') && m.title && m.title.text.startsWith(title)) {
+      const f = v.frame.bbox, r = v.el.getBoundingClientRect();
+      return {left: r.left + f.left, top: r.top + f.top, width: f.width, height: f.height,
+              x0: m.x_range.start, x1: m.x_range.end, y0: m.y_range.start, y1: m.y_range.end};
+    }
+  }
+  return null;
+}"""
+# Number of samples in the first line renderer of the figure titled `title` (the plotted data).
+JS_CURVE_LENGTH = """(title) => {
+  for (const v of window.Bokeh.index.all_views()) {
+    const m = v.model;
+    if ((m.type === 'Figure' || m.type === 'Plot') && m.title && m.title.text.startsWith(title)) {
+      for (const r of m.renderers) {
+        if (r.data_source && r.glyph && r.glyph.type === 'Line') return r.data_source.get_length();
+      }
+    }
+  }
+  return -1;
+}"""
+
+
+# True once the summary shows a finished plan for an R0 above `arg` (read from data-inputs).
+JS_SUMMARY_R0_ABOVE = """(lo) => {
+  const find = (root) => {
+    const el = root.querySelector('.uam-plan-summary');
+    if (el) return el;
+    for (const h of root.querySelectorAll('*')) if (h.shadowRoot) { const f = find(h.shadowRoot); if (f) return f; }
+    return null;
+  };
+  const el = find(document);
+  if (!el || el.dataset.busy !== 'false') return false;
+  const m = /;r0=([0-9.]+);/.exec(el.dataset.inputs || '');
+  return m !== null && parseFloat(m[1]) > lo;
+}"""
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def app_url(tmp_path_factory):
+    """Serve the app in a subprocess (the way users start it) and yield its URL."""
+    home = tmp_path_factory.mktemp("uam_home")
+    port = _free_port()
+    env = {**os.environ, "UAM_STUDIO_HOME": str(home)}
+    log = open(home / "serve.log", "w")  # noqa: SIM115 - closed below
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "panel", "serve", "uam_studio/app/main.py", "--port", str(port),
+         "--address", "127.0.0.1", "--allow-websocket-origin", f"127.0.0.1:{port}", "--warm", "--liveness"],
+        cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
+    url = f"http://127.0.0.1:{port}/main"
+    deadline = time.monotonic() + 180
+    while True:  # --warm builds the app once before the server answers; /liveness builds no session
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/liveness", timeout=30) as r:
+                if r.status == 200:
+                    break
+        except OSError:
+            pass
+        if proc.poll() is not None or time.monotonic() > deadline:
+            proc.kill()
+            log.close()
+            pytest.fail(f"panel serve did not start: {(home / 'serve.log').read_text()[-2000:]}")
+        time.sleep(0.5)
+    yield url
+    proc.terminate()
+    try:
+        proc.wait(20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+    log.close()
+    # Tracebacks other than a page closing with messages in flight are app errors.
+    blocks = (home / "serve.log").read_text().split("Traceback (most recent call last):")[1:]
+    errors = [b for b in blocks if "WebSocketClosedError" not in b and "StreamClosedError" not in b]
+    assert not errors, errors[0][-3000:]
+
+
+@pytest.fixture(scope="session")
+def browser_type_launch_args(browser_type_launch_args):
+    return {**browser_type_launch_args, "executable_path": CHROMIUM, "args": ["--no-sandbox"]}
+
+
+@pytest.fixture(scope="session")
+def browser_context_args(browser_context_args):
+    return {**browser_context_args, "viewport": {"width": 1500, "height": 1100}}
+
+
+def _open(page, url):
+    page.set_default_timeout(TIMEOUT_MS)
+    page.goto(url)
+    summary = page.locator(".uam-plan-summary")
+    summary.get_by_text("Route:").wait_for()
+    return summary
+
+
+def _row(page, name: str):
+    return page.locator(".tabulator-row", has=page.locator('.tabulator-cell[tabulator-field="name"]',
+                                                           has_text=name))
+
+
+def _wait_count(locator, n: int, timeout_s: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while locator.count() != n:
+        if time.monotonic() > deadline:
+            raise AssertionError(f"expected {n} matches, found {locator.count()}")
+        time.sleep(0.1)
+
+
+def test_planner_map_table_slider_update_route_and_summary(page, app_url):
+    summary = _open(page, app_url)
+    text0 = summary.inner_text()
+    for needle in ("Route: vertiport", "Altitudes:", "Min predicted voltage:", "Margin to EOD", "Safe:"):
+        assert needle in text0
+    assert page.get_by_text("q_max (C)").count() == 1 and page.get_by_text("R0 (ohm)").count() == 1
+
+    # 1. click the map: a new destination D1 appears in the table
+    fr = page.evaluate(JS_FRAME, "Map")
+    assert fr is not None
+    x = fr["left"] + (-25 - fr["x0"]) / (fr["x1"] - fr["x0"]) * fr["width"]
+    y = fr["top"] + (fr["y1"] - 20) / (fr["y1"] - fr["y0"]) * fr["height"]
+    page.mouse.click(x, y)
+    d1 = _row(page, "D1")
+    d1.wait_for()
+    assert page.locator(".tabulator-row").count() == 5
+
+    # 2. priority of D1 -> 3 stars (star editor)
+    prio = d1.locator('.tabulator-cell[tabulator-field="priority"]')
+    prio.click()
+    editing = page.locator(".tabulator-cell.tabulator-editing")
+    editing.wait_for()
+    editing.locator("svg").nth(2).click()
+    page.keyboard.press("Enter")
+    page.wait_for_function("() => !document.activeElement || true")
+    _wait_count(_row(page, "D1").locator('.tabulator-cell[tabulator-field="priority"] polygon[fill="#FFEA00"]'), 3)
+    # 3. wind of D1 -> -20 kt (number editor)
+    wind = _row(page, "D1").locator('.tabulator-cell[tabulator-field="wind_kts"]')
+    wind.click()
+    editing.locator("input").fill("-20")
+    editing.locator("input").press("Enter")
+    _row(page, "D1").locator('.tabulator-cell[tabulator-field="wind_kts"]', has_text="-20").wait_for()
+    # the plan for exactly these inputs (data-inputs), and no newer one on the way
+    current = page.locator(".uam-plan-summary[data-busy='false'][data-inputs*='|D1:3:-20']")
+    current.wait_for()
+    text1 = current.inner_text()
+    assert "D1" in text1.split("Route:")[1].split("\n")[0], text1  # the new 3-star destination is served
+    assert text1 != text0
+
+    # 4. drag the R0 slider to the right: a weaker cell, a different plan
+    slider = page.locator(".bk-input-group", has=page.get_by_text("R0 (ohm)")).locator(".noUi-handle")
+    box = slider.bounding_box()
+    track = page.locator(".bk-input-group", has=page.get_by_text("R0 (ohm)")).locator(".noUi-target")
+    tbox = track.bounding_box()
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.mouse.down()
+    page.mouse.move(tbox["x"] + tbox["width"] * 0.62, box["y"] + box["height"] / 2, steps=8)
+    page.mouse.up()
+    page.wait_for_function(JS_SUMMARY_R0_ABOVE, arg=0.2)
+    current = page.locator(".uam-plan-summary[data-busy='false']")
+    current.wait_for()
+    text2 = current.inner_text()
+    r0 = float(text2.split("R0 ")[1].split(" ohm")[0])
+    assert r0 > 0.2, text2
+    assert text2.split("Min predicted voltage:")[1] != text1.split("Min predicted voltage:")[1]
+    assert page.locator(".uam-error").get_by_text("Not applied").count() == 0
+
+
+def test_invalid_mission_file_is_a_clear_message_and_keeps_the_mission(page, app_url):
+    _open(page, app_url)
+    summary = page.locator(".uam-plan-summary[data-busy='false']")
+    text0 = summary.inner_text()
+    rows0 = page.locator(".tabulator-row").count()
+    page.locator("input[type=file]").set_input_files(
+        {"name": "broken.json", "mimeType": "application/json", "buffer": b'{"name": "x", "destinations": ['})
+    err = page.locator(".uam-error").get_by_text("file broken.json: is not valid JSON")
+    err.wait_for()
+    assert "Traceback" not in page.content()
+    assert page.locator(".tabulator-row").count() == rows0
+    assert summary.inner_text() == text0  # previous mission and plan kept
+
+    # a file with a bad field names it; still nothing changes
+    page.locator("input[type=file]").set_input_files(
+        {"name": "prio.json", "mimeType": "application/json",
+         "buffer": (ROOT / "assets" / "example_mission.json").read_bytes().replace(b'"priority": 3', b'"priority": 5')})
+    page.locator(".uam-error").get_by_text("destinations[2].priority: 5 is out of range; allowed [1, 3]").wait_for()
+    assert page.locator(".tabulator-row").count() == rows0
+
+
+def test_retraining_curve_grows_and_agent_is_selectable(page, app_url):
+    _open(page, app_url)
+    page.locator(".bk-tab", has_text="Retrain").click()
+    steps = page.locator(".bk-input-group", has=page.get_by_text("Steps (environment transitions)")).locator("input")
+    steps.fill("600")
+    steps.press("Enter")
+    page.locator(".uam-train-start button").click()
+    lengths = []
+    deadline = time.monotonic() + 180
+    while time.monotonic() < deadline:
+        n = page.evaluate(JS_CURVE_LENGTH, "Destinations reached")
+        if n > 0 and (not lengths or n != lengths[-1]):
+            lengths.append(n)
+        if page.locator(".uam-train-status").get_by_text("done:").count():
+            lengths.append(page.evaluate(JS_CURVE_LENGTH, "Destinations reached"))
+            break
+        time.sleep(0.15)
+    else:
+        raise AssertionError(f"training did not finish; curve lengths seen: {lengths}")
+    assert len(set(lengths)) >= 2 and lengths == sorted(lengths) and lengths[0] > 0, lengths
+    assert page.locator(".uam-train-status").get_by_text("saved").count() == 1
+
+    page.locator(".bk-tab", has_text="Planner").click()
+    policy = page.locator(".bk-input-group", has=page.get_by_text("Policy", exact=True)).locator("select")
+    policy.locator("option", has_text="Retrained: single_charge-map-").first.wait_for(state="attached")
+
+
+def test_training_session_does_not_block_another_session(browser, app_url):
+    """Two sessions: while one trains, the other still replans (timings: benchmarks/bench_app.py)."""
+    trainer, planner = browser.new_page(), browser.new_page()
+    try:
+        _open(trainer, app_url)
+        trainer.locator(".bk-tab", has_text="Retrain").click()
+        steps = trainer.locator(".bk-input-group", has=trainer.get_by_text("Steps (environment transitions)"))
+        steps.locator("input").fill("50000")
+        steps.locator("input").press("Enter")
+        trainer.locator(".uam-train-start button").click()
+        trainer.wait_for_function(f"() => ({JS_CURVE_LENGTH})('Destinations reached') > 0")
+
+        _open(planner, app_url)
+        handle = planner.locator(".bk-input-group", has=planner.get_by_text("q_max (C)")).locator(".noUi-handle")
+        handle.focus()
+        for _ in range(20):  # 20 steps of 50 C
+            handle.press("ArrowLeft")
+        planner.locator(".uam-plan-summary[data-busy='false'][data-inputs*=';q_max=6600;']").wait_for()
+        assert "q_max 6600 C" in planner.locator(".uam-plan-summary").inner_text()
+        n1 = trainer.evaluate(JS_CURVE_LENGTH, "Destinations reached")
+        trainer.locator(".uam-train-stop button").click()
+        trainer.locator(".uam-train-status").get_by_text("stopped:").wait_for()
+        assert trainer.evaluate(JS_CURVE_LENGTH, "Destinations reached") >= n1 > 0
+    finally:
+        trainer.close()
+        planner.close()
