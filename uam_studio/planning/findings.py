@@ -175,7 +175,7 @@ def reward_sweep(
         model = train_dqn(cfg, make_env(scenario=scenario, backend="physics", **w), callback=cb)
         breaches, reached, prio, cycles, margins = [], [], [], [], []
         for m in missions:
-            plan = rollout_agent(m, model)
+            plan = rollout_agent(m, model, shield=False)  # the agent alone: breaches count
             if not plan.route:
                 breaches.append(False)
                 reached.append(0)
