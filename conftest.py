@@ -1,12 +1,20 @@
-"""Repository-wide pytest set-up.
+"""Repository-wide pytest set-up, done at import time, before any notebook kernel starts.
 
-The classroom notebooks (``notebooks/*.ipynb``, run by nbval with ``--nbval-lax``) read
-``UAM_FAST`` through :func:`uam_studio.classroom.fast_mode`. Tests run them in fast mode unless the
-caller sets the variable (``UAM_FAST=0 python -m pytest notebooks`` runs the full-size versions).
-It is set here, at import time, before any kernel starts, so every notebook kernel inherits it;
-``tests/test_notebooks.py`` checks that a kernel really sees it.
+* ``UAM_FAST=1``: the classroom notebooks (``notebooks/*.ipynb``, run by nbval with ``--nbval-lax``)
+  read it through :func:`uam_studio.classroom.fast_mode`. Tests run them in fast mode unless the caller
+  sets the variable (``UAM_FAST=0 python -m pytest notebooks`` runs the full-size versions).
+* ``PYTHONPATH`` starts with this checkout, so a notebook kernel (whose working directory is
+  ``notebooks/``) imports the ``uam_studio`` being tested even when the installed package points at
+  another checkout.
+
+Kernels inherit both; ``tests/test_notebooks.py`` checks that a kernel sees them.
 """
 
 import os
+from pathlib import Path
 
+ROOT = str(Path(__file__).resolve().parent)
 os.environ.setdefault("UAM_FAST", "1")
+_paths = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
+if not _paths or _paths[0] != ROOT:
+    os.environ["PYTHONPATH"] = os.pathsep.join([ROOT, *(p for p in _paths if p != ROOT)])

@@ -46,20 +46,24 @@ def test_notebook_shape(name):
 
 
 @pytest.mark.slow
-def test_notebook_kernel_sees_fast_mode():
-    """conftest.py sets UAM_FAST=1 before kernels start; a kernel started as nbval does inherits it."""
+def test_notebook_kernel_sees_fast_mode_and_this_checkout():
+    """conftest.py sets UAM_FAST=1 and PYTHONPATH before kernels start; a kernel started as nbval starts
+    it (working directory notebooks/) inherits both and imports this checkout's uam_studio."""
     from nbval.kernel import start_new_kernel
 
     assert os.environ.get("UAM_FAST") is not None
-    km, kc = start_new_kernel(kernel_name="python3")
+    km, kc = start_new_kernel(kernel_name="python3", cwd=str(NOTEBOOK_DIR))
     lines: list[str] = []
     try:
         kc.execute_interactive(
-            "import os\nfrom uam_studio.classroom import fast_mode\nprint(os.environ.get('UAM_FAST'), fast_mode())",
+            "import os, uam_studio\nfrom uam_studio.classroom import fast_mode\n"
+            "print(os.environ.get('UAM_FAST'), fast_mode(), uam_studio.__file__)",
             timeout=60,
             output_hook=lambda msg: lines.append(msg["content"].get("text", "")),
         )
     finally:
         kc.stop_channels()
         km.shutdown_kernel(now=True)
-    assert "".join(lines).split() == [os.environ["UAM_FAST"], str(os.environ["UAM_FAST"] == "1")]
+    value, fast, module = "".join(lines).split()
+    assert [value, fast] == [os.environ["UAM_FAST"], str(os.environ["UAM_FAST"] == "1")]
+    assert Path(module).resolve().parents[1] == NOTEBOOK_DIR.parent
