@@ -15,7 +15,8 @@ pageload and concurrency serve the app with ``panel serve uam_studio/app/main.py
 subprocess and drive Debian's chromium (``/usr/bin/chromium``) with playwright. The page load is the
 time from ``goto`` to the first plan shown in the summary. Concurrency: session B moves the q_max
 slider with the keyboard (one 50 C step at a time) and waits for the summary of that exact input;
-first with nothing else running, then while session A retrains a DQN agent.
+first with nothing else running, then while session A retrains a DQN agent, once with the training in
+a child process (the app's default) and once in a thread of the server (for comparison).
 """
 
 from __future__ import annotations
@@ -94,9 +95,9 @@ def bench_latency(n: int, n_oracle: int) -> list[str]:
         count = n_oracle if policy == "oracle" else n
         r0s = list(np.round(np.linspace(0.05, 0.25, count), 4))
         state = PlannerState(mission=mission, background=True, policy=policy)
+        assert state.wait_idle(600)  # (results are applied in the worker thread here: build views after)
         view = PlannerView(state)
         view.__panel__().get_root(Document())  # the views' Bokeh models, as in a session
-        assert state.wait_idle(600)
         view.r0.value = 0.3
         assert state.wait_idle(600)  # warm (agent loaded, caches filled)
         app, bare = [], []
@@ -126,6 +127,9 @@ def bench_latency(n: int, n_oracle: int) -> list[str]:
 class Served:
     """``panel serve uam_studio/app/main.py --warm`` on a free port, with a temporary user folder."""
 
+    def __init__(self, **env: str) -> None:
+        self.extra_env = env
+
     def __enter__(self) -> Served:
         s = socket.socket()
         s.bind(("127.0.0.1", 0))
@@ -133,7 +137,7 @@ class Served:
         s.close()
         self.home = tempfile.mkdtemp(prefix="uam_bench_home_")
         self.log = open(Path(self.home) / "serve.log", "w")  # noqa: SIM115
-        env = {**os.environ, "UAM_STUDIO_HOME": self.home}
+        env = {**os.environ, "UAM_STUDIO_HOME": self.home, **self.extra_env}
         self.t_start = time.perf_counter()
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "panel", "serve", "uam_studio/app/main.py", "--port", str(self.port),
@@ -220,15 +224,15 @@ def _replan_times(page, k: int) -> list[float]:
     return out
 
 
-def bench_concurrency(k: int, steps: int) -> list[str]:
+def bench_concurrency(k: int, steps: int, runner: str) -> list[str]:
     from playwright.sync_api import sync_playwright
 
     js_len = """() => { for (const v of window.Bokeh.index.all_views()) { const m = v.model;
       if (m.title && m.title.text && m.title.text.startsWith('Destinations reached'))
         for (const r of m.renderers) if (r.glyph && r.glyph.type === 'Line') return r.data_source.get_length();
       } return -1; }"""
-    lines = [f"concurrency: load average before {_load()}"]
-    with Served() as srv, sync_playwright() as p:
+    lines = [f"concurrency (training in a {runner}): load average before {_load()}"]
+    with Served(UAM_STUDIO_RETRAIN_RUNNER=runner) as srv, sync_playwright() as p:
         browser = _browser(p)
         a = browser.new_page(viewport={"width": 1500, "height": 1100})
         b = browser.new_page(viewport={"width": 1500, "height": 1100})
@@ -267,6 +271,8 @@ def main() -> None:
     ap.add_argument("--loads", type=int, default=5, help="page loads (pageload)")
     ap.add_argument("--k", type=int, default=15, help="replans per phase (concurrency)")
     ap.add_argument("--steps", type=int, default=200_000, help="training steps of session A (concurrency)")
+    ap.add_argument("--runners", default="process,thread",
+                    help="where session A trains: the app's default child process, and/or a thread (concurrency)")
     ap.add_argument("--append", default=None, metavar="FILE", help="append the results as a section to FILE")
     args = ap.parse_args()
     lines: list[str] = []
@@ -275,7 +281,8 @@ def main() -> None:
     if args.what in ("pageload", "all"):
         lines += bench_pageload(args.loads)
     if args.what in ("concurrency", "all"):
-        lines += bench_concurrency(args.k, args.steps)
+        for runner in args.runners.split(","):
+            lines += bench_concurrency(args.k, args.steps, runner)
     print("\n".join(lines))
     if args.append:
         cmd = "python benchmarks/bench_app.py " + " ".join(sys.argv[1:])

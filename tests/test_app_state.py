@@ -249,7 +249,8 @@ def test_training_setup_errors(kw, field):
 
 def test_retrain_state_trains_saves_and_the_planner_can_use_it(home):
     planner = _state()
-    rs = RetrainState(source="map", scenario="single_charge", steps=300, seed=1)
+    rs = RetrainState(source="map", scenario="single_charge", steps=300, seed=1)  # in a child process
+    assert rs.runner == "process"
     assert rs.start(planner.mission), rs.error
     assert rs.running and not rs.start(planner.mission)  # one run at a time
     assert "already going" in rs.error
@@ -273,7 +274,7 @@ def test_retrain_state_trains_saves_and_the_planner_can_use_it(home):
 
 
 def test_retrain_stop_saves_the_agent_so_far(home):
-    rs = RetrainState(source="random", steps=200_000)
+    rs = RetrainState(source="random", steps=200_000, runner="thread")
     assert rs.start(None), rs.error
     while rs.running and rs.episodes < 3:
         rs.poll()
@@ -284,6 +285,20 @@ def test_retrain_stop_saves_the_agent_so_far(home):
     assert not rs.running and rs.status.startswith("stopped") and rs.timesteps < 200_000
     card = json.loads(zipfile.ZipFile(rs.agent_path).read("card.json"))
     assert card["stopped_early"] is True and card["env"]["mission"] is None
+
+
+def test_retrain_process_reports_a_failure_in_the_child(home):
+    from uam_studio.planning.retrain import RetrainProcess
+
+    blocker = home / "not_a_folder"
+    blocker.parent.mkdir(parents=True, exist_ok=True)
+    blocker.write_text("a file where the agents folder should be")
+    proc = RetrainProcess(blocker / "agent.zip", steps=100, seed=0)
+    proc.start()
+    proc.join(180)
+    episodes = proc.poll()
+    assert proc.finished and proc.result is None and episodes
+    assert proc.error.startswith(("FileExistsError", "NotADirectoryError")), proc.error
 
 
 def test_retrain_on_a_bad_map_is_a_message():

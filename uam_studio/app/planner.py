@@ -214,7 +214,7 @@ class PlannerView(pn.viewable.Viewer):
         s.param.watch(self._on_error, ["error", "notice"])
 
         self.table = pn.widgets.Tabulator(
-            self._frame(), show_index=False, selectable="checkbox", layout="fit_columns", height=260,
+            self._frame(), show_index=False, selectable="checkbox", layout="fit_data_fill", height=260,
             editors={"name": {"type": "input"},
                      "x_km": {"type": "number", "min": COORD_RANGE_KM[0], "max": COORD_RANGE_KM[1], "step": 0.1},
                      "y_km": {"type": "number", "min": COORD_RANGE_KM[0], "max": COORD_RANGE_KM[1], "step": 0.1},
@@ -222,8 +222,8 @@ class PlannerView(pn.viewable.Viewer):
                      "wind_kts": {"type": "number", "min": WIND_RANGE_KTS[0], "max": WIND_RANGE_KTS[1], "step": 1},
                      "dwell_s": {"type": "number", "min": 0, "step": 60}},
             formatters={"priority": {"type": "star", "stars": 3}},
-            titles={"name": "Destination", "x_km": "x (km)", "y_km": "y (km)", "priority": "Priority",
-                    "wind_kts": "Wind to it (kt)", "dwell_s": "Dwell (s)"},
+            titles={"name": "Name", "x_km": "x km", "y_km": "y km", "priority": "Priority",
+                    "wind_kts": "Wind kt", "dwell_s": "Dwell s"},
             css_classes=["uam-destinations"], sizing_mode="stretch_width",
         )
         self.table.on_edit(self._on_table_edit)
@@ -270,7 +270,8 @@ class PlannerView(pn.viewable.Viewer):
         )
         center = pn.Column(
             pn.pane.Markdown("Click the map to add a destination, drag to move it, select it and press "
-                             "Backspace to delete it. Edit names, priorities (stars) and winds in the table."),
+                             "Backspace to delete it. Edit names, priorities (stars), the wind on legs *to* "
+                             "each destination (kt, negative = tailwind) and dwell times in the table."),
             self.map, self.table, width=620,
         )
         results = pn.Column(pn.Row("### Plan", self.busy), self.summary, self.voltage_plot, self.altitude_plot,

@@ -22,6 +22,7 @@ import collections
 import functools
 import json
 import math
+import os
 import threading
 import time
 import traceback
@@ -67,6 +68,7 @@ APP_Q_RANGE = (5000.0, 8000.0)  # C, the paper's range of q_max
 APP_R0_RANGE = (0.017, 0.45)  # ohm, the paper's range of R0
 APP_EOD_RANGE = (2.5, 3.5)  # V; the Dynaformer is trained down to 2.5 V
 MAX_FILE_BYTES = 1_000_000
+RUNNER_ENV = "UAM_STUDIO_RETRAIN_RUNNER"  # "process" (default) or "thread", for comparisons
 POPULATION_N = 300
 
 EXAMPLE_MISSION: dict[str, Any] = {
@@ -660,13 +662,15 @@ class BatteryLabState(param.Parameterized):
 
 
 class RetrainState(param.Parameterized):
-    """A DQN retraining run in a background thread (one per session at a time).
+    """A DQN retraining run in the background (one per session at a time).
 
     :meth:`start` validates the settings (:func:`uam_studio.planning.retrain.training_setup`) and
-    starts the thread; :meth:`stop` sets the stop flag (the agent trained so far is still saved).
-    The training thread only appends to a queue and sets plain attributes; :meth:`poll`, called on
-    the session's own thread (a periodic callback in the app), drains the queue into the param
-    values that views watch and returns the new episodes.
+    starts the run: in a child process (``runner="process"``, the served app's default:
+    :class:`~uam_studio.planning.retrain.RetrainProcess`, lower CPU priority, no GIL shared with
+    the sessions) or in a thread of this process (``runner="thread"``). :meth:`stop` sets the stop
+    flag (the agent trained so far is still saved). Neither touches the param values: :meth:`poll`,
+    called on the session's own thread (a periodic callback in the app), drains the episodes into
+    the values that views watch and returns the new ones.
     """
 
     source = param.Selector(default="map", objects=["map", "random"], doc="current map or random missions")
@@ -683,11 +687,18 @@ class RetrainState(param.Parameterized):
     status = param.String(default="")
     error = param.String(default="")
     agent_path = param.String(default="", doc="the last saved agent")
+    runner = param.Selector(default="process", objects=["process", "thread"],
+                            doc="train in a child process (default; $UAM_STUDIO_RETRAIN_RUNNER overrides) "
+                                "or in a thread of this process")
 
     MA_WINDOW = 50
 
     def __init__(self, **params: Any) -> None:
+        env = os.environ.get(RUNNER_ENV, "").strip()
+        if "runner" not in params and env in ("process", "thread"):
+            params["runner"] = env
         super().__init__(**params)
+        self._proc: Any = None
         self._queue: collections.deque = collections.deque()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -725,6 +736,14 @@ class RetrainState(param.Parameterized):
         self._target_steps = cfg.steps
         self.param.update(running=True, timesteps=0, episodes=0, agent_path="",
                           status=f"training {cfg.steps} steps on {'the current map' if m else 'random missions'}")
+        if self.runner == "process":
+            from uam_studio.planning.retrain import RetrainProcess
+
+            self._proc = RetrainProcess(path, mission=m, source="app", scenario=self.scenario, alpha=self.alpha,
+                                        beta=self.beta, gamma=self.gamma, steps=self.steps, seed=self.seed)
+            self._proc.start()
+            return True
+        self._proc = None
         self._thread = threading.Thread(target=self._run, args=(cfg, env_fn, path, m), daemon=True,
                                         name="uam-retrain")
         self._thread.start()
@@ -749,6 +768,8 @@ class RetrainState(param.Parameterized):
         """Ask the run to stop at the next environment step (the agent so far is saved)."""
         if self.running:
             self._stop.set()
+            if self._proc is not None:
+                self._proc.stop()
             self.status = "stopping..."
 
     @property
@@ -760,6 +781,12 @@ class RetrainState(param.Parameterized):
         """Drain the episode queue (call on the session's thread). Returns the new episodes as rows
         ``{"episode", "reached", "cycles", "reached_ma", "cycles_ma"}`` (moving averages over
         :attr:`MA_WINDOW` episodes); updates the progress and, at the end, the status."""
+        if self._proc is not None and not self._finished:
+            self._queue.extend(self._proc.poll())
+            if self._proc.finished:
+                self._result = self._proc.result
+                self._failure = f"training failed: {self._proc.error}" if self._proc.error else None
+                self._finished = True
         rows = []
         while self._queue:
             e = self._queue.popleft()
@@ -789,6 +816,8 @@ class RetrainState(param.Parameterized):
         return rows
 
     def join(self, timeout: float | None = None) -> None:
-        """Wait for the training thread (tests)."""
-        if self._thread is not None:
+        """Wait for the training thread or process (tests)."""
+        if self._proc is not None:
+            self._proc.join(timeout)
+        elif self._thread is not None:
             self._thread.join(timeout)

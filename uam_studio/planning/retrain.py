@@ -6,6 +6,8 @@ Shared by ``uam-studio train dqn`` and the app's Retrain tab:
   factory (a fixed map with a random cell each episode, or a random mission every episode);
 - :func:`retrain_dqn`: train (stoppable, streaming :class:`EpisodeStats`), build the model card and
   save the agent atomically (never into the bundled ``pretrained/`` folder);
+- :class:`RetrainProcess`: :func:`retrain_dqn` in a child process (lower CPU priority, one torch
+  thread), streaming the episodes back; a server keeps its cores and its GIL for its sessions;
 - :func:`user_home`, :func:`agents_dir`, :func:`list_agents`, :func:`new_agent_path`: the user folder,
   ``$UAM_STUDIO_HOME`` or ``~/.uam_studio``, whose ``agents/`` subfolder holds retrained agents.
 """
@@ -13,7 +15,9 @@ Shared by ``uam-studio train dqn`` and the app's Retrain tab:
 from __future__ import annotations
 
 import datetime
+import multiprocessing
 import os
+import queue as queue_mod
 import re
 import threading
 import time
@@ -31,6 +35,7 @@ __all__ = [
     "DQN_REWARD_DEFAULTS",
     "HOME_ENV",
     "AgentInfo",
+    "RetrainProcess",
     "RetrainResult",
     "agents_dir",
     "is_bundled",
@@ -264,3 +269,88 @@ def retrain_dqn(
         card["source"] = source
     save_agent(model, agent, card)
     return RetrainResult(agent, card, tally.n, int(model.num_timesteps), stopped, model)
+
+
+# ----------------------------------------------------------------------------- in a child process
+
+
+def _process_main(setup: dict[str, Any], agent_path: str, mission: Mission | None, out: Any, stop: Any,
+                  source: str | None, nice: int) -> None:
+    """Entry point of :class:`RetrainProcess`'s child: train, save, report on ``out``."""
+    try:
+        os.nice(nice)
+    except (AttributeError, OSError):  # not on this platform / not allowed
+        pass
+    try:
+        import torch
+
+        torch.set_num_threads(1)
+        cfg, env_fn = training_setup(mission=mission, **setup)
+        res = retrain_dqn(cfg, env_fn, agent_path, mission=mission, on_episode=out.put, stop_event=stop,
+                          source=source)
+        out.put(RetrainResult(res.path, res.card, res.episodes, res.timesteps, res.stopped))
+    except BaseException as err:  # reported to the parent; nothing is raised in the child
+        out.put(("error", f"{type(err).__name__}: {' '.join(str(err).split())}"))
+
+
+class RetrainProcess:
+    """:func:`retrain_dqn` in a child process (``spawn``), streaming :class:`EpisodeStats` back.
+
+    Training in a thread of a server competes with its sessions for the GIL; a child process does
+    not, and runs at a lower CPU priority (``nice``) with one torch thread. The settings are
+    validated here, in the parent (:func:`training_setup` raises :class:`InputError`).
+
+    :param agent_path: the agent zip to write (never inside ``pretrained/``).
+    :param mission: the map to train on, or None for random missions.
+    :param nice: niceness added in the child (0 for none).
+    :param setup: ``scenario``, ``alpha``, ``beta``, ``gamma``, ``steps``, ``seed`` of
+        :func:`training_setup`.
+    """
+
+    def __init__(self, agent_path: str | os.PathLike[str], mission: Mission | None = None,
+                 source: str | None = "app", nice: int = 10, **setup: Any) -> None:
+        if is_bundled(agent_path):
+            raise InputError("agent_path", f"{agent_path}: must not be in the bundled pretrained/ folder")
+        self.config, _ = training_setup(mission=mission, **setup)
+        self.agent_path = Path(agent_path)
+        ctx = multiprocessing.get_context("spawn")  # no fork of a threaded server
+        self._out = ctx.Queue()
+        self._stop = ctx.Event()
+        self._proc = ctx.Process(target=_process_main, name="uam-retrain", daemon=True,
+                                 args=(setup, str(agent_path), mission, self._out, self._stop, source, nice))
+        self.result: RetrainResult | None = None
+        self.error: str | None = None
+        self.finished = False
+
+    def start(self) -> None:
+        self._proc.start()
+
+    def stop(self) -> None:
+        """Ask the child to stop at its next environment step; it still saves the agent so far."""
+        self._stop.set()
+
+    def poll(self) -> list[Any]:
+        """The episodes reported since the last call (never blocks). Sets :attr:`result` or
+        :attr:`error` and :attr:`finished` when the child is done."""
+        episodes: list[Any] = []
+        exited = not self._proc.is_alive() if self._proc.pid is not None else False
+        while True:
+            try:
+                item = self._out.get_nowait()
+            except queue_mod.Empty:
+                break
+            except (EOFError, OSError):
+                break
+            if isinstance(item, RetrainResult):
+                self.result, self.finished = item, True
+            elif isinstance(item, tuple) and item[:1] == ("error",):
+                self.error, self.finished = item[1], True
+            else:
+                episodes.append(item)
+        if exited and not self.finished:
+            self.error = f"the training process exited (code {self._proc.exitcode}) without a result"
+            self.finished = True
+        return episodes
+
+    def join(self, timeout: float | None = None) -> None:
+        self._proc.join(timeout)

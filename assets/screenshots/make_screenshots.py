@@ -1,0 +1,94 @@
+"""Take the README's screenshots of the app's three tabs (playwright + Debian's chromium).
+
+    python assets/screenshots/make_screenshots.py
+
+Serves the app with ``panel serve`` on a free port (user folder in a temporary directory), adds a
+destination on the map, switches to the Battery lab (varying R0) and runs a short retraining, and
+writes ``planner.png``, ``battery_lab.png`` and ``retrain.png`` next to this file.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+JS_FRAME = """(title) => {
+  for (const v of window.Bokeh.index.all_views()) {
+    const m = v.model;
+    if (m.title && m.title.text && m.title.text.startsWith(title)) {
+      const f = v.frame.bbox, r = v.el.getBoundingClientRect();
+      return {left: r.left + f.left, top: r.top + f.top, width: f.width, height: f.height,
+              x0: m.x_range.start, x1: m.x_range.end, y0: m.y_range.start, y1: m.y_range.end};
+    }
+  }
+  return null;
+}"""
+
+
+def main() -> None:
+    from playwright.sync_api import sync_playwright
+
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    home = tempfile.mkdtemp(prefix="uam_shots_")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "panel", "serve", "uam_studio/app/main.py", "--port", str(port), "--address",
+         "127.0.0.1", "--allow-websocket-origin", f"127.0.0.1:{port}", "--warm", "--liveness"],
+        cwd=ROOT, env={**os.environ, "UAM_STUDIO_HOME": home}, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        for _ in range(600):
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{port}/liveness", timeout=10):
+                    break
+            except OSError:
+                time.sleep(0.5)
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+            page = browser.new_page(viewport={"width": 1560, "height": 1250})
+            page.set_default_timeout(120_000)
+            page.goto(f"http://127.0.0.1:{port}/main")
+            page.locator(".uam-plan-summary[data-busy='false']").get_by_text("Route:").wait_for()
+            fr = page.evaluate(JS_FRAME, "Map")
+            page.mouse.click(fr["left"] + (-22 - fr["x0"]) / (fr["x1"] - fr["x0"]) * fr["width"],
+                             fr["top"] + (fr["y1"] - 18) / (fr["y1"] - fr["y0"]) * fr["height"])
+            page.locator(".uam-plan-summary[data-busy='false'][data-inputs*='|D1:']").wait_for()
+            page.mouse.move(5, 600)  # no hover tooltip in the picture
+            time.sleep(1.5)
+            page.screenshot(path=str(HERE / "planner.png"))
+
+            page.locator(".bk-tab", has_text="Battery lab").click()
+            page.locator(".bk-btn", has_text="R0").first.click()
+            time.sleep(3)
+            page.screenshot(path=str(HERE / "battery_lab.png"))
+
+            page.locator(".bk-tab", has_text="Retrain").click()
+            box = page.locator(".bk-input-group", has=page.get_by_text("Steps (environment transitions)"))
+            box.locator("input").fill("3000")
+            box.locator("input").press("Enter")
+            page.locator(".uam-train-start button").click()
+            page.locator(".uam-train-status").get_by_text("done:").wait_for(timeout=900_000)
+            time.sleep(1.5)
+            page.screenshot(path=str(HERE / "retrain.png"))
+            browser.close()
+    finally:
+        proc.terminate()
+        proc.wait(20)
+        shutil.rmtree(home, ignore_errors=True)
+    for name in ("planner.png", "battery_lab.png", "retrain.png"):
+        print(f"{name}: {(HERE / name).stat().st_size / 1024:.0f} KB")
+
+
+if __name__ == "__main__":
+    main()
