@@ -143,6 +143,9 @@ def _wait_count(locator, n: int, timeout_s: float = 30.0) -> None:
 
 
 def test_planner_map_table_slider_update_route_and_summary(page, app_url):
+    outside: list[str] = []  # the page must work offline: nothing but the app server
+    page.on("request", lambda r: outside.append(r.url)
+            if not r.url.startswith(("http://127.0.0.1", "ws://127.0.0.1", "data:", "blob:")) else None)
     summary = _open(page, app_url)
     text0 = summary.inner_text()
     for needle in ("Route: vertiport", "Altitudes:", "Min predicted voltage:", "Margin to EOD", "Safe:"):
@@ -198,6 +201,7 @@ def test_planner_map_table_slider_update_route_and_summary(page, app_url):
     assert r0 > 0.2, text2
     assert text2.split("Min predicted voltage:")[1] != text1.split("Min predicted voltage:")[1]
     assert page.locator(".uam-error").get_by_text("Not applied").count() == 0
+    assert outside == []
 
 
 def test_invalid_mission_file_is_a_clear_message_and_keeps_the_mission(page, app_url):
