@@ -229,7 +229,7 @@ def test_retraining_curve_grows_and_agent_is_selectable(page, app_url):
     _open(page, app_url)
     page.locator(".bk-tab", has_text="Retrain").click()
     steps = page.locator(".bk-input-group", has=page.get_by_text("Steps (environment transitions)")).locator("input")
-    steps.fill("600")
+    steps.fill("2000")  # a few seconds: several curve updates (one a second)
     steps.press("Enter")
     page.locator(".uam-train-start button").click()
     lengths = []

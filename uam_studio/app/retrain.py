@@ -22,7 +22,7 @@ from uam_studio.app.state import PlannerState, RetrainState, registry
 from uam_studio.planning.mission import SCENARIOS
 from uam_studio.planning.retrain import agents_dir
 
-POLL_MS = 300
+POLL_MS = 1000  # curves and progress once a second: each update re-renders two plots
 CURVE_COLUMNS = ["episode", "reached", "cycles", "reached_ma", "cycles_ma"]
 
 

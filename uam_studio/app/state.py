@@ -93,6 +93,37 @@ AGENT_PREFIX = "agent:"
 _POOL = ThreadPoolExecutor(max_workers=4, thread_name_prefix="uam-plan")
 
 
+class PlanningActivity:
+    """Which sessions are planning right now, as a ``multiprocessing`` Event that retraining child
+    processes watch: while any session plans (from the request to the views updated), they pause
+    between episodes (:class:`~uam_studio.planning.retrain.RetrainProcess`)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._active: set[int] = set()
+        self._event: Any = None
+
+    @property
+    def event(self) -> Any:
+        with self._lock:
+            if self._event is None:
+                import multiprocessing
+
+                self._event = multiprocessing.get_context("spawn").Event()
+                if self._active:
+                    self._event.set()
+            return self._event
+
+    def mark(self, key: int, active: bool) -> None:
+        with self._lock:
+            (self._active.add if active else self._active.discard)(key)
+            if self._event is not None:
+                (self._event.set if self._active else self._event.clear)()
+
+
+ACTIVITY = PlanningActivity()
+
+
 # ----------------------------------------------------------------------------- shared, cached
 
 
@@ -500,7 +531,8 @@ class PlannerState(param.Parameterized):
             self.policy = "greedy"
 
     def close(self) -> None:
-        """Stop following the agent registry (the session ended)."""
+        """Stop following the agent registry and count as idle (the session ended)."""
+        ACTIVITY.mark(id(self), False)
         if self._agents_watcher is not None:
             registry().param.unwatch(self._agents_watcher)
             self._agents_watcher = None
@@ -535,6 +567,7 @@ class PlannerState(param.Parameterized):
             self._latest = (self._seq, req)
             start = not self._running
             self._running = True
+        ACTIVITY.mark(id(self), True)
         if not self.busy:
             self.busy = True
         if start:
@@ -573,7 +606,11 @@ class PlannerState(param.Parameterized):
         if latest:
             changes["busy"] = False
         self.last_elapsed_s = res.get("elapsed_s")
-        self.param.update(**changes)
+        try:
+            self.param.update(**changes)
+        finally:
+            if latest:
+                ACTIVITY.mark(id(self), False)  # the views are updated too: training may go on
         with self._done:
             self._done.notify_all()
 
@@ -739,8 +776,9 @@ class RetrainState(param.Parameterized):
         if self.runner == "process":
             from uam_studio.planning.retrain import RetrainProcess
 
-            self._proc = RetrainProcess(path, mission=m, source="app", scenario=self.scenario, alpha=self.alpha,
-                                        beta=self.beta, gamma=self.gamma, steps=self.steps, seed=self.seed)
+            self._proc = RetrainProcess(path, mission=m, source="app", pause_event=ACTIVITY.event,
+                                        scenario=self.scenario, alpha=self.alpha, beta=self.beta,
+                                        gamma=self.gamma, steps=self.steps, seed=self.seed)
             self._proc.start()
             return True
         self._proc = None

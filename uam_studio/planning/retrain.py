@@ -275,18 +275,26 @@ def retrain_dqn(
 
 
 def _process_main(setup: dict[str, Any], agent_path: str, mission: Mission | None, out: Any, stop: Any,
-                  source: str | None, nice: int) -> None:
+                  source: str | None, nice: int, pause: Any, max_pause_s: float) -> None:
     """Entry point of :class:`RetrainProcess`'s child: train, save, report on ``out``."""
     try:
         os.nice(nice)
     except (AttributeError, OSError):  # not on this platform / not allowed
         pass
+
+    def on_episode(e: Any) -> None:
+        out.put(e)
+        if pause is not None:  # give way while the parent asks for it (at most max_pause_s per episode)
+            t0 = time.monotonic()
+            while pause.is_set() and not stop.is_set() and time.monotonic() - t0 < max_pause_s:
+                time.sleep(0.005)
+
     try:
         import torch
 
         torch.set_num_threads(1)
         cfg, env_fn = training_setup(mission=mission, **setup)
-        res = retrain_dqn(cfg, env_fn, agent_path, mission=mission, on_episode=out.put, stop_event=stop,
+        res = retrain_dqn(cfg, env_fn, agent_path, mission=mission, on_episode=on_episode, stop_event=stop,
                           source=source)
         out.put(RetrainResult(res.path, res.card, res.episodes, res.timesteps, res.stopped))
     except BaseException as err:  # reported to the parent; nothing is raised in the child
@@ -303,12 +311,17 @@ class RetrainProcess:
     :param agent_path: the agent zip to write (never inside ``pretrained/``).
     :param mission: the map to train on, or None for random missions.
     :param nice: niceness added in the child (0 for none).
+    :param pause_event: a ``multiprocessing`` Event (of the ``spawn`` context); while it is set the
+        child pauses between episodes (at most ``max_pause_s`` per episode). A server sets it while
+        its sessions plan, so that training gives way even where niceness cannot help (a server
+        that itself runs niced, a machine busy with other work).
     :param setup: ``scenario``, ``alpha``, ``beta``, ``gamma``, ``steps``, ``seed`` of
         :func:`training_setup`.
     """
 
     def __init__(self, agent_path: str | os.PathLike[str], mission: Mission | None = None,
-                 source: str | None = "app", nice: int = 10, **setup: Any) -> None:
+                 source: str | None = "app", nice: int = 10, pause_event: Any = None, max_pause_s: float = 2.0,
+                 **setup: Any) -> None:
         if is_bundled(agent_path):
             raise InputError("agent_path", f"{agent_path}: must not be in the bundled pretrained/ folder")
         self.config, _ = training_setup(mission=mission, **setup)
@@ -317,7 +330,8 @@ class RetrainProcess:
         self._out = ctx.Queue()
         self._stop = ctx.Event()
         self._proc = ctx.Process(target=_process_main, name="uam-retrain", daemon=True,
-                                 args=(setup, str(agent_path), mission, self._out, self._stop, source, nice))
+                                 args=(setup, str(agent_path), mission, self._out, self._stop, source, nice,
+                                       pause_event, float(max_pause_s)))
         self.result: RetrainResult | None = None
         self.error: str | None = None
         self.finished = False
