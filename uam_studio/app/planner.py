@@ -19,7 +19,7 @@ import pandas as pd
 import panel as pn
 import param
 
-from uam_studio.app.session import ensure_bokeh_backend
+from uam_studio.app.session import ensure_bokeh_backend, in_server_session
 from uam_studio.app.state import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE, PlannerState, population
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.mission import COORD_RANGE_KM, SCENARIOS, VERTIPORT
@@ -274,8 +274,11 @@ class PlannerView(pn.viewable.Viewer):
                              "each destination (kt, negative = tailwind) and dwell times in the table."),
             self.map, self.table, width=620,
         )
-        results = pn.Column(pn.Row("### Plan", self.busy), self.summary, self.voltage_plot, self.altitude_plot,
-                            self.health_plot, width=520)
+        # Served, the plots below the summary load right after the page (defer_load): the map, the table
+        # and the summary come first.
+        plots = (self.voltage_plot, self.altitude_plot, self.health_plot)
+        deferred = [pn.panel(lambda p=p: p, defer_load=True) for p in plots] if in_server_session() else plots
+        results = pn.Column(pn.Row("### Plan", self.busy), self.summary, *deferred, width=520)
         return pn.Column(self.error, self.notice, pn.Row(controls, center, results))
 
     # ------------------------------------------------------------------ state -> views
