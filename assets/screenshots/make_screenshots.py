@@ -65,7 +65,9 @@ def main() -> None:
                              fr["top"] + (fr["y1"] - 18) / (fr["y1"] - fr["y0"]) * fr["height"])
             page.locator(".uam-plan-summary[data-busy='false'][data-inputs*='|D1:']").wait_for()
             page.mouse.move(5, 600)  # no hover tooltip in the picture
-            time.sleep(1.5)
+            page.wait_for_function("() => [...window.Bokeh.index.all_views()].filter("
+                                   "v => v.model.type === 'Figure').length >= 4")  # plots load after the page
+            time.sleep(2)
             page.screenshot(path=str(HERE / "planner.png"))
 
             page.locator(".bk-tab", has_text="Battery lab").click()
