@@ -112,3 +112,15 @@ def test_ranked_actions_are_valid_and_sorted(tiny_agent):
         q = tiny_agent.policy.q_net(th.as_tensor(obs[None])).numpy()[0]
     assert np.all(np.diff(q[ranked]) <= 0)
     assert env.lookahead_safe(-1) is False
+
+
+def test_per_mission_gaps_by_hand():
+    from uam_studio.planning.compare import PlanScore, per_mission_gaps
+
+    def s(m, p, prio):
+        return PlanScore(m, p, prio, 1, 1, True, 3.2, 0.0)
+
+    scores = [s("a", "oracle", 10), s("a", "greedy", 8), s("b", "oracle", 0), s("b", "greedy", 0),
+              s("c", "oracle", 4), s("c", "greedy", 4)]
+    g = per_mission_gaps(scores)
+    assert g["oracle"] == [0.0, 0.0] and g["greedy"] == [0.2, 0.0]  # mission b skipped: oracle reaches 0

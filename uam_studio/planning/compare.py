@@ -32,7 +32,7 @@ import numpy as np
 from uam_studio.planning.check import Plan, check_plan
 from uam_studio.planning.mission import Mission
 
-__all__ = ["PlanScore", "compare_planners", "summarize"]
+__all__ = ["PlanScore", "compare_planners", "per_mission_gaps", "summarize"]
 
 
 @dataclass(frozen=True)
@@ -116,6 +116,22 @@ def compare_planners(
         if progress is not None:
             progress(i + 1)
     return scores
+
+
+def per_mission_gaps(scores: Sequence[PlanScore], reference: str = "oracle") -> dict[str, list[float]]:
+    """Per policy, the gap ``(reference - policy) / reference`` in reached priority of every mission
+    where the reference reaches something (fractions, missions in order)."""
+    by_mission: dict[str, dict[str, PlanScore]] = {}
+    for s in scores:
+        by_mission.setdefault(s.mission, {})[s.policy] = s
+    out: dict[str, list[float]] = {}
+    for m in by_mission.values():
+        ref = m.get(reference)
+        if ref is None or ref.reached_priority <= 0:
+            continue
+        for p, s in m.items():
+            out.setdefault(p, []).append((ref.reached_priority - s.reached_priority) / ref.reached_priority)
+    return out
 
 
 def summarize(scores: Sequence[PlanScore], reference: str = "oracle") -> dict[str, dict[str, float]]:

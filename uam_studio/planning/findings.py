@@ -189,7 +189,7 @@ def reward_sweep(
             pr = {d.name: d.priority for d in m.destinations}
             reached.append(len(set(names)))
             prio.append(sum(pr[n] for n in set(names)))
-            cycles.append(int(sim.charging_cycles))
+            cycles.append(int(sim.charging_cycles) if safe else 0)  # an unsafe plan counts nothing
             if safe:
                 margins.append(float(sim.min_voltage_v) - m.eod_v)
         tail = episodes[int(0.8 * len(episodes)):] or episodes
