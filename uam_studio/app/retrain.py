@@ -121,19 +121,21 @@ class RetrainView(pn.viewable.Viewer):
     # ------------------------------------------------------------------ plots
 
     @staticmethod
-    def _reached_element(data: pd.DataFrame) -> hv.Overlay:
-        raw = hv.Curve(data, "episode", "reached", label="per episode").opts(color="#9ecae1", line_width=1)
-        ma = hv.Curve(data, "episode", "reached_ma", label=f"moving average ({RetrainState.MA_WINDOW})").opts(
-            color="#08519c", line_width=2.5)
-        return (raw * ma).opts(width=620, height=260, title="Destinations reached per episode",
-                               ylabel="destinations reached", legend_position="bottom_right", show_grid=True,
-                               framewise=True)
+    def _curve_pair(data: pd.DataFrame, column: str, title: str, ylabel: str, raw_color: str,
+                    ma_color: str) -> hv.Overlay:
+        """Per-episode ``column`` and its moving average (``<column>_ma``) as one overlay."""
+        raw = hv.Curve(data, "episode", column, label="per episode").opts(color=raw_color, line_width=1)
+        ma = hv.Curve(data, "episode", f"{column}_ma", label=f"moving average ({RetrainState.MA_WINDOW})").opts(
+            color=ma_color, line_width=2.5)
+        return (raw * ma).opts(width=620, height=260, title=title, ylabel=ylabel,
+                               legend_position="bottom_right", show_grid=True, framewise=True)
 
-    @staticmethod
-    def _cycles_element(data: pd.DataFrame) -> hv.Overlay:
-        raw = hv.Curve(data, "episode", "cycles", label="per episode").opts(color="#fdae6b", line_width=1)
-        ma = hv.Curve(data, "episode", "cycles_ma", label=f"moving average ({RetrainState.MA_WINDOW})").opts(
-            color="#a63603", line_width=2.5)
-        return (raw * ma).opts(width=620, height=260, title="Charging cycles per episode",
-                               ylabel="charging cycles", legend_position="bottom_right", show_grid=True,
-                               framewise=True)
+    @classmethod
+    def _reached_element(cls, data: pd.DataFrame) -> hv.Overlay:
+        return cls._curve_pair(data, "reached", "Destinations reached per episode", "destinations reached",
+                               "#9ecae1", "#08519c")
+
+    @classmethod
+    def _cycles_element(cls, data: pd.DataFrame) -> hv.Overlay:
+        return cls._curve_pair(data, "cycles", "Charging cycles per episode", "charging cycles",
+                               "#fdae6b", "#a63603")

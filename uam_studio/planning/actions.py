@@ -122,6 +122,11 @@ class LegTable:
         """Charge (C) one cell gives on leg i -> j at ``ALTITUDES_M[a]``."""
         return float(self.current(i, j, a).sum() * DT_S)
 
+    def cheapest_level(self, i: int, j: int) -> int | None:
+        """Index of the feasible level of leg i -> j that uses the least charge, None if none is."""
+        levels = [a for a in range(N_ALTITUDES) if self.feasible[i, j, a]]
+        return min(levels, key=lambda a: self.charge(i, j, a)) if levels else None
+
     def cheapest_charge(self, i: int, j: int) -> float:
         """Charge (C) of leg i -> j at its lowest feasible level (the cheapest one in the paper's
         tables: climbing costs more than the cruise saves), ``inf`` if no level is feasible."""

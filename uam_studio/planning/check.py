@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from uam_studio.planning.mission import VERTIPORT, Mission
+from uam_studio.planning.mission import Mission
 from uam_studio.planning.route import RouteSimulation, simulate_route
 
 
@@ -138,20 +138,14 @@ def make_plan(
     check = check_plan(mission, route, altitudes_m)
     stats = dict(stats or {})
     msgs = list(messages)
-    reached: list[str] = []
+    reached: tuple[str, ...] = ()
     cycles = 0
     if check.sim is not None:
-        for leg in check.sim.legs:
-            if not leg.reached:
-                break
-            if leg.to == VERTIPORT:
-                cycles += 1
-            elif leg.to not in reached:
-                reached.append(leg.to)
+        reached, cycles = check.sim.reached, check.sim.charging_cycles
         stats.setdefault("flight_time_s", float(check.sim.time_s[-1]))
     stats.update(safe=check.safe, min_voltage_v=check.min_voltage_v, margin_v=check.margin_v)
     if not check.safe:
         msgs.append(check.message)
     prio = {d.name: d.priority for d in mission.destinations}
-    return Plan(policy, tuple(route), tuple(altitudes_m), tuple(reached), sum(prio[n] for n in reached),
+    return Plan(policy, tuple(route), tuple(altitudes_m), reached, sum(prio[n] for n in reached),
                 cycles, tuple(msgs), stats)

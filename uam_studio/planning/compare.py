@@ -65,11 +65,7 @@ class PlanScore:
 def _score(mission: Mission, plan: Plan, plan_s: float, policy: str) -> PlanScore:
     check = check_plan(mission, plan.route, plan.altitudes_m)
     prio = {d.name: d.priority for d in mission.destinations}
-    reached: list[str] = []
-    if check.safe and check.sim is not None:
-        for leg in check.sim.legs:
-            if leg.to in prio and leg.to not in reached:
-                reached.append(leg.to)
+    reached = check.sim.reached if check.safe and check.sim is not None else ()
     cycles = int(check.sim.charging_cycles) if check.sim is not None else 0
     return PlanScore(mission.name, policy, int(sum(prio[n] for n in reached)), len(reached), cycles,
                      bool(check.safe), check.min_voltage_v, float(plan_s))

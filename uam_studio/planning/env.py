@@ -623,10 +623,9 @@ class UAMPlanningEnv(gym.Env):
             return False
         if target == VERTIPORT_SLOT or self.scenario == "single_flight":  # single flight: no way back
             return True
-        levels = [k for k in range(N_ALTITUDES) if legs.feasible[target, VERTIPORT_SLOT, k]]
-        if not levels:
+        home = legs.cheapest_level(target, VERTIPORT_SLOT)
+        if home is None:
             return False
-        home = min(levels, key=lambda k: legs.charge(target, VERTIPORT_SLOT, k))
         return not probe.fly_leg(legs.current(target, VERTIPORT_SLOT, home)).eod
 
     def action_masks(self) -> np.ndarray:

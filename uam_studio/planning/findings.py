@@ -185,10 +185,10 @@ def reward_sweep(
             sim = simulate_route(m, plan.route, plan.altitudes_m)
             safe = sim.eod_s is None
             breaches.append(not safe)
-            names = [leg.to for leg in sim.legs if leg.reached and leg.to != "vertiport"] if safe else []
+            names = sim.reached if safe else ()
             pr = {d.name: d.priority for d in m.destinations}
-            reached.append(len(set(names)))
-            prio.append(sum(pr[n] for n in set(names)))
+            reached.append(len(names))
+            prio.append(sum(pr[n] for n in names))
             cycles.append(int(sim.charging_cycles) if safe else 0)  # an unsafe plan counts nothing
             if safe:
                 margins.append(float(sim.min_voltage_v) - m.eod_v)

@@ -16,15 +16,10 @@ import time
 import numpy as np
 
 from uam_studio.battery import full_charge
-from uam_studio.planning.actions import ALTITUDES_M, N_ALTITUDES, N_MAX, VERTIPORT_SLOT, LegTable
+from uam_studio.planning.actions import ALTITUDES_M, N_MAX, VERTIPORT_SLOT
 from uam_studio.planning.check import Plan, make_plan
 from uam_studio.planning.mission import VERTIPORT, Mission
 from uam_studio.planning.oracle import _too_close, fly_batch, prepare_mission
-
-
-def _cheapest_level(legs: LegTable, i: int, j: int) -> int | None:
-    levels = [a for a in range(N_ALTITUDES) if legs.feasible[i, j, a]]
-    return min(levels, key=lambda a: legs.charge(i, j, a)) if levels else None
 
 
 def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
@@ -53,7 +48,7 @@ def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
     if scenario == "single_flight":
         if n > 1:
             msgs.append(f"single flight: planning the leg to {dests[0].name} only")
-        a = _cheapest_level(legs, VERTIPORT_SLOT, 0)
+        a = legs.cheapest_level(VERTIPORT_SLOT, 0)
         if a is not None and fly(VERTIPORT_SLOT, 0, a, fresh)[0]:
             route, alts = [dests[0].name], [ALTITUDES_M[a]]
         elif a is not None:
@@ -69,8 +64,8 @@ def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
         cands.sort(key=lambda k: -legs.priority[k] / legs.dist[at, k])
         moved = False
         for k in cands:
-            a = _cheapest_level(legs, at, k)
-            b = _cheapest_level(legs, k, VERTIPORT_SLOT)
+            a = legs.cheapest_level(at, k)
+            b = legs.cheapest_level(k, VERTIPORT_SLOT)
             if a is None or b is None:
                 continue
             ok, x1 = fly(at, k, a, x)
@@ -86,7 +81,7 @@ def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
         if at == VERTIPORT_SLOT:  # a fresh cell fits nothing more
             break
         route.append(VERTIPORT)
-        alts.append(ALTITUDES_M[_cheapest_level(legs, at, VERTIPORT_SLOT)])
+        alts.append(ALTITUDES_M[legs.cheapest_level(at, VERTIPORT_SLOT)])
         at, x = VERTIPORT_SLOT, fresh
         if scenario == "single_charge":
             break

@@ -30,7 +30,6 @@ from typing import Any
 import numpy as np
 
 from uam_studio.errors import InputError
-from uam_studio.planning.actions import N_MAX
 from uam_studio.planning.check import Plan, PlanCheck, check_plan
 from uam_studio.planning.mission import SCENARIOS, VERTIPORT, Mission, load_mission, mission_from_dict
 
@@ -57,11 +56,6 @@ def _as_mission(mission: Any) -> Mission:
     if isinstance(mission, (str, os.PathLike)):
         return load_mission(mission)
     return mission_from_dict(mission)
-
-
-def _first_n(mission: Mission, n: int) -> Mission:
-    return Mission(mission.name, mission.vertiport, mission.destinations[:n], mission.scenario,
-                   mission.battery, mission.eod_v)
 
 
 def _round_list(a: np.ndarray) -> list[float]:
@@ -95,24 +89,16 @@ def _dedupe(messages: list[str]) -> list[str]:
 def _dqn_route(mission: Mission, agent_path: str | os.PathLike[str] | None, predictor: Any,
                messages: list[str]) -> tuple[list[str], list[float]]:
     """Roll the agent out greedily on ``mission`` (physics battery); messages for what went wrong."""
-    from uam_studio.planning.actions import VERTIPORT_SLOT, LegTable
-    from uam_studio.planning.oracle import _too_close, takeoff_failure
+    from uam_studio.planning.actions import VERTIPORT_SLOT
+    from uam_studio.planning.oracle import _too_close, prepare_mission
 
-    scenario = mission.scenario
+    setup = prepare_mission(mission, None, "dqn")  # the oracle's and greedy's preamble
+    if setup.early is not None:
+        messages.extend(setup.early.messages)
+        return [], []
+    messages.extend(setup.messages)
+    mission, legs, scenario = setup.mission, setup.legs, setup.scenario
     dests = mission.destinations
-    if not dests:
-        messages.append("the mission has no destinations")
-        return [], []
-    if len(dests) > N_MAX:
-        extra = ", ".join(d.name for d in dests[N_MAX:])
-        messages.append(f"the planner handles at most {N_MAX} destinations; not planned: {extra}")
-        mission = _first_n(mission, N_MAX)
-        dests = mission.destinations
-    fail = takeoff_failure(mission.battery.q_max, mission.battery.r0, mission.eod_v)
-    if fail is not None:
-        messages.append(fail)
-        return [], []
-    legs = LegTable(mission)
     for k in range(len(dests) if scenario != "single_flight" else 1):
         reason = _too_close(legs, k)
         if reason is not None:
@@ -209,16 +195,15 @@ def rollout_agent(mission: Mission, agent: Any, predictor: Any = None,
             action = greedy_action(model, obs)
         else:
             ranked = ranked_actions(model, obs)
-            safe = [a for a in ranked[:1] if env.lookahead_safe(a)]  # the agent's own choice first
-            if not safe:
+            # best-Q first; each probe flies up to two legs, so stop at the first safe one
+            choice = next((int(a) for a in ranked if env.lookahead_safe(a)), None)
+            if choice is None or choice != ranked[0]:
                 filtered += 1
-                safe = [a for a in ranked[1:] if env.lookahead_safe(a)][:1]
-            if not safe:  # nothing safe: head home at the cheapest level, or stop at the vertiport
-                home = [a for a in ranked if a // N_ALTITUDES == VERTIPORT_SLOT]
-                if not home:
+            if choice is None:  # nothing safe: head home at the agent's preferred level, or stop
+                choice = next((int(a) for a in ranked if a // N_ALTITUDES == VERTIPORT_SLOT), None)
+                if choice is None:
                     break
-                safe = home[:1]
-            action = int(safe[0])
+            action = choice
         obs, _, terminated, truncated, _ = env.step(action)
         done = terminated or truncated
     plan = env.episode_plan("dqn+shield" if shield else "dqn")
@@ -330,13 +315,7 @@ def plan_mission(
         route, alts = _dqn_route(m, agent_path, pred_model, messages)
 
     check = check_plan(m, route, alts)
-    reached: list[str] = []
-    if check.sim is not None:
-        for leg in check.sim.legs:
-            if not leg.reached:
-                break
-            if leg.to != VERTIPORT and leg.to not in reached:
-                reached.append(leg.to)
+    reached = list(check.sim.reached) if check.sim is not None else []
     if not check.safe:
         messages.append(check.message)
     prio = {d.name: d.priority for d in m.destinations}

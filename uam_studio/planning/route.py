@@ -91,6 +91,17 @@ class RouteSimulation:
         """Lowest voltage (V) over the route (the EOD sample included)."""
         return float(self.voltage_v.min())
 
+    @property
+    def reached(self) -> tuple[str, ...]:
+        """Destinations reached (names, in first-visit order), up to the first leg that failed."""
+        out: list[str] = []
+        for leg in self.legs:
+            if not leg.reached:
+                break
+            if leg.to != VERTIPORT and leg.to not in out:
+                out.append(leg.to)
+        return tuple(out)
+
     def to_dict(self) -> dict[str, Any]:
         """Plain-JSON dict: arrays as lists rounded to 6 decimals, ``None`` for missing values."""
         return {
