@@ -346,3 +346,29 @@ def test_health_population_is_cached_and_pc1_tracks_r0():
     pop = population()
     assert pop is population() and len(pop) == 300
     assert abs(np.corrcoef(pop.pc1, pop.r0)[0, 1]) > 0.9
+
+
+def test_plans_are_cached_across_sessions_and_copies_are_independent():
+    from uam_studio.app.state import PlanRequest, compute_plan
+
+    req = PlanRequest(mission_from_dict({**EXAMPLE_MISSION, "name": "Cache check"}), "greedy")
+    first = compute_plan(req)
+    again = compute_plan(req)
+    assert first["error"] is None and not first["cached"] and again["cached"]
+    assert again["plan"] == first["plan"] and again["health"] == first["health"]
+    again["plan"]["route"].append("mutated")  # a session's copy never leaks into the cache
+    assert compute_plan(req)["plan"]["route"] == first["plan"]["route"]
+    other = PlanRequest(mission_from_dict({**EXAMPLE_MISSION, "name": "Cache check", "eod_v": 3.1}), "greedy")
+    assert not compute_plan(other)["cached"]  # any input change is a new plan
+
+
+def test_cached_dqn_plan_is_not_reused_for_another_agent_file(monkeypatch, tmp_path):
+    import uam_studio.planning.policy as policy
+    from uam_studio.app.state import PlanRequest, compute_plan
+
+    req = PlanRequest(mission_from_dict({**EXAMPLE_MISSION, "name": "Agent stamp"}), "dqn")
+    assert compute_plan(req)["plan"]["route"]
+    monkeypatch.setattr(policy, "BUNDLED_DIR", tmp_path)  # the bundled agent is gone
+    res = compute_plan(req)
+    assert not res["cached"] and res["plan"]["route"] == []
+    assert any("no bundled DQN agent" in m for m in res["plan"]["messages"])

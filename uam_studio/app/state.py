@@ -19,6 +19,7 @@ Planning, physics and training all come from the library (:func:`~uam_studio.pla
 from __future__ import annotations
 
 import collections
+import copy
 import functools
 import json
 import math
@@ -70,6 +71,7 @@ APP_EOD_RANGE = (2.5, 3.5)  # V; the Dynaformer is trained down to 2.5 V
 MAX_FILE_BYTES = 1_000_000
 RUNNER_ENV = "UAM_STUDIO_RETRAIN_RUNNER"  # "process" (default) or "thread", for comparisons
 POPULATION_N = 300
+PLAN_CACHE_SIZE = 256  # plans kept for all sessions (compute_plan)
 
 EXAMPLE_MISSION: dict[str, Any] = {
     "name": "Bay shuttle",
@@ -171,8 +173,11 @@ def health_estimate(q_max: float, r0: float) -> tuple[float, float] | None:
 
 
 def warm_up() -> None:
-    """Load the Dynaformer and the health population now (server start), not in the first session."""
+    """Load the Dynaformer and the health population, and plan the example mission with the default
+    policy, now (server start), so the first session shows its first plan at once."""
     population()
+    policy = "dqn" if _bundled_exists(EXAMPLE_MISSION.scenario) else "greedy"
+    compute_plan(PlanRequest(mission_from_dict(EXAMPLE_MISSION), policy))
 
 
 def _one_line(err: BaseException) -> str:
@@ -225,12 +230,62 @@ class PlanRequest:
     policy: str  # dqn | oracle | greedy | agent:<path>
 
 
+def _agent_stamp(req: PlanRequest) -> tuple[str, int, int] | None:
+    """(path, mtime ns, size) of the agent file a DQN plan uses (retrained, or the bundled one for the
+    mission's scenario), so a plan cached for another or an older file is never reused."""
+    from uam_studio.planning.policy import bundled_agent_path
+
+    if req.policy.startswith(AGENT_PREFIX):
+        path = Path(req.policy[len(AGENT_PREFIX):])
+    elif req.policy == "dqn":
+        path = bundled_agent_path(req.mission.scenario)
+    else:
+        return None
+    try:
+        st = path.stat()
+    except OSError:
+        return str(path), -1, -1
+    return str(path), st.st_mtime_ns, st.st_size
+
+
+_PLAN_CACHE: collections.OrderedDict[tuple, dict[str, Any]] = collections.OrderedDict()
+_PLAN_CACHE_LOCK = threading.Lock()
+
+
 def compute_plan(req: PlanRequest) -> dict[str, Any]:
     """Plan ``req`` with the library and estimate the cell's health. Never raises.
 
+    Plans are deterministic in the request (mission, battery, cut-off, policy; a retrained agent's
+    file stamp), so the last :data:`PLAN_CACHE_SIZE` results are shared by all sessions: a new
+    session, an undo or a slider dragged back re-shows a plan at once. Unexpected failures
+    ("planning failed: ...") are not cached.
+
     :return: ``{"plan": plan_mission's dict or None, "error": one line or None, "health": (pc1, pc2)
-        or None, "elapsed_s": float, "request": req}``.
+        or None, "elapsed_s": float, "request": req, "cached": bool}``.
     """
+    t0 = time.perf_counter()
+    key = (req, _agent_stamp(req))
+    with _PLAN_CACHE_LOCK:
+        hit = _PLAN_CACHE.get(key)
+        if hit is not None:
+            _PLAN_CACHE.move_to_end(key)
+    cached = hit is not None
+    if not cached:
+        res = _compute_plan(req)
+        if not (res["error"] or "").startswith("planning failed"):
+            with _PLAN_CACHE_LOCK:
+                _PLAN_CACHE[key] = res
+                while len(_PLAN_CACHE) > PLAN_CACHE_SIZE:
+                    _PLAN_CACHE.popitem(last=False)
+        hit = res
+    out = copy.deepcopy(hit)
+    out["cached"] = cached
+    if cached:
+        out["elapsed_s"] = time.perf_counter() - t0
+    return out
+
+
+def _compute_plan(req: PlanRequest) -> dict[str, Any]:
     from uam_studio.planning.policy import plan_mission
 
     t0 = time.perf_counter()
