@@ -236,3 +236,14 @@ def test_profile_arrays_read_only_and_leg_current_copy():
     cur = leg_current(40.0, 1000, 0)
     cur[0] = 0.0  # caller's own copy
     assert np.array_equal(cur[1:], prof.current_a[1:])
+
+
+@pytest.mark.parametrize("args", [(30.0, 1000.0, 13.0, 0.0), (55.5, 500.0, -39.0, 300.0), (100.0, 3000.0, 39.0, 0.0)])
+def test_leg_charge_matches_the_sampled_profile(args):
+    from uam_studio.flight import leg_charge_c
+
+    d, h, w, dwell = args
+    for dt in (1.0, 0.5, 7.0):
+        assert leg_charge_c(d, h, w, dwell) == pytest.approx(leg_profile(d, h, w, dt, dwell).charge_c, rel=1e-12)
+    with pytest.raises(InfeasibleLegError):
+        leg_charge_c(2.0, 3000.0, 0.0)

@@ -104,6 +104,34 @@ class LegProfile:
         return float(self.current_a.sum() * self.dt_s)
 
 
+def _phase_specs(distance_km, altitude_m, wind_kts, dwell_s) -> tuple[float, float, list[tuple[str, float, float]]]:
+    """Checked (distance km, altitude m) and the phases as (name, duration s, pack power kW)."""
+    d = _check_open("distance_km", distance_km, MAX_DISTANCE_KM, " km")
+    h = check_range("altitude_m", altitude_m, *tables.ALTITUDE_RANGE_M, " m")
+    w = check_range("wind_kts", wind_kts, *tables.WIND_RANGE_KTS, " kt")
+    dwell = check_range("dwell_s", dwell_s, 0.0, MAX_DWELL_S, " s")
+    need = min_leg_distance_km(h)
+    if d < need:
+        raise InfeasibleLegError(
+            "distance_km",
+            f"{d:.1f} km is too short for cruise at {h:g} m; needs >= {math.ceil(need * 10) / 10:.1f} km",
+        )
+    specs: list[tuple[str, float, float]] = []
+    for name in PHASES:
+        if name == "cruise":
+            specs.append(
+                (name, tables.cruise_duration_s(d, h, w), tables.cruise_power_kw(h, w))
+            )
+        else:
+            key = _TABLE_NAME.get(name, name)
+            specs.append(
+                (name, tables.phase_duration_s(key, h), tables.phase_power_kw(key, h))
+            )
+    if dwell > 0:
+        specs.append(("dwell", dwell, 0.0))
+    return d, h, specs
+
+
 def leg_profile(
     distance_km: float,
     altitude_m: float,
@@ -118,31 +146,10 @@ def leg_profile(
     Raises :class:`InputError` for out-of-range inputs and :class:`InfeasibleLegError`
     if the leg is shorter than :func:`min_leg_distance_km`.
     """
-    d = _check_open("distance_km", distance_km, MAX_DISTANCE_KM, " km")
-    h = check_range("altitude_m", altitude_m, *tables.ALTITUDE_RANGE_M, " m")
-    w = check_range("wind_kts", wind_kts, *tables.WIND_RANGE_KTS, " kt")
     dt = _check_open("dt_s", dt_s, MAX_DT_S, " s")
-    dwell = check_range("dwell_s", dwell_s, 0.0, MAX_DWELL_S, " s")
-    need = min_leg_distance_km(h)
-    if d < need:
-        raise InfeasibleLegError(
-            "distance_km",
-            f"{d:.1f} km is too short for cruise at {h:g} m; needs >= {math.ceil(need * 10) / 10:.1f} km",
-        )
-
-    specs: list[tuple[str, float, float]] = []
-    for name in PHASES:
-        if name == "cruise":
-            specs.append(
-                (name, tables.cruise_duration_s(d, h, w), tables.cruise_power_kw(h, w))
-            )
-        else:
-            key = _TABLE_NAME.get(name, name)
-            specs.append(
-                (name, tables.phase_duration_s(key, h), tables.phase_power_kw(key, h))
-            )
-    if dwell > 0:
-        specs.append(("dwell", dwell, 0.0))
+    d, h, specs = _phase_specs(distance_km, altitude_m, wind_kts, dwell_s)
+    dwell = float(dwell_s)
+    w = float(wind_kts)
 
     phases, t = [], 0.0
     for name, dur, p in specs:
@@ -163,6 +170,16 @@ def leg_profile(
     for arr in (time, power, current):
         arr.setflags(write=False)
     return LegProfile(d, h, w, dt, dwell, tuple(phases), duration, time, power, current)
+
+
+def leg_charge_c(distance_km: float, altitude_m: float, wind_kts: float, dwell_s: float = 0.0) -> float:
+    """Charge (C) one cell gives on a leg: :attr:`LegProfile.charge_c` without sampling the profile.
+
+    The sampled current conserves energy exactly, so this equals ``leg_profile(...).charge_c`` for
+    any ``dt_s`` (to float rounding). Same inputs and errors as :func:`leg_profile`.
+    """
+    _, _, specs = _phase_specs(distance_km, altitude_m, wind_kts, dwell_s)
+    return float(power_kw_to_cell_current_a(sum(p * dur for _, dur, p in specs)))
 
 
 def leg_current(

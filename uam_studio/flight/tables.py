@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import csv
 import io
-from functools import cache
+from functools import cache, lru_cache
 from importlib.resources import files
 from typing import NamedTuple
 
@@ -134,6 +134,7 @@ def _check_alt(altitude_m: float) -> float:
     return check_range("altitude_m", altitude_m, *ALTITUDE_RANGE_M, " m")
 
 
+@lru_cache(maxsize=4096)  # planners ask for the same few altitudes over and over (errors are not cached)
 def _phase(phase: str, altitude_m: float, what: str) -> float:
     if phase not in TABLE_PHASES:
         raise InputError(
@@ -154,6 +155,7 @@ def phase_duration_s(phase: str, altitude_m: float) -> float:
     return _phase(phase, altitude_m, "duration_s")
 
 
+@lru_cache(maxsize=16384)  # one entry per (altitude, wind) of a mission's legs
 def _cruise(key: str, altitude_m: float, wind_kts: float) -> float:
     g = _grids()
     h = _check_alt(altitude_m)

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from uam_studio.errors import InputError
-from uam_studio.flight import leg_profile, min_leg_distance_km
+from uam_studio.flight import leg_charge_c, leg_profile, min_leg_distance_km
 from uam_studio.flight.profile import MAX_DISTANCE_KM
 
 if TYPE_CHECKING:
@@ -108,6 +108,7 @@ class LegTable:
         ok &= self.dist <= MAX_DISTANCE_KM
         self.feasible = ok[:, :, None] & (self.dist[:, :, None] >= np.asarray(MIN_LEG_KM)[None, None, :])
         self._cache: dict[tuple[int, int, int], np.ndarray] = {}
+        self._charge: dict[tuple[int, int, int], float] = {}
 
     def current(self, i: int, j: int, a: int) -> np.ndarray:
         """Per-cell current (A) of leg i -> j at ``ALTITUDES_M[a]`` (read-only; must be feasible)."""
@@ -119,8 +120,12 @@ class LegTable:
         return cur
 
     def charge(self, i: int, j: int, a: int) -> float:
-        """Charge (C) one cell gives on leg i -> j at ``ALTITUDES_M[a]``."""
-        return float(self.current(i, j, a).sum() * DT_S)
+        """Charge (C) one cell gives on leg i -> j at ``ALTITUDES_M[a]`` (cached)."""
+        key = (i, j, a)
+        q = self._charge.get(key)
+        if q is None:
+            q = self._charge[key] = leg_charge_c(self.dist[i, j], ALTITUDES_M[a], self.wind[j], self.dwell[j])
+        return q
 
     def cheapest_level(self, i: int, j: int) -> int | None:
         """Index of the feasible level of leg i -> j that uses the least charge, None if none is."""
