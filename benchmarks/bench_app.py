@@ -207,14 +207,18 @@ def bench_pageload(n: int) -> list[str]:
 
 
 def _replan_times(page, k: int) -> list[float]:
-    """Move the q_max slider k times by one step (alternating direction) and time each updated plan."""
+    """Move the q_max slider k times by one step down and time each updated plan.
+
+    Always the same direction, so every value is new: the app caches plans by their inputs
+    (``compute_plan``), and a value seen before would be answered from the cache, not planned.
+    """
     handle = page.locator(".bk-input-group", has=page.get_by_text("q_max (C)")).locator(".noUi-handle")
     summary = page.locator(".uam-plan-summary")
     q = float(summary.get_attribute("data-inputs").split(";q_max=")[1].split(";")[0])
     out = []
-    for i in range(k):
-        key, dq = ("ArrowLeft", -50.0) if i % 2 == 0 else ("ArrowRight", 50.0)
-        q += dq
+    for _ in range(k):
+        key = "ArrowLeft"
+        q -= 50.0
         handle.focus()
         t0 = time.perf_counter()
         handle.press(key)

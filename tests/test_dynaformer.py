@@ -20,7 +20,7 @@ HAS_BUNDLED = bundled_weights_path().is_file()
 def tiny(tmp_path_factory):
     torch.manual_seed(0)
     cfg = DynaformerConfig(d_model=16, n_heads=2, enc_layers=1, dec_layers=1, ff_dim=32, latent_dim=4)
-    pca = {"mean": torch.zeros(4), "components": torch.eye(4)[:2], "scale": torch.ones(2), "explained": torch.ones(2)}
+    pca = {"mean": torch.zeros(2), "components": torch.eye(2), "scale": torch.ones(2), "explained": torch.ones(2)}
     path = tmp_path_factory.mktemp("w") / "tiny.pt"
     save_artifact(path, Dynaformer(cfg), pca, {"note": "test"})
     return load_predictor(path), path
@@ -103,15 +103,69 @@ def test_fallback_to_bundled(tmp_path):
     assert pred.source == str(bundled_weights_path())
 
 
-@pytest.mark.skipif(not HAS_BUNDLED, reason="no bundled weights")
-@pytest.mark.xfail(strict=True, reason="the bundled model misses the accuracy goal (RMSE 56 mV, median RTE 0.084): "
-                   "its health latent does not capture q_max; see pretrained/DYNAFORMER_CARD.md and issue #3")
-def test_bundled_model_tracks_physics_on_held_out_missions():
-    """A small held-out check of the bundled model (the full evaluation is `uam-studio evaluate dynaformer`)."""
+@pytest.fixture(scope="module")
+def held_out_metrics():
     from uam_studio.dynaformer import load_pretrained
     from uam_studio.dynaformer.evaluate import eod_metrics, predict_set
 
     ds = make_dataset(60, seed=987654, flight_fraction=1.0)
-    m = eod_metrics(ds, predict_set(load_pretrained(), ds))
-    assert m["rmse_mv"] < 40.0
-    assert m["median_rte"] < 0.05
+    return eod_metrics(ds, predict_set(load_pretrained(), ds))
+
+
+@pytest.mark.skipif(not HAS_BUNDLED, reason="no bundled weights")
+def test_bundled_model_times_eod_on_held_out_missions(held_out_metrics):
+    """A small held-out check (the full evaluation is `uam-studio evaluate dynaformer`): the issue's
+    median-RTE goal of 0.02 holds on these 60 flight missions (0.006 measured)."""
+    assert held_out_metrics["median_rte"] <= 0.02
+    assert held_out_metrics["eod_agreement"] >= 0.9
+
+
+@pytest.mark.skipif(not HAS_BUNDLED, reason="no bundled weights")
+@pytest.mark.xfail(strict=True, reason="the bundled model misses the 20 mV RMSE goal (22.4 mV here, 21.9 mV on the "
+                   "400-mission evaluation); see pretrained/DYNAFORMER_CARD.md and issue #3")
+def test_bundled_model_voltage_rmse_goal(held_out_metrics):
+    assert held_out_metrics["rmse_mv"] <= 20.0
+
+
+@pytest.mark.skipif(not HAS_BUNDLED, reason="no bundled weights")
+def test_bundled_health_pcs_follow_r0_and_q_max_from_20_s():
+    """Noise-free 20 s take-off contexts: PC1 follows R0 and PC2 q_max (the issue asks 0.95 and 0.9)."""
+    from uam_studio.dynaformer import load_pretrained
+
+    ds = make_dataset(300, seed=4242, max_len=64, flight_fraction=1.0)
+    pcs = load_pretrained().health(ds.current_a[:, :20].astype(float), ds.voltage_v[:, :20].astype(float))
+    assert abs(np.corrcoef(pcs[:, 0], ds.r0)[0, 1]) >= 0.95
+    assert abs(np.corrcoef(pcs[:, 1], ds.q_max)[0, 1]) >= 0.9
+
+
+def test_two_stage_training_freezes_the_encoder_and_writes_weights(tmp_path, monkeypatch):
+    """Stage 1 fits the health head; stage 2 trains only the decoder; the export loads and predicts."""
+    import uam_studio.dynaformer.train as train_mod
+
+    snap = {}
+    original = train_mod.pretrain_encoder
+
+    def spy(model, *args):
+        before = {k: v.clone() for k, v in model.state_dict().items()}
+        mse = original(model, *args)
+        snap.update(before=before, after={k: v.clone() for k, v in model.state_dict().items()}, mse=mse)
+        return mse
+
+    monkeypatch.setattr(train_mod, "pretrain_encoder", spy)
+    cfg = train_mod.TrainConfig(n_train=64, n_context=256, context_batch=32, encoder_steps=30, steps=6, batch=8,
+                                max_len=512, checkpoint_every=3, device="cpu", threads=1)
+    tiny_cfg = DynaformerConfig(d_model=16, n_heads=2, enc_layers=1, dec_layers=1, ff_dim=32, latent_dim=4)
+    weights = train_mod.train(cfg, tmp_path / "run", resume=False, model_cfg=tiny_cfg)
+    pred = load_predictor(weights)
+    final = pred.model.state_dict()
+    moved = lambda k, a, b: not torch.equal(a[k], b[k])  # noqa: E731
+    enc = [k for k in final if k.split(".")[0] in train_mod.ENCODER_PARTS]
+    dec = [k for k in final if k not in enc]
+    assert any(moved(k, snap["before"], snap["after"]) for k in enc)  # stage 1 trains the encoder
+    assert not any(moved(k, snap["before"], snap["after"]) for k in dec)  # ... and only the encoder
+    assert not any(moved(k, snap["after"], final) for k in enc)  # stage 2 leaves it frozen
+    assert any(moved(k, snap["after"], final) for k in dec)
+    cur, ci, cv = _ctx()
+    v = pred.predict(ci, cv, cur)
+    assert v.shape == cur.shape and np.all(np.isfinite(v))
+    assert pred.meta["encoder_stage_health_mse"] == pytest.approx(snap["mse"])

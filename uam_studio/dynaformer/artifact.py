@@ -11,7 +11,7 @@ import torch
 from ..errors import InputError
 from .model import Dynaformer, DynaformerConfig
 
-FORMAT = "uam_studio.dynaformer/1"
+FORMAT = "uam_studio.dynaformer/2"  # 2: patch encoder + health head
 
 
 class WeightsError(InputError):
@@ -58,7 +58,7 @@ def load_artifact(path) -> tuple[Dynaformer, dict, dict]:
         model = Dynaformer(cfg)
         model.load_state_dict(blob["state_dict"])
         pca = {k: v.float() for k, v in blob["pca"].items()}
-        if pca["components"].shape != (2, cfg.latent_dim):
+        if pca["components"].shape != (2, 2):
             raise ValueError("PCA shape")
     except Exception as exc:
         raise WeightsError(path, f"incompatible weights ({type(exc).__name__}: {str(exc)[:80]})") from None

@@ -1,10 +1,16 @@
 """The Dynaformer network (Biggio et al. 2023), re-designed small for flight profiles on a CPU.
 
-* Encoder: one token per observed (current, voltage) sample of the context (20 s
-  by default, up to ``max_context`` samples), a ``torch.nn.TransformerEncoder``,
-  mean-pooled into a small **health latent** (``latent_dim``). The latent is the
-  bottleneck through which all health information must pass. Its first two
-  principal components (PCA fitted on training data) are the paper's PC1, PC2.
+* Encoder: the observed context (20 s by default, up to ``max_context`` samples) is
+  cut into patches of ``patch`` samples (the paper's 20 s context is one patch);
+  each patch token sees its currents, its voltages, their change since the first
+  observed sample and its start time. A ``torch.nn.TransformerEncoder`` over the
+  patch tokens is mean-pooled into a small **health latent** (``latent_dim``), the
+  bottleneck through which all health information must pass to the decoder. A
+  linear **health head** projects it to the 2-D **health embedding**; in training
+  only, the embedding is supervised to be (R0, q_max) normalised to [-1, 1] and
+  [-0.5, 0.5] (see :mod:`uam_studio.dynaformer.train`), so its principal components
+  (PCA fitted on training data), the paper's PC1 and PC2, follow R0 and q_max.
+  Inference never sees q_max or R0.
 * Decoder: the planned current profile is cut into chunks of ``chunk`` samples,
   one query token per chunk. Each token sees its currents, the charge drawn before
   it and its start time (sinusoidal), and is shifted by the health latent. A
@@ -33,7 +39,8 @@ class DynaformerConfig:
     enc_layers: int = 2
     dec_layers: int = 3
     ff_dim: int = 128
-    chunk: int = 32  # samples (s on the 1 s grid) per decoder token
+    chunk: int = 64  # samples (s on the 1 s grid) per decoder token
+    patch: int = 20  # context samples per encoder token
     latent_dim: int = 8
     memory_tokens: int = 4
     max_context: int = 1024  # samples; longer contexts are strided down to this
@@ -56,11 +63,14 @@ class Dynaformer(nn.Module):
         cfg = cfg or DynaformerConfig()
         self.cfg = cfg
         d = cfg.d_model
-        self.enc_in = nn.Linear(4, d)
+        n_in = 5 * cfg.patch + 1
+        self.enc_in = nn.Sequential(nn.Linear(n_in, 4 * d), nn.GELU(), nn.Linear(4 * d, 4 * d), nn.GELU(),
+                                    nn.Linear(4 * d, d))
         enc_layer = nn.TransformerEncoderLayer(d, cfg.n_heads, cfg.ff_dim, dropout=0.0, batch_first=True,
                                                norm_first=True)
         self.encoder = nn.TransformerEncoder(enc_layer, cfg.enc_layers, enable_nested_tensor=False)
         self.to_latent = nn.Sequential(nn.LayerNorm(d), nn.Linear(d, d), nn.GELU(), nn.Linear(d, cfg.latent_dim))
+        self.health_head = nn.Linear(cfg.latent_dim, 2)  # latent -> 2-D health embedding
         self.latent_to_memory = nn.Linear(cfg.latent_dim, d * cfg.memory_tokens)
         self.latent_to_query = nn.Linear(cfg.latent_dim, d)
         self.dec_in = nn.Linear(cfg.chunk + 3, d)
@@ -76,13 +86,26 @@ class Dynaformer(nn.Module):
         ctx_mask: [B, L] True where the sample is real (contexts of different lengths).
         """
         b, n = ctx_i.shape
+        p = self.cfg.patch
         if ctx_mask is None:
             ctx_mask = torch.ones_like(ctx_i, dtype=torch.bool)
-        t = torch.arange(n, device=ctx_i.device, dtype=torch.float32).expand(b, n)
+        n_tok = max(1, -(-n // p))
+        pad = n_tok * p - n
+        m = nn.functional.pad(ctx_mask, (0, pad), value=False).float()
+        i = nn.functional.pad(ctx_i, (0, pad)) * m
+        v = nn.functional.pad(ctx_v, (0, pad))
         v0 = ctx_v[:, :1]
-        feats = torch.stack([ctx_i / I_SCALE, (ctx_v - V_CENTER) / V_SCALE, (ctx_v - v0) * 10.0, t / 600.0], dim=-1)
-        h = self.encoder(self.enc_in(feats), src_key_padding_mask=~ctx_mask)
-        w = ctx_mask.unsqueeze(-1).float()
+        dv = (v - v0) * m
+        v = torch.where(m > 0, v, v0)
+        step = torch.diff(v, dim=1, prepend=v[:, :1]) * m
+        start_s = torch.arange(n_tok, device=ctx_i.device, dtype=torch.float32) * p
+        feats = torch.cat([(i / I_SCALE).view(b, n_tok, p), ((v - V_CENTER) / V_SCALE).view(b, n_tok, p),
+                           (dv * 10.0).view(b, n_tok, p),
+                           (step * 100.0).view(b, n_tok, p), m.view(b, n_tok, p),
+                           (start_s / 600.0).expand(b, n_tok).unsqueeze(-1)], dim=-1)
+        tok_mask = m.view(b, n_tok, p).any(-1)
+        h = self.encoder(self.enc_in(feats), src_key_padding_mask=~tok_mask)
+        w = tok_mask.unsqueeze(-1).float()
         pooled = (h * w).sum(1) / w.sum(1).clamp_min(1.0)
         return self.to_latent(pooled)
 

@@ -102,7 +102,7 @@ class DynaformerPredictor:
         """
         dt = check_range("dt_s", dt_s, 1e-3, 60.0, " s")
         ci, cv, single = self._context(context_current_a, context_voltage_v, dt)
-        z = self.model.encode(ci, cv)
+        z = self.model.health_head(self.model.encode(ci, cv))
         pcs = ((z - self.pca["mean"]) @ self.pca["components"].T) / self.pca["scale"]
         out = pcs.numpy().astype(np.float64)
         return out[0] if single else out

@@ -1,4 +1,16 @@
-"""Training loop for the Dynaformer: synthetic data, bucketed batches, checkpoints, resume."""
+"""Training loop for the Dynaformer: synthetic data, bucketed batches, checkpoints, resume.
+
+Two stages:
+
+1. ``encoder_steps``: the encoder and health head: the 2-D health embedding regresses
+   the cell's R0 normalised to [-1, 1] and q_max normalised to [-0.5, 0.5] (so R0
+   carries the larger spread and PC1 follows R0, PC2 q_max, as in the paper), from short contexts
+   (20-120 s, with sensor noise) of ``n_context`` cheap extra discharges. q_max's signature in 20 s is a few
+   millivolts on top of R0's hundreds; trained jointly with the decoder, the
+   encoder never found it, and joint training after this stage erased it again.
+2. ``steps``: the encoder is frozen and the decoder learns the voltage of whole
+   discharges from the health latent: weighted MSE (4x weight near the 3.0 V EOD).
+"""
 
 from __future__ import annotations
 
@@ -13,16 +25,25 @@ import torch
 from tqdm.auto import tqdm
 
 from .artifact import atomic_torch_save, save_artifact
-from .data import DischargeSet, make_dataset
+from .data import TRAIN_Q_RANGE, TRAIN_R_RANGE, DischargeSet, make_dataset
 from .model import Dynaformer, DynaformerConfig
 
 DEFAULT_CONTEXT_S = 20
+ENCODER_PARTS = ("enc_in", "encoder", "to_latent", "health_head")  # trained in stage 1, frozen in stage 2
+CONTEXT_SET_LEN = 600  # samples (s) of each extra short-context cell
+CONTEXT_BATCH_MAX_S = 120  # s: the extra context batch stays short (cheap); discharges carry the long ones
+Q_MID, Q_HALF = sum(TRAIN_Q_RANGE) / 2, (TRAIN_Q_RANGE[1] - TRAIN_Q_RANGE[0]) / 2  # C
+Q_LATENT_SPREAD = 0.5  # q_max's half-range in the latent, R0's is 1
+R_MID, R_HALF = sum(TRAIN_R_RANGE) / 2, (TRAIN_R_RANGE[1] - TRAIN_R_RANGE[0]) / 2  # ohm
 
 
 @dataclass
 class TrainConfig:
     n_train: int = 24000
-    steps: int = 5000
+    n_context: int = 96000  # extra short-context cells (stage 1)
+    context_batch: int = 256
+    encoder_steps: int = 10000  # stage 1: encoder + health head only
+    steps: int = 12000
     batch: int = 32
     lr: float = 1e-3
     seed: int = 0
@@ -38,34 +59,56 @@ def pick_device(name: str) -> torch.device:
     return torch.device(name)
 
 
-def sample_context_lengths(rng: np.random.Generator, n: int) -> np.ndarray:
-    """Mostly the paper's 20 s; sometimes longer (up to 600 s) so any length up to the history works."""
+def sample_context_lengths(rng: np.random.Generator, n: int, max_s: int = 600) -> np.ndarray:
+    """Mostly the paper's 20 s; sometimes longer (up to ``max_s``) so any length up to the history works."""
     long = rng.random(n) < 0.4
-    return np.where(long, rng.integers(20, 601, n), DEFAULT_CONTEXT_S)
+    return np.where(long, rng.integers(DEFAULT_CONTEXT_S, max_s + 1, n), DEFAULT_CONTEXT_S)
+
+
+def health_targets(ds: DischargeSet, idx: np.ndarray) -> np.ndarray:
+    """Stage-1 latent targets [len(idx), 2]: R0 on [-1, 1] and q_max on [-0.5, 0.5] over the
+    training ranges (ohm, C)."""
+    r = (ds.r0[idx] - R_MID) / R_HALF
+    q = Q_LATENT_SPREAD * (ds.q_max[idx] - Q_MID) / Q_HALF
+    return np.stack([r, q], 1).astype(np.float32)
+
+
+def noisy_context(ds: DischargeSet, idx: np.ndarray, rng: np.random.Generator, noise: bool = True,
+                  max_s: int = 600):
+    """Context current (A), voltage (V) and mask [B, L] of random length (mostly 20 s, at most
+    ``max_s``), with sensor noise (none on half the cells, else up to 10 mV)."""
+    n_valid = ds.valid[idx].sum(1)
+    lens = np.minimum(sample_context_lengths(rng, idx.size, max_s), np.maximum(n_valid, 1))
+    lmax = int(lens.max())
+    ctx_i = ds.current_a[idx, :lmax].astype(np.float32)
+    ctx_v = ds.voltage_v[idx, :lmax].astype(np.float32)
+    ctx_mask = np.arange(lmax)[None, :] < lens[:, None]
+    if noise:
+        sig_v = np.where(rng.random(idx.size) < 0.5, 0.0, rng.uniform(0.0, 0.010, idx.size))
+        ctx_v = ctx_v + rng.normal(size=ctx_v.shape) * sig_v[:, None]
+        ctx_i = ctx_i + rng.normal(size=ctx_i.shape) * 0.005
+    return ctx_i, ctx_v, ctx_mask
+
+
+def _tensor(a, device, dtype=torch.float32) -> torch.Tensor:
+    return torch.as_tensor(np.ascontiguousarray(a), dtype=dtype, device=device)
 
 
 def make_batch(ds: DischargeSet, idx: np.ndarray, rng: np.random.Generator, chunk: int, device,
                noise: bool = True):
-    """Tensors for one batch: context (with sensor noise), profile, targets and loss weights."""
+    """Tensors for one batch: context (with sensor noise), profile, targets, loss weights, health targets."""
     n_valid = ds.valid[idx].sum(1)
     t = int(math.ceil(max(int(n_valid.max()), chunk) / chunk) * chunk)
     t = min(t, ds.current_a.shape[1] // chunk * chunk)
     cur = ds.current_a[idx, :t]
     volt = ds.voltage_v[idx, :t]
     valid = ds.valid[idx, :t]
-    lens = np.minimum(sample_context_lengths(rng, idx.size), np.maximum(n_valid, 1))
-    lmax = int(lens.max())
-    ctx_i = cur[:, :lmax].copy()
-    ctx_v = volt[:, :lmax].copy()
-    ctx_mask = np.arange(lmax)[None, :] < lens[:, None]
-    if noise:
-        sig_v = np.where(rng.random(idx.size) < 0.5, 0.0, rng.uniform(0.0, 0.010, idx.size))
-        ctx_v = ctx_v + rng.normal(size=ctx_v.shape) * sig_v[:, None]
-        ctx_i = ctx_i + rng.normal(size=ctx_i.shape) * 0.005
+    ctx_i, ctx_v, ctx_mask = noisy_context(ds, idx, rng, noise)
     # Weight the region around the 3.0 V cut-off more: it decides the EOD time.
     weight = valid * (1.0 + 3.0 * ((volt > 2.8) & (volt < 3.3)))
-    as_t = lambda a, dt=torch.float32: torch.as_tensor(np.ascontiguousarray(a), dtype=dt, device=device)  # noqa: E731
-    return (as_t(ctx_i), as_t(ctx_v), as_t(ctx_mask, torch.bool), as_t(cur), as_t(volt), as_t(weight))
+    return (_tensor(ctx_i, device), _tensor(ctx_v, device), _tensor(ctx_mask, device, torch.bool),
+            _tensor(cur, device), _tensor(volt, device), _tensor(weight, device),
+            _tensor(health_targets(ds, idx), device))
 
 
 class BucketSampler:
@@ -82,15 +125,24 @@ class BucketSampler:
         return self.rng.choice(b, self.batch, replace=False)
 
 
+def _cached_dataset(path: Path, n: int, seed: int, max_len: int) -> DischargeSet:
+    """make_dataset, cached as .npz in the run folder (git-ignored ``runs/``)."""
+    if path.exists():
+        return DischargeSet.load(path)
+    ds = make_dataset(n, seed=seed, max_len=max_len)
+    ds.save(path)
+    return ds
+
+
 @torch.no_grad()
 def fit_pca(model: Dynaformer, ds: DischargeSet, device, context_s: int = DEFAULT_CONTEXT_S) -> dict:
-    """PCA (2 components) of the health latent over 20 s contexts of the training data."""
+    """PCA (2 components) of the health embedding over 20 s contexts of the training data."""
     model.eval()
     lat = []
     for s in range(0, len(ds), 1024):
         ci = torch.as_tensor(ds.current_a[s:s + 1024, :context_s], device=device)
         cv = torch.as_tensor(ds.voltage_v[s:s + 1024, :context_s], device=device)
-        lat.append(model.encode(ci, cv).cpu().double())
+        lat.append(model.health_head(model.encode(ci, cv)).cpu().double())
     z = torch.cat(lat)
     mean = z.mean(0)
     _, s_vals, vh = torch.linalg.svd(z - mean, full_matrices=False)
@@ -99,6 +151,31 @@ def fit_pca(model: Dynaformer, ds: DischargeSet, device, context_s: int = DEFAUL
     scale = scores.std(0)
     explained = (s_vals[:2] ** 2 / (s_vals ** 2).sum())
     return {"mean": mean.float(), "components": comps.float(), "scale": scale.float(), "explained": explained.float()}
+
+
+def pretrain_encoder(model: Dynaformer, ctx_ds: DischargeSet, cfg: TrainConfig, rng: np.random.Generator,
+                     device) -> float:
+    """Stage 1: fit the encoder's latent to :func:`health_targets` on short contexts.
+
+    :return: the final latent MSE (EMA, normalised units).
+    """
+    params = [p for name, p in model.named_parameters() if name.split(".")[0] in ENCODER_PARTS]
+    opt = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=1e-4)
+    sched = torch.optim.lr_scheduler.LambdaLR(
+        opt, lambda s: 0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * min(s, cfg.encoder_steps) / cfg.encoder_steps)))
+    ema = None
+    for _ in tqdm(range(cfg.encoder_steps), desc="encoder", unit="step", mininterval=5.0):
+        cidx = rng.integers(0, len(ctx_ds), cfg.context_batch)
+        xi, xv, xm = noisy_context(ctx_ds, cidx, rng, max_s=CONTEXT_BATCH_MAX_S)
+        z = model.encode(_tensor(xi, device), _tensor(xv, device), _tensor(xm, device, torch.bool))
+        loss = ((model.health_head(z) - _tensor(health_targets(ctx_ds, cidx), device)) ** 2).mean()
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        sched.step()
+        lv = float(loss.detach())
+        ema = lv if ema is None else 0.98 * ema + 0.02 * lv
+    return float(ema or 0.0)
 
 
 def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerConfig | None = None,
@@ -118,15 +195,13 @@ def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerC
     device = pick_device(cfg.device)
     torch.manual_seed(cfg.seed)
     t_start = time.perf_counter()
-    cache = out / f"train_data_seed{cfg.seed}_n{cfg.n_train}.npz"
-    if cache.exists():
-        ds = DischargeSet.load(cache)
-    else:
-        ds = make_dataset(cfg.n_train, seed=cfg.seed, max_len=cfg.max_len)
-        ds.save(cache)
+    ds = _cached_dataset(out / f"train_data_seed{cfg.seed}_n{cfg.n_train}.npz", cfg.n_train, cfg.seed, cfg.max_len)
+    ctx_ds = (_cached_dataset(out / f"context_data_seed{cfg.seed}_n{cfg.n_context}.npz", cfg.n_context,
+                              cfg.seed + 7919, CONTEXT_SET_LEN) if cfg.n_context else None)
     t_data = time.perf_counter() - t_start
     model = Dynaformer(model_cfg).to(device)
-    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=1e-4)
+    decoder_params = [p for name, p in model.named_parameters() if name.split(".")[0] not in ENCODER_PARTS]
+    opt = torch.optim.AdamW(decoder_params, lr=cfg.lr, weight_decay=1e-4)
     warm = 300
     sched = torch.optim.lr_scheduler.LambdaLR(
         opt, lambda s: min(1.0, (s + 1) / warm) * (0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * min(s, cfg.steps) / cfg.steps))))
@@ -147,11 +222,16 @@ def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerC
     sampler = BucketSampler(ds.valid.sum(1), cfg.batch, rng)
     model.train()
     t0 = time.perf_counter()
+    encoder_mse = None
+    if step == 0 and ctx_ds is not None and cfg.encoder_steps > 0:
+        encoder_mse = pretrain_encoder(model, ctx_ds, cfg, rng, device)
     bar = tqdm(total=cfg.steps, initial=step, desc="dynaformer", unit="step", mininterval=5.0)
     ema = None
     while step < cfg.steps:
-        ci, cv, cm, cur, volt, w = make_batch(ds, sampler(), rng, model_cfg.chunk, device)
-        pred = model(ci, cv, cur, cm)
+        ci, cv, cm, cur, volt, w, _ = make_batch(ds, sampler(), rng, model_cfg.chunk, device)
+        with torch.no_grad():
+            latent = model.encode(ci, cv, cm)
+        pred = model.decode(latent, cur)
         loss = (w * (pred - volt) ** 2).sum() / w.sum().clamp_min(1.0)
         opt.zero_grad(set_to_none=True)
         loss.backward()
@@ -174,7 +254,8 @@ def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerC
     train_s = elapsed_before + time.perf_counter() - t0
     pca = fit_pca(model, ds, device)
     meta = {"train_config": asdict(cfg), "train_seconds": round(train_s, 1), "data_seconds": round(t_data, 1),
-            "device": str(device), "torch_threads": torch.get_num_threads(), "final_rmse_mv_ema": 1000 * math.sqrt(ema or 0)}
+            "device": str(device), "torch_threads": torch.get_num_threads(), "final_rmse_mv_ema": 1000 * math.sqrt(ema or 0),
+            "encoder_stage_health_mse": encoder_mse}
     weights = out / "dynaformer.pt"
     save_artifact(weights, model.cpu(), pca, meta)
     (out / "train_meta.json").write_text(json.dumps(meta, indent=2))
