@@ -372,3 +372,29 @@ def test_cached_dqn_plan_is_not_reused_for_another_agent_file(monkeypatch, tmp_p
     res = compute_plan(req)
     assert not res["cached"] and res["plan"]["route"] == []
     assert any("no bundled DQN agent" in m for m in res["plan"]["messages"])
+
+
+def test_planning_activity_keeps_training_paused_for_a_grace_period():
+    import time
+
+    from uam_studio.app.state import PlanningActivity
+
+    act = PlanningActivity(grace_s=0.3)
+    ev = act.event
+    act.mark(1, True)
+    act.mark(2, True)
+    assert ev.is_set()
+    act.mark(1, False)
+    assert ev.is_set()  # session 2 still plans
+    act.mark(2, False)
+    assert ev.is_set()  # grace: the changes are still being sent and drawn
+    time.sleep(0.6)
+    assert not ev.is_set()
+    act.mark(3, True)
+    act.mark(3, False)
+    act.mark(3, True)  # a new plan inside the grace period keeps it set
+    time.sleep(0.6)
+    assert ev.is_set()
+    act.mark(3, False)
+    time.sleep(0.6)
+    assert not ev.is_set()

@@ -97,13 +97,16 @@ _POOL = ThreadPoolExecutor(max_workers=4, thread_name_prefix="uam-plan")
 
 class PlanningActivity:
     """Which sessions are planning right now, as a ``multiprocessing`` Event that retraining child
-    processes watch: while any session plans (from the request to the views updated), they pause
+    processes watch: while any session plans (from the request to the views updated, plus
+    :attr:`grace_s` for the server to send the changes and the browser to draw them), they pause
     between episodes (:class:`~uam_studio.planning.retrain.RetrainProcess`)."""
 
-    def __init__(self) -> None:
+    def __init__(self, grace_s: float = 1.0) -> None:
+        self.grace_s = grace_s
         self._lock = threading.Lock()
         self._active: set[int] = set()
         self._event: Any = None
+        self._timer: threading.Timer | None = None
 
     @property
     def event(self) -> Any:
@@ -119,8 +122,25 @@ class PlanningActivity:
     def mark(self, key: int, active: bool) -> None:
         with self._lock:
             (self._active.add if active else self._active.discard)(key)
-            if self._event is not None:
-                (self._event.set if self._active else self._event.clear)()
+            if self._timer is not None:
+                self._timer.cancel()
+                self._timer = None
+            if self._event is None:
+                return
+            if self._active:
+                self._event.set()
+            elif self.grace_s > 0 and self._event.is_set():
+                self._timer = threading.Timer(self.grace_s, self._clear_if_idle)
+                self._timer.daemon = True
+                self._timer.start()
+            else:
+                self._event.clear()
+
+    def _clear_if_idle(self) -> None:
+        with self._lock:
+            if not self._active and self._event is not None:
+                self._event.clear()
+            self._timer = None
 
 
 ACTIVITY = PlanningActivity()
