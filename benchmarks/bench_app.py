@@ -25,13 +25,10 @@ import argparse
 import datetime
 import os
 import shutil
-import socket
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
-import urllib.request
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +37,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # this checkout's uam_studio, whatever the installed one points to
 sys.path.insert(0, str(Path(__file__).parent))
 from _timing import percentile_ms  # noqa: E402
+
+from uam_studio.app.serve import ServedApp  # noqa: E402
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 
@@ -124,47 +123,14 @@ def bench_latency(n: int, n_oracle: int) -> list[str]:
 # ----------------------------------------------------------------------------- served app + browser
 
 
-class Served:
-    """``panel serve uam_studio/app/main.py --warm`` on a free port, with a temporary user folder."""
+class Served(ServedApp):
+    """:class:`uam_studio.app.serve.ServedApp` with a temporary user folder, removed afterwards."""
 
     def __init__(self, **env: str) -> None:
-        self.extra_env = env
-
-    def __enter__(self) -> Served:
-        s = socket.socket()
-        s.bind(("127.0.0.1", 0))
-        self.port = s.getsockname()[1]
-        s.close()
-        self.home = tempfile.mkdtemp(prefix="uam_bench_home_")
-        self.log = open(Path(self.home) / "serve.log", "w")  # noqa: SIM115
-        env = {**os.environ, "UAM_STUDIO_HOME": self.home, **self.extra_env}
-        self.t_start = time.perf_counter()
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "panel", "serve", "uam_studio/app/main.py", "--port", str(self.port),
-             "--address", "127.0.0.1", "--allow-websocket-origin", f"127.0.0.1:{self.port}", "--warm",
-             "--liveness"], cwd=ROOT, env=env, stdout=self.log, stderr=subprocess.STDOUT)
-        deadline = time.monotonic() + 300
-        while True:
-            try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{self.port}/liveness", timeout=10) as r:
-                    if r.status == 200:
-                        break
-            except OSError:
-                pass
-            if self.proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError("panel serve did not start")
-            time.sleep(0.25)
-        self.startup_s = time.perf_counter() - self.t_start
-        self.url = f"http://127.0.0.1:{self.port}/main"
-        return self
+        super().__init__(tempfile.mkdtemp(prefix="uam_bench_home_"), timeout_s=300, **env)
 
     def __exit__(self, *exc) -> None:
-        self.proc.terminate()
-        try:
-            self.proc.wait(20)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-        self.log.close()
+        super().__exit__(*exc)
         shutil.rmtree(self.home, ignore_errors=True)
 
 

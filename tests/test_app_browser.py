@@ -7,13 +7,8 @@ The tests are skipped only if no chromium is installed.
 
 from __future__ import annotations
 
-import os
 import shutil
-import socket
-import subprocess
-import sys
 import time
-import urllib.request
 from pathlib import Path
 
 import pytest
@@ -67,44 +62,17 @@ JS_SUMMARY_R0_ABOVE = """(lo) => {
 }"""
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="module")
 def app_url(tmp_path_factory):
     """Serve the app in a subprocess (the way users start it) and yield its URL."""
+    from uam_studio.app.serve import ServedApp
+
     home = tmp_path_factory.mktemp("uam_home")
-    port = _free_port()
-    env = {**os.environ, "UAM_STUDIO_HOME": str(home)}
-    log = open(home / "serve.log", "w")  # noqa: SIM115 - closed below
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "panel", "serve", "uam_studio/app/main.py", "--port", str(port),
-         "--address", "127.0.0.1", "--allow-websocket-origin", f"127.0.0.1:{port}", "--warm", "--liveness"],
-        cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
-    url = f"http://127.0.0.1:{port}/main"
-    deadline = time.monotonic() + 180
-    while True:  # --warm builds the app once before the server answers; /liveness builds no session
-        try:
-            with urllib.request.urlopen(f"http://127.0.0.1:{port}/liveness", timeout=30) as r:
-                if r.status == 200:
-                    break
-        except OSError:
-            pass
-        if proc.poll() is not None or time.monotonic() > deadline:
-            proc.kill()
-            log.close()
-            pytest.fail(f"panel serve did not start: {(home / 'serve.log').read_text()[-2000:]}")
-        time.sleep(0.5)
-    yield url
-    proc.terminate()
     try:
-        proc.wait(20)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-    log.close()
+        with ServedApp(home, timeout_s=180) as srv:
+            yield srv.url
+    except RuntimeError as err:
+        pytest.fail(str(err))
     # Tracebacks other than a page closing with messages in flight are app errors.
     blocks = (home / "serve.log").read_text().split("Traceback (most recent call last):")[1:]
     errors = [b for b in blocks if "WebSocketClosedError" not in b and "StreamClosedError" not in b]
