@@ -398,3 +398,13 @@ def test_planning_activity_keeps_training_paused_for_a_grace_period():
     act.mark(3, False)
     time.sleep(0.6)
     assert not ev.is_set()
+
+
+def test_warm_up_plans_what_a_new_session_shows_first():
+    from uam_studio.app.state import compute_plan, warm_up
+
+    warm_up()
+    s = PlannerState(auto=False)
+    res = compute_plan(s.request())
+    assert res["cached"] and res["error"] is None and res["plan"]["route"]
+    s.close()

@@ -62,5 +62,3 @@ def session_dispatcher() -> Callable[[Callable[[], None]], None] | None:
             pass
 
     return dispatch
-
-

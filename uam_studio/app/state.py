@@ -196,8 +196,9 @@ def warm_up() -> None:
     """Load the Dynaformer and the health population, and plan the example mission with the default
     policy, now (server start), so the first session shows its first plan at once."""
     population()
-    policy = "dqn" if _bundled_exists(EXAMPLE_MISSION.scenario) else "greedy"
-    compute_plan(PlanRequest(mission_from_dict(EXAMPLE_MISSION), policy))
+    mission = mission_from_dict(EXAMPLE_MISSION)
+    policy = "dqn" if _bundled_exists(mission.scenario) else "greedy"
+    compute_plan(PlanRequest(mission, policy))
 
 
 def _one_line(err: BaseException) -> str:
