@@ -20,9 +20,10 @@ voltage at takeoff, infers the battery's health with no access to q_max or R0, a
 predicts the voltage for a whole planned current profile on a 1 s grid.
 Architecture: `uam_studio/dynaformer/model.py` (torch.nn Transformer encoder over
 20-sample context patches and a causal decoder over 64-sample chunks of the profile,
-{n_params:,} parameters, {size_bytes / 1e6:.2f} MB file). The health
-embedding is a {meta.get('latent_dim', 2)}-dimensional latent; PCA (2 components,
-fitted on the training contexts) is stored in the same file.
+{n_params:,} parameters, {size_bytes / 1e6:.2f} MB file). The decoder reads the
+encoder's {meta.get('latent_dim', 8)}-D health latent; a linear health head maps it to the 2-D
+health embedding, whose PCA (2 components, fitted on the training contexts) is stored in
+the same file.
 
 **Reproduce** (from the repository root; writes to `runs/`, never to `pretrained/`):
 
@@ -49,9 +50,9 @@ for true voltages in (2.8, 3.3) V. The q_max/R0 supervision is training-only (in
 never sees them). Without it, q_max's few-millivolt signature in 20 s was lost (|r| with
 q_max 0.03 in the first bundled model). **The PC order is by construction**: R0 is given
 twice q_max's spread in the embedding, so PC1 follows R0 and PC2 q_max; what the health
-table measures is how well the context determines each. With equal spreads (an earlier
-run) the PCs mixed the two (|r| 0.91 and 0.90), because q_max and R0 are independent in
-the training data. A run whose decoder read a 2-D latent directly had the same health
+table measures is how well the context determines each. An earlier run trained the head
+on equal spreads and fitted the PCA on the 8-D latent: its PCs mixed the two (|r| 0.91
+and 0.90), because q_max and R0 are independent in the training data. A run whose decoder read a 2-D latent directly had the same health
 numbers but a median flight RTE of 0.059-0.067, so the decoder reads the 8-D latent.
 Wall time: {meta.get('data_seconds')} s of data generation plus
 {meta.get('train_seconds')} s of training.

@@ -96,7 +96,7 @@ def _tensor(a, device, dtype=torch.float32) -> torch.Tensor:
 
 def make_batch(ds: DischargeSet, idx: np.ndarray, rng: np.random.Generator, chunk: int, device,
                noise: bool = True):
-    """Tensors for one batch: context (with sensor noise), profile, targets, loss weights, health targets."""
+    """Tensors for one batch: context (with sensor noise), profile, targets and loss weights."""
     n_valid = ds.valid[idx].sum(1)
     t = int(math.ceil(max(int(n_valid.max()), chunk) / chunk) * chunk)
     t = min(t, ds.current_a.shape[1] // chunk * chunk)
@@ -107,8 +107,7 @@ def make_batch(ds: DischargeSet, idx: np.ndarray, rng: np.random.Generator, chun
     # Weight the region around the 3.0 V cut-off more: it decides the EOD time.
     weight = valid * (1.0 + 3.0 * ((volt > 2.8) & (volt < 3.3)))
     return (_tensor(ctx_i, device), _tensor(ctx_v, device), _tensor(ctx_mask, device, torch.bool),
-            _tensor(cur, device), _tensor(volt, device), _tensor(weight, device),
-            _tensor(health_targets(ds, idx), device))
+            _tensor(cur, device), _tensor(volt, device), _tensor(weight, device))
 
 
 class BucketSampler:
@@ -155,7 +154,7 @@ def fit_pca(model: Dynaformer, ds: DischargeSet, device, context_s: int = DEFAUL
 
 def pretrain_encoder(model: Dynaformer, ctx_ds: DischargeSet, cfg: TrainConfig, rng: np.random.Generator,
                      device) -> float:
-    """Stage 1: fit the encoder's latent to :func:`health_targets` on short contexts.
+    """Stage 1: fit the health head on the encoder (its 2-D output) to :func:`health_targets` on short contexts.
 
     :return: the final latent MSE (EMA, normalised units).
     """
@@ -228,7 +227,7 @@ def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerC
     bar = tqdm(total=cfg.steps, initial=step, desc="dynaformer", unit="step", mininterval=5.0)
     ema = None
     while step < cfg.steps:
-        ci, cv, cm, cur, volt, w, _ = make_batch(ds, sampler(), rng, model_cfg.chunk, device)
+        ci, cv, cm, cur, volt, w = make_batch(ds, sampler(), rng, model_cfg.chunk, device)
         with torch.no_grad():
             latent = model.encode(ci, cv, cm)
         pred = model.decode(latent, cur)
