@@ -237,6 +237,13 @@ def test_retrain_into_pretrained_is_refused():
     assert not (ROOT / "pretrained" / "refused.zip").exists()
 
 
+def test_training_setup_safe_return_reaches_the_env_and_the_card():
+    for flag in (False, True):
+        cfg, env_fn = training_setup(steps=10, safe_return=flag)
+        assert cfg.safe_return is flag and cfg.to_dict()["safe_return"] is flag
+        assert env_fn().safe_return is flag
+
+
 @pytest.mark.parametrize("kw, field", [({"alpha": -1}, "alpha"), ({"steps": 0}, "steps"),
                                        ({"scenario": "tour"}, "scenario")])
 def test_training_setup_errors(kw, field):

@@ -44,6 +44,17 @@ def test_shapes_single_and_batch(tiny):
     assert p.health(np.stack([ci] * 3), np.stack([cv] * 3)).shape == (3, 2)
 
 
+def test_observed_context_is_returned_as_observed(tiny):
+    """The first samples are the measured context, not a prediction; an EOD inside it is kept."""
+    p, _ = tiny
+    cur, ci, cv = _ctx()
+    low = cv.copy()
+    low[5:] = 2.9  # the observation already fell below the 3.0 V cut-off
+    v = p.predict(ci, low, cur)
+    np.testing.assert_array_equal(v[:20], low)
+    assert p.predict_eod_s(ci, low, cur) == 6.0
+
+
 def test_prediction_is_causal(tiny):
     """Changing the future current must not change the past prediction (beyond the current chunk)."""
     p, _ = tiny

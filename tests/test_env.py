@@ -160,6 +160,34 @@ def test_eod_penalty_terminates():
     assert not check_plan(far, info["route"], info["altitudes_m"]).safe
 
 
+def test_safe_return_ends_a_stranding_leg_before_it_is_flown():
+    """F at 60 km: the cell flies there (paper setting: +3) but could not fly back."""
+    def strand(safe_return):
+        m = Mission("strand", Vertiport(0.0, 0.0, 0.0), (Destination("F", 60.0, 0.0, 3, 0.0),
+                                                          Destination("N", 20.0, 0.0, 1, 0.0)),
+                    "single_charge", Battery(5000.0, 0.25))
+        env = UAMPlanningEnv(m, gamma=7.0, safe_return=safe_return)
+        env.reset(seed=0)
+        return env, env.step(encode_action(0, 0))
+
+    env, (_, r, term, _, info) = strand(False)
+    assert (r, term, info["eod"], info["stranded"], info["reached"]) == (3.0, False, False, False, ["F"])
+    env, (_, r, term, _, info) = strand(True)
+    assert (r, term, info["eod"], info["stranded"], info["reached"], info["route"]) == (
+        -7.0, True, False, True, [], [])
+    env, _ = strand(True)  # a leg with a way home is flown as usual, from the same cell state
+    env.reset(seed=0)
+    _, r, term, _, info = env.step(encode_action(1, 0))
+    assert (r, term, info["stranded"], info["reached"]) == (1.0, False, False, ["N"])
+    _, r, term, _, info = env.step(encode_action(VERTIPORT_SLOT, 0))
+    assert (r, term, info["eod"]) == (-1.0, True, False)
+    plain = UAMPlanningEnv(env.mission)
+    plain.reset(seed=0)
+    plain.step(encode_action(1, 0))
+    _, _, _, _, ref = plain.step(encode_action(VERTIPORT_SLOT, 0))
+    assert ref["leg_min_voltage_v"] == info["leg_min_voltage_v"]
+
+
 def test_invalid_action_is_penalised_not_raised():
     env = UAMPlanningEnv(hand_mission())
     env.reset(seed=0)
@@ -266,3 +294,13 @@ def test_make_env_factory_and_reset_options():
     m = hand_mission()
     e1.reset(options={"mission": m})
     assert e1.mission is m
+
+
+@pytest.mark.parametrize("q_max, r0", [(5000.0, 0.017), (8000.0, 0.45), (4000.0, 0.6), (9000.0, 0.9)])
+def test_takeoff_observation_equals_simulate(q_max, r0):
+    """The env's fast take-off observation is simulate()'s, including cells that end below 2.5 V."""
+    from uam_studio.battery.simulate import EOD_RANGE
+
+    ci, cv = observe_takeoff(q_max, r0)
+    ref = simulate(ci, 1.0, q_max, r0, eod_v=EOD_RANGE[0]).voltage_v
+    np.testing.assert_array_equal(cv, ref)

@@ -173,7 +173,7 @@ def _run_plan(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- train
 
 _DYNAFORMER_ONLY = ("n_train", "device", "no_resume")
-_DQN_ONLY = ("scenario", "mission", "alpha", "beta", "gamma")
+_DQN_ONLY = ("scenario", "mission", "alpha", "beta", "gamma", "safe_return")
 
 
 def _add_train_arguments(p: argparse.ArgumentParser) -> None:
@@ -198,6 +198,9 @@ def _add_train_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--alpha", type=float, default=None, help="reward per reached destination x priority (default 1)")
     g.add_argument("--beta", type=float, default=None, help="penalty per charging stop (default 1)")
     g.add_argument("--gamma", type=float, default=None, help="penalty for an end of discharge (default 5)")
+    g.add_argument("--safe-return", action="store_true", default=None,
+                   help="a leg that would leave no way home ends the episode with -gamma (the planner's "
+                        "safety rule, learnt in training); default off, the paper's setting")
 
 
 def _refuse_bundled(out) -> None:
@@ -262,7 +265,8 @@ def _run_train_dqn(args: argparse.Namespace) -> int:
     if args.steps is not None and args.steps < 1:
         raise _CliExit("--steps: must be >= 1", EXIT_INPUT)
     # Shared with the app's Retrain tab: validation, env, card and atomic save live in the library.
-    cfg, env_fn = training_setup(scenario, mission, args.alpha, args.beta, args.gamma, args.steps, args.seed)
+    cfg, env_fn = training_setup(scenario, mission, args.alpha, args.beta, args.gamma, args.steps, args.seed,
+                                 safe_return=bool(args.safe_return))
     res = retrain_dqn(cfg, env_fn, agent, mission=mission, progress_bar=True, source="cli")
     card, final = res.card, res.card["final_stats"]
     card_path = agent.with_name("card.json") if agent.name == "agent.zip" else agent.with_suffix(".card.json")

@@ -138,6 +138,11 @@ class DynaformerPredictor:
             t_out = dt * np.arange(1, cur.shape[1] + 1)
             v = np.stack([np.interp(t_out, np.arange(1, n + 1), row) for row in v])
         v = np.clip(np.nan_to_num(v, nan=0.0, posinf=5.0, neginf=0.0), 0.0, 5.0)
+        # The observed context is measured, not predicted: return it as observed (same dt_s grid
+        # from t = 0), so an EOD already inside the observation is reported where it happened.
+        obs = np.atleast_2d(np.asarray(context_voltage_v, dtype=np.float64))
+        k = min(obs.shape[1], v.shape[1])
+        v[:, :k] = obs[:, :k]
         return v[0] if (single and single_ctx) else v
 
     def predict_eod_s(self, context_current_a, context_voltage_v, current_a, dt_s: float = 1.0,

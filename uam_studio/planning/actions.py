@@ -109,6 +109,7 @@ class LegTable:
         self.feasible = ok[:, :, None] & (self.dist[:, :, None] >= np.asarray(MIN_LEG_KM)[None, None, :])
         self._cache: dict[tuple[int, int, int], np.ndarray] = {}
         self._charge: dict[tuple[int, int, int], float] = {}
+        self._cheapest: dict[tuple[int, int], float] = {}
 
     def current(self, i: int, j: int, a: int) -> np.ndarray:
         """Per-cell current (A) of leg i -> j at ``ALTITUDES_M[a]`` (read-only; must be feasible)."""
@@ -134,9 +135,12 @@ class LegTable:
 
     def cheapest_charge(self, i: int, j: int) -> float:
         """Charge (C) of leg i -> j at its lowest feasible level (the cheapest one in the paper's
-        tables: climbing costs more than the cruise saves), ``inf`` if no level is feasible."""
-        levels = np.flatnonzero(self.feasible[i, j])
-        return self.charge(i, j, int(levels[0])) if levels.size else float("inf")
+        tables: climbing costs more than the cruise saves), ``inf`` if no level is feasible (cached)."""
+        q = self._cheapest.get((i, j))
+        if q is None:
+            levels = np.flatnonzero(self.feasible[i, j])
+            q = self._cheapest[(i, j)] = self.charge(i, j, int(levels[0])) if levels.size else float("inf")
+        return q
 
     def name(self, k: int) -> str:
         """Node name of index ``k`` (``"vertiport"`` for N_MAX)."""

@@ -99,7 +99,15 @@ def observe_takeoff(q_max: float, r0: float) -> tuple[np.ndarray, np.ndarray]:
 
 @functools.lru_cache(maxsize=4096)
 def _takeoff_voltage(q_max: float, r0: float) -> np.ndarray:
-    v = np.array(simulate(takeoff_context_current(), DT_S, q_max, r0, eod_v=EOD_RANGE[0]).voltage_v)
+    # The environment's own leg solver (no per-call input checks): the same numbers as simulate(),
+    # which it falls back to for a cell that ends below the lowest cut-off within the window.
+    cell = PhysicsBattery()
+    cell.reset(q_max, r0, EOD_RANGE[0])
+    out = cell.fly_leg(takeoff_context_current())
+    if out.eod:
+        v = np.array(simulate(takeoff_context_current(), DT_S, q_max, r0, eod_v=EOD_RANGE[0]).voltage_v)
+    else:
+        v = np.array(out.voltage_v)
     v.setflags(write=False)
     return v
 
@@ -300,6 +308,7 @@ class UAMPlanningEnv(gym.Env):
     * ``+alpha * priority`` for each destination reached with the voltage never below the cut-off;
     * ``-beta`` for each safe landing at the vertiport (a charging stop);
     * ``-gamma`` if the voltage falls below the cut-off (EOD) on a leg; the episode terminates.
+      With ``safe_return``, also ``-gamma`` (and the end) for a leg that would leave no way home.
 
     Defaults ``alpha=1, beta=1, gamma=5`` as in the paper's figures.
 
@@ -318,10 +327,11 @@ class UAMPlanningEnv(gym.Env):
     * single_charge: when the aircraft lands back at the vertiport, or at EOD;
     * multi_charge: landing at the vertiport recharges (``-beta``); ends when every reachable
       destination is visited and the aircraft is back at the vertiport, or at EOD;
+    * with ``safe_return``, also at a leg that would strand the aircraft (not flown);
     * truncation after ``max_steps`` (default ``2 * N_MAX + 2 = 18``) steps.
 
     ``info`` (reset and every step): ``reached`` (names, cumulative), ``reached_priority``,
-    ``charging_cycles``, ``eod``, ``invalid_action``, ``leg_min_voltage_v`` (None before a leg),
+    ``charging_cycles``, ``eod``, ``invalid_action``, ``stranded``, ``leg_min_voltage_v`` (None before a leg),
     ``route`` and ``altitudes_m`` so far, ``health`` (the two health features).
 
     ## Arguments
@@ -342,6 +352,12 @@ class UAMPlanningEnv(gym.Env):
     :param r0_range, q_range, radius_km: ranges for random cells and missions
         (:mod:`uam_studio.planning.generate` explains the 0.35 ohm default).
     :param max_steps: truncation length.
+    :param safe_return: off (default) is the paper's setting. On, a destination leg after which
+        the battery (this env's backend) could not fly home at the least-charge level, a leg that
+        strands the aircraft, is *not* flown: the episode ends with ``-gamma`` as if at EOD and
+        ``info["stranded"] = True``. Training with it teaches the agent the same rule that the
+        planner's safety filter (:meth:`lookahead_safe`) enforces, so the filter and the agent's
+        Q-values agree.
     """
 
     metadata = {"render_modes": []}
@@ -363,6 +379,7 @@ class UAMPlanningEnv(gym.Env):
         q_range=DEFAULT_Q_RANGE,
         radius_km=DEFAULT_RADIUS_KM,
         max_steps: int = MAX_EPISODE_STEPS,
+        safe_return: bool = False,
     ) -> None:
         super().__init__()
         if mission is not None and not isinstance(mission, Mission):
@@ -388,6 +405,7 @@ class UAMPlanningEnv(gym.Env):
         self.beta = check_range("beta", beta, 0.0, 1e6)
         self.gamma = check_range("gamma", gamma, 0.0, 1e6)
         self.max_steps = int(check_positive("max_steps", max_steps))
+        self.safe_return = bool(safe_return)
         self.n_dest = n_dest
         self.randomize_battery = bool(randomize_battery)
         self.randomize_wind = bool(randomize_wind)
@@ -482,6 +500,7 @@ class UAMPlanningEnv(gym.Env):
         self._return = 0.0
         self._eod = False
         self._invalid = False
+        self._stranded = False
         self._leg_min_v: float | None = None
         self._done = False
 
@@ -517,7 +536,15 @@ class UAMPlanningEnv(gym.Env):
         target, ai = divmod(a, N_ALTITUDES)
         legs = self._legs
         cur = legs.current(self._node, target, ai)
-        out = self.backend.fly_leg(cur)
+        if self.safe_return:
+            probe = copy.copy(self.backend)
+            out = probe.fly_leg(cur)
+            if not out.eod and not self._home_reachable(probe, target):
+                self._stranded = True
+                return self._finish(-self.gamma, terminated=True)
+            self.backend = probe
+        else:
+            out = self.backend.fly_leg(cur)
         self._route.append(legs.name(target))
         self._alts.append(ALTITUDES_M[ai])
         self._leg_min_v = out.min_voltage_v
@@ -596,6 +623,7 @@ class UAMPlanningEnv(gym.Env):
             "charging_cycles": self._cycles,
             "eod": self._eod,
             "invalid_action": self._invalid,
+            "stranded": self._stranded,
             "leg_min_voltage_v": self._leg_min_v,
             "route": list(self._route),
             "altitudes_m": list(self._alts),
@@ -617,16 +645,19 @@ class UAMPlanningEnv(gym.Env):
         if self._done or not (0 <= a < N_ACTIONS and self._mask[a]):
             return False
         target, ai = divmod(a, N_ALTITUDES)
-        legs = self._legs
         probe = copy.copy(self.backend)
-        if probe.fly_leg(legs.current(self._node, target, ai)).eod:
+        if probe.fly_leg(self._legs.current(self._node, target, ai)).eod:
             return False
-        if target == VERTIPORT_SLOT or self.scenario == "single_flight":  # single flight: no way back
+        return self._home_reachable(probe, target)
+
+    def _home_reachable(self, backend: BatteryBackend, node: int) -> bool:
+        """Could ``backend`` (left unchanged) fly from ``node`` home at the least-charge level?"""
+        if node == VERTIPORT_SLOT or self.scenario == "single_flight":  # single flight: no way back
             return True
-        home = legs.cheapest_level(target, VERTIPORT_SLOT)
+        home = self._legs.cheapest_level(node, VERTIPORT_SLOT)
         if home is None:
             return False
-        return not probe.fly_leg(legs.current(target, VERTIPORT_SLOT, home)).eod
+        return not copy.copy(backend).fly_leg(self._legs.current(node, VERTIPORT_SLOT, home)).eod
 
     def action_masks(self) -> np.ndarray:
         """Boolean valid-action mask, shape (36,) (the sb3-contrib ``MaskablePPO`` convention)."""

@@ -136,6 +136,7 @@ def training_setup(
     gamma: float | None = None,
     steps: int | None = None,
     seed: int = 0,
+    safe_return: bool = False,
 ) -> tuple[Any, Callable[[], Any]]:
     """Validate the settings of a DQN retraining and build ``(DQNTrainConfig, env_fn)``.
 
@@ -144,6 +145,8 @@ def training_setup(
         None for a random mission every episode.
     :param alpha, beta, gamma: reward weights (default :data:`DQN_REWARD_DEFAULTS`), in [0, 1e6].
     :param steps: env transitions (default: :class:`DQNTrainConfig`'s), in [1, 1e7].
+    :param safe_return: train with the environment's ``safe_return`` rule (a leg that would leave
+        no way home ends the episode with ``-gamma``); off is the paper's setting.
     :raises InputError: bad settings, or a map the environment cannot use (no destinations, more
         than 8, none far enough from the vertiport).
     """
@@ -155,12 +158,13 @@ def training_setup(
     scenario = scenario or (mission.scenario if mission is not None else "single_charge")
     given = {"alpha": alpha, "beta": beta, "gamma": gamma}
     weights = {k: check_range(k, DQN_REWARD_DEFAULTS[k] if v is None else v, 0.0, 1e6) for k, v in given.items()}
-    cfg = DQNTrainConfig(scenario=scenario, seed=int(seed), **weights)
+    cfg = DQNTrainConfig(scenario=scenario, seed=int(seed), safe_return=bool(safe_return), **weights)
     if steps is not None:
         if isinstance(steps, bool) or int(steps) != steps or not 1 <= int(steps) <= MAX_STEPS:
             raise InputError("steps", f"{steps!r} is out of range; allowed integers in [1, {MAX_STEPS:g}]")
         cfg.steps = int(steps)
-    env_kwargs: dict[str, Any] = {"scenario": scenario, "backend": "physics", **weights}
+    env_kwargs: dict[str, Any] = {"scenario": scenario, "backend": "physics", "safe_return": cfg.safe_return,
+                                  **weights}
     if mission is not None:
         env_kwargs.update(mission=mission, randomize_battery=True)
     env_fn = make_env(**env_kwargs)  # bad maps fail here, before training

@@ -89,6 +89,7 @@ class DQNTrainConfig:
     gamma_discount: float = 0.99  # ~10-step episodes: terminal rewards stay visible at the first decision
     net_arch: tuple[int, ...] = (256, 256)
     double_dqn: bool = True  # less over-estimation of the max; cheap
+    safe_return: bool = False  # env option: a leg that leaves no way home ends the episode with -gamma
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
