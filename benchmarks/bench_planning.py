@@ -92,7 +92,7 @@ def gap(n: int, seed: int, agents: dict[str, str | None]) -> dict:
     out = {}
     for scenario, agent in agents.items():
         missions = held_out_missions(n, seed, scenario=scenario)
-        policies = ("oracle", "greedy") + (("dqn", "dqn_raw") if agent else ())
+        policies = ("oracle", "greedy") + (("dqn", "dqn_raw", "dqn_rollout") if agent else ())
         t0 = time.perf_counter()
         with tqdm(total=n, desc=scenario, file=sys.stderr) as bar:
             scores = compare_planners(missions, agent, policies, progress=lambda k: bar.update(1))

@@ -98,6 +98,39 @@ def test_safety_filter_makes_every_plan_safe(tiny_agent):
         assert check_plan(m, plan.route, plan.altitudes_m).safe, m.name
 
 
+def test_rollout_never_earns_less_than_the_filtered_agent(tiny_agent):
+    """Policy rollout over the K best safe actions: safe, and at least the filtered agent's reward."""
+    from uam_studio.planning.check import check_plan
+    from uam_studio.planning.policy import rollout_agent
+
+    def reward(m, plan):
+        prio = {d.name: d.priority for d in m.destinations}
+        return sum(prio[n] for n in plan.reached) - sum(r == "vertiport" for r in plan.route)
+
+    better = 0
+    for m in held_out_missions(8, 5150, n_dest=(5, 8)):
+        base = rollout_agent(m, tiny_agent, shield=True)
+        improved = rollout_agent(m, tiny_agent, shield=True, lookahead=4)
+        assert check_plan(m, improved.route, improved.altitudes_m).safe, m.name
+        assert reward(m, improved) >= reward(m, base), m.name
+        better += reward(m, improved) > reward(m, base)
+    assert better >= 1  # a 1500-step agent leaves room: rollout must find it somewhere
+
+
+def test_env_clone_is_independent():
+    from uam_studio.planning.env import UAMPlanningEnv
+
+    env = UAMPlanningEnv(mission=held_out_missions(1, 77, n_dest=(6, 6))[0])
+    env.reset(seed=0)
+    first = int(np.flatnonzero(env.action_masks())[0])
+    twin = env.clone()
+    _, _, _, _, info = twin.step(first)
+    assert info["route"] and env._info()["route"] == []
+    assert env.action_masks()[first] and env.backend.state is not twin.backend.state
+    _, _, _, _, again = env.step(first)
+    assert again["route"] == info["route"] and again["leg_min_voltage_v"] == info["leg_min_voltage_v"]
+
+
 def test_ranked_actions_are_valid_and_sorted(tiny_agent):
     import torch as th
 

@@ -136,6 +136,12 @@ def test_trained_agent_plans_and_is_physics_checked(capsys, agent):
     _check_result(res, _example())
     if not res["safe"]:
         assert any(m.startswith("unsafe: voltage falls below") for m in res["messages"])
+    # policy rollout on top of the agent: a physics-checked, safe plan reaching at least as much
+    base = _plan_json(capsys, str(EXAMPLE), "--agent", str(agent))
+    res = _plan_json(capsys, str(EXAMPLE), "--agent", str(agent), "--lookahead", "4")
+    _check_result(res, _example())
+    assert res["safe"] and res["reached_priority"] - res["charging_cycles"] >= (
+        base["reached_priority"] - base["charging_cycles"])
 
 
 def test_train_into_pretrained_is_refused(capsys):
@@ -154,8 +160,11 @@ def test_plan_argument_errors(capsys):
     assert main(["plan", str(EXAMPLE), "--policy", "astar"]) == 2
     assert main(["plan", str(EXAMPLE), "--policy", "oracle", "--r0", "9"]) == 2
     assert main(["plan", str(EXAMPLE), "--policy", "oracle", "--agent", "a.zip"]) == 2
+    assert main(["plan", str(EXAMPLE), "--policy", "greedy", "--lookahead", "3"]) == 2
+    assert main(["plan", str(EXAMPLE), "--lookahead", "9"]) == 2
     err = capsys.readouterr().err.splitlines()
-    assert len(err) == 3 and "r0" in err[1] and "--agent" in err[2]
+    assert len(err) == 5 and "r0" in err[1] and "--agent" in err[2] and "--lookahead" in err[3]
+    assert "lookahead" in err[4] and "[0, 8]" in err[4]
 
 
 # --------------------------------------------------------------------------- library: hard missions

@@ -129,6 +129,10 @@ def _add_plan_arguments(p: argparse.ArgumentParser) -> None:
                    help="dqn (trained agent, default), oracle (exact, knows the cell) or greedy (baseline)")
     p.add_argument("--agent", default=None, metavar="FILE",
                    help="DQN agent zip (default: the bundled pretrained/dqn_<scenario>.zip)")
+    p.add_argument("--lookahead", type=int, default=0, metavar="K",
+                   help="dqn: improve the agent by policy rollout over its K best safe actions per step "
+                        "(0 = off, default; 6 is what benchmarks/RESULTS.md measures; costs up to K extra "
+                        "episodes per step)")
     p.add_argument("--q-max", type=float, default=None, help="override the mission's q_max (C)")
     p.add_argument("--r0", type=float, default=None, help="override the mission's r0 (ohm)")
     p.add_argument("--json", action="store_true", help="print the plan as JSON")
@@ -140,8 +144,11 @@ def _run_plan(args: argparse.Namespace) -> int:
 
     if args.agent is not None and args.policy != "dqn":
         raise _CliExit(f"--agent: only used with --policy dqn (not {args.policy})", EXIT_INPUT)
+    if args.lookahead and args.policy != "dqn":
+        raise _CliExit(f"--lookahead: only used with --policy dqn (not {args.policy})", EXIT_INPUT)
     mission = load_mission(args.mission)
-    res = plan_mission(mission, args.policy, q_max=args.q_max, r0=args.r0, agent_path=args.agent)
+    res = plan_mission(mission, args.policy, q_max=args.q_max, r0=args.r0, agent_path=args.agent,
+                       lookahead=args.lookahead)
     if args.json:
         json.dump(res, sys.stdout, allow_nan=False)
         sys.stdout.write("\n")

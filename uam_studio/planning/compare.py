@@ -32,7 +32,9 @@ import numpy as np
 from uam_studio.planning.check import Plan, check_plan
 from uam_studio.planning.mission import Mission
 
-__all__ = ["PlanScore", "compare_planners", "per_mission_gaps", "summarize"]
+__all__ = ["ROLLOUT_K", "PlanScore", "compare_planners", "per_mission_gaps", "summarize"]
+
+ROLLOUT_K = 6  # candidate actions per step of the dqn_rollout policy
 
 
 @dataclass(frozen=True)
@@ -83,7 +85,8 @@ def compare_planners(
     :param agent_path: DQN agent (zip path or trained model), needed for the ``dqn`` policies
     :param policies: any of ``"oracle"``, ``"greedy"``, ``"dqn"`` (the agent with the safety filter of
         :func:`~uam_studio.planning.policy.rollout_agent`, as ``uam-studio plan`` runs it) and
-        ``"dqn_raw"`` (the agent's own greedy choices, the paper's setting)
+        ``"dqn_raw"`` (the agent's own greedy choices, the paper's setting) and ``"dqn_rollout"``
+        (the filtered agent improved by policy rollout over its ``ROLLOUT_K`` best safe actions)
     :param progress: called with the number of missions done so far (e.g. a tqdm ``update``)
     :return: one :class:`PlanScore` per mission and policy, missions in order
     """
@@ -99,6 +102,7 @@ def compare_planners(
         "greedy": greedy_plan,
         "dqn": lambda m: rollout_agent(m, agent_path, shield=True),
         "dqn_raw": lambda m: rollout_agent(m, agent_path, shield=False),
+        "dqn_rollout": lambda m: rollout_agent(m, agent_path, shield=True, lookahead=ROLLOUT_K),
     }
     for p in policies:
         if p not in planners:

@@ -659,6 +659,17 @@ class UAMPlanningEnv(gym.Env):
             return False
         return not copy.copy(backend).fly_leg(self._legs.current(node, VERTIPORT_SLOT, home)).eod
 
+    def clone(self) -> UAMPlanningEnv:
+        """An independent copy of the episode so far (what-if planning): stepping it leaves this env
+        unchanged. The mission's leg table (read-only profiles and charges) is shared."""
+        twin = copy.copy(self)
+        twin.backend = copy.copy(self.backend)
+        for name in ("_visited", "_mask", "_obs"):
+            setattr(twin, name, getattr(self, name).copy())
+        for name in ("_route", "_alts", "_reached"):
+            setattr(twin, name, list(getattr(self, name)))
+        return twin
+
     def action_masks(self) -> np.ndarray:
         """Boolean valid-action mask, shape (36,) (the sb3-contrib ``MaskablePPO`` convention)."""
         return self._mask.copy()

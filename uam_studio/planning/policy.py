@@ -87,7 +87,7 @@ def _dedupe(messages: list[str]) -> list[str]:
 
 
 def _dqn_route(mission: Mission, agent_path: str | os.PathLike[str] | None, predictor: Any,
-               messages: list[str]) -> tuple[list[str], list[float]]:
+               messages: list[str], lookahead: int = 0) -> tuple[list[str], list[float]]:
     """Roll the agent out greedily on ``mission`` (physics battery); messages for what went wrong."""
     from uam_studio.planning.actions import VERTIPORT_SLOT
     from uam_studio.planning.oracle import _too_close, prepare_mission
@@ -120,7 +120,7 @@ def _dqn_route(mission: Mission, agent_path: str | os.PathLike[str] | None, pred
     else:
         path = Path(agent_path)
 
-    plan = rollout_agent(mission, path, predictor, messages)
+    plan = rollout_agent(mission, path, predictor, messages, lookahead=lookahead)
     messages.extend(m for m in plan.messages if not m.startswith("end of discharge"))  # physics check says it
     return list(plan.route), list(plan.altitudes_m)
 
@@ -146,8 +146,37 @@ def load_agent_cached(path: str | os.PathLike[str]) -> tuple[Any, dict[str, Any]
     return _cached_agent(str(p.resolve()), st.st_mtime_ns, st.st_size)
 
 
+def _shielded_choice(env: Any, model: Any, obs: np.ndarray) -> tuple[int | None, bool]:
+    """The agent's best-Q action whose leg and way home are safe (``lookahead_safe``), else the
+    vertiport at its preferred level; (None, True) if there is nothing to do. Second value: the
+    filter overrode the agent's first choice."""
+    from uam_studio.planning.actions import N_ALTITUDES, VERTIPORT_SLOT
+    from uam_studio.planning.training import ranked_actions
+
+    ranked = ranked_actions(model, obs)
+    # best-Q first; each probe flies up to two legs, so stop at the first safe one
+    choice = next((int(a) for a in ranked if env.lookahead_safe(a)), None)
+    overridden = choice is None or choice != ranked[0]
+    if choice is None:  # nothing safe: head home at the agent's preferred level, or stop
+        choice = next((int(a) for a in ranked if a // N_ALTITUDES == VERTIPORT_SLOT), None)
+    return choice, overridden
+
+
+def _continuation_return(env: Any, model: Any, action: int) -> float:
+    """Reward of taking ``action`` on a clone of ``env`` and then following the filtered agent to the end."""
+    twin = env.clone()
+    obs, total, terminated, truncated, _ = twin.step(action)
+    while not (terminated or truncated):
+        choice, _ = _shielded_choice(twin, model, obs)
+        if choice is None:
+            break
+        obs, r, terminated, truncated, _ = twin.step(choice)
+        total += r
+    return float(total)
+
+
 def rollout_agent(mission: Mission, agent: Any, predictor: Any = None,
-                  messages: list[str] | None = None, shield: bool = True) -> Plan:
+                  messages: list[str] | None = None, shield: bool = True, lookahead: int = 0) -> Plan:
     """Fly a DQN agent greedily on ``mission`` (physics battery) and return its plan.
 
     :param agent: an agent zip path, or a trained :class:`~uam_studio.planning.dqn.MaskedDQN` (its
@@ -158,12 +187,17 @@ def rollout_agent(mission: Mission, agent: Any, predictor: Any = None,
     (:meth:`UAMPlanningEnv.lookahead_safe`; here the physics model of the mission's cell), and
     returns home (or stops) when none is. Without it, the raw greedy policy (the paper's setting).
 
+    ``lookahead`` K > 0 (with the filter) is *policy rollout*, a one-step policy improvement: at
+    each step the agent's K best safe actions are each tried on a copy of the episode and followed
+    by the filtered agent to the end; the one whose episode earns the most reward (the agent's own
+    objective, ties to the higher Q) is taken. The agent's own choice is always among them, so the
+    plan never earns less reward than the filtered agent's; each step costs up to K extra episodes.
+
     The mission must already be servable (at most ``N_MAX`` destinations, a cell that finishes the
     take-off); :func:`plan_mission` checks that first. Health features: the predictor's ``health``
     if the agent was trained on Dynaformer features, else the physics-only fallback.
     ``messages`` (if given) receives notes about mismatches; the plan's own messages are in the plan.
     """
-    from uam_studio.planning.actions import N_ALTITUDES, VERTIPORT_SLOT
     from uam_studio.planning.env import UAMPlanningEnv
     from uam_studio.planning.training import greedy_action, ranked_actions
 
@@ -194,19 +228,25 @@ def rollout_agent(mission: Mission, agent: Any, predictor: Any = None,
         if not shield:
             action = greedy_action(model, obs)
         else:
-            ranked = ranked_actions(model, obs)
-            # best-Q first; each probe flies up to two legs, so stop at the first safe one
-            choice = next((int(a) for a in ranked if env.lookahead_safe(a)), None)
-            if choice is None or choice != ranked[0]:
-                filtered += 1
-            if choice is None:  # nothing safe: head home at the agent's preferred level, or stop
-                choice = next((int(a) for a in ranked if a // N_ALTITUDES == VERTIPORT_SLOT), None)
-                if choice is None:
-                    break
+            choice, overridden = _shielded_choice(env, model, obs)
+            filtered += overridden
+            if choice is None:
+                break
+            if lookahead > 1 and env.lookahead_safe(choice):
+                # the filtered agent's choice (its best-Q safe action) first, then the next safe ones
+                safe = [choice]
+                for a in (int(a) for a in ranked_actions(model, obs)[:4 * lookahead]):
+                    if len(safe) == lookahead:
+                        break
+                    if a != choice and env.lookahead_safe(a):
+                        safe.append(a)
+                if len(safe) > 1:
+                    gains = [_continuation_return(env, model, a) for a in safe]
+                    choice = safe[int(np.argmax(gains))]  # argmax keeps the first (best-Q) of ties
             action = choice
         obs, _, terminated, truncated, _ = env.step(action)
         done = terminated or truncated
-    plan = env.episode_plan("dqn+shield" if shield else "dqn")
+    plan = env.episode_plan(("dqn+rollout" if lookahead > 1 else "dqn+shield") if shield else "dqn")
     if filtered:
         notes.append(f"safety filter: {filtered} of the agent's choices would not have left a safe way home; "
                      "replaced by its next-best safe choice")
@@ -271,6 +311,7 @@ def plan_mission(
     r0: float | None = None,
     agent_path: str | os.PathLike[str] | None = None,
     predictor: Any = None,
+    lookahead: int = 0,
 ) -> dict[str, Any]:
     """Plan ``mission`` with ``policy``, check it with the physics model, predict it with the Dynaformer.
 
@@ -281,6 +322,8 @@ def plan_mission(
     :param agent_path: the DQN agent (default ``pretrained/dqn_<scenario>.zip``; its absence is a message).
     :param predictor: a Dynaformer predictor (``predict(context_current_a, context_voltage_v, current_a,
         dt_s)``), None for the bundled one (its absence is a message), or False to skip the prediction.
+    :param lookahead: dqn only: policy rollout over the agent's K best safe actions per step
+        (:func:`rollout_agent`), 0 (default) or 1 for the filtered agent alone; 0-8.
     :return: plain-JSON dict with exactly the keys ``policy``, ``route`` (node names, ``"vertiport"``
         = recharge), ``altitudes_m``, ``charging_cycles``, ``reached`` (names), ``reached_priority``,
         ``predicted`` (``{"time_s", "voltage_v"}`` or None), ``physics`` (``{"time_s", "voltage_v",
@@ -291,6 +334,8 @@ def plan_mission(
     """
     if policy not in POLICIES:
         raise InputError("policy", f"{policy!r} is not a policy; allowed: {', '.join(POLICIES)}")
+    if isinstance(lookahead, bool) or not isinstance(lookahead, (int, np.integer)) or not 0 <= lookahead <= 8:
+        raise InputError("lookahead", f"{lookahead!r} is out of range; allowed integers in [0, 8]")
     m = _as_mission(mission)
     if q_max is not None or r0 is not None:
         m = m.with_battery(q_max, r0)
@@ -312,7 +357,7 @@ def plan_mission(
         route, alts = list(plan.route), list(plan.altitudes_m)
         messages.extend(plan.messages)
     else:
-        route, alts = _dqn_route(m, agent_path, pred_model, messages)
+        route, alts = _dqn_route(m, agent_path, pred_model, messages, int(lookahead))
 
     check = check_plan(m, route, alts)
     reached = list(check.sim.reached) if check.sim is not None else []
