@@ -132,8 +132,8 @@ def test_bundled_model_times_eod_on_held_out_missions(held_out_metrics):
 
 
 @pytest.mark.skipif(not HAS_BUNDLED, reason="no bundled weights")
-@pytest.mark.xfail(strict=True, reason="the bundled model misses the 20 mV RMSE goal (22.4 mV here, 21.9 mV on the "
-                   "400-mission evaluation); see pretrained/DYNAFORMER_CARD.md and issue #3")
+@pytest.mark.xfail(strict=True, reason="the bundled model misses the 20 mV RMSE goal (about 22 mV here, 21.8 mV on "
+                   "the 400-mission evaluation); see pretrained/DYNAFORMER_CARD.md and issue #3")
 def test_bundled_model_voltage_rmse_goal(held_out_metrics):
     assert held_out_metrics["rmse_mv"] <= 20.0
 
