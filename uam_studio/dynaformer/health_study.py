@@ -132,7 +132,8 @@ def accuracy_table(predictor: Any, ds, contexts_s: Sequence[int] = (20, 60, 400)
             v = predict_set(predictor, ds, context_s=int(ctx), noise_v=float(noise) / 1000.0, seed=seed)
             m = eod_metrics(ds, v, context_s=int(ctx))
             h = health_correlations(predictor, ds, int(ctx), float(noise) / 1000.0, seed=seed)
-            rows.append({"context_s": int(ctx), "noise_mv": float(noise), "median_rte": m["median_rte"],
-                         "median_rte_after_context": m["median_rte_after_context"], "p90_rte": m["p90_rte"], "rmse_mv": m["rmse_mv"], "eod_agreement": m["eod_agreement"],
+            rows.append({"context_s": int(ctx), "noise_mv": float(noise),
+                         **{k: m[k] for k in ("median_rte", "median_rte_after_context", "p90_rte", "rmse_mv",
+                                              "eod_agreement")},
                          "abs_r_r0": h["abs_r_r0"], "abs_r_q_max": h["abs_r_q_max"]})
     return rows

@@ -146,20 +146,25 @@ def load_agent_cached(path: str | os.PathLike[str]) -> tuple[Any, dict[str, Any]
     return _cached_agent(str(p.resolve()), st.st_mtime_ns, st.st_size)
 
 
-def _shielded_choice(env: Any, model: Any, obs: np.ndarray) -> tuple[int | None, bool]:
-    """The agent's best-Q action whose leg and way home are safe (``lookahead_safe``), else the
-    vertiport at its preferred level; (None, True) if there is nothing to do. Second value: the
-    filter overrode the agent's first choice."""
+def _filtered_candidates(env: Any, model: Any, obs: np.ndarray, k: int = 1) -> tuple[list[int], bool]:
+    """The agent's best-Q actions whose leg and way home are safe (``lookahead_safe``), best first:
+    the first such action anywhere in the ranking, then up to ``k - 1`` more among the agent's
+    ``4 k`` best. If none is safe: the vertiport at the agent's preferred level alone, or [] if
+    there is nothing to do. Second value: the filter overrode the agent's first choice."""
     from uam_studio.planning.actions import N_ALTITUDES, VERTIPORT_SLOT
     from uam_studio.planning.training import ranked_actions
 
     ranked = ranked_actions(model, obs)
-    # best-Q first; each probe flies up to two legs, so stop at the first safe one
-    choice = next((int(a) for a in ranked if env.lookahead_safe(a)), None)
-    overridden = choice is None or choice != ranked[0]
-    if choice is None:  # nothing safe: head home at the agent's preferred level, or stop
-        choice = next((int(a) for a in ranked if a // N_ALTITUDES == VERTIPORT_SLOT), None)
-    return choice, overridden
+    safe: list[int] = []
+    for i, a in enumerate(ranked):  # each probe flies up to two legs: stop as soon as possible
+        if safe and (len(safe) == k or i >= 4 * k):
+            break
+        if env.lookahead_safe(a):
+            safe.append(int(a))
+    overridden = not safe or safe[0] != ranked[0]
+    if not safe:  # nothing safe: head home at the agent's preferred level, or stop
+        safe = [int(a) for a in ranked if a // N_ALTITUDES == VERTIPORT_SLOT][:1]
+    return safe, overridden
 
 
 def _continuation_return(env: Any, model: Any, action: int) -> float:
@@ -167,10 +172,10 @@ def _continuation_return(env: Any, model: Any, action: int) -> float:
     twin = env.clone()
     obs, total, terminated, truncated, _ = twin.step(action)
     while not (terminated or truncated):
-        choice, _ = _shielded_choice(twin, model, obs)
-        if choice is None:
+        choice, _ = _filtered_candidates(twin, model, obs)
+        if not choice:
             break
-        obs, r, terminated, truncated, _ = twin.step(choice)
+        obs, r, terminated, truncated, _ = twin.step(choice[0])
         total += r
     return float(total)
 
@@ -199,7 +204,7 @@ def rollout_agent(mission: Mission, agent: Any, predictor: Any = None,
     ``messages`` (if given) receives notes about mismatches; the plan's own messages are in the plan.
     """
     from uam_studio.planning.env import UAMPlanningEnv
-    from uam_studio.planning.training import greedy_action, ranked_actions
+    from uam_studio.planning.training import greedy_action
 
     notes = messages if messages is not None else []
     if isinstance(agent, (str, os.PathLike)):
@@ -228,21 +233,15 @@ def rollout_agent(mission: Mission, agent: Any, predictor: Any = None,
         if not shield:
             action = greedy_action(model, obs)
         else:
-            choice, overridden = _shielded_choice(env, model, obs)
+            # with lookahead: the filtered agent's choice (its best-Q safe action) and the next safe ones
+            candidates, overridden = _filtered_candidates(env, model, obs, max(1, lookahead))
             filtered += overridden
-            if choice is None:
+            if not candidates:
                 break
-            if lookahead > 1 and env.lookahead_safe(choice):
-                # the filtered agent's choice (its best-Q safe action) first, then the next safe ones
-                safe = [choice]
-                for a in (int(a) for a in ranked_actions(model, obs)[:4 * lookahead]):
-                    if len(safe) == lookahead:
-                        break
-                    if a != choice and env.lookahead_safe(a):
-                        safe.append(a)
-                if len(safe) > 1:
-                    gains = [_continuation_return(env, model, a) for a in safe]
-                    choice = safe[int(np.argmax(gains))]  # argmax keeps the first (best-Q) of ties
+            choice = candidates[0]
+            if len(candidates) > 1:
+                gains = [_continuation_return(env, model, a) for a in candidates]
+                choice = candidates[int(np.argmax(gains))]  # argmax keeps the first (best-Q) of ties
             action = choice
         obs, _, terminated, truncated, _ = env.step(action)
         done = terminated or truncated
