@@ -3,6 +3,7 @@
     python benchmarks/bench_planning.py throughput            # env steps/s: physics, dynaformer, naive loop
     python benchmarks/bench_planning.py gap --n 200           # bundled DQN and greedy vs oracle, 200 missions
     python benchmarks/bench_planning.py retrain --budget 180  # per-mission training on 8-destination maps
+    python benchmarks/bench_planning.py retrain --init-from pretrained/dqn_single_charge.zip  # fine-tuned
     python benchmarks/bench_planning.py findings              # the paper's qualitative findings
 
 Every part measures its reference in the same run: the naive loop for throughput (the same env with
@@ -70,15 +71,45 @@ def _steps_per_s(env: UAMPlanningEnv, seconds: float, seed: int = 0) -> tuple[fl
     return n / (time.perf_counter() - t0), n
 
 
-def throughput(seconds: float) -> dict:
+def _vec_steps_per_s(n_workers: int, seconds: float, seed: int = 0) -> float:
+    """Env transitions per second of SB3's ``SubprocVecEnv``: ``n_workers`` physics envs, one process each.
+
+    Random masked actions; each env's mask is read from its observation (the last ``N_ACTIONS``
+    entries), so a step is one round trip per worker. Finished episodes reset inside the worker.
+    """
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    from uam_studio.planning.env import N_FEATURES, make_env
+
+    vec = SubprocVecEnv([make_env(backend="physics") for _ in range(n_workers)])
+    try:
+        vec.seed(seed)
+        obs = vec.reset()
+        rng = np.random.default_rng(seed)
+        n = 0
+        t0 = time.perf_counter()
+        while time.perf_counter() - t0 < seconds:
+            actions = [int(rng.choice(np.flatnonzero(o[N_FEATURES:] > 0.5))) for o in obs]
+            obs, _, _, _ = vec.step(np.array(actions))
+            n += n_workers
+        return n / (time.perf_counter() - t0)
+    finally:
+        vec.close()
+
+
+def throughput(seconds: float, workers: int = 2) -> dict:
     from uam_studio.dynaformer import load_pretrained
 
     res = {}
     res["physics"], _ = _steps_per_s(UAMPlanningEnv(backend="physics"), seconds)
+    res["physics_subproc"] = _vec_steps_per_s(workers, seconds)
+    res["subproc_workers"] = workers
     res["dynaformer"], _ = _steps_per_s(UAMPlanningEnv(backend="dynaformer", predictor=load_pretrained()), seconds)
     res["naive_loop"], _ = _steps_per_s(UAMPlanningEnv(backend=NaiveEulerBattery()), seconds)
     print(f"env steps/s (random masked actions, random 1-8 destination missions, {seconds:.0f} s each):")
-    print(f"  physics backend     {res['physics']:8.0f}   (goal >= 1000)")
+    print(f"  physics backend     {res['physics']:8.0f}   (one env, one process)")
+    print(f"  physics, SubprocVecEnv x{workers} {res['physics_subproc']:8.0f}   (goal >= 1000 on 2 cores; "
+          f"{res['physics_subproc'] / res['physics']:.2f}x one env)")
     print(f"  dynaformer backend  {res['dynaformer']:8.0f}   (goal >= 200)")
     print(f"  naive Euler loop    {res['naive_loop']:8.1f}   -> physics is {res['physics'] / res['naive_loop']:.0f}x faster")
     return res
@@ -92,7 +123,7 @@ def gap(n: int, seed: int, agents: dict[str, str | None]) -> dict:
     out = {}
     for scenario, agent in agents.items():
         missions = held_out_missions(n, seed, scenario=scenario)
-        policies = ("oracle", "greedy") + (("dqn", "dqn_raw", "dqn_rollout") if agent else ())
+        policies = ("oracle", "greedy") + (("dqn", "dqn_raw", "dqn_rollout", "dqn_rollout_agent") if agent else ())
         t0 = time.perf_counter()
         with tqdm(total=n, desc=scenario, file=sys.stderr) as bar:
             scores = compare_planners(missions, agent, policies, progress=lambda k: bar.update(1))
@@ -108,12 +139,21 @@ def gap(n: int, seed: int, agents: dict[str, str | None]) -> dict:
     return out
 
 
-def retrain(n_maps: int, budget_s: float, seed: int) -> dict:
-    """Per-mission training (the paper's per-map setting) against the oracle on 8-destination maps."""
+def retrain(n_maps: int, budget_s: float, seed: int, init_agent: str | None = None) -> dict:
+    """Per-mission training (the paper's per-map setting) against the oracle on 8-destination maps.
+
+    ``init_agent``: fine-tune that agent (warm start, ``FINE_TUNE`` exploration) instead of training
+    from random weights. Scores: the agent alone (raw, the paper's setting), with the safety filter,
+    and with policy rollout (planning time, not training time).
+    """
+    import dataclasses
+
     from uam_studio.planning.check import check_plan
+    from uam_studio.planning.compare import ROLLOUT_K
     from uam_studio.planning.env import make_env
     from uam_studio.planning.oracle import oracle_plan
     from uam_studio.planning.policy import rollout_agent
+    from uam_studio.planning.retrain import FINE_TUNE
     from uam_studio.planning.training import DQNTrainConfig, train_dqn
 
     rows = []
@@ -123,15 +163,19 @@ def retrain(n_maps: int, budget_s: float, seed: int) -> dict:
         timer = threading.Timer(budget_s, stop.set)
         cfg = DQNTrainConfig(scenario="single_charge", steps=10**7, seed=k, learning_starts=500,
                              exploration_fraction=0.05, buffer_size=100_000)
+        if init_agent:
+            cfg = dataclasses.replace(cfg, init_agent=init_agent, **FINE_TUNE)
         t0 = time.perf_counter()
         timer.start()
         model = train_dqn(cfg, make_env(mission=m, scenario="single_charge"), stop_event=stop)
         wall = time.perf_counter() - t0
         timer.cancel()
         row = {"mission": m.name, "oracle": ref.reached_priority, "train_s": wall,
-               "timesteps": int(model.num_timesteps)}
-        for name, shield in (("raw", False), ("shield", True)):  # raw: the agent alone (the paper's setting)
-            plan = rollout_agent(m, model, shield=shield)
+               "timesteps": int(model.num_timesteps), "init_agent": init_agent}
+        variants = (("raw", {"shield": False}), ("shield", {"shield": True}),
+                    ("rollout", {"shield": True, "lookahead": ROLLOUT_K}))
+        for name, kw in variants:  # raw: the agent alone (the paper's setting)
+            plan = rollout_agent(m, model, **kw)
             check = check_plan(m, plan.route, plan.altitudes_m)
             prio = plan.reached_priority if check.safe else 0
             row[name] = prio
@@ -140,10 +184,14 @@ def retrain(n_maps: int, budget_s: float, seed: int) -> dict:
         row["gap"] = row["raw_gap"]
         rows.append(row)
         print(f"  {m.name}: oracle {ref.reached_priority}, DQN {row['raw']} (safe {row['raw_safe']}, gap "
-              f"{100 * row['raw_gap']:.1f}%), with the safety filter {row['shield']} (gap {100 * row['shield_gap']:.1f}%); "
+              f"{100 * row['raw_gap']:.1f}%), with the safety filter {row['shield']} (gap "
+              f"{100 * row['shield_gap']:.1f}%), with rollout {row['rollout']} (gap {100 * row['rollout_gap']:.1f}%); "
               f"{wall:.0f} s, {model.num_timesteps} steps")
-    print(f"per-mission training, {budget_s:.0f} s budget: mean gap {100 * np.mean([r['gap'] for r in rows]):.1f}%, "
-          f"within 5% on {sum(r['gap'] <= 0.05 for r in rows)}/{len(rows)} maps")
+    start = f"fine-tuned from {init_agent}" if init_agent else "from random weights"
+    for name in ("raw", "shield", "rollout"):
+        gaps = [r[f"{name}_gap"] for r in rows]
+        print(f"per-mission training ({start}), {budget_s:.0f} s budget, {name}: mean gap "
+              f"{100 * np.mean(gaps):.1f}%, within 5% on {sum(g <= 0.05 for g in gaps)}/{len(rows)} maps")
     return {"rows": rows}
 
 
@@ -198,11 +246,13 @@ def main() -> None:
     ap.add_argument("--scenarios", default="single_charge,multi_charge")
     ap.add_argument("--agent-dir", default="pretrained", help="gap: folder with dqn_<scenario>.zip")
     ap.add_argument("--budget", type=float, default=180.0, help="retrain: training seconds per map")
+    ap.add_argument("--init-from", default=None, help="retrain: fine-tune this agent zip (warm start)")
+    ap.add_argument("--workers", type=int, default=2, help="throughput: SubprocVecEnv processes")
     ap.add_argument("--quick", action="store_true", help="findings: fewer steps and missions")
     ap.add_argument("--json", help="write the results here")
     a = ap.parse_args()
     if a.part == "throughput":
-        res = throughput(a.seconds)
+        res = throughput(a.seconds, a.workers)
     elif a.part == "gap":
         agents = {}
         for s in a.scenarios.split(","):
@@ -212,7 +262,7 @@ def main() -> None:
                 print(f"note: no agent {p}; oracle and greedy only")
         res = gap(a.n, a.seed, agents)
     elif a.part == "retrain":
-        res = retrain(a.n, a.budget, a.seed)
+        res = retrain(a.n, a.budget, a.seed, a.init_from)
     else:
         res = findings(a.quick)
     if a.json:

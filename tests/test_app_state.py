@@ -415,3 +415,18 @@ def test_warm_up_plans_what_a_new_session_shows_first():
     res = compute_plan(s.request())
     assert res["cached"] and res["error"] is None and res["plan"]["route"]
     s.close()
+
+
+def test_training_setup_init_agent_sets_fine_tuning(tmp_path):
+    from uam_studio.errors import InputError
+    from uam_studio.planning.retrain import FINE_TUNE
+
+    agent = ROOT / "pretrained" / "dqn_single_charge.zip"
+    cfg, _ = training_setup(steps=10, init_agent=agent)
+    assert cfg.init_agent == str(agent) and cfg.to_dict()["init_agent"] == str(agent)
+    assert all(getattr(cfg, k) == v for k, v in FINE_TUNE.items())
+    plain, _ = training_setup(steps=10)
+    assert plain.init_agent is None and plain.exploration_initial_eps == 1.0
+    with pytest.raises(InputError) as err:
+        training_setup(steps=10, init_agent=tmp_path / "missing.zip")
+    assert err.value.field == "init_agent" and "not found" in str(err.value)

@@ -98,23 +98,56 @@ def test_safety_filter_makes_every_plan_safe(tiny_agent):
         assert check_plan(m, plan.route, plan.altitudes_m).safe, m.name
 
 
-def test_rollout_never_earns_less_than_the_filtered_agent(tiny_agent):
-    """Policy rollout over the K best safe actions: safe, and at least the filtered agent's reward."""
+def _reward(m, plan) -> int:
+    prio = {d.name: d.priority for d in m.destinations}
+    return sum(prio[n] for n in plan.reached) - sum(r == "vertiport" for r in plan.route)
+
+
+def test_rollout_never_earns_less_than_either_base(tiny_agent):
+    """Policy rollout with the filtered agent and the greedy rule as bases: safe, and at least the
+    reward of the filtered agent and of the greedy planner; agent-only rollout at least the agent's."""
     from uam_studio.planning.check import check_plan
+    from uam_studio.planning.greedy import greedy_plan
     from uam_studio.planning.policy import rollout_agent
 
-    def reward(m, plan):
-        prio = {d.name: d.priority for d in m.destinations}
-        return sum(prio[n] for n in plan.reached) - sum(r == "vertiport" for r in plan.route)
-
     better = 0
-    for m in held_out_missions(8, 5150, n_dest=(5, 8)):
+    missions = held_out_missions(6, 5150, n_dest=(5, 8)) + held_out_missions(3, 5151, n_dest=(5, 7),
+                                                                            scenario="multi_charge")
+    for m in missions:
         base = rollout_agent(m, tiny_agent, shield=True)
-        improved = rollout_agent(m, tiny_agent, shield=True, lookahead=4)
-        assert check_plan(m, improved.route, improved.altitudes_m).safe, m.name
-        assert reward(m, improved) >= reward(m, base), m.name
-        better += reward(m, improved) > reward(m, base)
+        greedy = greedy_plan(m)
+        agent_only = rollout_agent(m, tiny_agent, shield=True, lookahead=3, bases=("agent",))
+        improved = rollout_agent(m, tiny_agent, shield=True, lookahead=3)
+        for plan in (agent_only, improved):
+            assert check_plan(m, plan.route, plan.altitudes_m).safe, m.name
+        assert _reward(m, agent_only) >= _reward(m, base), m.name
+        assert _reward(m, improved) >= max(_reward(m, base), _reward(m, greedy)), m.name
+        better += _reward(m, improved) > max(_reward(m, base), _reward(m, greedy))
     assert better >= 1  # a 1500-step agent leaves room: rollout must find it somewhere
+    with pytest.raises(InputError, match="bases"):
+        rollout_agent(missions[0], tiny_agent, lookahead=2, bases=("oracle",))
+
+
+@pytest.mark.parametrize("scenario", ["single_charge", "multi_charge"])
+def test_env_greedy_action_follows_the_greedy_planner(scenario):
+    """Following ``UAMPlanningEnv.greedy_action`` flies the greedy planner's route."""
+    from uam_studio.planning.env import UAMPlanningEnv
+    from uam_studio.planning.greedy import greedy_plan
+
+    for m in held_out_missions(5, 6262, n_dest=(4, 8), scenario=scenario):
+        env = UAMPlanningEnv(mission=m, scenario=scenario)
+        env.reset(seed=0)
+        done = False
+        while not done:
+            a = env.greedy_action()
+            if a is None:
+                break
+            _, _, term, trunc, info = env.step(a)
+            done = term or trunc
+        plan = greedy_plan(m)
+        assert env.episode_plan().route == plan.route, m.name
+        assert env.episode_plan().altitudes_m == plan.altitudes_m, m.name
+        assert env.greedy_action() is None
 
 
 def test_env_clone_is_independent():

@@ -272,3 +272,24 @@ def test_save_load_round_trip_and_bad_files(tmp_path):
         load_agent(path, env=wrong_env)
     with pytest.raises(InputError):
         load_card(garbage)
+
+
+def test_warm_start_copies_the_agent_and_rejects_mismatches(tmp_path):
+    """init_agent: the new model starts with the saved agent's weights (it plans the same before
+    any update); a missing file or another net_arch is a clear init_agent error."""
+    src_cfg = DQNTrainConfig(steps=400, n_envs=2, learning_starts=100, net_arch=(16,), seed=5)
+    src = train_dqn(src_cfg, VisitEnv)
+    path = tmp_path / "src.zip"
+    save_agent(src, path, {"scenario": "toy"})
+    cfg = DQNTrainConfig(steps=2, n_envs=1, learning_starts=100, net_arch=(16,), seed=9,
+                         init_agent=str(path), exploration_initial_eps=0.2)
+    warm = train_dqn(cfg, VisitEnv)  # 2 steps < learning_starts: no gradient step yet
+    for k, v in src.policy.state_dict().items():
+        assert th.equal(v, warm.policy.state_dict()[k]), k
+    cold = train_dqn(DQNTrainConfig(steps=2, n_envs=1, learning_starts=100, net_arch=(16,), seed=9), VisitEnv)
+    assert not all(th.equal(v, cold.policy.state_dict()[k]) for k, v in src.policy.state_dict().items())
+    with pytest.raises(InputError, match="init_agent.*net_arch"):
+        train_dqn(DQNTrainConfig(steps=2, n_envs=1, net_arch=(8,), init_agent=str(path)), VisitEnv)
+    with pytest.raises(InputError, match="init_agent.*not found"):
+        train_dqn(DQNTrainConfig(steps=2, n_envs=1, net_arch=(16,), init_agent=str(tmp_path / "no.zip")),
+                  VisitEnv)

@@ -180,7 +180,7 @@ def _run_plan(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- train
 
 _DYNAFORMER_ONLY = ("n_train", "device", "no_resume")
-_DQN_ONLY = ("scenario", "mission", "alpha", "beta", "gamma", "safe_return")
+_DQN_ONLY = ("scenario", "mission", "alpha", "beta", "gamma", "safe_return", "init_from")
 
 
 def _add_train_arguments(p: argparse.ArgumentParser) -> None:
@@ -208,6 +208,9 @@ def _add_train_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--safe-return", action="store_true", default=None,
                    help="a leg that would leave no way home ends the episode with -gamma (the planner's "
                         "safety rule, learnt in training); default off, the paper's setting")
+    g.add_argument("--init-from", default=None, metavar="AGENT",
+                   help="fine-tune this agent zip (e.g. pretrained/dqn_single_charge.zip) instead of "
+                        "starting from random weights; exploration starts at epsilon 0.2")
 
 
 def _refuse_bundled(out) -> None:
@@ -273,7 +276,7 @@ def _run_train_dqn(args: argparse.Namespace) -> int:
         raise _CliExit("--steps: must be >= 1", EXIT_INPUT)
     # Shared with the app's Retrain tab: validation, env, card and atomic save live in the library.
     cfg, env_fn = training_setup(scenario, mission, args.alpha, args.beta, args.gamma, args.steps, args.seed,
-                                 safe_return=bool(args.safe_return))
+                                 safe_return=bool(args.safe_return), init_agent=args.init_from)
     res = retrain_dqn(cfg, env_fn, agent, mission=mission, progress_bar=True, source="cli")
     card, final = res.card, res.card["final_stats"]
     card_path = agent.with_name("card.json") if agent.name == "agent.zip" else agent.with_suffix(".card.json")

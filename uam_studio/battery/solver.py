@@ -58,10 +58,13 @@ def integrate_current(current: np.ndarray, x0: BatteryState, q_total: np.ndarray
     # Bulk-minus-surface concentration gaps follow d[k+1] = a d[k] -/+ (dt/VolS) i[k].
     gap_n0 = x0.qnb * inv_vb - x0.qns * inv_vs
     gap_p0 = x0.qpb * inv_vb - x0.qps * inv_vs
-    gap_n, _ = lfilter([dt * inv_vs], [1.0, -a_diff], current, axis=-1, zi=(a_diff * gap_n0)[:, None])
-    gap_p, _ = lfilter([-dt * inv_vs], [1.0, -a_diff], current, axis=-1, zi=(a_diff * gap_p0)[:, None])
-    gap_n = _shift(gap_n, gap_n0)  # d[0..T-1]
-    gap_p = _shift(gap_p, gap_p0)
+    # Both gaps share one filter: -gap_p obeys gap_n's recurrence, so one lfilter call on the
+    # stacked rows [current; current] from [gap_n0; -gap_p0] gives both.
+    batch = current.shape[0]
+    gaps, _ = lfilter([dt * inv_vs], [1.0, -a_diff], np.concatenate([current, current]), axis=-1,
+                      zi=(a_diff * np.concatenate([gap_n0, -gap_p0]))[:, None])
+    gap_n = _shift(gaps[:batch], gap_n0)  # d[0..T-1]
+    gap_p = _shift(-gaps[batch:], gap_p0)
     flux_n = dt * gap_n / tdiff
     flux_p = dt * gap_p / tdiff
     qnb = x0.qnb[:, None] - np.cumsum(flux_n, axis=1)

@@ -86,7 +86,9 @@ def compare_planners(
     :param policies: any of ``"oracle"``, ``"greedy"``, ``"dqn"`` (the agent with the safety filter of
         :func:`~uam_studio.planning.policy.rollout_agent`, as ``uam-studio plan`` runs it) and
         ``"dqn_raw"`` (the agent's own greedy choices, the paper's setting) and ``"dqn_rollout"``
-        (the filtered agent improved by policy rollout over its ``ROLLOUT_K`` best safe actions)
+        (the filtered agent improved by policy rollout over its ``ROLLOUT_K`` best safe actions and
+        the greedy rule's action, each continued by the filtered agent and by the greedy rule), and
+        ``"dqn_rollout_agent"`` (the same rollout with the filtered agent as its only base policy)
     :param progress: called with the number of missions done so far (e.g. a tqdm ``update``)
     :return: one :class:`PlanScore` per mission and policy, missions in order
     """
@@ -103,6 +105,8 @@ def compare_planners(
         "dqn": lambda m: rollout_agent(m, agent_path, shield=True),
         "dqn_raw": lambda m: rollout_agent(m, agent_path, shield=False),
         "dqn_rollout": lambda m: rollout_agent(m, agent_path, shield=True, lookahead=ROLLOUT_K),
+        "dqn_rollout_agent": lambda m: rollout_agent(m, agent_path, shield=True, lookahead=ROLLOUT_K,
+                                                     bases=("agent",)),
     }
     for p in policies:
         if p not in planners:

@@ -659,6 +659,27 @@ class UAMPlanningEnv(gym.Env):
             return False
         return not copy.copy(backend).fly_leg(self._legs.current(node, VERTIPORT_SLOT, home)).eod
 
+    def greedy_action(self) -> int | None:
+        """The greedy baseline's next action in this episode (the rule of
+        :func:`uam_studio.planning.greedy.greedy_plan`, on this env's battery): the unvisited
+        destination with the best priority / distance from here whose leg, at its least-charge
+        level, and the way home are safe (:meth:`lookahead_safe`); else the vertiport at its
+        least-charge level; None when there is nothing left to do (at the vertiport, nothing fits)."""
+        if self._done:
+            return None
+        legs, node = self._legs, self._node
+        todo = np.flatnonzero(self._servable_slots & ~self._visited)
+        for k in sorted(todo, key=lambda k: -legs.priority[k] / max(legs.dist[node, k], 1e-9)):
+            level = legs.cheapest_level(node, int(k))
+            if level is not None and self.lookahead_safe(int(k) * N_ALTITUDES + level):
+                return int(k) * N_ALTITUDES + level
+            if self.scenario == "single_flight":
+                return None
+        if node == VERTIPORT_SLOT or self.scenario == "single_flight":
+            return None
+        level = self._legs.cheapest_level(node, VERTIPORT_SLOT)
+        return None if level is None else VERTIPORT_SLOT * N_ALTITUDES + level
+
     def clone(self) -> UAMPlanningEnv:
         """An independent copy of the episode so far (what-if planning): stepping it leaves this env
         unchanged. The mission's leg table (read-only profiles and charges) is shared."""

@@ -167,21 +167,35 @@ def _filtered_candidates(env: Any, model: Any, obs: np.ndarray, k: int = 1) -> t
     return safe, overridden
 
 
-def _continuation_return(env: Any, model: Any, action: int) -> float:
-    """Reward of taking ``action`` on a clone of ``env`` and then following the filtered agent to the end."""
+ROLLOUT_BASES = ("agent", "greedy")
+
+
+def _base_action(env: Any, model: Any, obs: np.ndarray, base: str) -> int | None:
+    """The next action of a rollout base policy: the filtered agent (``"agent"``) or the greedy
+    baseline's rule (``"greedy"``, :meth:`UAMPlanningEnv.greedy_action`); None to stop."""
+    if base == "greedy":
+        return env.greedy_action()
+    choice, _ = _filtered_candidates(env, model, obs)
+    return choice[0] if choice else None
+
+
+def _continuation_return(env: Any, model: Any, action: int, base: str = "agent") -> float:
+    """Reward of taking ``action`` on a clone of ``env`` and then following ``base`` (see
+    :func:`_base_action`) to the end."""
     twin = env.clone()
     obs, total, terminated, truncated, _ = twin.step(action)
     while not (terminated or truncated):
-        choice, _ = _filtered_candidates(twin, model, obs)
-        if not choice:
+        nxt = _base_action(twin, model, obs, base)
+        if nxt is None:
             break
-        obs, r, terminated, truncated, _ = twin.step(choice[0])
+        obs, r, terminated, truncated, _ = twin.step(nxt)
         total += r
     return float(total)
 
 
 def rollout_agent(mission: Mission, agent: Any, predictor: Any = None,
-                  messages: list[str] | None = None, shield: bool = True, lookahead: int = 0) -> Plan:
+                  messages: list[str] | None = None, shield: bool = True, lookahead: int = 0,
+                  bases: tuple[str, ...] = ROLLOUT_BASES) -> Plan:
     """Fly a DQN agent greedily on ``mission`` (physics battery) and return its plan.
 
     :param agent: an agent zip path, or a trained :class:`~uam_studio.planning.dqn.MaskedDQN` (its
@@ -193,10 +207,14 @@ def rollout_agent(mission: Mission, agent: Any, predictor: Any = None,
     returns home (or stops) when none is. Without it, the raw greedy policy (the paper's setting).
 
     ``lookahead`` K > 0 (with the filter) is *policy rollout*, a one-step policy improvement: at
-    each step the agent's K best safe actions are each tried on a copy of the episode and followed
-    by the filtered agent to the end; the one whose episode earns the most reward (the agent's own
-    objective, ties to the higher Q) is taken. The agent's own choice is always among them, so the
-    plan never earns less reward than the filtered agent's; each step costs up to K extra episodes.
+    each step the candidates (the agent's K best safe actions, plus the greedy rule's action when
+    ``"greedy"`` is in ``bases``) are each tried on a copy of the episode and followed to the end
+    by each base policy in ``bases`` (``"agent"``: the filtered agent; ``"greedy"``: the greedy
+    baseline's rule, :meth:`UAMPlanningEnv.greedy_action`); the candidate whose best continuation
+    earns the most reward (the agent's own objective, ties to the higher Q) is taken. Each base's
+    own next action is always a candidate, so the plan never earns less reward than any base policy
+    alone would from the start (rollout with several base heuristics); each step costs up to
+    (K + 1) x len(bases) extra episodes.
 
     The mission must already be servable (at most ``N_MAX`` destinations, a cell that finishes the
     take-off); :func:`plan_mission` checks that first. Health features: the predictor's ``health``
@@ -207,6 +225,8 @@ def rollout_agent(mission: Mission, agent: Any, predictor: Any = None,
     from uam_studio.planning.training import greedy_action
 
     notes = messages if messages is not None else []
+    if not bases or any(b not in ROLLOUT_BASES for b in bases):
+        raise InputError("bases", f"{bases!r}: allowed a non-empty tuple of {', '.join(ROLLOUT_BASES)}")
     if isinstance(agent, (str, os.PathLike)):
         model, card = load_agent_cached(agent)
     else:
@@ -239,13 +259,17 @@ def rollout_agent(mission: Mission, agent: Any, predictor: Any = None,
             if not candidates:
                 break
             choice = candidates[0]
+            if lookahead > 0 and "greedy" in bases:
+                g = env.greedy_action()
+                if g is not None and g not in candidates:
+                    candidates.append(g)
             if len(candidates) > 1:
-                gains = [_continuation_return(env, model, a) for a in candidates]
+                gains = [max(_continuation_return(env, model, a, b) for b in bases) for a in candidates]
                 choice = candidates[int(np.argmax(gains))]  # argmax keeps the first (best-Q) of ties
             action = choice
         obs, _, terminated, truncated, _ = env.step(action)
         done = terminated or truncated
-    plan = env.episode_plan(("dqn+rollout" if lookahead > 1 else "dqn+shield") if shield else "dqn")
+    plan = env.episode_plan(("dqn+rollout" if lookahead > 0 else "dqn+shield") if shield else "dqn")
     if filtered:
         notes.append(f"safety filter: {filtered} of the agent's choices would not have left a safe way home; "
                      "replaced by its next-best safe choice")
@@ -321,8 +345,9 @@ def plan_mission(
     :param agent_path: the DQN agent (default ``pretrained/dqn_<scenario>.zip``; its absence is a message).
     :param predictor: a Dynaformer predictor (``predict(context_current_a, context_voltage_v, current_a,
         dt_s)``), None for the bundled one (its absence is a message), or False to skip the prediction.
-    :param lookahead: dqn only: policy rollout over the agent's K best safe actions per step
-        (:func:`rollout_agent`), 0 (default) or 1 for the filtered agent alone; 0-8.
+    :param lookahead: dqn only: policy rollout over the agent's K best safe actions (and the greedy
+        rule's action) per step, continued by the filtered agent and by the greedy rule
+        (:func:`rollout_agent`); 0 (default) for the filtered agent alone; 0-8.
     :return: plain-JSON dict with exactly the keys ``policy``, ``route`` (node names, ``"vertiport"``
         = recharge), ``altitudes_m``, ``charging_cycles``, ``reached`` (names), ``reached_priority``,
         ``predicted`` (``{"time_s", "voltage_v"}`` or None), ``physics`` (``{"time_s", "voltage_v",

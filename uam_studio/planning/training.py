@@ -84,12 +84,14 @@ class DQNTrainConfig:
     target_update_interval: int = 1000  # env transitions (SB3 divides by n_envs): ~100 episodes, not 10k
     train_freq: int = 4  # vec-env steps between updates, i.e. 4 * n_envs transitions
     gradient_steps: int = 4  # one gradient step per 4 transitions with n_envs=4
-    exploration_fraction: float = 0.3  # epsilon 1 -> final over the first 30% of steps
+    exploration_initial_eps: float = 1.0  # epsilon at the start (lower it to fine-tune a trained agent)
+    exploration_fraction: float = 0.3  # epsilon initial -> final over the first 30% of steps
     exploration_final_eps: float = 0.05
     gamma_discount: float = 0.99  # ~10-step episodes: terminal rewards stay visible at the first decision
     net_arch: tuple[int, ...] = (256, 256)
     double_dqn: bool = True  # less over-estimation of the max; cheap
     safe_return: bool = False  # env option: a leg that leaves no way home ends the episode with -gamma
+    init_agent: str | None = None  # warm start: copy this agent zip's network weights (same net_arch)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -249,6 +251,7 @@ def train_dqn(
         train_freq=config.train_freq,
         gradient_steps=config.gradient_steps,
         target_update_interval=config.target_update_interval,
+        exploration_initial_eps=config.exploration_initial_eps,
         exploration_fraction=config.exploration_fraction,
         exploration_final_eps=config.exploration_final_eps,
         policy_kwargs={"net_arch": list(config.net_arch)},
@@ -257,6 +260,8 @@ def train_dqn(
         device="cpu",
         verbose=verbose,
     )
+    if config.init_agent is not None:
+        _warm_start(model, config.init_agent)
     callbacks: list[BaseCallback] = [EpisodeStatsCallback(callback, stop_event, keep=False)]
     if progress_bar:
         callbacks.append(TqdmCallback())
@@ -264,6 +269,26 @@ def train_dqn(
         return model
     model.learn(total_timesteps=config.steps, callback=CallbackList(callbacks))
     return model
+
+
+def _warm_start(model: MaskedDQN, agent_path: str | os.PathLike[str]) -> None:
+    """Copy the Q-network (and target network) weights of a saved agent into ``model``.
+
+    :raises InputError: (field ``init_agent``) an unreadable agent, or one whose spaces or network
+        shape differ from ``model``'s
+    """
+    try:
+        src = load_agent(agent_path)
+    except InputError as err:
+        raise InputError("init_agent", str(err).split(": ", 1)[-1]) from None
+    if src.observation_space != model.observation_space or src.action_space != model.action_space:
+        raise InputError("init_agent", f"{agent_path}: incompatible agent (observations "
+                                       f"{src.observation_space.shape}, {src.action_space})")
+    theirs, ours = src.policy.state_dict(), model.policy.state_dict()
+    if {k: v.shape for k, v in theirs.items()} != {k: v.shape for k, v in ours.items()}:
+        raise InputError("init_agent", f"{agent_path}: network shape differs from net_arch "
+                                       f"{list(model.policy.net_arch)}")
+    model.policy.load_state_dict(theirs)
 
 
 def greedy_action(model: MaskedDQN, obs: np.ndarray) -> int:
