@@ -131,9 +131,9 @@ def gap(n: int, seed: int, agents: dict[str, str | None]) -> dict:
         out[scenario] = {"summary": s, "wall_s": time.perf_counter() - t0, "agent": agent,
                          "scores": [x.to_dict() for x in scores]}
         print(f"\n{scenario}: {n} held-out missions (seed {seed}, 6-8 destinations), agent {agent}")
-        print("  policy   mean prio  mean gap  p90 gap  worst  same cycles  mean cycles  EOD breach  median plan")
+        print(f"  {'policy':17s} mean prio  mean gap  p90 gap  worst  same cycles  mean cycles  EOD breach  median plan")
         for p, r in s.items():
-            print(f"  {p:7s} {r['mean_priority']:9.2f} {100 * r['mean_gap']:8.1f}% {100 * r['p90_gap']:7.1f}% "
+            print(f"  {p:17s} {r['mean_priority']:9.2f} {100 * r['mean_gap']:8.1f}% {100 * r['p90_gap']:7.1f}% "
                   f"{100 * r['worst_gap']:5.0f}% {100 * r['same_cycles']:10.1f}% {r['mean_cycles']:11.2f} "
                   f"{100 * r['eod_breach_rate']:10.1f}% {1000 * r['median_plan_s']:9.1f} ms")
     return out
