@@ -146,15 +146,12 @@ def retrain(n_maps: int, budget_s: float, seed: int, init_agent: str | None = No
     from random weights. Scores: the agent alone (raw, the paper's setting), with the safety filter,
     and with policy rollout (planning time, not training time).
     """
-    import dataclasses
-
     from uam_studio.planning.check import check_plan
     from uam_studio.planning.compare import ROLLOUT_K
     from uam_studio.planning.env import make_env
     from uam_studio.planning.oracle import oracle_plan
     from uam_studio.planning.policy import rollout_agent
-    from uam_studio.planning.retrain import FINE_TUNE
-    from uam_studio.planning.training import DQNTrainConfig, train_dqn
+    from uam_studio.planning.training import DQNTrainConfig, fine_tuning, train_dqn
 
     rows = []
     for k, m in enumerate(held_out_missions(n_maps, seed, n_dest=(8, 8))):
@@ -164,7 +161,7 @@ def retrain(n_maps: int, budget_s: float, seed: int, init_agent: str | None = No
         cfg = DQNTrainConfig(scenario="single_charge", steps=10**7, seed=k, learning_starts=500,
                              exploration_fraction=0.05, buffer_size=100_000)
         if init_agent:
-            cfg = dataclasses.replace(cfg, init_agent=init_agent, **FINE_TUNE)
+            cfg = fine_tuning(cfg, init_agent)
         t0 = time.perf_counter()
         timer.start()
         model = train_dqn(cfg, make_env(mission=m, scenario="single_charge"), stop_event=stop)

@@ -668,16 +668,16 @@ class UAMPlanningEnv(gym.Env):
         if self._done:
             return None
         legs, node = self._legs, self._node
-        todo = np.flatnonzero(self._servable_slots & ~self._visited)
+        todo = [int(k) for k in np.flatnonzero(self._servable_slots & ~self._visited)]
         for k in sorted(todo, key=lambda k: -legs.priority[k] / max(legs.dist[node, k], 1e-9)):
-            level = legs.cheapest_level(node, int(k))
-            if level is not None and self.lookahead_safe(int(k) * N_ALTITUDES + level):
-                return int(k) * N_ALTITUDES + level
+            level = legs.cheapest_level(node, k)
+            if level is not None and self.lookahead_safe(k * N_ALTITUDES + level):
+                return k * N_ALTITUDES + level
             if self.scenario == "single_flight":
                 return None
         if node == VERTIPORT_SLOT or self.scenario == "single_flight":
             return None
-        level = self._legs.cheapest_level(node, VERTIPORT_SLOT)
+        level = legs.cheapest_level(node, VERTIPORT_SLOT)
         return None if level is None else VERTIPORT_SLOT * N_ALTITUDES + level
 
     def clone(self) -> UAMPlanningEnv:

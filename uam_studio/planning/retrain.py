@@ -14,7 +14,6 @@ Shared by ``uam-studio train dqn`` and the app's Retrain tab:
 
 from __future__ import annotations
 
-import dataclasses
 import datetime
 import multiprocessing
 import os
@@ -34,7 +33,6 @@ from uam_studio.planning.policy import BUNDLED_DIR
 
 __all__ = [
     "DQN_REWARD_DEFAULTS",
-    "FINE_TUNE",
     "HOME_ENV",
     "AgentInfo",
     "RetrainProcess",
@@ -50,10 +48,6 @@ __all__ = [
 
 HOME_ENV = "UAM_STUDIO_HOME"
 DQN_REWARD_DEFAULTS = {"alpha": 1.0, "beta": 1.0, "gamma": 5.0}  # the paper's figures (as UAMPlanningEnv)
-# Exploration and warm-up of a fine-tuning run (``init_agent``): the agent already plans, so it
-# explores a little around its own choices instead of starting from uniform random actions.
-FINE_TUNE = {"exploration_initial_eps": 0.2, "exploration_fraction": 0.2, "exploration_final_eps": 0.02,
-             "learning_starts": 500}
 STATS_WINDOW = 100  # final_stats average the last 100 episodes
 MAX_STEPS = 10_000_000
 
@@ -155,12 +149,12 @@ def training_setup(
     :param safe_return: train with the environment's ``safe_return`` rule (a leg that would leave
         no way home ends the episode with ``-gamma``); off is the paper's setting.
     :param init_agent: fine-tune this agent (zip) instead of starting from random weights: its
-        network is copied in and exploration starts at :data:`FINE_TUNE` settings (epsilon 0.2, not 1).
+        network is copied in and exploration starts at :data:`~uam_studio.planning.training.FINE_TUNE` settings (epsilon 0.2, not 1).
     :raises InputError: bad settings, or a map the environment cannot use (no destinations, more
         than 8, none far enough from the vertiport).
     """
     from uam_studio.planning.env import make_env
-    from uam_studio.planning.training import DQNTrainConfig
+    from uam_studio.planning.training import DQNTrainConfig, fine_tuning
 
     if scenario is not None and scenario not in SCENARIOS:
         raise InputError("scenario", f"{scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}")
@@ -169,13 +163,7 @@ def training_setup(
     weights = {k: check_range(k, DQN_REWARD_DEFAULTS[k] if v is None else v, 0.0, 1e6) for k, v in given.items()}
     cfg = DQNTrainConfig(scenario=scenario, seed=int(seed), safe_return=bool(safe_return), **weights)
     if init_agent is not None:
-        from uam_studio.planning.training import load_agent
-
-        try:
-            load_agent(init_agent)  # fail here, before the env is built, on an unreadable agent
-        except InputError as err:
-            raise InputError("init_agent", str(err).split(": ", 1)[-1]) from None
-        cfg = dataclasses.replace(cfg, init_agent=str(init_agent), **FINE_TUNE)
+        cfg = fine_tuning(cfg, init_agent)  # fails here, before the env is built, on an unreadable agent
     if steps is not None:
         if isinstance(steps, bool) or int(steps) != steps or not 1 <= int(steps) <= MAX_STEPS:
             raise InputError("steps", f"{steps!r} is out of range; allowed integers in [1, {MAX_STEPS:g}]")

@@ -25,7 +25,7 @@ import tempfile
 import threading
 import zipfile
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -42,8 +42,10 @@ __all__ = [
     "CARD_NAME",
     "DQNTrainConfig",
     "EpisodeStats",
+    "FINE_TUNE",
     "EpisodeStatsCallback",
     "TqdmCallback",
+    "fine_tuning",
     "greedy_action",
     "ranked_actions",
     "load_agent",
@@ -271,16 +273,37 @@ def train_dqn(
     return model
 
 
+# Exploration and warm-up of a fine-tuning run (``init_agent``): the agent already plans, so it
+# explores a little around its own choices instead of starting from uniform random actions.
+FINE_TUNE = {"exploration_initial_eps": 0.2, "exploration_fraction": 0.2, "exploration_final_eps": 0.02,
+             "learning_starts": 500}
+
+
+def _load_init_agent(agent_path: str | os.PathLike[str]) -> MaskedDQN:
+    """:func:`load_agent`, with its errors reported under the field ``init_agent``."""
+    try:
+        return load_agent(agent_path)
+    except InputError as err:
+        raise InputError("init_agent", str(err).split(": ", 1)[-1]) from None
+
+
+def fine_tuning(config: DQNTrainConfig, init_agent: str | os.PathLike[str]) -> DQNTrainConfig:
+    """``config`` set to fine-tune ``init_agent`` (a saved agent zip): its weights are copied in by
+    :func:`train_dqn`, with the :data:`FINE_TUNE` exploration (epsilon from 0.2, not 1).
+
+    :raises InputError: (field ``init_agent``) a missing or unreadable agent, checked now
+    """
+    _load_init_agent(init_agent)
+    return replace(config, init_agent=str(init_agent), **FINE_TUNE)
+
+
 def _warm_start(model: MaskedDQN, agent_path: str | os.PathLike[str]) -> None:
     """Copy the Q-network (and target network) weights of a saved agent into ``model``.
 
     :raises InputError: (field ``init_agent``) an unreadable agent, or one whose spaces or network
         shape differ from ``model``'s
     """
-    try:
-        src = load_agent(agent_path)
-    except InputError as err:
-        raise InputError("init_agent", str(err).split(": ", 1)[-1]) from None
+    src = _load_init_agent(agent_path)
     if src.observation_space != model.observation_space or src.action_space != model.action_space:
         raise InputError("init_agent", f"{agent_path}: incompatible agent (observations "
                                        f"{src.observation_space.shape}, {src.action_space})")
