@@ -227,11 +227,13 @@ def test_training_session_does_not_block_another_session(browser, app_url):
         _open(trainer, app_url)
         trainer.locator(".bk-tab", has_text="Retrain").click()
         steps = trainer.locator(".bk-input-group", has=trainer.get_by_text("Steps (environment transitions)"))
-        steps.locator("input").fill("50000")
+        # The most steps the tab allows: on a loaded CI machine the planner's 20 replans below took
+        # over 3 minutes, longer than a 50000-step run; the run must still be going at Stop.
+        steps.locator("input").fill("1000000")
         steps.locator("input").press("Enter")
         steps.locator("input").press("Tab")  # commit the value before Start (else the 5000-step default may run)
         trainer.locator(".uam-train-start button").click()
-        trainer.locator(".uam-train-status").get_by_text("training 50000 steps").wait_for()
+        trainer.locator(".uam-train-status").get_by_text("training 1000000 steps").wait_for()
         trainer.wait_for_function(f"() => ({JS_CURVE_LENGTH})('Destinations reached') > 0")
 
         _open(planner, app_url)
@@ -242,8 +244,8 @@ def test_training_session_does_not_block_another_session(browser, app_url):
         planner.locator(".uam-plan-summary[data-busy='false'][data-inputs*=';q_max=6600;']").wait_for()
         assert "q_max 6600 C" in planner.locator(".uam-plan-summary").inner_text()
         n1 = trainer.evaluate(JS_CURVE_LENGTH, "Destinations reached")
-        going = trainer.locator(".uam-train-status").get_by_text("training 50000 steps").count()
-        assert going, "the 50000-step run is no longer going (it ended or failed) before Stop"
+        going = trainer.locator(".uam-train-status").get_by_text("training 1000000 steps").count()
+        assert going, "the 1000000-step run is no longer going (it ended or failed) before Stop"
         trainer.locator(".uam-train-stop button").click()
         trainer.locator(".uam-train-status").get_by_text("stopped:").wait_for()
         assert trainer.evaluate(JS_CURVE_LENGTH, "Destinations reached") >= n1 > 0
