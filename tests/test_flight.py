@@ -247,3 +247,22 @@ def test_leg_charge_matches_the_sampled_profile(args):
         assert leg_charge_c(d, h, w, dwell) == pytest.approx(leg_profile(d, h, w, dt, dwell).charge_c, rel=1e-12)
     with pytest.raises(InfeasibleLegError):
         leg_charge_c(2.0, 3000.0, 0.0)
+
+
+def test_leg_charges_vectorised_equals_scalar_bit_for_bit():
+    from uam_studio.errors import InputError
+    from uam_studio.flight import leg_charge_c, leg_charges_c
+
+    rng = np.random.default_rng(3)
+    d = rng.uniform(25.0, 500.0, (7, 5))
+    w = rng.choice([-39.0, -13.0, 0.0, 7.5, 39.0], (1, 5))
+    hs = (500.0, 1000.0, 1750.0, 3000.0)
+    got = leg_charges_c(d, hs, w)
+    assert got.shape == (*d.shape, len(hs))
+    for k, h in enumerate(hs):
+        want = np.array([[leg_charge_c(d[i, j], h, w[0, j]) for j in range(5)] for i in range(7)])
+        assert np.array_equal(got[..., k], want)  # exactly: the same sums in the same order
+    for field, args in (("altitude_m", (d, 3100.0, w)), ("distance_km", (d + 400.0, 500.0, w)),
+                        ("wind_kts", (d, 500.0, w + 50.0)), ("distance_km", (d * np.nan, 500.0, w))):
+        with pytest.raises(InputError, match=field):
+            leg_charges_c(*args)

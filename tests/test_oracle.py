@@ -175,3 +175,30 @@ def test_oracle_names_unreachable_destination_and_single_flight_failure():
     assert any(msg.startswith("cannot reach Far at any altitude") for msg in p.messages)
     p = oracle_plan(_mission([far], scenario="single_flight"))
     assert p.route == () and p.messages[0].startswith("cannot reach Far at any altitude")
+
+
+def test_leg_table_charges_match_the_flight_model_exactly():
+    """The vectorised per-mission charge table equals leg_charge_c on every feasible leg; the
+    cheapest level and charge follow from it; infeasible legs are inf / None."""
+    from uam_studio.flight import leg_charge_c
+    from uam_studio.planning.actions import ALTITUDES_M, N_ALTITUDES, N_TARGETS
+
+    n = 0
+    for m in held_out_missions(6, 77, n_dest=(1, N_MAX), scenario="single_charge"):
+        legs = LegTable(m)
+        for i in range(N_TARGETS):
+            for j in range(N_TARGETS):
+                ok = [a for a in range(N_ALTITUDES) if legs.feasible[i, j, a]]
+                for a in range(N_ALTITUDES):
+                    if a in ok:
+                        want = leg_charge_c(legs.dist[i, j], ALTITUDES_M[a], legs.wind[j], legs.dwell[j])
+                        assert legs.charge(i, j, a) == want
+                        n += 1
+                    else:
+                        assert legs.charge(i, j, a) == float("inf")
+                if ok:
+                    assert legs.cheapest_level(i, j) == min(ok, key=lambda a: legs.charge(i, j, a))
+                    assert legs.cheapest_charge(i, j) == legs.charge(i, j, ok[0])
+                else:
+                    assert legs.cheapest_level(i, j) is None and legs.cheapest_charge(i, j) == float("inf")
+    assert n > 100

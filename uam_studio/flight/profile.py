@@ -11,6 +11,7 @@ subtracted), but a leg must be long enough to contain them: see
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -180,6 +181,49 @@ def leg_charge_c(distance_km: float, altitude_m: float, wind_kts: float, dwell_s
     """
     _, _, specs = _phase_specs(distance_km, altitude_m, wind_kts, dwell_s)
     return float(power_kw_to_cell_current_a(sum(p * dur for _, dur, p in specs)))
+
+
+def leg_charges_c(distance_km: np.ndarray, altitudes_m, wind_kts: np.ndarray) -> np.ndarray:
+    """Charge (C) one cell gives on many legs at a few altitudes: :func:`leg_charge_c` elementwise,
+    bit for bit (the same products summed in the same order), without the per-leg checks.
+
+    ``distance_km`` (km) and ``wind_kts`` (kt) broadcast against each other to the legs' shape;
+    the result is ``[*legs, len(altitudes_m)]`` (m). A dwell draws no charge, so none is taken.
+    Legs too short for an altitude get a value too: callers mask them with
+    :func:`min_leg_distance_km`. Raises :class:`InputError` for an altitude, distance or wind out
+    of range (distances may be 0 here: a table's diagonal).
+    """
+    d = np.asarray(distance_km, dtype=float)
+    w = np.asarray(wind_kts, dtype=float)
+    if not np.all((d >= 0.0) & (d <= MAX_DISTANCE_KM)):
+        raise InputError("distance_km", f"has values outside [0, {MAX_DISTANCE_KM:g}] km")
+    if not np.all((w >= tables.WIND_RANGE_KTS[0]) & (w <= tables.WIND_RANGE_KTS[1])):
+        raise InputError("wind_kts", f"has values outside [{tables.WIND_RANGE_KTS[0]:g}, "
+                                     f"{tables.WIND_RANGE_KTS[1]:g}] kt")
+    hs = tuple(float(h) for h in np.atleast_1d(altitudes_m))
+    power, speed = tables.cruise_table_many(hs, w)  # [n_alt, *w.shape]
+    power, speed = np.moveaxis(power, 0, -1), np.moveaxis(speed, 0, -1)  # [*w.shape, n_alt]
+    d = d[..., None]
+    total = np.zeros(np.broadcast_shapes(d.shape, power.shape))
+    for term in _phase_charge_terms(hs):  # the order of _phase_specs, so the float sums match leg_charge_c's
+        total += (d * 1000.0 / speed) * power if term is None else term
+    return np.asarray(power_kw_to_cell_current_a(total))
+
+
+@functools.lru_cache(maxsize=64)
+def _phase_charge_terms(altitudes_m: tuple[float, ...]) -> tuple[np.ndarray | None, ...]:
+    """Per phase, in ``PHASES`` order: power x duration (kW s) of a non-cruise phase at each
+    altitude (m), None for the cruise (it depends on the leg)."""
+    terms = []
+    for name in PHASES:
+        if name == "cruise":
+            terms.append(None)
+        else:
+            key = _TABLE_NAME.get(name, name)
+            term = np.array([tables.phase_duration_s(key, h) * tables.phase_power_kw(key, h) for h in altitudes_m])
+            term.setflags(write=False)
+            terms.append(term)
+    return tuple(terms)
 
 
 def leg_current(

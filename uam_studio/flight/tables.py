@@ -164,6 +164,39 @@ def _cruise(key: str, altitude_m: float, wind_kts: float) -> float:
     return float(np.interp(h, g["alt"], per_alt))
 
 
+def cruise_table_many(altitudes_m, wind_kts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cruise pack power (kW) and effective ground speed (m/s) for a few altitudes (m) and an
+    array of winds (kt), each shaped ``[len(altitudes_m), *wind_kts.shape]``:
+    :func:`cruise_power_kw` and :func:`cruise_ground_speed_mps` elementwise, bit for bit (the same
+    interpolations), for a planner's table of legs. Winds are not range-checked here."""
+    g = _grids()
+    hs = tuple(float(h) for h in np.atleast_1d(altitudes_m))
+    rows = _table_rows(hs)
+    w = np.asarray(wind_kts, dtype=float)
+    out = []
+    for key in ("power_kw", "speed_mps"):
+        if all(r is not None for r in rows):  # table altitudes: np.interp there returns that row exactly
+            out.append(np.stack([np.interp(w, g["wind"], g[key][r]) for r in rows]))
+            continue
+        per_alt = np.stack([np.interp(w, g["wind"], row) for row in g[key]])  # [n_table_alt, *w.shape]
+        flat = per_alt.reshape(per_alt.shape[0], -1)
+        out.append(np.stack([per_alt[r] if r is not None else
+                             np.array([np.interp(h, g["alt"], col) for col in flat.T]).reshape(w.shape)
+                             for h, r in zip(hs, rows)]))
+    return out[0], out[1]
+
+
+@lru_cache(maxsize=64)
+def _table_rows(altitudes_m: tuple[float, ...]) -> tuple[int | None, ...]:
+    """Row of each (checked) altitude (m) in the tables, None between rows."""
+    g = _grids()
+    rows = []
+    for h in altitudes_m:
+        at = np.flatnonzero(g["alt"] == _check_alt(h))
+        rows.append(int(at[0]) if at.size else None)
+    return tuple(rows)
+
+
 def cruise_power_kw(altitude_m: float, wind_kts: float) -> float:
     """Cruise pack power (kW) at altitude (m) and wind (kt, negative = tailwind)."""
     return _cruise("power_kw", altitude_m, wind_kts)
