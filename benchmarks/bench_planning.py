@@ -97,19 +97,25 @@ def _vec_steps_per_s(n_workers: int, seconds: float, seed: int = 0) -> float:
         vec.close()
 
 
-def throughput(seconds: float, workers: int = 2) -> dict:
+def throughput(seconds: float, workers: int = 2, repeats: int = 3) -> dict:
+    """Steps/s of each backend. The physics backend, the goal's subject, is measured ``repeats``
+    times (fresh env, seeds 0, 1, ...) and reported as the median: on this kind of machine one run
+    swings by about +/-8% from run to run."""
     from uam_studio.dynaformer import load_pretrained
 
     res = {}
-    res["physics"], _ = _steps_per_s(UAMPlanningEnv(backend="physics"), seconds)
+    runs = [_steps_per_s(UAMPlanningEnv(backend="physics"), seconds, seed=k)[0] for k in range(repeats)]
+    res["physics_runs"] = runs
+    res["physics"] = float(np.median(runs))
     res["physics_subproc"] = _vec_steps_per_s(workers, seconds)
     res["subproc_workers"] = workers
     res["dynaformer"], _ = _steps_per_s(UAMPlanningEnv(backend="dynaformer", predictor=load_pretrained()), seconds)
     res["naive_loop"], _ = _steps_per_s(UAMPlanningEnv(backend=NaiveEulerBattery()), seconds)
     print(f"env steps/s (random masked actions, random 1-8 destination missions, {seconds:.0f} s each):")
-    print(f"  physics backend     {res['physics']:8.0f}   (one env, one process)")
-    print(f"  physics, SubprocVecEnv x{workers} {res['physics_subproc']:8.0f}   (goal >= 1000 on 2 cores; "
-          f"{res['physics_subproc'] / res['physics']:.2f}x one env)")
+    print(f"  physics backend     {res['physics']:8.0f}   (one env, one process; median of "
+          f"{', '.join(f'{r:.0f}' for r in runs)}; goal >= 1000)")
+    print(f"  physics, SubprocVecEnv x{workers} {res['physics_subproc']:8.0f}   "
+          f"({res['physics_subproc'] / res['physics']:.2f}x one env)")
     print(f"  dynaformer backend  {res['dynaformer']:8.0f}   (goal >= 200)")
     print(f"  naive Euler loop    {res['naive_loop']:8.1f}   -> physics is {res['physics'] / res['naive_loop']:.0f}x faster")
     return res
@@ -245,11 +251,12 @@ def main() -> None:
     ap.add_argument("--budget", type=float, default=180.0, help="retrain: training seconds per map")
     ap.add_argument("--init-from", default=None, help="retrain: fine-tune this agent zip (warm start)")
     ap.add_argument("--workers", type=int, default=2, help="throughput: SubprocVecEnv processes")
+    ap.add_argument("--repeats", type=int, default=3, help="throughput: physics runs (median reported)")
     ap.add_argument("--quick", action="store_true", help="findings: fewer steps and missions")
     ap.add_argument("--json", help="write the results here")
     a = ap.parse_args()
     if a.part == "throughput":
-        res = throughput(a.seconds, a.workers)
+        res = throughput(a.seconds, a.workers, a.repeats)
     elif a.part == "gap":
         agents = {}
         for s in a.scenarios.split(","):
