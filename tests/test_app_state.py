@@ -280,6 +280,25 @@ def test_retrain_state_trains_saves_and_the_planner_can_use_it(home):
     planner.close()
 
 
+def test_retrain_state_fine_tunes_the_bundled_agent(home):
+    """Start from the bundled agent: the child process fine-tunes pretrained/dqn_<scenario>.zip
+    (recorded in the card, exploration from epsilon 0.2) and never writes over it."""
+    bundled = ROOT / "pretrained" / "dqn_single_charge.zip"
+    before = bundled.read_bytes()
+    planner = _state()
+    rs = RetrainState(source="map", scenario="single_charge", steps=300, seed=2, start_from="bundled")
+    assert rs.start(planner.mission), rs.error
+    assert rs.status.startswith("fine-tuning the bundled agent 300 steps")
+    rs.join(120)
+    rs.poll()
+    assert not rs.running and rs.error == "" and rs.timesteps >= 300
+    card = json.loads(zipfile.ZipFile(rs.agent_path).read("card.json"))
+    assert card["config"]["init_agent"] == str(bundled)
+    assert card["config"]["exploration_initial_eps"] == pytest.approx(0.2)
+    assert Path(rs.agent_path).parent == home / "agents" and bundled.read_bytes() == before
+    planner.close()
+
+
 def test_retrain_stop_saves_the_agent_so_far(home):
     rs = RetrainState(source="random", steps=200_000, runner="thread")
     assert rs.start(None), rs.error

@@ -62,3 +62,17 @@ def test_serve_argument_errors(capsys, argv, needle):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and err.startswith("error:") and needle in err
+
+
+def test_retrain_view_start_from_widget_drives_the_state():
+    from uam_studio.app.retrain import RetrainView
+    from uam_studio.app.state import RetrainState
+
+    planner = PlannerState(policy="greedy")
+    state = RetrainState(runner="thread")
+    view = RetrainView(state, planner)
+    view.__panel__().get_root(Document())
+    assert state.start_from == "scratch" and view.start_from.value == "scratch"
+    view.start_from.value = "bundled"
+    assert state.start_from == "bundled"
+    planner.close()

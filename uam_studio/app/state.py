@@ -793,6 +793,9 @@ class RetrainState(param.Parameterized):
     gamma = param.Number(default=5.0, bounds=(0.0, 100.0), doc="penalty for an end of discharge")
     steps = param.Integer(default=5000, bounds=(100, 1_000_000), doc="environment transitions")
     seed = param.Integer(default=0, bounds=(0, 2**31 - 1))
+    start_from = param.Selector(default="scratch", objects=["scratch", "bundled"],
+                                doc="random weights, or fine-tune the scenario's bundled agent "
+                                    "(pretrained/dqn_<scenario>.zip; exploration from epsilon 0.2)")
 
     running = param.Boolean(default=False)
     timesteps = param.Integer(default=0)
@@ -834,8 +837,14 @@ class RetrainState(param.Parameterized):
         if self.source == "map" and mission is None:
             self.error = "training: no map to train on"
             return False
+        init_agent = None
+        if self.start_from == "bundled":
+            from uam_studio.planning.policy import bundled_agent_path
+
+            init_agent = str(bundled_agent_path(self.scenario))
         try:
-            cfg, env_fn = training_setup(self.scenario, m, self.alpha, self.beta, self.gamma, self.steps, self.seed)
+            cfg, env_fn = training_setup(self.scenario, m, self.alpha, self.beta, self.gamma, self.steps, self.seed,
+                                         init_agent=init_agent)
         except InputError as err:
             what = "current map" if m is not None else "settings"
             self.error = f"training ({what}): {_one_line(err)}"
@@ -847,14 +856,15 @@ class RetrainState(param.Parameterized):
         self._result, self._failure, self._finished = None, None, False
         self._reached, self._cycles = [], []
         self._target_steps = cfg.steps
+        what = "fine-tuning the bundled agent" if init_agent else "training"
         self.param.update(running=True, timesteps=0, episodes=0, agent_path="",
-                          status=f"training {cfg.steps} steps on {'the current map' if m else 'random missions'}")
+                          status=f"{what} {cfg.steps} steps on {'the current map' if m else 'random missions'}")
         if self.runner == "process":
             from uam_studio.planning.retrain import RetrainProcess
 
             self._proc = RetrainProcess(path, mission=m, source="app", pause_event=ACTIVITY.event,
                                         scenario=self.scenario, alpha=self.alpha, beta=self.beta,
-                                        gamma=self.gamma, steps=self.steps, seed=self.seed)
+                                        gamma=self.gamma, steps=self.steps, seed=self.seed, init_agent=init_agent)
             self._proc.start()
             return True
         self._proc = None
