@@ -856,9 +856,9 @@ class RetrainState(param.Parameterized):
         self._result, self._failure, self._finished = None, None, False
         self._reached, self._cycles = [], []
         self._target_steps = cfg.steps
-        what = "fine-tuning the bundled agent" if init_agent else "training"
+        verb = "fine-tuning the bundled agent" if init_agent else "training"
         self.param.update(running=True, timesteps=0, episodes=0, agent_path="",
-                          status=f"{what} {cfg.steps} steps on {'the current map' if m else 'random missions'}")
+                          status=f"{verb} {cfg.steps} steps on {'the current map' if m else 'random missions'}")
         if self.runner == "process":
             from uam_studio.planning.retrain import RetrainProcess
 

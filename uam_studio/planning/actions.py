@@ -108,8 +108,6 @@ class LegTable:
         ok &= self.dist <= MAX_DISTANCE_KM
         self.feasible = ok[:, :, None] & (self.dist[:, :, None] >= np.asarray(MIN_LEG_KM)[None, None, :])
         self._cache: dict[tuple[int, int, int], np.ndarray] = {}
-        self._charges: np.ndarray | None = None  # [i, j, a] C, inf where infeasible
-        self._cheapest: np.ndarray | None = None  # [i, j] C
 
     def current(self, i: int, j: int, a: int) -> np.ndarray:
         """Per-cell current (A) of leg i -> j at ``ALTITUDES_M[a]`` (read-only; must be feasible)."""
@@ -120,32 +118,35 @@ class LegTable:
             self._cache[key] = cur
         return cur
 
-    def _charge_table(self) -> np.ndarray:
+    @functools.cached_property
+    def _charges(self) -> np.ndarray:
         """Charge (C) of every leg i -> j at every level a, shape [N_TARGETS, N_TARGETS, N_ALTITUDES];
         ``inf`` where the leg is not feasible. Equal, bit for bit, to ``leg_charge_c`` of each leg.
         Computed once per mission in one vectorised pass (an env observation needs most of them)."""
-        if self._charges is None:
-            dist = np.minimum(self.dist, MAX_DISTANCE_KM)  # longer legs are infeasible anyway
-            table = leg_charges_c(dist, ALTITUDES_M, self.wind[None, :])  # wind of the node flown to
-            self._charges = np.where(self.feasible, table, np.inf)
-            first = np.argmax(self.feasible, axis=-1)  # lowest feasible level
-            self._cheapest = np.take_along_axis(self._charges, first[..., None], -1)[..., 0]
-        return self._charges
+        dist = np.minimum(self.dist, MAX_DISTANCE_KM)  # longer legs are infeasible anyway
+        table = leg_charges_c(dist, ALTITUDES_M, self.wind[None, :])  # wind of the node flown to
+        return np.where(self.feasible, table, np.inf)
+
+    @functools.cached_property
+    def _cheapest(self) -> np.ndarray:
+        """Charge (C) of each leg i -> j at its lowest feasible level, shape [N_TARGETS, N_TARGETS]
+        (``inf`` where none is)."""
+        first = np.argmax(self.feasible, axis=-1)  # lowest feasible level (0 where none: inf there)
+        return np.take_along_axis(self._charges, first[..., None], -1)[..., 0]
 
     def charge(self, i: int, j: int, a: int) -> float:
         """Charge (C) one cell gives on leg i -> j at ``ALTITUDES_M[a]`` (``inf`` if not feasible)."""
-        return float(self._charge_table()[i, j, a])
+        return float(self._charges[i, j, a])
 
     def cheapest_level(self, i: int, j: int) -> int | None:
         """Index of the feasible level of leg i -> j that uses the least charge, None if none is."""
-        row = self._charge_table()[i, j]
+        row = self._charges[i, j]
         a = int(np.argmin(row))
         return a if np.isfinite(row[a]) else None
 
     def cheapest_charge(self, i: int, j: int) -> float:
         """Charge (C) of leg i -> j at its lowest feasible level (the cheapest one in the paper's
         tables: climbing costs more than the cruise saves), ``inf`` if no level is feasible."""
-        self._charge_table()
         return float(self._cheapest[i, j])
 
     def name(self, k: int) -> str:
