@@ -71,17 +71,22 @@ def _steps_per_s(env: UAMPlanningEnv, seconds: float, seed: int = 0) -> tuple[fl
     return n / (time.perf_counter() - t0), n
 
 
-def _vec_steps_per_s(n_workers: int, seconds: float, seed: int = 0) -> float:
-    """Env transitions per second of SB3's ``SubprocVecEnv``: ``n_workers`` physics envs, one process each.
+def _vec_steps_per_s(n_workers: int, seconds: float, seed: int = 0, envs_per_worker: int = 1) -> float:
+    """Env transitions per second of ``n_workers`` processes of physics envs.
 
-    Random masked actions; each env's mask is read from its observation (the last ``N_ACTIONS``
-    entries), so a step is one round trip per worker. Finished episodes reset inside the worker.
+    ``envs_per_worker=1``: SB3's ``SubprocVecEnv`` (one env per process, one pipe round trip per
+    env step). More: :class:`~uam_studio.planning.vec_env.GroupedSubprocVecEnv` (a group of envs per
+    process, one round trip per group step). Random masked actions; each env's mask is read from
+    its observation (the last ``N_ACTIONS`` entries). Finished episodes reset inside the workers.
+    The clock starts after the workers have started and reset.
     """
     from stable_baselines3.common.vec_env import SubprocVecEnv
 
     from uam_studio.planning.env import N_FEATURES, make_env
+    from uam_studio.planning.vec_env import GroupedSubprocVecEnv
 
-    vec = SubprocVecEnv([make_env(backend="physics") for _ in range(n_workers)])
+    fns = [make_env(backend="physics") for _ in range(n_workers * envs_per_worker)]
+    vec = SubprocVecEnv(fns) if envs_per_worker == 1 else GroupedSubprocVecEnv(fns, n_workers=n_workers)
     try:
         vec.seed(seed)
         obs = vec.reset()
@@ -91,16 +96,17 @@ def _vec_steps_per_s(n_workers: int, seconds: float, seed: int = 0) -> float:
         while time.perf_counter() - t0 < seconds:
             actions = [int(rng.choice(np.flatnonzero(o[N_FEATURES:] > 0.5))) for o in obs]
             obs, _, _, _ = vec.step(np.array(actions))
-            n += n_workers
+            n += len(fns)
         return n / (time.perf_counter() - t0)
     finally:
         vec.close()
 
 
-def throughput(seconds: float, workers: int = 2, repeats: int = 3) -> dict:
+def throughput(seconds: float, workers: int = 2, repeats: int = 3, group: int = 8) -> dict:
     """Steps/s of each backend. The physics backend, the goal's subject, is measured ``repeats``
     times (fresh env, seeds 0, 1, ...) and reported as the median: on this kind of machine one run
-    swings by about +/-8% from run to run."""
+    swings by about +/-8% from run to run. So is the physics backend on both cores: ``workers``
+    processes of ``group`` envs each (:class:`~uam_studio.planning.vec_env.GroupedSubprocVecEnv`)."""
     from uam_studio.dynaformer import load_pretrained
 
     res = {}
@@ -109,13 +115,20 @@ def throughput(seconds: float, workers: int = 2, repeats: int = 3) -> dict:
     res["physics"] = float(np.median(runs))
     res["physics_subproc"] = _vec_steps_per_s(workers, seconds)
     res["subproc_workers"] = workers
+    grouped = [_vec_steps_per_s(workers, seconds, seed=k, envs_per_worker=group) for k in range(repeats)]
+    res["physics_grouped_runs"] = grouped
+    res["physics_grouped"] = float(np.median(grouped))
+    res["group"] = group
     res["dynaformer"], _ = _steps_per_s(UAMPlanningEnv(backend="dynaformer", predictor=load_pretrained()), seconds)
     res["naive_loop"], _ = _steps_per_s(UAMPlanningEnv(backend=NaiveEulerBattery()), seconds)
     print(f"env steps/s (random masked actions, random 1-8 destination missions, {seconds:.0f} s each):")
     print(f"  physics backend     {res['physics']:8.0f}   (one env, one process; median of "
           f"{', '.join(f'{r:.0f}' for r in runs)}; goal >= 1000)")
     print(f"  physics, SubprocVecEnv x{workers} {res['physics_subproc']:8.0f}   "
-          f"({res['physics_subproc'] / res['physics']:.2f}x one env)")
+          f"({res['physics_subproc'] / res['physics']:.2f}x one env; SB3, one env per process)")
+    print(f"  physics, grouped {workers}x{group}   {res['physics_grouped']:8.0f}   "
+          f"({workers} processes of {group} envs, both cores; median of "
+          f"{', '.join(f'{r:.0f}' for r in grouped)}; {res['physics_grouped'] / res['physics']:.2f}x one env; goal >= 1000)")
     print(f"  dynaformer backend  {res['dynaformer']:8.0f}   (goal >= 200)")
     print(f"  naive Euler loop    {res['naive_loop']:8.1f}   -> physics is {res['physics'] / res['naive_loop']:.0f}x faster")
     return res
@@ -250,13 +263,14 @@ def main() -> None:
     ap.add_argument("--agent-dir", default="pretrained", help="gap: folder with dqn_<scenario>.zip")
     ap.add_argument("--budget", type=float, default=180.0, help="retrain: training seconds per map")
     ap.add_argument("--init-from", default=None, help="retrain: fine-tune this agent zip (warm start)")
-    ap.add_argument("--workers", type=int, default=2, help="throughput: SubprocVecEnv processes")
+    ap.add_argument("--workers", type=int, default=2, help="throughput: worker processes of the vector envs")
+    ap.add_argument("--group", type=int, default=8, help="throughput: envs per process of the grouped vector env")
     ap.add_argument("--repeats", type=int, default=3, help="throughput: physics runs (median reported)")
     ap.add_argument("--quick", action="store_true", help="findings: fewer steps and missions")
     ap.add_argument("--json", help="write the results here")
     a = ap.parse_args()
     if a.part == "throughput":
-        res = throughput(a.seconds, a.workers, a.repeats)
+        res = throughput(a.seconds, a.workers, a.repeats, a.group)
     elif a.part == "gap":
         agents = {}
         for s in a.scenarios.split(","):

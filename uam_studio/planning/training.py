@@ -37,6 +37,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 from ..errors import InputError
 from .dqn import MaskedDQN, MaskedDQNPolicy
+from .vec_env import GroupedSubprocVecEnv
 
 __all__ = [
     "CARD_NAME",
@@ -78,7 +79,8 @@ class DQNTrainConfig:
     beta: float = 1.0
     gamma: float = 5.0
     seed: int = 0
-    n_envs: int = 4  # DummyVecEnv copies: decorrelates consecutive samples at no process overhead
+    n_envs: int = 4  # env copies: decorrelates consecutive samples
+    n_workers: int = 1  # 1: all copies in this process (DummyVecEnv); >= 2: GroupedSubprocVecEnv processes
     learning_rate: float = 1e-3  # Adam; rl-zoo CartPole uses 2.3e-3, a bit lower is steadier here
     buffer_size: int = 50_000  # holds the whole run at the default budget: small episodes, no staleness issue
     learning_starts: int = 1000  # ~100 random (masked) episodes before the first update
@@ -241,7 +243,13 @@ def train_dqn(
         raise InputError("steps", f"{config.steps!r} is out of range; allowed >= 1")
     if config.n_envs < 1:
         raise InputError("n_envs", f"{config.n_envs!r} is out of range; allowed >= 1")
-    vec_env = make_vec_env(env_fn, n_envs=config.n_envs, seed=config.seed, vec_env_cls=DummyVecEnv)
+    if not 1 <= config.n_workers <= config.n_envs:
+        raise InputError("n_workers", f"{config.n_workers!r} is out of range; allowed 1 to n_envs ({config.n_envs})")
+    if config.n_workers == 1:
+        vec_env = make_vec_env(env_fn, n_envs=config.n_envs, seed=config.seed, vec_env_cls=DummyVecEnv)
+    else:
+        vec_env = make_vec_env(env_fn, n_envs=config.n_envs, seed=config.seed, vec_env_cls=GroupedSubprocVecEnv,
+                               vec_env_kwargs={"n_workers": config.n_workers})
     model = MaskedDQN(
         MaskedDQNPolicy,
         vec_env,
@@ -267,9 +275,12 @@ def train_dqn(
     callbacks: list[BaseCallback] = [EpisodeStatsCallback(callback, stop_event, keep=False)]
     if progress_bar:
         callbacks.append(TqdmCallback())
-    if stop_event is not None and stop_event.is_set():
-        return model
-    model.learn(total_timesteps=config.steps, callback=CallbackList(callbacks))
+    try:
+        if stop_event is None or not stop_event.is_set():
+            model.learn(total_timesteps=config.steps, callback=CallbackList(callbacks))
+    finally:
+        if config.n_workers > 1:
+            vec_env.close()  # the worker processes end with the run; the model keeps its weights
     return model
 
 
