@@ -71,8 +71,9 @@ def _steps_per_s(env: UAMPlanningEnv, seconds: float, seed: int = 0) -> tuple[fl
     return n / (time.perf_counter() - t0), n
 
 
-def _vec_steps_per_s(n_workers: int, seconds: float, seed: int = 0, envs_per_worker: int = 1) -> float:
-    """Env transitions per second of ``n_workers`` processes of physics envs.
+def _vec_steps_per_s(n_workers: int, seconds: float, seed: int = 0, envs_per_worker: int = 1,
+                     dynaformer: bool = False) -> float:
+    """Env transitions per second of ``n_workers`` processes of physics (or Dynaformer) envs.
 
     ``envs_per_worker=1``: SB3's ``SubprocVecEnv`` (one env per process, one pipe round trip per
     env step). More: :class:`~uam_studio.planning.vec_env.GroupedSubprocVecEnv` (a group of envs per
@@ -85,7 +86,13 @@ def _vec_steps_per_s(n_workers: int, seconds: float, seed: int = 0, envs_per_wor
     from uam_studio.planning.env import N_FEATURES, make_env
     from uam_studio.planning.vec_env import GroupedSubprocVecEnv
 
-    fns = [make_env(backend="physics") for _ in range(n_workers * envs_per_worker)]
+    if dynaformer:
+        from uam_studio.dynaformer import load_pretrained
+
+        kind = {"backend": "dynaformer", "predictor": load_pretrained()}
+    else:
+        kind = {"backend": "physics"}
+    fns = [make_env(**kind) for _ in range(n_workers * envs_per_worker)]
     vec = SubprocVecEnv(fns) if envs_per_worker == 1 else GroupedSubprocVecEnv(fns, n_workers=n_workers)
     try:
         vec.seed(seed)
@@ -102,7 +109,7 @@ def _vec_steps_per_s(n_workers: int, seconds: float, seed: int = 0, envs_per_wor
         vec.close()
 
 
-def throughput(seconds: float, workers: int = 2, repeats: int = 3, group: int = 8) -> dict:
+def throughput(seconds: float, workers: int = 2, repeats: int = 3, group: int = 32) -> dict:
     """Steps/s of each backend. The physics backend, the goal's subject, is measured ``repeats``
     times (fresh env, seeds 0, 1, ...) and reported as the median: on this kind of machine one run
     swings by about +/-8% from run to run. So is the physics backend on both cores: ``workers``
@@ -120,6 +127,7 @@ def throughput(seconds: float, workers: int = 2, repeats: int = 3, group: int = 
     res["physics_grouped"] = float(np.median(grouped))
     res["group"] = group
     res["dynaformer"], _ = _steps_per_s(UAMPlanningEnv(backend="dynaformer", predictor=load_pretrained()), seconds)
+    res["dynaformer_grouped"] = _vec_steps_per_s(workers, seconds, envs_per_worker=group, dynaformer=True)
     res["naive_loop"], _ = _steps_per_s(UAMPlanningEnv(backend=NaiveEulerBattery()), seconds)
     print(f"env steps/s (random masked actions, random 1-8 destination missions, {seconds:.0f} s each):")
     print(f"  physics backend     {res['physics']:8.0f}   (one env, one process; median of "
@@ -129,7 +137,9 @@ def throughput(seconds: float, workers: int = 2, repeats: int = 3, group: int = 
     print(f"  physics, grouped {workers}x{group}   {res['physics_grouped']:8.0f}   "
           f"({workers} processes of {group} envs, both cores; median of "
           f"{', '.join(f'{r:.0f}' for r in grouped)}; {res['physics_grouped'] / res['physics']:.2f}x one env; goal >= 1000)")
-    print(f"  dynaformer backend  {res['dynaformer']:8.0f}   (goal >= 200)")
+    print(f"  dynaformer backend  {res['dynaformer']:8.0f}   (one env, one process; goal >= 200)")
+    print(f"  dynaformer, grouped {workers}x{group} {res['dynaformer_grouped']:6.0f}   "
+          f"({workers} processes of {group} envs, one torch thread each; goal >= 200)")
     print(f"  naive Euler loop    {res['naive_loop']:8.1f}   -> physics is {res['physics'] / res['naive_loop']:.0f}x faster")
     return res
 
@@ -264,7 +274,7 @@ def main() -> None:
     ap.add_argument("--budget", type=float, default=180.0, help="retrain: training seconds per map")
     ap.add_argument("--init-from", default=None, help="retrain: fine-tune this agent zip (warm start)")
     ap.add_argument("--workers", type=int, default=2, help="throughput: worker processes of the vector envs")
-    ap.add_argument("--group", type=int, default=8, help="throughput: envs per process of the grouped vector env")
+    ap.add_argument("--group", type=int, default=32, help="throughput: envs per process of the grouped vector env")
     ap.add_argument("--repeats", type=int, default=3, help="throughput: physics runs (median reported)")
     ap.add_argument("--quick", action="store_true", help="findings: fewer steps and missions")
     ap.add_argument("--json", help="write the results here")

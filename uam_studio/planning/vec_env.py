@@ -13,12 +13,14 @@ limit. With the same environment factories, seeds and actions it returns exactly
 ``DummyVecEnv`` returns (tested). An error inside a worker is re-raised in the caller with the
 worker's message.
 
-Only flat ``Box`` observations are supported (all uam_studio environments use one).
+Only flat ``Box`` observations are supported (all uam_studio environments use one). Workers that
+load torch (the Dynaformer backend) run it on one thread each: the processes are the parallelism.
 """
 
 from __future__ import annotations
 
 import multiprocessing as mp
+import sys
 import traceback
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -64,6 +66,8 @@ def _worker(remote, parent_remote, env_fns: CloudpickleWrapper) -> None:
     """Worker loop: build the group's envs, answer commands until ``close``."""
     parent_remote.close()
     envs = [fn() for fn in env_fns.var]
+    if "torch" in sys.modules:  # a Dynaformer backend: the workers are the parallelism, one thread each
+        sys.modules["torch"].set_num_threads(1)
     while True:
         try:
             cmd, data = remote.recv()
