@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 from stable_baselines3.common.monitor import Monitor
@@ -79,6 +81,12 @@ def test_worker_error_is_raised_in_the_caller_and_the_env_stays_usable():
         assert obs.shape == (4, UAMPlanningEnv().observation_space.shape[0])
     finally:
         vec.close()
+
+
+def test_an_env_that_cannot_be_built_is_a_worker_error_at_construction():
+    bad = functools.partial(UAMPlanningEnv, scenario="no_such_scenario")
+    with pytest.raises(WorkerError, match="scenario"):
+        GroupedSubprocVecEnv([make_env(), make_env(), bad], n_workers=2)
 
 
 def test_bad_worker_counts_are_one_line_errors():

@@ -65,7 +65,11 @@ def _step_group(envs: list[gym.Env], actions: np.ndarray) -> tuple:
 def _worker(remote, parent_remote, env_fns: CloudpickleWrapper) -> None:
     """Worker loop: build the group's envs, answer commands until ``close``."""
     parent_remote.close()
-    envs = [fn() for fn in env_fns.var]
+    try:
+        envs = [fn() for fn in env_fns.var]
+        build_error = None
+    except Exception as exc:  # noqa: BLE001 - reported to the caller at its first command
+        envs, build_error = [], f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"
     if "torch" in sys.modules:  # a Dynaformer backend: the workers are the parallelism, one thread each
         sys.modules["torch"].set_num_threads(1)
     while True:
@@ -74,6 +78,9 @@ def _worker(remote, parent_remote, env_fns: CloudpickleWrapper) -> None:
         except EOFError:
             break
         try:
+            if build_error is not None and cmd != "close":
+                remote.send(("error", build_error))
+                continue
             if cmd == "step":
                 out: Any = _step_group(envs, data)
             elif cmd == "reset":
@@ -144,23 +151,35 @@ class GroupedSubprocVecEnv(VecEnv):
             self.processes.append(proc)
         self.closed = False
         self.waiting = False
-        self.remotes[0].send(("spaces", None))
-        observation_space, action_space = self._answer(self.remotes[0])
+        for remote in self.remotes:
+            remote.send(("spaces", None))
+        try:
+            observation_space, action_space = self._answers(self.remotes)[0]
+        except WorkerError:
+            self.close()
+            raise
         if not isinstance(observation_space, gym.spaces.Box):
             self.close()
             raise InputError("observation_space", f"{observation_space} is not supported; allowed: a flat Box")
         super().__init__(n_envs, observation_space, action_space)
 
     # -- plumbing ----------------------------------------------------------------------------
+    @staticmethod
+    def _recv(remote) -> tuple[str, Any]:
+        try:
+            return remote.recv()
+        except (EOFError, ConnectionResetError):
+            return "error", "a worker process exited (could it build its environments?)"
+
     def _answer(self, remote) -> Any:
-        status, out = remote.recv()
+        status, out = self._recv(remote)
         if status == "error":
             raise WorkerError(out)
         return out
 
     def _answers(self, remotes) -> list[Any]:
         # read every reply before raising, so no pipe is left holding a stale answer
-        replies = [r.recv() for r in remotes]
+        replies = [self._recv(r) for r in remotes]
         for status, out in replies:
             if status == "error":
                 raise WorkerError(out)
