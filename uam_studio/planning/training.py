@@ -246,42 +246,41 @@ def train_dqn(
         raise InputError("n_envs", f"{config.n_envs!r} is out of range; allowed >= 1")
     if not 1 <= config.n_workers <= config.n_envs:
         raise InputError("n_workers", f"{config.n_workers!r} is out of range; allowed 1 to n_envs ({config.n_envs})")
-    if config.n_workers == 1:
-        vec_env = make_vec_env(env_fn, n_envs=config.n_envs, seed=config.seed, vec_env_cls=DummyVecEnv)
-    else:
-        vec_env = make_vec_env(env_fn, n_envs=config.n_envs, seed=config.seed, vec_env_cls=GroupedSubprocVecEnv,
-                               vec_env_kwargs={"n_workers": config.n_workers})
-    model = MaskedDQN(
-        MaskedDQNPolicy,
-        vec_env,
-        learning_rate=config.learning_rate,
-        buffer_size=config.buffer_size,
-        learning_starts=config.learning_starts,
-        batch_size=config.batch_size,
-        gamma=config.gamma_discount,
-        train_freq=config.train_freq,
-        gradient_steps=config.gradient_steps,
-        target_update_interval=config.target_update_interval,
-        exploration_initial_eps=config.exploration_initial_eps,
-        exploration_fraction=config.exploration_fraction,
-        exploration_final_eps=config.exploration_final_eps,
-        policy_kwargs={"net_arch": list(config.net_arch)},
-        double_dqn=config.double_dqn,
-        seed=config.seed,
-        device="cpu",
-        verbose=verbose,
-    )
-    if config.init_agent is not None:
-        _warm_start(model, config.init_agent)
-    callbacks: list[BaseCallback] = [EpisodeStatsCallback(callback, stop_event, keep=False)]
-    if progress_bar:
-        callbacks.append(TqdmCallback())
+    in_process = config.n_workers == 1
+    vec_env = make_vec_env(env_fn, n_envs=config.n_envs, seed=config.seed,
+                           vec_env_cls=DummyVecEnv if in_process else GroupedSubprocVecEnv,
+                           vec_env_kwargs=None if in_process else {"n_workers": config.n_workers})
     try:
+        model = MaskedDQN(
+            MaskedDQNPolicy,
+            vec_env,
+            learning_rate=config.learning_rate,
+            buffer_size=config.buffer_size,
+            learning_starts=config.learning_starts,
+            batch_size=config.batch_size,
+            gamma=config.gamma_discount,
+            train_freq=config.train_freq,
+            gradient_steps=config.gradient_steps,
+            target_update_interval=config.target_update_interval,
+            exploration_initial_eps=config.exploration_initial_eps,
+            exploration_fraction=config.exploration_fraction,
+            exploration_final_eps=config.exploration_final_eps,
+            policy_kwargs={"net_arch": list(config.net_arch)},
+            double_dqn=config.double_dqn,
+            seed=config.seed,
+            device="cpu",
+            verbose=verbose,
+        )
+        if config.init_agent is not None:
+            _warm_start(model, config.init_agent)
+        callbacks: list[BaseCallback] = [EpisodeStatsCallback(callback, stop_event, keep=False)]
+        if progress_bar:
+            callbacks.append(TqdmCallback())
         if stop_event is None or not stop_event.is_set():
             model.learn(total_timesteps=config.steps, callback=CallbackList(callbacks))
     finally:
-        if config.n_workers > 1:
-            vec_env.close()  # the worker processes end with the run; the model keeps its weights
+        if not in_process:
+            vec_env.close()  # the worker processes end with the run (or its error); the model keeps its weights
     return model
 
 

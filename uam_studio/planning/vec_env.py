@@ -94,9 +94,7 @@ def _worker(remote, parent_remote, env_fns: CloudpickleWrapper) -> None:
                 out = [envs[i].get_wrapper_attr(name) for i in local]
             elif cmd == "set_attr":
                 name, value, local = data
-                for i in local:
-                    envs[i].set_wrapper_attr(name, value)
-                out = None
+                out = [envs[i].set_wrapper_attr(name, value) for i in local]  # one None per env
             elif cmd == "env_method":
                 name, args, kwargs, local = data
                 out = [envs[i].get_wrapper_attr(name)(*args, **kwargs) for i in local]
@@ -171,12 +169,6 @@ class GroupedSubprocVecEnv(VecEnv):
         except (EOFError, ConnectionResetError):
             return "error", "a worker process exited (could it build its environments?)"
 
-    def _answer(self, remote) -> Any:
-        status, out = self._recv(remote)
-        if status == "error":
-            raise WorkerError(out)
-        return out
-
     def _answers(self, remotes) -> list[Any]:
         # read every reply before raising, so no pipe is left holding a stale answer
         replies = [self._recv(r) for r in remotes]
@@ -194,8 +186,6 @@ class GroupedSubprocVecEnv(VecEnv):
         for w, ks in local.items():
             self.remotes[w].send((cmd, make_data(ks)))
         answers = dict(zip(local, self._answers([self.remotes[w] for w in local]), strict=True))
-        if cmd == "set_attr":
-            return []
         by_env = {(w, k): a for w, ks in local.items() for k, a in zip(ks, answers[w], strict=True)}
         return [by_env[wk] for wk in wanted]
 
@@ -230,13 +220,13 @@ class GroupedSubprocVecEnv(VecEnv):
             return
         if self.waiting:
             for remote in self.remotes:
-                remote.recv()
+                self._recv(remote)
         for remote in self.remotes:
             try:
                 remote.send(("close", None))
-                remote.recv()
-            except (BrokenPipeError, EOFError):
-                pass
+            except BrokenPipeError:
+                continue
+            self._recv(remote)
         for proc in self.processes:
             proc.join(timeout=5)
             if proc.is_alive():
