@@ -105,3 +105,14 @@ def test_training_with_worker_processes_streams_episodes_and_closes_them():
     assert len(stats) >= 20 and all(s.length >= 1 for s in stats)
     assert 600 <= model.num_timesteps <= 616 and stats[-1].timestep <= model.num_timesteps
     assert model.env.closed and all(not p.is_alive() for p in model.env.processes)
+
+
+def test_worker_processes_are_closed_when_the_training_set_up_fails(tmp_path):
+    import multiprocessing
+
+    bad = tmp_path / "not_an_agent.zip"
+    bad.write_bytes(b"not a zip")
+    cfg = DQNTrainConfig(steps=10, n_envs=2, n_workers=2, init_agent=str(bad))
+    with pytest.raises(InputError, match="init_agent"):
+        train_dqn(cfg, make_env(scenario="single_charge"))
+    assert multiprocessing.active_children() == []
