@@ -165,7 +165,8 @@ def test_two_stage_training_freezes_the_encoder_and_writes_weights(tmp_path, mon
     monkeypatch.setattr(train_mod, "pretrain_encoder", spy)
     cfg = train_mod.TrainConfig(n_train=64, n_context=256, context_batch=32, encoder_steps=30, steps=6, batch=8,
                                 max_len=512, checkpoint_every=3, device="cpu", threads=1)
-    tiny_cfg = DynaformerConfig(d_model=16, n_heads=2, enc_layers=1, dec_layers=1, ff_dim=32, latent_dim=4)
+    tiny_cfg = DynaformerConfig(d_model=16, n_heads=2, enc_layers=1, dec_layers=1, ff_dim=32, latent_dim=4,
+                                health="transformer")
     weights = train_mod.train(cfg, tmp_path / "run", resume=False, model_cfg=tiny_cfg)
     pred = load_predictor(weights)
     final = pred.model.state_dict()
@@ -180,3 +181,49 @@ def test_two_stage_training_freezes_the_encoder_and_writes_weights(tmp_path, mon
     v = pred.predict(ci, cv, cur)
     assert v.shape == cur.shape and np.all(np.isfinite(v))
     assert pred.meta["encoder_stage_health_mse"] == pytest.approx(snap["mse"])
+
+
+def test_takeoff_training_fits_the_health_and_trains_only_the_decoder(tmp_path):
+    """Default health estimator: the closed-form take-off fit recovers R0 and q_max on held-out
+    noise-free flights; the decoder trains; the export loads, predicts and refuses a short context."""
+    import uam_studio.dynaformer.train as train_mod
+    from uam_studio.dynaformer.model import takeoff_to_health
+
+    cfg = train_mod.TrainConfig(n_train=64, n_context=3000, steps=6, batch=8, max_len=512, checkpoint_every=3,
+                                device="cpu", threads=1)
+    tiny_cfg = DynaformerConfig(d_model=16, n_heads=2, enc_layers=1, dec_layers=1, ff_dim=32)
+    untrained = Dynaformer(tiny_cfg).state_dict()
+    weights = train_mod.train(cfg, tmp_path / "run", resume=False, model_cfg=tiny_cfg)
+    pred = load_predictor(weights)
+    final = pred.model.state_dict()
+    assert any(not torch.equal(untrained[k], final[k]) for k in final if k.startswith("latent_to_query"))
+    ds = make_dataset(200, seed=31337, max_len=64, flight_fraction=1.0)
+    with torch.no_grad():
+        h = pred.model.encode(torch.as_tensor(ds.current_a[:, :20]), torch.as_tensor(ds.voltage_v[:, :20]))
+    r0, q_max = (t.numpy() for t in takeoff_to_health(h.double()))
+    assert np.corrcoef(r0, ds.r0)[0, 1] > 0.99
+    assert np.median(np.abs(q_max - ds.q_max)) < 300.0  # C, from 3000 fitting cells
+    cur, ci, cv = _ctx()
+    assert np.all(np.isfinite(pred.predict(ci, cv, cur)))
+    with pytest.raises(InputError) as err:
+        pred.predict(ci[:10], cv[:10], cur)
+    assert str(err.value).startswith("context_current_a") and "20 s" in str(err.value)
+
+
+def test_format_2_weights_still_load_as_the_transformer_encoder(tmp_path):
+    """Weights saved before the take-off estimator (format 2, no 'health' in the config) load as before."""
+    from uam_studio.dynaformer import artifact
+
+    cfg = DynaformerConfig(d_model=16, n_heads=2, enc_layers=1, dec_layers=1, ff_dim=32, latent_dim=4,
+                           health="transformer")
+    model = Dynaformer(cfg)
+    config = cfg.to_dict()
+    del config["health"], config["health_window"]
+    pca = {"mean": torch.zeros(2), "components": torch.eye(2), "scale": torch.ones(2), "explained": torch.ones(2)}
+    path = tmp_path / "old.pt"
+    torch.save({"format": "uam_studio.dynaformer/2", "config": config, "state_dict": model.state_dict(),
+                "pca": pca, "meta": {}}, path)
+    pred = load_predictor(path)
+    assert pred.model.cfg.health == "transformer"
+    cur, ci, cv = _ctx()
+    assert np.all(np.isfinite(pred.predict(ci[:5], cv[:5], cur)))  # the encoder takes any context length

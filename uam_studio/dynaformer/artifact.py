@@ -11,7 +11,8 @@ import torch
 from ..errors import InputError
 from .model import Dynaformer, DynaformerConfig
 
-FORMAT = "uam_studio.dynaformer/2"  # 2: patch encoder + health head
+FORMAT = "uam_studio.dynaformer/3"  # 3: config names its health estimator (take-off or transformer)
+OLD_FORMATS = ("uam_studio.dynaformer/2",)  # 2: patch encoder + health head (always "transformer")
 
 
 class WeightsError(InputError):
@@ -51,10 +52,13 @@ def load_artifact(path) -> tuple[Dynaformer, dict, dict]:
         blob = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # corrupted or not a torch file
         raise WeightsError(path, f"not a readable weights file ({type(exc).__name__})") from None
-    if not isinstance(blob, dict) or blob.get("format") != FORMAT:
+    if not isinstance(blob, dict) or blob.get("format") not in (FORMAT, *OLD_FORMATS):
         raise WeightsError(path, f"incompatible format (expected {FORMAT})")
     try:
-        cfg = DynaformerConfig(**blob["config"])
+        config = dict(blob["config"])
+        if blob["format"] in OLD_FORMATS:
+            config.setdefault("health", "transformer")
+        cfg = DynaformerConfig(**config)
         model = Dynaformer(cfg)
         model.load_state_dict(blob["state_dict"])
         pca = {k: v.float() for k, v in blob["pca"].items()}

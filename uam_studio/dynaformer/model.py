@@ -1,6 +1,17 @@
 """The Dynaformer network (Biggio et al. 2023), re-designed small for flight profiles on a CPU.
 
-* Encoder: the observed context (20 s by default, up to ``max_context`` samples) is
+* Health estimator, two kinds (``DynaformerConfig.health``):
+
+  - ``"takeoff"`` (the default since session 8): :class:`TakeoffHealth`, a quadratic
+    regression on the first ``health_window`` s of the context (the take-off from full
+    charge), fitted in closed form to (R0, 6500 C / q_max). Its 2-D output is both the
+    health embedding and the decoder's latent. Unlike the transformer encoder, whose
+    q_max estimate saturated at the edges of the training range, it extrapolates (median
+    q_max error +48 / +18 C at 4000-5000 / 8000-9000 C on noise-free flights), but it is
+    fragile to sensor noise (benchmarks/RESULTS.md).
+  - ``"transformer"`` (the sessions 5-7 model, still loadable):
+
+* Encoder (``"transformer"`` only): the observed context (20 s by default, up to ``max_context`` samples) is
   cut into patches of ``patch`` samples (the paper's 20 s context is one patch);
   each patch token sees its currents, its voltages, their change since the first
   observed sample and its start time. A ``torch.nn.TransformerEncoder`` over the
@@ -44,6 +55,8 @@ class DynaformerConfig:
     latent_dim: int = 8
     memory_tokens: int = 4
     max_context: int = 1024  # samples; longer contexts are strided down to this
+    health: str = "takeoff"  # "takeoff" (TakeoffHealth) or "transformer" (the patch encoder)
+    health_window: int = 20  # samples (s) of the take-off that TakeoffHealth reads
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -57,22 +70,98 @@ def sinusoidal(pos: torch.Tensor, dim: int, max_period: float = 20000.0) -> torc
     return torch.cat([torch.sin(ang), torch.cos(ang)], dim=-1)
 
 
+R0_MID, R0_HALF = 0.2335, 0.2165  # ohm: the training range's centre and half-width
+U_REF_C, U_SCALE = 6500.0, 0.23  # C, -: health u = (6500 C / q_max - 1) / 0.23, about [-1, 1] in range
+TAKEOFF_POINTS = 20  # samples of the window that the features use
+
+
+def takeoff_targets(r0_ohm, q_max_c):
+    """TakeoffHealth's regression targets [..., 2]: R0 and 6500 C / q_max, each scaled to about [-1, 1]."""
+    return torch.stack([(torch.as_tensor(r0_ohm, dtype=torch.float64) - R0_MID) / R0_HALF,
+                        (U_REF_C / torch.as_tensor(q_max_c, dtype=torch.float64) - 1.0) / U_SCALE], -1)
+
+
+def takeoff_to_health(h: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(R0 in ohm, q_max in C) from TakeoffHealth's output [..., 2]."""
+    return h[..., 0] * R0_HALF + R0_MID, U_REF_C / (h[..., 1] * U_SCALE + 1.0)
+
+
+class TakeoffHealth(nn.Module):
+    """Health (R0, 1/q_max) from the take-off: a quadratic regression on the first ``window`` samples.
+
+    Features (float64): the voltage change since the first sample (x10 and divided by the mean
+    current), the first voltage, every 4th current, log mean current, and all their pairwise
+    products. The weights are buffers fitted in closed form (:func:`uam_studio.dynaformer.train.fit_takeoff_health`).
+    The output is clamped to R0 in about [-0.09, 0.56] ohm and q_max in [2700, 16000] C.
+    """
+
+    def __init__(self, window: int = 20) -> None:
+        super().__init__()
+        self.window = int(window)
+        self.register_buffer("points", torch.linspace(0, window - 1, TAKEOFF_POINTS).round().long())
+        n_base = 2 * (TAKEOFF_POINTS - 1) + 1 + len(range(0, TAKEOFF_POINTS, 4)) + 1
+        n_feat = n_base + n_base * (n_base + 1) // 2
+        self.register_buffer("iu", torch.triu_indices(n_base, n_base))
+        self.register_buffer("mean", torch.zeros(n_feat, dtype=torch.float64))
+        self.register_buffer("scale", torch.ones(n_feat, dtype=torch.float64))
+        self.register_buffer("weight", torch.zeros(n_feat, 2, dtype=torch.float64))
+        self.register_buffer("bias", torch.zeros(2, dtype=torch.float64))
+
+    def features(self, ctx_i: torch.Tensor, ctx_v: torch.Tensor) -> torch.Tensor:
+        """Raw features [B, F] (float64) from context current (A) and voltage (V), [B, >= window]."""
+        if ctx_i.shape[-1] < self.window:
+            raise ValueError(f"the take-off health estimate needs {self.window} samples, got {ctx_i.shape[-1]}")
+        i = ctx_i[:, self.points].double()
+        v = ctx_v[:, self.points].double()
+        i_mean = i.mean(1, keepdim=True).clamp_min(0.05)
+        dv = v[:, 1:] - v[:, :1]
+        base = torch.cat([dv * 10.0, dv / i_mean, (v[:, :1] - 3.6) / 0.5, i[:, ::4] / 3.0, torch.log(i_mean)], 1)
+        prod = base.unsqueeze(2) * base.unsqueeze(1)
+        return torch.cat([base, prod[:, self.iu[0], self.iu[1]]], 1)
+
+    def forward(self, ctx_i: torch.Tensor, ctx_v: torch.Tensor) -> torch.Tensor:
+        x = (self.features(ctx_i, ctx_v) - self.mean) / self.scale
+        h = x @ self.weight + self.bias
+        h = torch.stack([h[:, 0].clamp(-1.5, 1.5), h[:, 1].clamp(-2.5, 4.0)], 1)
+        return torch.nan_to_num(h).float()
+
+
+class _HealthScale(nn.Module):
+    """Health embedding from TakeoffHealth's (R0, u): u at half scale, so that PC1 follows R0
+    and PC2 q_max (as in the transformer's supervised embedding). Not used by the decoder."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.register_buffer("gain", torch.tensor([1.0, 0.5]), persistent=False)
+
+    def forward(self, h: torch.Tensor) -> torch.Tensor:
+        return h * self.gain
+
+
 class Dynaformer(nn.Module):
     def __init__(self, cfg: DynaformerConfig | None = None) -> None:
         super().__init__()
         cfg = cfg or DynaformerConfig()
+        if cfg.health not in ("takeoff", "transformer"):
+            raise ValueError(f"health must be 'takeoff' or 'transformer', got {cfg.health!r}")
         self.cfg = cfg
         d = cfg.d_model
-        n_in = 5 * cfg.patch + 1
-        self.enc_in = nn.Sequential(nn.Linear(n_in, 4 * d), nn.GELU(), nn.Linear(4 * d, 4 * d), nn.GELU(),
-                                    nn.Linear(4 * d, d))
-        enc_layer = nn.TransformerEncoderLayer(d, cfg.n_heads, cfg.ff_dim, dropout=0.0, batch_first=True,
-                                               norm_first=True)
-        self.encoder = nn.TransformerEncoder(enc_layer, cfg.enc_layers, enable_nested_tensor=False)
-        self.to_latent = nn.Sequential(nn.LayerNorm(d), nn.Linear(d, d), nn.GELU(), nn.Linear(d, cfg.latent_dim))
-        self.health_head = nn.Linear(cfg.latent_dim, 2)  # latent -> 2-D health embedding
-        self.latent_to_memory = nn.Linear(cfg.latent_dim, d * cfg.memory_tokens)
-        self.latent_to_query = nn.Linear(cfg.latent_dim, d)
+        if cfg.health == "takeoff":
+            self.latent_dim = 2
+            self.takeoff = TakeoffHealth(cfg.health_window)
+            self.health_head = _HealthScale()  # the estimate, R0 at twice q's spread, is the health embedding
+        else:
+            self.latent_dim = cfg.latent_dim
+            n_in = 5 * cfg.patch + 1
+            self.enc_in = nn.Sequential(nn.Linear(n_in, 4 * d), nn.GELU(), nn.Linear(4 * d, 4 * d), nn.GELU(),
+                                        nn.Linear(4 * d, d))
+            enc_layer = nn.TransformerEncoderLayer(d, cfg.n_heads, cfg.ff_dim, dropout=0.0, batch_first=True,
+                                                   norm_first=True)
+            self.encoder = nn.TransformerEncoder(enc_layer, cfg.enc_layers, enable_nested_tensor=False)
+            self.to_latent = nn.Sequential(nn.LayerNorm(d), nn.Linear(d, d), nn.GELU(), nn.Linear(d, cfg.latent_dim))
+            self.health_head = nn.Linear(cfg.latent_dim, 2)  # latent -> 2-D health embedding
+        self.latent_to_memory = nn.Linear(self.latent_dim, d * cfg.memory_tokens)
+        self.latent_to_query = nn.Linear(self.latent_dim, d)
         self.dec_in = nn.Linear(cfg.chunk + 3, d)
         dec_layer = nn.TransformerDecoderLayer(d, cfg.n_heads, cfg.ff_dim, dropout=0.0, batch_first=True,
                                                norm_first=True)
@@ -83,8 +172,11 @@ class Dynaformer(nn.Module):
     def encode(self, ctx_i: torch.Tensor, ctx_v: torch.Tensor, ctx_mask: torch.Tensor | None = None) -> torch.Tensor:
         """Health latent [B, latent_dim] from context current (A) and voltage (V), [B, L].
 
-        ctx_mask: [B, L] True where the sample is real (contexts of different lengths).
+        ctx_mask: [B, L] True where the sample is real (contexts of different lengths); the
+        take-off estimator reads the first ``health_window`` samples and ignores it.
         """
+        if self.cfg.health == "takeoff":
+            return self.takeoff(ctx_i, ctx_v)
         b, n = ctx_i.shape
         p = self.cfg.patch
         if ctx_mask is None:

@@ -79,7 +79,13 @@ class DynaformerPredictor:
             raise InputError("context_voltage_v", "voltages must be in [0, 5] V")
         ci = _to_grid(ci, dt_s, hold=True)
         cv = _to_grid(cv, dt_s, hold=False)
-        if ci.shape[1] > self.max_context:  # whole history: stride down to the encoder's limit
+        if self.model.cfg.health == "takeoff":  # reads the take-off window from t = 0, nothing after it
+            w = self.model.cfg.health_window
+            if ci.shape[1] < w:
+                raise InputError("context_current_a", f"needs at least {w} s of take-off (got {ci.shape[1]} s "
+                                 "on the 1 s grid)")
+            ci, cv = ci[:, :w], cv[:, :w]
+        elif ci.shape[1] > self.max_context:  # whole history: stride down to the encoder's limit
             stride = int(math.ceil(ci.shape[1] / self.max_context))
             ci, cv = ci[:, ::stride], cv[:, ::stride]
         if batch is not None and ci.shape[0] not in (1, batch):
