@@ -212,7 +212,6 @@ def test_takeoff_training_fits_the_health_and_trains_only_the_decoder(tmp_path):
 
 def test_format_2_weights_still_load_as_the_transformer_encoder(tmp_path):
     """Weights saved before the take-off estimator (format 2, no 'health' in the config) load as before."""
-    from uam_studio.dynaformer import artifact
 
     cfg = DynaformerConfig(d_model=16, n_heads=2, enc_layers=1, dec_layers=1, ff_dim=32, latent_dim=4,
                            health="transformer")
