@@ -37,6 +37,8 @@ from dataclasses import asdict, dataclass
 import torch
 from torch import nn
 
+from .data import TRAIN_R_RANGE
+
 V_CENTER, V_SCALE = 3.6, 0.5  # V: voltage normalisation
 I_SCALE = 3.0  # A
 Q_SCALE = 8000.0  # C: cumulative charge normalisation
@@ -70,13 +72,14 @@ def sinusoidal(pos: torch.Tensor, dim: int, max_period: float = 20000.0) -> torc
     return torch.cat([torch.sin(ang), torch.cos(ang)], dim=-1)
 
 
-R0_MID, R0_HALF = 0.2335, 0.2165  # ohm: the training range's centre and half-width
+R0_MID = sum(TRAIN_R_RANGE) / 2  # ohm: the training range's centre
+R0_HALF = (TRAIN_R_RANGE[1] - TRAIN_R_RANGE[0]) / 2  # ohm: and half-width
 U_REF_C, U_SCALE = 6500.0, 0.23  # C, -: health u = (6500 C / q_max - 1) / 0.23, about [-1, 1] in range
 TAKEOFF_POINTS = 20  # samples of the window that the features use
 
 
 def takeoff_targets(r0_ohm, q_max_c):
-    """TakeoffHealth's regression targets [..., 2]: R0 and 6500 C / q_max, each scaled to about [-1, 1]."""
+    """TakeoffHealth's regression targets [..., 2]: R0 (ohm) and 6500 C / q_max (q_max in C), each scaled to about [-1, 1]."""
     return torch.stack([(torch.as_tensor(r0_ohm, dtype=torch.float64) - R0_MID) / R0_HALF,
                         (U_REF_C / torch.as_tensor(q_max_c, dtype=torch.float64) - 1.0) / U_SCALE], -1)
 

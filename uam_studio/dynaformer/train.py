@@ -32,7 +32,9 @@ import torch
 from tqdm.auto import tqdm
 
 from .artifact import atomic_torch_save, save_artifact
-from .data import TRAIN_Q_RANGE, TRAIN_R_RANGE, DischargeSet, make_dataset
+from .data import TRAIN_Q_RANGE, DischargeSet, make_dataset
+from .model import R0_HALF as R_HALF
+from .model import R0_MID as R_MID
 from .model import Dynaformer, DynaformerConfig, takeoff_targets
 
 DEFAULT_CONTEXT_S = 20
@@ -41,7 +43,6 @@ CONTEXT_SET_LEN = 600  # samples (s) of each extra short-context cell
 CONTEXT_BATCH_MAX_S = 120  # s: the extra context batch stays short (cheap); discharges carry the long ones
 Q_MID, Q_HALF = sum(TRAIN_Q_RANGE) / 2, (TRAIN_Q_RANGE[1] - TRAIN_Q_RANGE[0]) / 2  # C
 Q_LATENT_SPREAD = 0.5  # q_max's half-range in the latent, R0's is 1
-R_MID, R_HALF = sum(TRAIN_R_RANGE) / 2, (TRAIN_R_RANGE[1] - TRAIN_R_RANGE[0]) / 2  # ohm
 
 
 @dataclass
