@@ -11,9 +11,10 @@ the widget change to the plan and every view (summary, map, plots) updated. Refe
 run: the bare library call ``plan_mission`` for the same inputs. Policies: the bundled DQN (if
 ``pretrained/dqn_single_charge.zip`` exists; otherwise that is reported), greedy and the oracle.
 
-pageload and concurrency serve the app with ``panel serve uam_studio/app/main.py --warm`` in a
-subprocess and drive Debian's chromium (``/usr/bin/chromium``) with playwright. The page load is the
-time from ``goto`` to the first plan shown in the summary. Concurrency: session B moves the q_max
+pageload and concurrency serve the app with ``uam-studio serve`` in a subprocess, built once before
+the first page (:class:`uam_studio.app.serve.ServedApp`), and drive Debian's chromium
+(``/usr/bin/chromium``) with playwright. The page load is the time from ``goto`` to the first plan
+shown in the summary. Concurrency: session B moves the q_max
 slider with the keyboard (one 50 C step at a time) and waits for the summary of that exact input;
 first with nothing else running, then while session A retrains a DQN agent, once with the training in
 a child process (the app's default) and once in a thread of the server (for comparison).
@@ -147,7 +148,7 @@ def bench_pageload(n: int) -> list[str]:
 
     lines = [f"pageload: load average before {_load()}"]
     with Served() as srv, sync_playwright() as p:
-        lines.append(f"  server start with --warm (imports, one app build): {srv.startup_s:.1f} s")
+        lines.append(f"  server start (imports, one app build): {srv.startup_s:.1f} s")
         browser = _browser(p)
         loads, dom = [], []
         outside: list[str] = []

@@ -1,7 +1,7 @@
 """Browser tests of the served app (pytest-playwright, Debian's chromium).
 
-One ``panel serve uam_studio/app/main.py`` subprocess serves the whole module, with
-``UAM_STUDIO_HOME`` in a temporary folder. Each test opens its own page (its own session).
+One ``uam-studio serve`` subprocess (:class:`uam_studio.app.serve.ServedApp`) serves the whole
+module, with ``UAM_STUDIO_HOME`` in a temporary folder. Each test opens its own page (its own session).
 The tests are skipped only if no chromium is installed.
 """
 

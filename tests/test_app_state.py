@@ -193,14 +193,15 @@ def test_reset_example():
     assert s.mission == mission_from_dict(EXAMPLE_MISSION)
 
 
-def test_missing_bundled_agent_is_a_message_not_an_error(monkeypatch, tmp_path):
-    import uam_studio.planning.policy as policy
+def test_missing_bundled_agent_is_a_visible_error(monkeypatch, tmp_path):
+    import uam_studio.bundled as bundled
 
-    monkeypatch.setattr(policy, "BUNDLED_DIR", tmp_path)
+    monkeypatch.setattr(bundled, "package_dir", lambda: tmp_path)  # an install without the agents
     s = _state()
+    assert s.policy == "greedy"  # no bundled agent: greedy is the default planner
     assert s.apply(policy="dqn")
-    assert s.plan_error == "" and s.plan["route"] == []
-    assert any("no bundled DQN agent" in m for m in s.plan["messages"])
+    assert s.plan_error.startswith("agent: bundled agent dqn_single_charge.zip is not installed")
+    assert s.plan is None
 
 
 def test_background_replanning_keeps_only_the_latest():
@@ -389,15 +390,15 @@ def test_plans_are_cached_across_sessions_and_copies_are_independent():
 
 
 def test_cached_dqn_plan_is_not_reused_for_another_agent_file(monkeypatch, tmp_path):
-    import uam_studio.planning.policy as policy
+    import uam_studio.bundled as bundled
     from uam_studio.app.state import PlanRequest, compute_plan
 
     req = PlanRequest(mission_from_dict({**EXAMPLE_MISSION, "name": "Agent stamp"}), "dqn")
     assert compute_plan(req)["plan"]["route"]
-    monkeypatch.setattr(policy, "BUNDLED_DIR", tmp_path)  # the bundled agent is gone
+    monkeypatch.setattr(bundled, "package_dir", lambda: tmp_path)  # the bundled agent is gone
     res = compute_plan(req)
-    assert not res["cached"] and res["plan"]["route"] == []
-    assert any("no bundled DQN agent" in m for m in res["plan"]["messages"])
+    assert not res["cached"] and res["plan"] is None
+    assert res["error"].startswith("agent: bundled agent dqn_single_charge.zip is not installed")
 
 
 def test_planning_activity_keeps_training_paused_for_a_grace_period():

@@ -117,14 +117,20 @@ def test_missing_agent_exits_2_naming_agent(capsys):
     assert len(err.splitlines()) == 1 and err.startswith("error: agent")
 
 
-def test_missing_bundled_agent_is_a_message(monkeypatch, tmp_path):
-    import uam_studio.planning.policy as policy
+def test_missing_bundled_agent_is_an_error_not_an_empty_plan(monkeypatch, tmp_path, capsys):
+    import uam_studio.bundled as bundled
+    from uam_studio.errors import InputError
 
-    monkeypatch.setattr(policy, "BUNDLED_DIR", tmp_path)
-    res = plan_mission(_example(), "dqn", predictor=False)
-    assert res["route"] == [] and res["predicted"] is None
-    assert any(m.startswith("no bundled DQN agent for scenario single_charge; use --policy oracle or greedy")
-               for m in res["messages"])
+    monkeypatch.setenv("UAM_STUDIO_HOME", str(tmp_path / "home"))
+    monkeypatch.setattr(bundled, "package_dir", lambda: tmp_path)  # an install without the agents
+    with pytest.raises(InputError, match=r"^agent: bundled agent dqn_single_charge.zip is not installed"):
+        plan_mission(_example(), "dqn", predictor=False)
+    code = main(["plan", str(EXAMPLE)])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == ""
+    assert len(err.splitlines()) == 1
+    assert err.startswith("error: agent: bundled agent dqn_single_charge.zip is not installed")
+    assert plan_mission(_example(), "greedy", predictor=False)["route"]  # the other policies still plan
 
 
 def test_trained_agent_plans_and_is_physics_checked(capsys, agent):

@@ -141,6 +141,7 @@ def _add_plan_arguments(p: argparse.ArgumentParser) -> None:
 
 def _run_plan(args: argparse.Namespace) -> int:
     from uam_studio.planning import load_mission
+    from uam_studio.planning.actions import N_MAX, check_destination_count
     from uam_studio.planning.policy import plan_mission
 
     if args.agent is not None and args.policy != "dqn":
@@ -148,6 +149,8 @@ def _run_plan(args: argparse.Namespace) -> int:
     if args.lookahead and args.policy != "dqn":
         raise _CliExit(f"--lookahead: only used with --policy dqn (not {args.policy})", EXIT_INPUT)
     mission = load_mission(args.mission)
+    if len(mission.destinations) > N_MAX:
+        check_destination_count(len(mission.destinations))
     res = plan_mission(mission, args.policy, q_max=args.q_max, r0=args.r0, agent_path=args.agent,
                        lookahead=args.lookahead)
     if args.json:
@@ -215,12 +218,29 @@ def _add_train_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _refuse_bundled(out) -> None:
+    from uam_studio.bundled import is_bundled
+
+    if is_bundled(out):
+        raise _CliExit("--out: must not be the bundled pretrained/ folder (copy weights there by hand)", EXIT_INPUT)
+
+
+def _check_out_folder(folder) -> None:
+    """Create the run folder ``folder`` if needed and check a file can be written in it, before any work."""
+    import tempfile
     from pathlib import Path
 
-    bundled = (Path(__file__).resolve().parent.parent / "pretrained").resolve()
-    out = Path(out).resolve()
-    if out == bundled or bundled in out.parents:
-        raise _CliExit("--out: must not be the bundled pretrained/ folder (copy weights there by hand)", EXIT_INPUT)
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise _CliExit(f"--out: {folder} exists and is not a folder", EXIT_INPUT) from None
+    except OSError as err:
+        raise _CliExit(f"--out: cannot create the folder {folder} ({err.strerror or err})", EXIT_INPUT) from None
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as err:
+        raise _CliExit(f"--out: cannot write in {folder} ({err.strerror or err})", EXIT_INPUT) from None
 
 
 def _reject_options(args: argparse.Namespace, names: tuple[str, ...], model: str) -> None:
@@ -239,11 +259,12 @@ def _run_train(args: argparse.Namespace) -> int:
 
 
 def _run_train_dynaformer(args: argparse.Namespace) -> int:
-    from .dynaformer.train import TrainConfig, train
+    from .dynaformer.train import TrainConfig, pick_device, train
 
     out = args.out or "runs/dynaformer"
     _refuse_bundled(out)
     cfg = TrainConfig(seed=args.seed, device=args.device or "auto")
+    pick_device(cfg.device)
     if args.steps is not None:
         if args.steps < 1:
             raise _CliExit("--steps: must be >= 1", EXIT_INPUT)
@@ -252,6 +273,7 @@ def _run_train_dynaformer(args: argparse.Namespace) -> int:
         if args.n_train < 64:
             raise _CliExit("--n-train: must be >= 64", EXIT_INPUT)
         cfg.n_train = args.n_train
+    _check_out_folder(out)
     weights = train(cfg, out, resume=not args.no_resume)
     print(f"wrote {weights}")
     return EXIT_OK
@@ -275,13 +297,13 @@ def _run_train_dqn(args: argparse.Namespace) -> int:
         raise _CliExit(f"--out: {agent} exists and is not a file", EXIT_INPUT)
     if args.steps is not None and args.steps < 1:
         raise _CliExit("--steps: must be >= 1", EXIT_INPUT)
+    _check_out_folder(agent.parent)
     # Shared with the app's Retrain tab: validation, env, card and atomic save live in the library.
     cfg, env_fn = training_setup(scenario, mission, args.alpha, args.beta, args.gamma, args.steps, args.seed,
                                  safe_return=bool(args.safe_return), init_agent=args.init_from)
-    res = retrain_dqn(cfg, env_fn, agent, mission=mission, progress_bar=True, source="cli")
-    card, final = res.card, res.card["final_stats"]
     card_path = agent.with_name("card.json") if agent.name == "agent.zip" else agent.with_suffix(".card.json")
-    card_path.write_text(json.dumps(card, indent=2, default=str) + "\n")
+    res = retrain_dqn(cfg, env_fn, agent, mission=mission, progress_bar=True, source="cli", card_path=card_path)
+    card, final = res.card, res.card["final_stats"]
     summary = (f"{final['episodes']} episodes; last {final['last_episodes']}: mean reward "
                f"{final['mean_reward']:.2f}, EOD rate {final['eod_rate']:.0%}" if final["last_episodes"]
                else "no finished episode")
@@ -315,23 +337,42 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 
 def _add_serve_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", type=int, default=5006, help="port to listen on (default 5006)")
-    p.add_argument("--address", default=None, help="address to listen on (default: all interfaces)")
+    p.add_argument("--address", default=None,
+                   help="address to listen on (default 127.0.0.1: this machine only); e.g. 0.0.0.0 for "
+                        "all interfaces, which lets anyone who can reach the port use the app, with no login")
+    p.add_argument("--allow-origin", action="append", default=[], metavar="HOST[:PORT]",
+                   help="also answer requests addressed to HOST[:PORT] (the name or IP other machines use "
+                        "to reach this one; PORT defaults to --port); repeatable. Other names get 403")
     p.add_argument("--show", action=argparse.BooleanOptionalAction, default=True,
                    help="open the app in a browser (default: yes)")
 
 
 def _run_serve(args: argparse.Namespace) -> int:
+    import errno
+    import socket
+
     if not 0 <= args.port <= 65535:
         raise _CliExit(f"--port: {args.port} is out of range; allowed [0, 65535]", EXIT_INPUT)
     try:
-        from uam_studio.app.serve import serve
+        from uam_studio.app.serve import DEFAULT_ADDRESS, serve, split_host
     except ImportError as err:
         raise _CliExit(f"serve: the app needs panel and holoviews ({err})", EXIT_INPUT) from None
+    for value in args.allow_origin:
+        try:
+            split_host(value)
+        except ValueError as err:
+            raise _CliExit(f"--allow-origin: {err}", EXIT_INPUT) from None
+    address = args.address or DEFAULT_ADDRESS
+    if address in ("0.0.0.0", "::") and not args.allow_origin:
+        print(f"note: --address {address}: other machines get 403 unless the name or IP they use for this "
+              "one is allowed with --allow-origin HOST[:PORT]", file=sys.stderr)
     try:
-        serve(port=args.port, show=args.show, address=args.address)
+        serve(port=args.port, show=args.show, address=address, allow_origin=args.allow_origin)
     except OSError as err:
-        raise _CliExit(f"--port: cannot listen on {args.address or '*'}:{args.port} "
-                       f"({err.strerror or err})", EXIT_INPUT) from None
+        if isinstance(err, socket.gaierror) or err.errno in (errno.EADDRNOTAVAIL, errno.EAFNOSUPPORT):
+            raise _CliExit(f"--address: cannot listen on {address} ({err.strerror or err})", EXIT_INPUT) from None
+        raise _CliExit(f"--port: cannot listen on {address}:{args.port} ({err.strerror or err})",
+                       EXIT_INPUT) from None
     return EXIT_OK
 
 

@@ -14,14 +14,23 @@ class InputError(ValueError):
         super().__init__(f"{field}: {message}")
 
 
+def short_repr(value: Any, limit: int = 60) -> str:
+    """``repr(value)``, cut to ``limit`` characters, so an error message stays one short line."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def check_range(field: str, value: Any, lo: float, hi: float, unit: str = "") -> float:
     """Return ``value`` as float if it is a finite number in [lo, hi], else raise :class:`InputError`."""
     try:
         x = float(value)
+    except OverflowError:
+        raise InputError(field, f"a {len(str(value))}-digit number is out of range; allowed [{lo:g}, {hi:g}]{unit}") \
+            from None
     except (TypeError, ValueError):
-        raise InputError(field, f"expected a number in [{lo:g}, {hi:g}]{unit}, got {value!r}") from None
+        raise InputError(field, f"expected a number in [{lo:g}, {hi:g}]{unit}, got {short_repr(value)}") from None
     if not math.isfinite(x) or x < lo or x > hi:
-        raise InputError(field, f"{value!r} is out of range; allowed [{lo:g}, {hi:g}]{unit}")
+        raise InputError(field, f"{short_repr(value)} is out of range; allowed [{lo:g}, {hi:g}]{unit}")
     return x
 
 
@@ -29,8 +38,10 @@ def check_positive(field: str, value: Any, unit: str = "") -> float:
     """Return ``value`` as float if it is finite and > 0, else raise :class:`InputError`."""
     try:
         x = float(value)
+    except OverflowError:
+        raise InputError(field, f"a {len(str(value))}-digit number is out of range; allowed > 0{unit}") from None
     except (TypeError, ValueError):
-        raise InputError(field, f"expected a number > 0{unit}, got {value!r}") from None
+        raise InputError(field, f"expected a number > 0{unit}, got {short_repr(value)}") from None
     if not math.isfinite(x) or x <= 0:
-        raise InputError(field, f"{value!r} is out of range; allowed > 0{unit}")
+        raise InputError(field, f"{short_repr(value)} is out of range; allowed > 0{unit}")
     return x

@@ -1,41 +1,168 @@
-"""Serve the app from Python: :func:`serve` (used by ``uam-studio serve``)."""
+"""Serve the app from Python: :func:`serve` (used by ``uam-studio serve``) and :class:`ServedApp`
+(the same server in a subprocess, for the browser tests and benchmarks).
+
+The server answers only requests addressed to it by a name in its allow-list (:func:`allowed_hosts`):
+every request (page, static files, ``/ws`` websocket, ``/liveness``) whose ``Host`` header, or whose
+``Origin`` header when it has one, is not in the list gets 403. A web page on another site therefore
+cannot drive the app, not even through DNS rebinding (a name of its own that resolves to this machine).
+"""
 
 from __future__ import annotations
 
+import logging
 import threading
+from collections.abc import Iterable, Sequence
+from typing import Any
+from urllib.parse import urlsplit
 
-from uam_studio.app.state import warm_up
+from tornado.httputil import HTTPServerRequest
+from tornado.routing import Matcher, Rule
+from tornado.web import RequestHandler
 
 DEFAULT_PORT = 5006
+DEFAULT_ADDRESS = "127.0.0.1"
+LOOPBACK_NAMES = ("127.0.0.1", "localhost", "[::1]")
+
+log = logging.getLogger(__name__)
+
+
+def split_host(value: str) -> tuple[str, int | None]:
+    """``HOST[:PORT]`` (an IPv6 address in brackets: ``[::1]:5006``) as ``(host, port or None)``, the
+    host in lower case. :class:`ValueError` if it is not of that form (a URL, an empty host, a bad port).
+    """
+    text = value.strip().lower()
+    if "/" in text or "@" in text or not text:
+        raise ValueError(f"{value!r} is not HOST[:PORT]")
+    if text.startswith("["):
+        end = text.find("]")
+        host, rest = text[:end + 1], text[end + 1:]
+        if end < 2:
+            raise ValueError(f"{value!r} is not HOST[:PORT]")
+    else:
+        host, sep, port = text.partition(":")
+        rest = sep + port
+        if ":" in port:
+            raise ValueError(f"{value!r} is not HOST[:PORT] (write an IPv6 address in brackets: [::1]:5006)")
+    if not host:
+        raise ValueError(f"{value!r} has no host")
+    if not rest:
+        return host, None
+    if not rest.startswith(":") or not rest[1:].isdigit() or not 0 < int(rest[1:]) <= 65535:
+        raise ValueError(f"{value!r} has no valid port; allowed [1, 65535]")
+    return host, int(rest[1:])
+
+
+def _host_literal(address: str) -> str:
+    """``address`` as it appears in a Host header: an IPv6 address in brackets."""
+    return f"[{address}]" if ":" in address and not address.startswith("[") else address
+
+
+def allowed_hosts(port: int, address: str | None = None, allow_origin: Iterable[str] = ()) -> list[str]:
+    """The ``host:port`` values that requests to the server may name in ``Host`` and ``Origin``.
+
+    Always the loopback names (``127.0.0.1``, ``localhost``, ``[::1]``) on ``port``; the listening
+    ``address`` if one is given; and each ``HOST[:PORT]`` of ``allow_origin`` (``port`` when it has none).
+    """
+    hosts = [f"{name}:{port}" for name in LOOPBACK_NAMES]
+    extra = [f"{_host_literal(address)}:{port}"] if address else []
+    for value in allow_origin:
+        host, host_port = split_host(value)
+        extra.append(f"{host}:{host_port or port}")
+    return hosts + [h for h in dict.fromkeys(h.lower() for h in extra) if h not in hosts]
+
+
+class _ForeignRequest(Matcher):
+    """Matches a request whose ``Host``, or ``Origin`` when present, is not in ``allowed``."""
+
+    def __init__(self, allowed: Iterable[str]) -> None:
+        self.allowed = frozenset(allowed)
+
+    def _is_allowed(self, netloc: str, default_port: int) -> bool:
+        try:
+            host, port = split_host(netloc)
+        except ValueError:
+            return False
+        return f"{host}:{port or default_port}" in self.allowed
+
+    def match(self, request: HTTPServerRequest) -> dict[str, Any] | None:
+        if not self._is_allowed(request.headers.get("Host", ""), 80):
+            return {}
+        origin = request.headers.get("Origin")
+        if origin is not None:
+            parts = urlsplit(origin)
+            if parts.scheme not in ("http", "https") or not self._is_allowed(
+                    parts.netloc, 443 if parts.scheme == "https" else 80):
+                return {}
+        return None
+
+
+class _Forbidden(RequestHandler):
+    """Answers 403 with one line naming the allow-list, for every method (websocket upgrades too)."""
+
+    def initialize(self, allowed: Sequence[str]) -> None:
+        self.allowed = allowed
+
+    def prepare(self) -> None:
+        host, origin = self.request.headers.get("Host"), self.request.headers.get("Origin")
+        log.warning("refused %s %s: Host %r, Origin %r not in %s", self.request.method, self.request.path,
+                    host, origin, ", ".join(self.allowed))
+        self.set_status(403)
+        self.set_header("Content-Type", "text/plain; charset=utf-8")
+        self.finish(f"403 Forbidden: this server answers only to {', '.join(self.allowed)} "
+                    "(uam-studio serve --allow-origin HOST[:PORT] adds a name)\n")
+
+
+def install_host_guard(server: Any, allowed: Sequence[str]) -> None:
+    """Make the bokeh ``server`` answer 403 to every request whose ``Host``, or ``Origin`` when present,
+    is not in ``allowed``: a route ahead of all others in its tornado Application. Its own websocket
+    Origin check gets the same list."""
+    app = server._tornado  # bokeh's Server keeps its tornado Application there (panel reads it too)
+    app.default_router.rules.insert(0, Rule(_ForeignRequest(allowed), _Forbidden, {"allowed": list(allowed)}))
+    app.websocket_origins.clear()  # the live set bokeh's /ws handler checks Origin against
+    app.websocket_origins.update(allowed)
 
 
 def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = None,
-          allow_websocket_origin: list[str] | None = None) -> None:
+          allow_origin: Sequence[str] = ()) -> None:
     """Start a Panel server with the app at ``/`` and block until it is stopped (Ctrl-C).
 
-    The Dynaformer and the health population are loaded in a background thread at start, so the
-    first session does not wait for them.
+    It listens on ``address`` (default ``127.0.0.1``: this machine only) and answers only requests
+    naming a host of :func:`allowed_hosts` (``allow_origin`` adds names); others get 403. ``/liveness``
+    answers once the server is up; ``/liveness?endpoint=/`` builds the app once first.
+
+    The port is bound first (:class:`OSError` if it cannot be; :class:`ValueError` for a bad
+    ``allow_origin`` before that), then the Dynaformer and the health population are loaded in a
+    background thread, so the first session does not wait for them.
     """
     import panel as pn
 
     from uam_studio.app.main import EXTENSIONS, TITLE, create_app
     from uam_studio.app.session import configure_server_threads
+    from uam_studio.app.state import warm_up
 
+    address = address or DEFAULT_ADDRESS
+    allowed_hosts(port, address, allow_origin)  # ValueError for a bad allow_origin, before binding
     configure_server_threads()
-    threading.Thread(target=warm_up, daemon=True, name="uam-warm-up").start()
     pn.extension(*EXTENSIONS)
-    pn.serve({"/": create_app}, port=port, address=address, show=show, title=TITLE,
-             websocket_origin=allow_websocket_origin, start=True, threaded=False,
-             print_url=True)
+    server = pn.serve({"/": create_app}, port=port, address=address, show=show, title=TITLE, start=False,
+                      threaded=False, liveness=True)
+    install_host_guard(server, allowed_hosts(server.port, address, allow_origin))
+    warm = threading.Thread(target=warm_up, daemon=True, name="uam-warm-up")
+    warm.start()
+    try:
+        server.start()
+        server.io_loop.start()  # until Ctrl-C (panel's SIGINT handler stops the loop)
+    finally:
+        warm.join()  # a daemon thread still inside torch at interpreter exit aborts the process
 
 
 class ServedApp:
-    """``panel serve uam_studio/app/main.py --warm --liveness`` in a subprocess on a free local port:
-    how the browser tests and ``benchmarks/bench_app.py`` start the app the way users do.
+    """``uam-studio serve --no-show`` in a subprocess on a free local port: how the browser tests and
+    ``benchmarks/bench_app.py`` start the app the way users do.
 
     Use as a context manager; ``url`` is the app's page, ``log_path`` the server's output and
-    ``startup_s`` the seconds from launch to the first ``/liveness`` answer (``--warm`` builds the
-    app once before the server answers).
+    ``startup_s`` the seconds from launch to the first answer of ``/liveness?endpoint=/`` (which
+    builds the app once: imports, one app build).
 
     :param home: the user folder (``UAM_STUDIO_HOME``) for the server.
     :param timeout_s: how long to wait for the server (s); :class:`RuntimeError` with the log's tail after.
@@ -64,26 +191,26 @@ class ServedApp:
         self.home.mkdir(parents=True, exist_ok=True)
         self._log = open(self.log_path, "w")  # noqa: SIM115 - closed in __exit__
         env = {**os.environ, "UAM_STUDIO_HOME": str(self.home), **self.extra_env}
-        root = Path(__file__).resolve().parents[2]
+        root = Path(self.home)  # outside any checkout: the installed package is what runs
         t0 = time.perf_counter()
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "panel", "serve", "uam_studio/app/main.py", "--port", str(self.port),
-             "--address", "127.0.0.1", "--allow-websocket-origin", f"127.0.0.1:{self.port}", "--warm",
-             "--liveness"], cwd=root, env=env, stdout=self._log, stderr=subprocess.STDOUT)
+            [sys.executable, "-m", "uam_studio.cli", "serve", "--no-show", "--port", str(self.port)],
+            cwd=root, env=env, stdout=self._log, stderr=subprocess.STDOUT)
         deadline = time.monotonic() + self.timeout_s
-        while True:  # /liveness answers once the server is up, and builds no session
+        liveness = f"http://127.0.0.1:{self.port}/liveness?endpoint=/"
+        while True:  # answers once the server is up and has built the app once
             try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{self.port}/liveness", timeout=30) as r:
+                with urllib.request.urlopen(liveness, timeout=60) as r:
                     if r.status == 200:
                         break
             except OSError:
                 pass
             if self.proc.poll() is not None or time.monotonic() > deadline:
                 self.__exit__()
-                raise RuntimeError(f"panel serve did not start: {self.log_path.read_text()[-2000:]}")
+                raise RuntimeError(f"uam-studio serve did not start: {self.log_path.read_text()[-2000:]}")
             time.sleep(0.25)
         self.startup_s = time.perf_counter() - t0
-        self.url = f"http://127.0.0.1:{self.port}/main"
+        self.url = f"http://127.0.0.1:{self.port}/"
         return self
 
     def __exit__(self, *exc) -> None:

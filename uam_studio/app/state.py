@@ -38,7 +38,7 @@ import param
 
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight.tables import ALTITUDE_RANGE_M, WIND_RANGE_KTS
-from uam_studio.planning.actions import N_MAX
+from uam_studio.planning.actions import N_MAX, check_destination_count
 from uam_studio.planning.mission import (
     COORD_RANGE_KM,
     SCENARIOS,
@@ -47,6 +47,7 @@ from uam_studio.planning.mission import (
     Mission,
     Vertiport,
     mission_from_dict,
+    mission_from_json,
     mission_to_dict,
 )
 
@@ -68,7 +69,6 @@ __all__ = [
 APP_Q_RANGE = (5000.0, 8000.0)  # C, the paper's range of q_max
 APP_R0_RANGE = (0.017, 0.45)  # ohm, the paper's range of R0
 APP_EOD_RANGE = (2.5, 3.5)  # V; the Dynaformer is trained down to 2.5 V
-MAX_FILE_BYTES = 1_000_000
 RUNNER_ENV = "UAM_STUDIO_RETRAIN_RUNNER"  # "process" (default) or "thread", for comparisons
 POPULATION_N = 300
 PLAN_CACHE_SIZE = 256  # plans kept for all sessions (compute_plan)
@@ -226,7 +226,12 @@ class AgentRegistry(param.Parameterized):
 
 @functools.lru_cache(maxsize=1)
 def registry() -> AgentRegistry:
-    """The process-wide :class:`AgentRegistry` (scanned on first use)."""
+    """The process-wide :class:`AgentRegistry` (scanned on first use, after deleting the temp files
+    that killed saves left in the agents folder)."""
+    from uam_studio.atomic_io import remove_stale_temps
+    from uam_studio.planning.retrain import agents_dir
+
+    remove_stale_temps(agents_dir())
     reg = AgentRegistry()
     reg.refresh()
     return reg
@@ -474,8 +479,7 @@ class PlannerState(param.Parameterized):
                 raise InputError("destinations", "a mission needs at least 1 destination (allowed 1 to "
                                                  f"{N_MAX}); add another before removing the last one")
             if n > N_MAX:
-                raise InputError("destinations", f"{n} destinations; the planners handle at most {N_MAX} "
-                                                 "(allowed 1 to 8); remove one first")
+                check_destination_count(n)
         self._build(**out)  # the library validates the rest (names, priorities, coordinates...)
         return out
 
@@ -564,30 +568,7 @@ class PlannerState(param.Parameterized):
 
     @staticmethod
     def _parse(data: bytes | str | None, what: str) -> Mission:
-        if data is None or len(data) == 0:
-            raise InputError(what, "is empty; expected a mission JSON file")
-        if len(data) > MAX_FILE_BYTES:
-            raise InputError(what, f"is {len(data)} bytes; at most {MAX_FILE_BYTES} allowed")
-        if isinstance(data, bytes):
-            try:
-                data = data.decode("utf-8")
-            except UnicodeDecodeError as err:
-                raise InputError(what, f"is not UTF-8 text (byte {err.start})") from None
-
-        def no_dupes(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-            d: dict[str, Any] = {}
-            for k, v in pairs:
-                if k in d:
-                    raise InputError(what, f"duplicate key {k!r} in a JSON object")
-                d[k] = v
-            return d
-
-        try:
-            obj = json.loads(data, object_pairs_hook=no_dupes)
-        except json.JSONDecodeError as err:
-            raise InputError(what, f"is not valid JSON: {err.msg} at line {err.lineno}, column {err.colno}") \
-                from None
-        return mission_from_dict(obj)
+        return mission_from_json(data if data is not None else b"", what)
 
     def reset_example(self) -> None:
         """Back to the bundled example mission."""

@@ -47,10 +47,19 @@ def pick(fast: T, full: T) -> T:
 
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
-"""The checkout the package runs from (editable install): holds ``assets/`` and ``pretrained/``."""
+"""The checkout the package runs from in an editable install (``pip install -e .``): it holds
+``assets/``, which is not package data (the bundled models are: :mod:`uam_studio.bundled`)."""
 
 
 def asset_path(name: str) -> Path:
     """Path of a file in the repository's ``assets/`` folder (e.g. ``"example_mission.json"``),
-    whatever the notebook's working directory."""
-    return REPO_ROOT / "assets" / name
+    whatever the notebook's working directory.
+
+    :raises InputError: (field ``asset``) the file is not there, e.g. in a plain (non-editable)
+        install, which ships no ``assets/``.
+    """
+    path = REPO_ROOT / "assets" / name
+    if not path.is_file():
+        raise InputError("asset", f"{name} is not in {path.parent}; the classroom assets come with the "
+                                  "repository checkout (pip install -e .), not with the installed package")
+    return path

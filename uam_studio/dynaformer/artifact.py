@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import os
-import tempfile
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import torch
 
+from ..atomic_io import atomic_save
 from ..errors import InputError
 from .model import Dynaformer, DynaformerConfig
 
@@ -22,25 +24,26 @@ class WeightsError(InputError):
         super().__init__("weights", f"{path}: {why}")
 
 
-def atomic_torch_save(obj, path) -> None:
-    """torch.save to a temp file in the same folder, then os.replace: never a half-written file."""
+def atomic_torch_save(obj: Any, path: str | os.PathLike[str], *,
+                      sidecars: Mapping[str | os.PathLike[str], bytes | str] | None = None) -> None:
+    """``torch.save(obj)`` to ``path`` atomically (:func:`uam_studio.atomic_io.atomic_save`), creating
+    its folder; ``sidecars``: files describing ``path``, written with it (see there)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        torch.save(obj, tmp)
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_save(path, lambda f: torch.save(obj, f), sidecars=sidecars)
 
 
-def save_artifact(path, model: Dynaformer, pca: dict, meta: dict) -> None:
+def save_artifact(path: str | os.PathLike[str], model: Dynaformer, pca: dict, meta: dict, *,
+                  sidecars: Mapping[str | os.PathLike[str], bytes | str] | None = None) -> None:
+    """Write the weights file ``path`` (format :data:`FORMAT`: config, weights, PCA, ``meta``) atomically.
+
+    :param sidecars: files describing the weights (e.g. ``train_meta.json``): written with them, so
+        a sidecar that exists always describes the weights beside it.
+    """
     state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
     atomic_torch_save({"format": FORMAT, "config": model.cfg.to_dict(), "state_dict": state,
-                       "pca": {k: torch.as_tensor(v) for k, v in pca.items()}, "meta": meta}, path)
+                       "pca": {k: torch.as_tensor(v) for k, v in pca.items()}, "meta": meta}, path,
+                      sidecars=sidecars)
 
 
 def load_artifact(path) -> tuple[Dynaformer, dict, dict]:
@@ -66,5 +69,9 @@ def load_artifact(path) -> tuple[Dynaformer, dict, dict]:
             raise ValueError("PCA shape")
     except Exception as exc:
         raise WeightsError(path, f"incompatible weights ({type(exc).__name__}: {str(exc)[:80]})") from None
+    bad = [k for k, v in [*blob["state_dict"].items(), *pca.items()]
+           if torch.is_tensor(v) and v.is_floating_point() and not bool(torch.isfinite(v).all())]
+    if bad:
+        raise WeightsError(path, f"{len(bad)} tensors hold NaN or inf values (first: {bad[0]})")
     model.eval()
     return model, pca, dict(blob.get("meta", {}))

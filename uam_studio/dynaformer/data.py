@@ -14,10 +14,12 @@ samples are on a 1 s grid (the model's native grid).
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..atomic_io import atomic_save
 from ..battery import simulate
 from ..flight import leg_profile, min_leg_distance_km
 
@@ -52,13 +54,33 @@ class DischargeSet:
     def subset(self, idx) -> DischargeSet:
         return DischargeSet(*(getattr(self, f)[idx] for f in self.__dataclass_fields__))
 
-    def save(self, path) -> None:
-        np.savez_compressed(path, **{f: getattr(self, f) for f in self.__dataclass_fields__})
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write the arrays to ``path`` as compressed ``.npz``, atomically (the folder must exist)."""
+        arrays = {f: getattr(self, f) for f in self.__dataclass_fields__}
+        atomic_save(path, lambda f: np.savez_compressed(f, **arrays))
 
     @classmethod
-    def load(cls, path) -> DischargeSet:
-        with np.load(path) as z:
-            return cls(**{f: z[f] for f in cls.__dataclass_fields__})
+    def load(cls, path: str | os.PathLike[str]) -> DischargeSet:
+        """Read a set written by :meth:`save`.
+
+        :raises ValueError: a file that is not a complete, consistent set (truncated or corrupt
+            zip, missing array, arrays of mismatched lengths), with the cause in the message.
+        :raises OSError: a file that is missing or cannot be opened (FileNotFoundError, PermissionError,
+            IsADirectoryError).
+        """
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                ds = cls(**{f: z[f] for f in cls.__dataclass_fields__})
+        except (FileNotFoundError, PermissionError, IsADirectoryError):
+            raise
+        except Exception as exc:  # zipfile.BadZipFile, zlib.error, KeyError, EOFError, ValueError, OSError
+            raise ValueError(f"{path}: not a readable dataset cache ({type(exc).__name__}: "
+                             f"{' '.join(str(exc).split())[:100]})") from None
+        n, shape = len(ds), ds.current_a.shape
+        if any(getattr(ds, f).shape[:1] != (n,) for f in cls.__dataclass_fields__) or \
+                ds.voltage_v.shape != shape or ds.valid.shape != shape:
+            raise ValueError(f"{path}: not a readable dataset cache (arrays of mismatched shapes)")
+        return ds
 
 
 def flight_profile(rng: np.random.Generator, max_len: int) -> np.ndarray:

@@ -8,24 +8,38 @@
 
 from __future__ import annotations
 
+import hashlib
 import math
-import os
+import threading
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from ..battery import rest_voltage
+from ..battery.fit import (
+    MIN_CONTEXT_S,
+    HealthEstimate,
+    band_from_sigma_points,
+    crossing_times,
+    fit_health_batch,
+    interval_ends,
+    two_sided_z,
+    with_preroll,
+)
+from ..bundled import bundled_path
 from ..errors import InputError, check_range
 from .artifact import WeightsError, load_artifact
+from .model import takeoff_targets
 
-BUNDLED_WEIGHTS = Path(__file__).resolve().parents[2] / "pretrained" / "dynaformer.pt"
 MAX_PROFILE_S = 200_000.0  # s: longer profiles are refused (memory)
 
 
 def bundled_weights_path() -> Path:
-    """The bundled weights: ``$UAM_STUDIO_DYNAFORMER`` if set, else ``pretrained/dynaformer.pt``."""
-    return Path(os.environ.get("UAM_STUDIO_DYNAFORMER", BUNDLED_WEIGHTS))
+    """The bundled weights: ``$UAM_STUDIO_DYNAFORMER`` if set, else ``dynaformer.pt`` in the user
+    folder's ``pretrained/`` or in the package data (:func:`uam_studio.bundled.bundled_path`)."""
+    return bundled_path("dynaformer.pt")
 
 
 def _as_2d(field: str, arr) -> tuple[np.ndarray, bool]:
@@ -56,8 +70,60 @@ def _to_grid(values: np.ndarray, dt_s: float, hold: bool) -> np.ndarray:
     return np.stack([np.interp(np.arange(1, n + 1), src_t, row) for row in values])
 
 
+HEALTH_SOURCES = ("fit", "model")
+REST_CURRENT_A = 0.1  # A: leading samples below this, holding < REST_CHARGE_C in all, are rest
+REST_CHARGE_C = 1.0  # C
+DECODER_CAL_SEED = 424242  # seed of the decoder-error calibration flights (disjoint from training and evaluation)
+DECODER_CAL_N = 400  # flights
+# The decoder's own error is a band of two parts scaled together by one factor lam: lam * 0.01 V
+# about the decoded curve, and lam * 0.2% of the decoded EOD time (see :func:`decoder_error_scores`).
+DECODER_ERROR_SHAPE = (0.01, 0.002)  # (V, -) per unit of lam
+CAL_PROBS = (0.5, 0.6, 0.7, 0.75, 0.8, 0.85, 0.9, 0.925, 0.95, 0.975, 0.99, 0.999)
+# Split-conformal quantiles of lam at CAL_PROBS for the bundled weights, keyed by the file's SHA-256
+# (``decoder_error_scores(load_pretrained())``: 400 flights, seed 424242). Other weights are
+# calibrated on first use (200 flights, a few seconds).
+BUNDLED_DECODER_LAMBDA: dict[str, tuple[float, ...]] = {
+    "ee9b4431cd2cfc3d30a57b697b2f8017eadcdf385e08a0c57c6298551e7b4e52":  # pretrained/dynaformer.pt (session 8)
+        (0.7289, 1.0064, 1.4257, 1.7271, 1.9916, 2.5405, 3.406, 3.8057, 4.0789, 5.8538, 7.3204, 7.3837),
+}
+
+
+def _clamped_latent(r0_ohm: np.ndarray, q_max_c: np.ndarray) -> torch.Tensor:
+    """The take-off decoder's latent [B, 2] for (R0 ohm, q_max C), clamped like TakeoffHealth's output."""
+    h = takeoff_targets(np.asarray(r0_ohm, float), np.asarray(q_max_c, float))
+    return torch.stack([h[:, 0].clamp(-1.5, 1.5), h[:, 1].clamp(-2.5, 4.0)], 1).float()
+
+
+def _leading_rest(grid: np.ndarray) -> np.ndarray:
+    """Per row of a 1 s current grid [B, n] (A): leading samples at rest (|i| < REST_CURRENT_A, together
+    under REST_CHARGE_C). A full, rested cell is unchanged by them, so the decoder skips them."""
+    quiet = np.abs(grid) < REST_CURRENT_A
+    small = np.abs(np.cumsum(grid, axis=1)) < REST_CHARGE_C
+    ok = quiet & small
+    return np.where(ok.all(axis=1), grid.shape[1], np.argmin(ok, axis=1))
+
+
+def _quantile_combine(med: np.ndarray, health_end: np.ndarray, decoder_end: np.ndarray, side: int) -> np.ndarray:
+    """One end of an interval from a median and two independent spreads, added in quadrature
+    (side -1: low, +1: high). Infinite times (no cut-off in the profile) stay conservative."""
+    with np.errstate(invalid="ignore"):
+        a, b = np.abs(health_end - med), np.abs(decoder_end - med)
+        out = med + side * np.sqrt(a ** 2 + b ** 2)
+    finite = np.isfinite(med) & np.isfinite(health_end) & np.isfinite(decoder_end)
+    extreme = np.minimum(health_end, decoder_end) if side < 0 else np.maximum(health_end, decoder_end)
+    extreme = np.minimum(extreme, med) if side < 0 else np.maximum(extreme, med)
+    return np.where(finite, out, extreme)
+
+
 class DynaformerPredictor:
-    """A loaded Dynaformer plus its health PCA. Thread-safe for inference."""
+    """A loaded Dynaformer plus its health PCA. Thread-safe for inference.
+
+    Health source (``health_source`` of every method): ``"fit"`` reads the whole context with the
+    physics model's maximum-likelihood fit (:func:`uam_studio.battery.fit.fit_health`) and hands the
+    decoder that (R0, 1/q_max); ``"model"`` uses the weights' own estimator (the take-off regression
+    on the first 20 s, or the transformer encoder of older weights). Default (None): ``"fit"`` for
+    weights whose decoder reads (R0, 1/q_max) (``health="takeoff"``), ``"model"`` otherwise.
+    """
 
     def __init__(self, model, pca: dict, meta: dict, source: str) -> None:
         self.model = model.eval()
@@ -66,9 +132,30 @@ class DynaformerPredictor:
         self.source = source
         self.chunk = model.cfg.chunk
         self.max_context = model.cfg.max_context
+        self._decoder_quantiles: tuple[float, ...] | None = None
+        self._cal_lock = threading.Lock()
 
     # ------------------------------------------------------------------ helpers
-    def _context(self, context_current_a, context_voltage_v, dt_s: float, batch: int | None = None):
+    @property
+    def reads_fitted_health(self) -> bool:
+        """True when the decoder's latent is (R0, 1/q_max), so a physics fit can drive it."""
+        return self.model.cfg.health == "takeoff"
+
+    def _source(self, health_source) -> str:
+        if health_source is None:
+            return "fit" if self.reads_fitted_health else "model"
+        if health_source == "fit":
+            if not self.reads_fitted_health:
+                raise InputError("health_source", "'fit' needs weights whose decoder reads (R0, 1/q_max) "
+                                 f"(health='takeoff'); these use health={self.model.cfg.health!r}")
+            return "fit"
+        if health_source in ("model", self.model.cfg.health):
+            return "model"
+        raise InputError("health_source", f"{health_source!r} is not allowed; use None, 'fit' or 'model' "
+                         f"(these weights' own estimator: {self.model.cfg.health!r})")
+
+    def _raw_context(self, context_current_a, context_voltage_v, batch: int | None = None):
+        """Validated context arrays [B, L] (A, V) on their own grid, and whether the input was 1-D."""
         ci, single_i = _as_2d("context_current_a", context_current_a)
         cv, _ = _as_2d("context_voltage_v", context_voltage_v)
         if ci.shape != cv.shape:
@@ -77,6 +164,13 @@ class DynaformerPredictor:
             raise InputError("context_current_a", "|current| must be <= 50 A")
         if np.any((cv < 0) | (cv > 5)):
             raise InputError("context_voltage_v", "voltages must be in [0, 5] V")
+        if batch is not None and ci.shape[0] not in (1, batch):
+            raise InputError("context_current_a", f"batch {ci.shape[0]} does not match current_a batch {batch}")
+        return ci, cv, single_i
+
+    def _context(self, context_current_a, context_voltage_v, dt_s: float, batch: int | None = None):
+        """The weights' own estimator's input: context tensors on the 1 s grid (A, V)."""
+        ci, cv, single_i = self._raw_context(context_current_a, context_voltage_v, batch)
         ci = _to_grid(ci, dt_s, hold=True)
         cv = _to_grid(cv, dt_s, hold=False)
         if self.model.cfg.health == "takeoff":  # reads the take-off window from t = 0, nothing after it
@@ -88,76 +182,330 @@ class DynaformerPredictor:
         elif ci.shape[1] > self.max_context:  # whole history: stride down to the encoder's limit
             stride = int(math.ceil(ci.shape[1] / self.max_context))
             ci, cv = ci[:, ::stride], cv[:, ::stride]
-        if batch is not None and ci.shape[0] not in (1, batch):
-            raise InputError("context_current_a", f"batch {ci.shape[0]} does not match current_a batch {batch}")
         return torch.as_tensor(ci, dtype=torch.float32), torch.as_tensor(cv, dtype=torch.float32), single_i
 
-    @torch.no_grad()
-    def latent(self, context_current_a, context_voltage_v, dt_s: float = 1.0) -> np.ndarray:
-        """Raw health latent [B, latent_dim] (for analysis)."""
-        ci, cv, _ = self._context(context_current_a, context_voltage_v, dt_s)
-        return self.model.encode(ci, cv).numpy()
+    def _estimates(self, ci: np.ndarray, cv: np.ndarray, dt: float, noise_v, estimate) -> list[HealthEstimate]:
+        """Health estimates of the rows of a validated context [B, L] (fitted unless given)."""
+        if estimate is not None:
+            ests = [estimate] if isinstance(estimate, HealthEstimate) else list(estimate)
+            if not ests or not all(isinstance(e, HealthEstimate) for e in ests):
+                raise InputError("estimate", "expected a HealthEstimate or a sequence of them (from health_estimate)")
+            if len(ests) not in (1, ci.shape[0]):
+                raise InputError("estimate", f"{len(ests)} estimates for a context batch of {ci.shape[0]}")
+            return ests * ci.shape[0] if len(ests) == 1 else ests
+        if ci.shape[1] * dt < MIN_CONTEXT_S - 1e-9:
+            raise InputError("context_current_a", f"needs at least {MIN_CONTEXT_S:g} s of context, got "
+                             f"{ci.shape[1] * dt:g} s ({ci.shape[1]} samples at {dt:g} s)")
+        if noise_v is not None:
+            check_range("noise_v", noise_v, 0.0, 1.0, " V")
+        return fit_health_batch(ci, cv, dt, noise_v)
 
-    # ------------------------------------------------------------------ public API
-    @torch.no_grad()
-    def health(self, context_current_a, context_voltage_v, dt_s: float = 1.0) -> np.ndarray:
-        """First two principal components of the health embedding, shape [..., 2] (standardised).
+    def _latent(self, source: str, context_current_a, context_voltage_v, dt: float, batch: int | None,
+                noise_v, estimate):
+        """(latent [B, d], estimates or None, raw context voltage [B, L], whether the context was 1-D)."""
+        if source == "fit":
+            ci, cv, single = self._raw_context(context_current_a, context_voltage_v, batch)
+            ests = self._estimates(ci, cv, dt, noise_v, estimate)
+            lat = _clamped_latent(np.array([e.r0 for e in ests]), np.array([e.q_max for e in ests]))
+            return lat, ests, cv, single
+        ci_t, cv_t, single = self._context(context_current_a, context_voltage_v, dt, batch)
+        _, cv, _ = self._raw_context(context_current_a, context_voltage_v, batch)
+        return self.model.encode(ci_t, cv_t), None, cv, single
 
-        :param context_current_a: observed current (A), [L] or [B, L].
-        :param context_voltage_v: observed voltage (V), same shape.
-        """
-        dt = check_range("dt_s", dt_s, 1e-3, 60.0, " s")
-        ci, cv, single = self._context(context_current_a, context_voltage_v, dt)
-        z = self.model.health_head(self.model.encode(ci, cv))
-        pcs = ((z - self.pca["mean"]) @ self.pca["components"].T) / self.pca["scale"]
-        out = pcs.numpy().astype(np.float64)
-        return out[0] if single else out
-
-    @torch.no_grad()
-    def predict(self, context_current_a, context_voltage_v, current_a, dt_s: float = 1.0) -> np.ndarray:
-        """Predicted voltage (V) on ``current_a``'s time grid (sample k at (k+1) dt_s).
-
-        :param context_current_a: observed current (A) from t = 0, [L] or [B, L].
-        :param context_voltage_v: observed voltage (V), same shape.
-        :param current_a: the whole planned per-cell current (A) from t = 0, context
-            included, [T] or [B, T].
-        :param dt_s: sample step of all inputs (s).
-        """
-        dt = check_range("dt_s", dt_s, 1e-3, 60.0, " s")
+    def _profile(self, current_a, dt: float) -> tuple[np.ndarray, bool]:
         cur, single = _as_2d("current_a", current_a)
         if np.any(np.abs(cur) > 50):
             raise InputError("current_a", "|current| must be <= 50 A")
         if cur.shape[1] * dt > MAX_PROFILE_S:
             raise InputError("current_a", f"profile longer than {MAX_PROFILE_S:g} s")
-        ci, cv, single_ctx = self._context(context_current_a, context_voltage_v, dt, batch=cur.shape[0])
-        grid = _to_grid(cur, dt, hold=True)
-        b = max(grid.shape[0], ci.shape[0])
-        n = grid.shape[1]
-        padded = int(math.ceil(n / self.chunk) * self.chunk)
+        return cur, single
+
+    @torch.no_grad()
+    def _decode(self, latent: torch.Tensor, grid: np.ndarray, skip_rest: bool,
+                estimates: list[HealthEstimate] | None = None) -> np.ndarray:
+        """Decoded voltage (V) [B, n] for latents [B, d] and a 1 s current grid [B, n] (A). With
+        ``skip_rest``, each row's leading rest (:func:`_leading_rest`) is cut before decoding and
+        filled with the rested full cell's voltage. With ``estimates`` (one per row), each row's
+        pre-roll (:func:`uam_studio.battery.fit.with_preroll`) is decoded before it and dropped."""
+        n_out = grid.shape[1]
+        grid, k_pre = with_preroll(estimates, grid, 1.0) if estimates is not None else (grid, 0)
+        b, n = grid.shape
+        k0 = _leading_rest(grid) if skip_rest else np.zeros(b, int)
+        padded = int(math.ceil(max(1, n) / self.chunk) * self.chunk)
         g = np.zeros((b, padded), np.float32)
-        g[:, :n] = grid
-        latent = self.model.encode(ci, cv)
-        if latent.shape[0] != b:
-            latent = latent.expand(b, -1)
+        for r in range(b):
+            g[r, :n - k0[r]] = grid[r, k0[r]:]
         v = self.model.decode(latent, torch.as_tensor(g)).numpy()[:, :n].astype(np.float64)
+        if skip_rest and k0.any():
+            out = np.full((b, n), float(rest_voltage()))
+            for r in range(b):
+                out[r, k0[r]:] = v[r, :n - k0[r]]
+            v = out
+        return v[:, k_pre:k_pre + n_out]
+
+    def _finish(self, v: np.ndarray, cur: np.ndarray, dt: float, n: int, obs: np.ndarray) -> np.ndarray:
+        """1 s grid -> current_a's grid, clipped to [0, 5] V, the observed context written back."""
         if dt != 1.0:
             t_out = dt * np.arange(1, cur.shape[1] + 1)
             v = np.stack([np.interp(t_out, np.arange(1, n + 1), row) for row in v])
         v = np.clip(np.nan_to_num(v, nan=0.0, posinf=5.0, neginf=0.0), 0.0, 5.0)
         # The observed context is measured, not predicted: return it as observed (same dt_s grid
         # from t = 0), so an EOD already inside the observation is reported where it happened.
-        obs = np.atleast_2d(np.asarray(context_voltage_v, dtype=np.float64))
         k = min(obs.shape[1], v.shape[1])
-        v[:, :k] = obs[:, :k]
+        v[:, :k] = obs[:, :k] if obs.shape[0] == v.shape[0] else obs[:1, :k]
+        return v
+
+    @torch.no_grad()
+    def latent(self, context_current_a, context_voltage_v, dt_s: float = 1.0, health_source: str | None = None,
+               noise_v: float | None = None) -> np.ndarray:
+        """Health latent [B, latent_dim] the decoder reads (for analysis)."""
+        dt = check_range("dt_s", dt_s, 1e-3, 60.0, " s")
+        lat, *_ = self._latent(self._source(health_source), context_current_a, context_voltage_v, dt, None,
+                               noise_v, None)
+        return lat.numpy()
+
+    # ------------------------------------------------------------------ public API
+    def health_estimate(self, context_current_a, context_voltage_v, dt_s: float = 1.0,
+                        noise_v: float | None = None) -> HealthEstimate | list[HealthEstimate]:
+        """The physics fit of the context (:func:`uam_studio.battery.fit.fit_health`): q_max (C), R0
+        (ohm), covariance. One :class:`HealthEstimate` for a 1-D context, a list for [B, L]. Pass it
+        back as ``estimate=`` to :meth:`predict`, :meth:`eod_interval_s`, :meth:`voltage_band` to skip
+        refitting.
+
+        :param context_current_a: measured current (A) from the log's first sample, [L] or [B, L],
+            at least 20 s.
+        :param context_voltage_v: measured voltage (V), same shape.
+        :param noise_v: voltage-noise std (V); None: estimated from the residuals.
+        """
+        dt = check_range("dt_s", dt_s, 1e-3, 60.0, " s")
+        ci, cv, single = self._raw_context(context_current_a, context_voltage_v)
+        ests = self._estimates(ci, cv, dt, noise_v, None)
+        return ests[0] if single else ests
+
+    @torch.no_grad()
+    def health(self, context_current_a, context_voltage_v, dt_s: float = 1.0, health_source: str | None = None,
+               noise_v: float | None = None, estimate=None) -> np.ndarray:
+        """First two principal components of the health embedding, shape [..., 2] (standardised).
+        With the physics fit, the embedding is the fitted (R0, 1/q_max) in the decoder's scaled units.
+
+        :param context_current_a: observed current (A), [L] or [B, L].
+        :param context_voltage_v: observed voltage (V), same shape.
+        :param health_source: None, ``"fit"`` or ``"model"`` (see the class).
+        :param noise_v: voltage-noise std (V) for the fit; None: estimated.
+        :param estimate: a :class:`HealthEstimate` (or one per row) to use instead of fitting.
+        """
+        dt = check_range("dt_s", dt_s, 1e-3, 60.0, " s")
+        lat, _, _, single = self._latent(self._source(health_source), context_current_a, context_voltage_v, dt,
+                                         None, noise_v, estimate)
+        z = self.model.health_head(lat)
+        pcs = ((z - self.pca["mean"]) @ self.pca["components"].T) / self.pca["scale"]
+        out = pcs.numpy().astype(np.float64)
+        return out[0] if single else out
+
+    @torch.no_grad()
+    def predict(self, context_current_a, context_voltage_v, current_a, dt_s: float = 1.0,
+                health_source: str | None = None, noise_v: float | None = None, estimate=None) -> np.ndarray:
+        """Predicted voltage (V) on ``current_a``'s time grid (sample k at (k+1) dt_s).
+
+        :param context_current_a: observed current (A) from t = 0, [L] or [B, L]; at least 20 s for
+            the physics fit.
+        :param context_voltage_v: observed voltage (V), same shape.
+        :param current_a: the whole planned per-cell current (A) from t = 0, context
+            included, [T] or [B, T].
+        :param dt_s: sample step of all inputs (s).
+        :param health_source: None, ``"fit"`` or ``"model"`` (see the class).
+        :param noise_v: voltage-noise std (V) for the fit; None: estimated.
+        :param estimate: a :class:`HealthEstimate` (or one per row) to use instead of fitting.
+        """
+        dt = check_range("dt_s", dt_s, 1e-3, 60.0, " s")
+        cur, single = self._profile(current_a, dt)
+        source = self._source(health_source)
+        latent, ests, obs, single_ctx = self._latent(source, context_current_a, context_voltage_v, dt,
+                                                     cur.shape[0], noise_v, estimate)
+        grid = _to_grid(cur, dt, hold=True)
+        b = max(grid.shape[0], latent.shape[0])
+        grid = np.broadcast_to(grid, (b, grid.shape[1]))
+        if latent.shape[0] != b:
+            latent = latent.expand(b, -1)
+        if ests is not None and len(ests) != b:
+            ests = ests * b
+        v = self._decode(latent, grid, skip_rest=source == "fit", estimates=ests)
+        v = self._finish(v, cur, dt, grid.shape[1], obs)
         return v[0] if (single and single_ctx) else v
 
     def predict_eod_s(self, context_current_a, context_voltage_v, current_a, dt_s: float = 1.0,
-                      eod_v: float = 3.0):
+                      eod_v: float = 3.0, health_source: str | None = None, noise_v: float | None = None,
+                      estimate=None):
         """Predicted EOD time (s): first sample below ``eod_v``; NaN if the profile ends first."""
-        v = np.atleast_2d(self.predict(context_current_a, context_voltage_v, current_a, dt_s))
+        v = np.atleast_2d(self.predict(context_current_a, context_voltage_v, current_a, dt_s,
+                                       health_source=health_source, noise_v=noise_v, estimate=estimate))
         below = v < eod_v
         eod = np.where(below.any(1), (np.argmax(below, 1) + 1) * dt_s, np.nan)
         return float(eod[0]) if np.ndim(current_a) == 1 else eod
+
+    # ------------------------------------------------------------------ uncertainty
+    def decoder_error(self, level: float = 0.9) -> tuple[float, float]:
+        """The decoder's own error at ``level``, given the exact health: (h_v in V, h_t relative). The
+        decoder's part of an EOD interval is [min(crossing of the curve - h_v, (1 - h_t) median),
+        max(crossing of the curve + h_v, (1 + h_t) median)]; ``level`` of held-out flights fall inside
+        (split-conformal, :func:`decoder_error_scores`). Bundled weights: stored; others: measured on
+        first use."""
+        lv = check_range("level", level, 0.5, 0.999)
+        with self._cal_lock:
+            if self._decoder_quantiles is None:
+                known = BUNDLED_DECODER_LAMBDA.get(_sha256(self.source))
+                if known is None:
+                    scores = decoder_error_scores(self, n=DECODER_CAL_N // 2)
+                    known = tuple(float(x) for x in _conformal_quantiles(scores, CAL_PROBS))
+                self._decoder_quantiles = known
+        lam = float(np.interp(lv, CAL_PROBS, self._decoder_quantiles))
+        return lam * DECODER_ERROR_SHAPE[0], lam * DECODER_ERROR_SHAPE[1]
+
+    def _interval_inputs(self, context_current_a, context_voltage_v, current_a, dt_s, level, noise_v, estimate,
+                         health_source):
+        dt = check_range("dt_s", dt_s, 1e-3, 60.0, " s")
+        lv = check_range("level", level, 0.5, 0.999)
+        cur, single = self._profile(current_a, dt)
+        if self._source(health_source) != "fit":
+            raise InputError("health_source", "intervals and bands need the physics fit ('fit')")
+        ci, cv, single_ctx = self._raw_context(context_current_a, context_voltage_v, cur.shape[0])
+        ests = self._estimates(ci, cv, dt, noise_v, estimate)
+        b = max(cur.shape[0], len(ests))
+        cur = np.broadcast_to(cur, (b, cur.shape[1]))
+        ests = ests * b if len(ests) == 1 else ests
+        return dt, lv, cur, ests, cv, single and single_ctx
+
+    @torch.no_grad()
+    def eod_interval_s(self, context_current_a, context_voltage_v, current_a, dt_s: float = 1.0,
+                       level: float = 0.9, eod_v: float = 3.0, noise_v: float | None = None, estimate=None,
+                       health_source: str | None = None):
+        """``level`` interval (low, median, high) of the time (s) from the log's first sample to the
+        first sample below ``eod_v`` along ``current_a`` (the same time as :meth:`predict_eod_s`),
+        ``math.inf`` where the profile ends first.
+
+        median: the Dynaformer at the fitted health. The health part of the spread: the health at the
+        two ends of the physics model's first-order EOD interval
+        (:func:`uam_studio.battery.fit.interval_points`), decoded. The decoder's own error: the
+        band of :meth:`decoder_error` about the median. The two spreads add in quadrature. One physics
+        call (5 trajectories per row) and one decoder call (3 per row).
+
+        :return: floats for a 1-D input, else three arrays [B].
+        """
+        dt, lv, cur, ests, obs, single = self._interval_inputs(context_current_a, context_voltage_v, current_a,
+                                                               dt_s, level, noise_v, estimate, health_source)
+        eod = check_range("eod_v", eod_v, 2.5, 4.0, " V")
+        b = cur.shape[0]
+        ends = interval_ends(ests, np.ascontiguousarray(cur), dt, lv, eod)  # [b, 2, 2] (q_max, r0)
+        pts = np.concatenate([np.array([[e.q_max, e.r0] for e in ests])[:, None], ends], axis=1)  # [b, 3, 2]
+        lat = _clamped_latent(pts[..., 1].ravel(), pts[..., 0].ravel())
+        grid = _to_grid(cur, dt, hold=True)
+        v = self._decode(lat, np.repeat(grid, 3, axis=0), skip_rest=True,
+                         estimates=[e for e in ests for _ in range(3)]).reshape(b, 3, -1)
+        h_v, h_t = self.decoder_error(lv)
+        curves = np.concatenate([v, (v[:, 0] - h_v)[:, None], (v[:, 0] + h_v)[:, None]], axis=1)  # [b, 5, n]
+        curves = np.stack([self._finish(curves[:, k], cur, dt, grid.shape[1], obs) for k in range(5)], axis=1)
+        times, _ = crossing_times(curves.reshape(b * 5, -1), dt, eod)
+        times = times.reshape(b, 5)
+        med = times[:, 0]
+        h_lo, h_hi = np.minimum(times[:, 1], times[:, 2]), np.maximum(times[:, 1], times[:, 2])
+        d_lo = np.minimum(times[:, 3], np.where(np.isfinite(med), med * (1.0 - h_t), np.inf))
+        d_hi = np.maximum(times[:, 4], med * (1.0 + h_t))
+        low = _quantile_combine(med, np.minimum(h_lo, med), np.minimum(d_lo, med), -1)
+        high = _quantile_combine(med, np.maximum(h_hi, med), np.maximum(d_hi, med), +1)
+        low = np.where(np.isfinite(low), np.maximum(np.ceil(low / dt - 1e-9) * dt, dt), low)
+        high = np.where(np.isfinite(high), np.ceil(high / dt - 1e-9) * dt, high)
+        if single:
+            return float(low[0]), float(med[0]), float(high[0])
+        return low, med, high
+
+    @torch.no_grad()
+    def voltage_band(self, context_current_a, context_voltage_v, current_a, dt_s: float = 1.0,
+                     level: float = 0.9, noise_v: float | None = None, estimate=None,
+                     health_source: str | None = None):
+        """Pointwise ``level`` band (low, median, high) of the predicted voltage (V) on ``current_a``'s
+        grid, a band to draw. median = :meth:`predict`. Spread: the 5 health sigma points
+        (:meth:`~uam_studio.battery.fit.HealthEstimate.sigma_points`) decoded, linearised per sample,
+        plus the decoder's own error (:meth:`decoder_error`: -+ h_v, and the median curve stretched
+        in time by -+ h_t) in quadrature. The observed context is returned as observed in all three.
+
+        :return: three arrays, [T] for a 1-D input, else [B, T].
+        """
+        dt, lv, cur, ests, obs, single = self._interval_inputs(context_current_a, context_voltage_v, current_a,
+                                                               dt_s, level, noise_v, estimate, health_source)
+        b = cur.shape[0]
+        pts = np.stack([e.sigma_points() for e in ests])  # [b, 5, 2]
+        lat = _clamped_latent(pts[..., 1].ravel(), pts[..., 0].ravel())
+        grid = _to_grid(cur, dt, hold=True)
+        v = self._decode(lat, np.repeat(grid, 5, axis=0), skip_rest=True,
+                         estimates=[e for e in ests for _ in range(5)]).reshape(b, 5, -1)
+        h_v, h_t = self.decoder_error(lv)
+        z = two_sided_z(lv)
+        low, med, high = (np.empty((b, v.shape[2])) for _ in range(3))
+        t = np.arange(1, v.shape[2] + 1, dtype=float)
+        for r in range(b):
+            c = v[r, 0]
+            early = np.interp(t * (1.0 + h_t), t, c)  # the curve reaching each voltage earlier
+            late = np.interp(t / (1.0 + h_t), t, c)
+            d_lo = np.maximum(h_v, c - early)
+            d_hi = np.maximum(h_v, late - c)
+            _, _, hi_h = band_from_sigma_points(v[r], lv)
+            s_h = (hi_h - c) / z  # the health part's std per sample
+            low[r] = c - np.sqrt((z * s_h) ** 2 + d_lo ** 2)
+            high[r] = c + np.sqrt((z * s_h) ** 2 + d_hi ** 2)
+            med[r] = c
+        out = [self._finish(np.clip(x, 0.0, 5.0), cur, dt, grid.shape[1], obs) for x in (low, med, high)]
+        return tuple(o[0] for o in out) if single else tuple(out)
+
+
+def _conformal_quantiles(scores: np.ndarray, probs) -> np.ndarray:
+    """Split-conformal quantiles of ``scores``: the ceil((n + 1) p)-th smallest (the largest if beyond)."""
+    s = np.sort(np.asarray(scores, float))
+    k = np.minimum(np.ceil((s.size + 1) * np.asarray(probs)).astype(int), s.size) - 1
+    return s[k]
+
+
+def _sha256(path) -> str:
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError:
+        return ""
+
+
+@torch.no_grad()
+def decoder_error_scores(pred: DynaformerPredictor, n: int = DECODER_CAL_N, seed: int = DECODER_CAL_SEED,
+                         eod_v: float = 3.0) -> np.ndarray:
+    """The decoder's own EOD error on ``n`` synthetic flights (training ranges, ``seed``), given the
+    exact health and a 20 s observed context: per flight whose true EOD falls after the context, the
+    smallest lam >= 0 such that [min(crossing of the curve - lam a, (1 - lam b) t_med),
+    max(crossing of the curve + lam a, (1 + lam b) t_med)] holds the true EOD ((a, b) =
+    :data:`DECODER_ERROR_SHAPE`; t_med: the decoded EOD). Closed form per side: the voltage part needs
+    lam a > (min of the curve up to the true EOD) - eod_v (low side) or >= eod_v - (min before it)
+    (high side); the time part lam b >= |t_med - t_true| / t_med on the side it is missing."""
+    from .data import make_dataset
+
+    a, b = DECODER_ERROR_SHAPE
+    ds = make_dataset(n, seed=seed, flight_fraction=1.0)
+    t = np.arange(ds.voltage_v.shape[1])[None, :]
+    true_t, _ = crossing_times(np.where(t < ds.length[:, None], ds.voltage_v, 5.0), 1.0, eod_v)
+    keep = np.where(np.isfinite(true_t) & (true_t > 20))[0]
+    lat = _clamped_latent(ds.r0[keep], ds.q_max[keep])
+    cur = ds.current_a[keep].astype(np.float64)
+    scores = []
+    for s in range(0, keep.size, 64):
+        rows = keep[s:s + 64]
+        v = pred._decode(lat[s:s + 64], cur[s:s + 64], skip_rest=True)
+        v[:, :20] = ds.voltage_v[rows, :20]
+        v = np.where(t < ds.length[rows, None], v, 5.0)
+        med, _ = crossing_times(v, 1.0, eod_v)
+        for r, i in enumerate(rows):
+            k = int(true_t[i]) - 1  # index of the true first sample below
+            t_true, t_med = float(true_t[i]), float(med[r])
+            up_to, before = v[r, :k + 1].min(), (v[r, :k].min() if k > 0 else np.inf)
+            rel = abs(t_med - t_true) / t_med if np.isfinite(t_med) else np.inf
+            lo = min((up_to - eod_v) / a, rel / b if t_med > t_true else np.inf) if up_to >= eod_v else 0.0
+            hi = min((eod_v - before) / a, rel / b) if before < eod_v else 0.0
+            scores.append(max(lo, hi, 0.0))
+    return np.asarray(scores)
 
 
 def load_predictor(path=None) -> DynaformerPredictor:

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -31,6 +32,10 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from uam_studio.errors import InputError
+
+from ..atomic_io import remove_stale_temps
+from ..tensor_files import TensorFileError, load_tensors
 from .artifact import atomic_torch_save, save_artifact
 from .data import TRAIN_Q_RANGE, DischargeSet, make_dataset
 from .model import R0_HALF as R_HALF
@@ -63,9 +68,23 @@ class TrainConfig:
 
 
 def pick_device(name: str) -> torch.device:
+    """The torch device for ``name``: ``auto`` (CUDA when available, else CPU), ``cpu``, ``cuda`` or ``cuda:N``.
+
+    :raises InputError: (field ``device``) for another name, or CUDA where torch sees no CUDA device.
+    """
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return torch.device(name)
+    try:
+        dev = torch.device(name)
+    except (RuntimeError, TypeError):
+        dev = None
+    if dev is None or dev.type not in ("cpu", "cuda"):
+        raise InputError("device", f"{name!r} is not a device; allowed: auto, cpu, cuda, cuda:N")
+    if dev.type == "cuda":
+        n = torch.cuda.device_count() if torch.cuda.is_available() else 0
+        if n == 0 or (dev.index or 0) >= n:
+            raise InputError("device", f"{name!r}: torch sees {n} CUDA devices here; use auto or cpu")
+    return dev
 
 
 def sample_context_lengths(rng: np.random.Generator, n: int, max_s: int = 600) -> np.ndarray:
@@ -134,9 +153,20 @@ class BucketSampler:
 
 
 def _cached_dataset(path: Path, n: int, seed: int, max_len: int) -> DischargeSet:
-    """make_dataset, cached as .npz in the run folder (git-ignored ``runs/``)."""
+    """make_dataset, cached as .npz in the run folder (git-ignored ``runs/``), written atomically.
+
+    A cache that cannot be read (truncated or corrupt, e.g. by a kill under an older version) or
+    holds another number of discharges is reported in one line on stderr and regenerated.
+    """
     if path.exists():
-        return DischargeSet.load(path)
+        try:
+            ds = DischargeSet.load(path)
+        except ValueError as exc:
+            print(f"warning: {exc}; regenerating it", file=sys.stderr)
+        else:
+            if len(ds) == n:
+                return ds
+            print(f"warning: {path}: holds {len(ds)} discharges, not {n}; regenerating it", file=sys.stderr)
     ds = make_dataset(n, seed=seed, max_len=max_len)
     ds.save(path)
     return ds
@@ -213,21 +243,73 @@ def pretrain_encoder(model: Dynaformer, ctx_ds: DischargeSet, cfg: TrainConfig, 
     return float(ema or 0.0)
 
 
+CHECKPOINT_KEYS = ("model", "opt", "sched", "step", "rng")
+"""Entries of a training checkpoint (plus ``train_s``, s): model, optimizer and scheduler state dicts,
+optimizer steps done, the numpy generator's state (a dict of strings and ints)."""
+_RESUME_HINT = "delete it or start over (resume=False, CLI --no-resume)"
+
+
+def load_checkpoint(path: str | Path, device: torch.device | str = "cpu") -> dict:
+    """A training checkpoint written by :func:`train`, read with :func:`uam_studio.tensor_files.load_tensors`
+    (``torch.load(weights_only=True)``): only tensors, numbers, strings, lists, tuples and dicts are
+    rebuilt; a file holding anything else is refused before any object in it is built.
+
+    :raises InputError: (field ``checkpoint``) a file that does not load that way, or is not a checkpoint
+    """
+    try:
+        ck = load_tensors(path, map_location=device)
+    except TensorFileError as err:
+        raise InputError("checkpoint", f"{path}: not a readable training checkpoint ({err}); {_RESUME_HINT}") \
+            from None
+    ok = (isinstance(ck, dict) and all(k in ck for k in CHECKPOINT_KEYS)
+          and all(isinstance(ck[k], dict) for k in ("model", "opt", "sched", "rng"))
+          and isinstance(ck["step"], int) and not isinstance(ck["step"], bool) and ck["step"] >= 0
+          and isinstance(ck.get("train_s", 0.0), (int, float)))
+    if not ok:
+        raise InputError("checkpoint", f"{path}: not a training checkpoint (expected entries "
+                                       f"{', '.join(CHECKPOINT_KEYS)}); {_RESUME_HINT}")
+    return ck
+
+
+def _resume(path: Path, ck: dict, model: Dynaformer, opt: torch.optim.Optimizer,
+            sched: torch.optim.lr_scheduler.LRScheduler, rng: np.random.Generator) -> None:
+    """Put a checkpoint's states into the run's model, optimizer, scheduler and generator.
+
+    :raises InputError: (field ``checkpoint``) states that do not fit this run (other model config)
+    """
+    try:
+        model.load_state_dict(ck["model"])
+        opt.load_state_dict(ck["opt"])
+        if set(ck["sched"]) != set(sched.state_dict()) or any(f is not None for f in ck["sched"]["lr_lambdas"]):
+            raise ValueError("scheduler state has other entries")
+        sched.load_state_dict(ck["sched"])
+        rng.bit_generator.state = ck["rng"]
+    except Exception as exc:
+        msg = " ".join(str(exc).split())[:100]
+        raise InputError("checkpoint", f"{path}: does not fit this training run ({type(exc).__name__}: {msg}); "
+                                       f"{_RESUME_HINT}") from None
+
+
 def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerConfig | None = None,
           callback=None) -> Path:
-    """Train from scratch (or resume from ``out_dir/checkpoint.pt``); write ``out_dir/dynaformer.pt``.
+    """Train from scratch (or resume from ``out_dir/checkpoint.pt``, see :func:`load_checkpoint`); write
+    ``out_dir/dynaformer.pt``.
 
     :param cfg: training settings.
     :param out_dir: run folder (never the bundled ``pretrained/`` folder).
     :param callback: optional ``f(step, loss)``.
     :return: path of the exported weights.
+    :raises InputError: (field ``checkpoint``) a checkpoint that is unreadable, unsafe or from another run.
     """
     model_cfg = model_cfg or DynaformerConfig()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    remove_stale_temps(out)
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     device = pick_device(cfg.device)
+    ckpt_path = out / "checkpoint.pt"
+    ck = load_checkpoint(ckpt_path, device) if resume and ckpt_path.exists() else None  # before the data: fail fast
     torch.manual_seed(cfg.seed)
     t_start = time.perf_counter()
     ds = _cached_dataset(out / f"train_data_seed{cfg.seed}_n{cfg.n_train}.npz", cfg.n_train, cfg.seed, cfg.max_len)
@@ -241,19 +323,10 @@ def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerC
     sched = torch.optim.lr_scheduler.LambdaLR(
         opt, lambda s: min(1.0, (s + 1) / warm) * (0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * min(s, cfg.steps) / cfg.steps))))
     step, elapsed_before = 0, 0.0
-    ckpt_path = out / "checkpoint.pt"
-    if resume and ckpt_path.exists():
-        ck = torch.load(ckpt_path, map_location=device, weights_only=False)
-        model.load_state_dict(ck["model"])
-        opt.load_state_dict(ck["opt"])
-        sched.load_state_dict(ck["sched"])
-        step, elapsed_before = ck["step"], ck.get("train_s", 0.0)
-        np_state = ck["rng"]
-    else:
-        np_state = None
     rng = np.random.default_rng(cfg.seed + 1)
-    if np_state is not None:
-        rng.bit_generator.state = np_state
+    if ck is not None:
+        _resume(ckpt_path, ck, model, opt, sched, rng)
+        step, elapsed_before = ck["step"], float(ck.get("train_s", 0.0))
     sampler = BucketSampler(ds.valid.sum(1), cfg.batch, rng)
     model.train()
     t0 = time.perf_counter()
@@ -297,6 +370,5 @@ def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerC
             "device": str(device), "torch_threads": torch.get_num_threads(), "final_rmse_mv_ema": 1000 * math.sqrt(ema or 0),
             "encoder_stage_health_mse": encoder_mse}
     weights = out / "dynaformer.pt"
-    save_artifact(weights, model.cpu(), pca, meta)
-    (out / "train_meta.json").write_text(json.dumps(meta, indent=2))
+    save_artifact(weights, model.cpu(), pca, meta, sidecars={out / "train_meta.json": json.dumps(meta, indent=2)})
     return weights

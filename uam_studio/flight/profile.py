@@ -32,6 +32,7 @@ PHASES = (
 MAX_DISTANCE_KM = 500.0
 MAX_DT_S = 60.0
 MAX_DWELL_S = 86_400.0
+MAX_SAMPLES = 2_000_000  # samples of one leg profile (about 48 MB of float64 arrays)
 # Modelling assumption: the paper gives climb durations but no climb distances.
 CLIMB_GROUND_SPEED_MPS = 30.0
 APPROACH_START_ALTITUDE_M = 500.0
@@ -142,7 +143,7 @@ def leg_profile(
 ) -> LegProfile:
     """Power profile of a leg of ``distance_km`` (km, (0, 500]) at ``altitude_m`` (m, [500, 3000])
     in ``wind_kts`` (kt, [-39, 39], negative = tailwind), sampled every ``dt_s`` (s, (0, 60]),
-    followed by ``dwell_s`` (s, [0, 86400]) at 0 kW.
+    followed by ``dwell_s`` (s, [0, 86400]) at 0 kW; at most ``MAX_SAMPLES`` samples.
 
     Raises :class:`InputError` for out-of-range inputs and :class:`InfeasibleLegError`
     if the leg is shorter than :func:`min_leg_distance_km`.
@@ -164,6 +165,9 @@ def leg_profile(
         [[0.0], np.cumsum([p * (end - start) for _, start, end, p in phases])]
     )
     n = max(1, math.ceil(duration / dt - 1e-9))
+    if n > MAX_SAMPLES:
+        raise InputError("dt_s", f"{dt_s!r} s gives {n} samples for this {duration:.0f} s leg; at most "
+                                 f"{MAX_SAMPLES} allowed, so dt_s >= {duration / MAX_SAMPLES:.3g} s here")
     edges = np.arange(n + 1) * dt
     power = np.diff(np.interp(edges, bounds, energy)) / dt
     current = np.asarray(power_kw_to_cell_current_a(power))

@@ -1,7 +1,7 @@
 """Mission planning: missions and their JSON format, and route simulation.
 
 Public API: :class:`Mission` (with :class:`Vertiport`, :class:`Destination`,
-:class:`Battery`), :func:`mission_from_dict`, :func:`mission_to_dict`,
+:class:`Battery`), :func:`mission_from_dict`, :func:`mission_from_json`, :func:`mission_to_dict`,
 :func:`load_mission`, :func:`save_mission`, :func:`simulate_route`
 (-> :class:`RouteSimulation` with :class:`LegResult` per leg).
 
@@ -37,6 +37,7 @@ from uam_studio.planning.mission import (
     Vertiport,
     load_mission,
     mission_from_dict,
+    mission_from_json,
     mission_to_dict,
     save_mission,
 )
@@ -83,6 +84,7 @@ __all__ = [
     "Vertiport",
     "load_mission",
     "mission_from_dict",
+    "mission_from_json",
     "mission_to_dict",
     "save_mission",
     "simulate_route",

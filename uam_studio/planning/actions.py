@@ -36,6 +36,16 @@ MIN_LEG_KM = tuple(min_leg_distance_km(h) for h in ALTITUDES_M)  # shortest leg 
 DT_S = 1.0  # sample step of every leg current (s)
 
 
+def check_destination_count(n: int) -> int:
+    """``n`` if a planner can plan a mission of ``n`` destinations (1 to ``N_MAX``), else :class:`InputError`."""
+    if n < 1:
+        raise InputError("destinations", f"a mission needs at least 1 destination (allowed 1 to {N_MAX})")
+    if n > N_MAX:
+        raise InputError("destinations", f"{n} destinations; the planners handle at most {N_MAX} "
+                                         f"(allowed 1 to {N_MAX})")
+    return n
+
+
 def encode_action(target: int, alt_idx: int) -> int:
     """Action index for ``target`` (0..N_MAX-1 destination slot, N_MAX vertiport) and altitude index."""
     if not 0 <= int(target) <= N_MAX:

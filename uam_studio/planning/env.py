@@ -358,9 +358,14 @@ class UAMPlanningEnv(gym.Env):
         ``info["stranded"] = True``. Training with it teaches the agent the same rule that the
         planner's safety filter (:meth:`lookahead_safe`) enforces, so the filter and the agent's
         Q-values agree.
+    :param render_mode: None (default) or ``"ansi"``: :meth:`render` returns a text summary of the
+        episode so far.
+
+    Registered with gymnasium by ``import uam_studio`` as ``uam_studio/SingleFlight-v0``,
+    ``uam_studio/SingleCharge-v0`` and ``uam_studio/MultiCharge-v0`` (:mod:`uam_studio.registration`).
     """
 
-    metadata = {"render_modes": []}
+    metadata = {"render_modes": ["ansi"], "render_fps": 1}
 
     def __init__(
         self,
@@ -380,8 +385,13 @@ class UAMPlanningEnv(gym.Env):
         radius_km=DEFAULT_RADIUS_KM,
         max_steps: int = MAX_EPISODE_STEPS,
         safe_return: bool = False,
+        render_mode: str | None = None,
     ) -> None:
         super().__init__()
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise InputError("render_mode", f"{render_mode!r} is not a render mode; allowed: None, "
+                                            f"{', '.join(self.metadata['render_modes'])}")
+        self.render_mode = render_mode
         if mission is not None and not isinstance(mission, Mission):
             raise InputError("mission", f"expected a Mission or None, got {type(mission).__name__}")
         scenario = scenario or (mission.scenario if mission is not None else "single_charge")
@@ -629,6 +639,32 @@ class UAMPlanningEnv(gym.Env):
             "altitudes_m": list(self._alts),
             "health": self._health.copy(),
         }
+
+    def render(self) -> str | None:
+        """With ``render_mode="ansi"``: the episode so far as text (scenario, mission, step, state,
+        the legs flown with their altitudes, destinations reached, charging cycles, voltage, return).
+        Without a render mode: None, with a gymnasium warning."""
+        if self.render_mode is None:
+            gym.logger.warn("render() without a render mode; create the env with render_mode='ansi'")
+            return None
+        if self.mission is None:
+            return f"{self.scenario}: no episode yet (call reset())\n"
+        if self._eod:
+            state = "end of discharge"
+        elif self._stranded:
+            state = "stranded (no safe way home)"
+        elif self._invalid:
+            state = "invalid action"
+        elif self._done:
+            state = "done" if not self._mask.any() else "truncated"
+        else:
+            state = "running"
+        legs = "".join(f" -> {n} ({a:g} m)" for n, a in zip(self._route, self._alts))
+        reached = ", ".join(self._reached) or "none"
+        return (f"{self.scenario} | {self.mission.name} | step {self._steps}/{self.max_steps} | {state}\n"
+                f"route: vertiport{legs}\n"
+                f"reached: {reached} (priority {self._reached_priority}); charging cycles {self._cycles}\n"
+                f"voltage {self._voltage:.3f} V (cut-off {self.mission.eod_v:g} V); return {self._return:.2f}\n")
 
     # ------------------------------------------------------------------ helpers
 

@@ -38,14 +38,15 @@ import dataclasses
 import json
 import math
 import os
-import tempfile
+import unicodedata
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from uam_studio.atomic_io import atomic_write_text, remove_stale_temps
 from uam_studio.battery import EOD_RANGE, Q_MAX_RANGE, R0_RANGE
-from uam_studio.errors import InputError, check_range
+from uam_studio.errors import InputError, check_range, short_repr
 from uam_studio.flight.profile import MAX_DWELL_S
 from uam_studio.flight.tables import WIND_RANGE_KTS
 
@@ -54,6 +55,7 @@ SCENARIOS = ("single_flight", "single_charge", "multi_charge")
 COORD_RANGE_KM = (-200.0, 200.0)
 PRIORITY_RANGE = (1, 3)
 MAX_NAME_LEN = 64
+MAX_FILE_BYTES = 1_000_000  # mission JSON (bytes)
 
 _NUMBER = (int, float)
 
@@ -80,20 +82,29 @@ def _under(prefix: str) -> Iterator[None]:
 def _number(field_name: str, value: Any, lo: float, hi: float, unit: str = "") -> float:
     """A JSON number (not a bool, not a string) in [lo, hi]."""
     if isinstance(value, bool) or not isinstance(value, _NUMBER):
-        raise InputError(field_name, f"expected a number in [{lo:g}, {hi:g}]{unit}, got {value!r}")
+        raise InputError(field_name, f"expected a number in [{lo:g}, {hi:g}]{unit}, got {short_repr(value)}")
     return check_range(field_name, value, lo, hi, unit)
 
 
 def _name(field_name: str, value: Any) -> str:
     if not isinstance(value, str):
-        raise InputError(field_name, f"expected a string, got {value!r}")
+        raise InputError(field_name, f"expected a string, got {short_repr(value)}")
+    if len(value) > MAX_NAME_LEN:
+        raise InputError(field_name, f"is {len(value)} characters long; at most {MAX_NAME_LEN} allowed")
+    bad = next((c for c in value if unicodedata.category(c) == "Cc"), None)
+    if bad is not None:
+        raise InputError(field_name, f"{value!r} contains the control character {bad!r}; "
+                                     "names are printable text")
     if not value.strip():
         raise InputError(field_name, "must not be empty")
     if value != value.strip():
         raise InputError(field_name, f"{value!r} has leading or trailing spaces")
-    if len(value) > MAX_NAME_LEN:
-        raise InputError(field_name, f"is {len(value)} characters long; at most {MAX_NAME_LEN} allowed")
     return value
+
+
+def _key_text(key: Any) -> str:
+    """A JSON key as it goes into an error's field name: as is when printable and short, else its repr."""
+    return key if isinstance(key, str) and key.isprintable() and len(key) <= MAX_NAME_LEN else short_repr(key)
 
 
 def _check_keys(path: str, d: Any, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> None:
@@ -107,7 +118,7 @@ def _check_keys(path: str, d: Any, required: tuple[str, ...], optional: tuple[st
     for key in d:
         if key not in allowed:
             raise InputError(
-                _join(path, str(key)), f"unknown field; allowed fields are {', '.join(allowed)}"
+                _join(path, _key_text(key)), f"unknown field; allowed fields are {', '.join(allowed)}"
             )
 
 
@@ -149,9 +160,9 @@ class Destination:
         if isinstance(p, float) and p.is_integer():
             p = int(p)
         if isinstance(p, bool) or not isinstance(p, int):
-            raise InputError("priority", f"expected an integer in [1, 3], got {self.priority!r}")
+            raise InputError("priority", f"expected an integer in [1, 3], got {short_repr(self.priority)}")
         if not PRIORITY_RANGE[0] <= p <= PRIORITY_RANGE[1]:
-            raise InputError("priority", f"{p!r} is out of range; allowed [1, 3]")
+            raise InputError("priority", f"{short_repr(p)} is out of range; allowed [1, 3]")
         object.__setattr__(self, "priority", p)
         object.__setattr__(self, "x_km", _number("x_km", self.x_km, *COORD_RANGE_KM, " km"))
         object.__setattr__(self, "y_km", _number("y_km", self.y_km, *COORD_RANGE_KM, " km"))
@@ -200,7 +211,7 @@ class Mission:
         object.__setattr__(self, "destinations", dests)
         if self.scenario not in SCENARIOS:
             raise InputError(
-                "scenario", f"{self.scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}"
+                "scenario", f"{short_repr(self.scenario)} is not a scenario; allowed: {', '.join(SCENARIOS)}"
             )
         if not isinstance(self.battery, Battery):
             raise InputError("battery", f"expected a Battery, got {type(self.battery).__name__}")
@@ -270,7 +281,7 @@ def mission_from_dict(d: Any) -> Mission:
     destinations = tuple(_destination_from_dict(i, x) for i, x in enumerate(raw))
     scenario = d["scenario"]
     if not isinstance(scenario, str) or scenario not in SCENARIOS:
-        raise InputError("scenario", f"{scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}")
+        raise InputError("scenario", f"{short_repr(scenario)} is not a scenario; allowed: {', '.join(SCENARIOS)}")
     _check_keys("battery", d["battery"], ("q_max", "r0"))
     with _under("battery"):
         battery = Battery(d["battery"]["q_max"], d["battery"]["r0"])
@@ -299,62 +310,86 @@ def mission_to_dict(m: Mission) -> dict[str, Any]:
     }
 
 
-def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in out:
-            raise InputError("file", f"duplicate key {key!r} in a JSON object")
-        out[key] = value
-    return out
+def mission_from_json(data: str | bytes, field: str = "file") -> Mission:
+    """Parse and validate a mission from JSON text (or UTF-8 bytes) of at most ``MAX_FILE_BYTES``.
+
+    Hostile JSON (duplicate keys, numbers of thousands of digits, arrays nested thousands deep)
+    is an :class:`InputError` like any other bad input.
+
+    :param field: the name errors about the text itself carry (``"file"``, or the app's upload field).
+    :raises InputError: ``field`` for text that is empty, too large, not UTF-8 or not valid JSON,
+        else the JSON path of the first bad field.
+    """
+    if data is None or len(data) == 0:
+        raise InputError(field, "is empty; expected a mission JSON file")
+    if len(data) > MAX_FILE_BYTES:
+        raise InputError(field, f"is {len(data)} bytes; at most {MAX_FILE_BYTES} allowed")
+    if isinstance(data, bytes):
+        try:
+            data = data.decode("utf-8")
+        except UnicodeDecodeError as err:
+            raise InputError(field, f"is not UTF-8 text (byte {err.start})") from None
+
+    def no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for key, value in pairs:
+            if key in out:
+                raise InputError(field, f"duplicate key {short_repr(key)} in a JSON object")
+            out[key] = value
+        return out
+
+    try:
+        obj = json.loads(data, object_pairs_hook=no_duplicate_keys)
+    except json.JSONDecodeError as err:
+        raise InputError(field, f"is not valid JSON: {err.msg} at line {err.lineno}, column {err.colno}") \
+            from None
+    except InputError:
+        raise
+    except RecursionError:
+        raise InputError(field, "is nested too deeply; a mission file is at most 4 levels deep") from None
+    except ValueError as err:  # e.g. an integer of more than sys.get_int_max_str_digits() digits
+        raise InputError(field, f"is not valid mission JSON: {' '.join(str(err).split())[:120]}") from None
+    return mission_from_dict(obj)
 
 
 def load_mission(path: str | os.PathLike[str]) -> Mission:
     """Read and validate a mission JSON file.
 
-    :raises InputError: field ``"file"`` if the file cannot be read or is not valid JSON
-        (with line and column), else the JSON path of the first bad field.
+    :raises InputError: field ``"file"`` if the file cannot be read, is larger than ``MAX_FILE_BYTES``
+        or is not valid JSON (with line and column), else the JSON path of the first bad field.
     """
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        if p.is_file() and p.stat().st_size > MAX_FILE_BYTES:
+            raise InputError("file", f"{str(p)!r} is {p.stat().st_size} bytes; at most {MAX_FILE_BYTES} allowed")
+        data = p.read_bytes()
     except FileNotFoundError:
         raise InputError("file", f"{str(p)!r} does not exist") from None
     except IsADirectoryError:
         raise InputError("file", f"{str(p)!r} is a directory, expected a mission JSON file") from None
-    except UnicodeDecodeError as err:
-        raise InputError("file", f"{str(p)!r} is not UTF-8 text (byte {err.start})") from None
     except OSError as err:
         raise InputError("file", f"cannot read {str(p)!r}: {err.strerror or err}") from None
     try:
-        data = json.loads(text, object_pairs_hook=_no_duplicate_keys)
-    except json.JSONDecodeError as err:
-        raise InputError(
-            "file", f"{str(p)!r} is not valid JSON: {err.msg} at line {err.lineno}, column {err.colno}"
-        ) from None
-    return mission_from_dict(data)
+        data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise InputError("file", f"{str(p)!r} is not UTF-8 text (byte {err.start})") from None
+    try:
+        return mission_from_json(data, "file")
+    except InputError as err:
+        rest = str(err)[len("file: "):]
+        if err.field != "file" or not rest.startswith("is "):
+            raise
+        raise InputError("file", f"{str(p)!r} {rest}") from None
 
 
 def save_mission(m: Mission, path: str | os.PathLike[str]) -> None:
-    """Write ``m`` as JSON atomically: a temporary file in the same folder, then ``os.replace``.
+    """Write ``m`` as JSON atomically (:func:`uam_studio.atomic_io.atomic_write_text`).
 
-    Readers see either the old file or the complete new one, never a partial write.
-    An existing file's permission bits are kept (new files get 0o644).
+    Readers see either the old file or the complete new one, never a partial write. Stale temp
+    files of this file name (left by a killed save) are deleted first. An existing file's
+    permission bits are kept.
     """
     p = Path(path)
     text = json.dumps(mission_to_dict(m), indent=2, allow_nan=False) + "\n"
-    try:
-        mode = p.stat().st_mode & 0o7777
-    except FileNotFoundError:
-        mode = 0o644
-    fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, mode)
-        os.replace(tmp, p)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
+    remove_stale_temps(p.parent, names=[p.name])
+    atomic_write_text(p, text)

@@ -197,6 +197,8 @@ def feasible_sorties(
     dominance: bool = True,
     allowed: np.ndarray | None = None,
     stats: dict[str, Any] | None = None,
+    start: tuple[int, np.ndarray, int] | None = None,
+    first_moves: np.ndarray | None = None,
 ) -> dict[int, Sortie]:
     """Every set of destinations one charge can visit and bring the aircraft home, with its best sortie.
 
@@ -206,6 +208,12 @@ def feasible_sorties(
         order and level (for testing; exponential).
     :param allowed: bool [N_MAX], destination slots that may be visited (default: all present).
     :param stats: filled with ``labels``, ``legs_flown``, ``pruned_eod``, ``pruned_dominated``.
+    :param start: ``(node slot, battery state [8], visited mask)`` to continue a sortie already under
+        way (default: the vertiport, a full charge, nothing visited). The sorties found then continue
+        from that node and state; their ``mask`` includes the visited bits and ``time_s`` counts from
+        the start.
+    :param first_moves: bool [N_TARGETS, N_ALTITUDES], the (target, level) pairs the first leg may
+        take (default: all).
     :return: ``{mask: Sortie}``, bit k of ``mask`` for slot k.
     """
     m = legs.mission
@@ -216,21 +224,30 @@ def feasible_sorties(
     bit = 1 << np.arange(N_MAX)
     good_sign = DOMINANCE_SIGN
 
-    mask = np.zeros(1, dtype=np.int64)
-    node = np.full(1, VERTIPORT_SLOT)
-    state = full_charge(q).as_array()
+    if start is None:
+        mask = np.zeros(1, dtype=np.int64)
+        node = np.full(1, VERTIPORT_SLOT)
+        state = full_charge(q).as_array()
+    else:
+        mask = np.full(1, int(start[2]), dtype=np.int64)
+        node = np.full(1, int(start[0]))
+        state = np.asarray(start[1], dtype=float).reshape(1, -1)
     t_s = np.zeros(1)
     vmin = np.full(1, np.inf)
     paths: list[tuple[tuple[int, ...], tuple[int, ...]]] = [((), ())]
     found: dict[int, Sortie] = {}
     st = {"labels": 1, "legs_flown": 0, "pruned_eod": 0, "pruned_dominated": 0}
 
+    first_leg = True
     while mask.size:
         unvisited = (mask[:, None] & bit[None, :]) == 0
         target_ok = np.zeros((mask.size, N_TARGETS), dtype=bool)
         target_ok[:, :N_MAX] = unvisited & ok_slot[None, :]
         target_ok[:, VERTIPORT_SLOT] = node != VERTIPORT_SLOT
         cand = target_ok[:, :, None] & feas[node]
+        if first_moves is not None and first_leg:
+            cand &= np.asarray(first_moves, dtype=bool)[None, :, alts]
+        first_leg = False
         li, ti, ai = np.nonzero(cand)
         if li.size == 0:
             break
@@ -266,10 +283,11 @@ def feasible_sorties(
     return found
 
 
-def min_sortie_cover(found: dict[int, Sortie], universe: int) -> list[Sortie]:
-    """Fewest sorties from ``found`` whose sets partition ``universe`` (a bitmask); ties: less time.
+def sortie_cover_table(found: dict[int, Sortie], universe: int) -> dict[int, tuple[int, float, int]]:
+    """For every subset of ``universe`` (a bitmask) that sorties of ``found`` can partition: the fewest
+    sorties, their total time (s) and the set of one of them, ``{subset: (sorties, time_s, first set)}``.
 
-    Exact dynamic programme over the subsets of ``universe`` (3^n). Returns [] if impossible.
+    Exact dynamic programme over the subsets of ``universe`` (3^n); ties: less time.
     """
     subsets = []
     sub = universe
@@ -292,6 +310,15 @@ def min_sortie_cover(found: dict[int, Sortie], universe: int) -> list[Sortie]:
             s = (s - 1) & mset
         if cand is not None:
             best[mset] = cand
+    return best
+
+
+def min_sortie_cover(found: dict[int, Sortie], universe: int) -> list[Sortie]:
+    """Fewest sorties from ``found`` whose sets partition ``universe`` (a bitmask); ties: less time.
+
+    Exact dynamic programme over the subsets of ``universe`` (3^n). Returns [] if impossible.
+    """
+    best = sortie_cover_table(found, universe)
     if universe not in best:
         return []
     out = []
@@ -463,5 +490,6 @@ __all__ = [
     "fly_batch",
     "min_sortie_cover",
     "oracle_plan",
+    "sortie_cover_table",
     "takeoff_failure",
 ]

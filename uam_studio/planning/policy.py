@@ -14,10 +14,10 @@ The CLI (``uam-studio plan``) and the Panel app call only this function. It
    last recharge), and concatenates the sorties.
 
 The result is a plain-JSON dict (see :func:`plan_mission`). Hard missions (no destinations, more
-than 8, unreachable destinations, a cell that cannot finish the take-off) and a missing bundled
-agent or Dynaformer give messages, never exceptions; only bad input (an invalid mission, an
-unknown policy, out-of-range ``q_max``/``r0``, an explicit ``agent_path`` that cannot be loaded)
-raises :class:`~uam_studio.errors.InputError`.
+than 8, unreachable destinations, a cell that cannot finish the take-off) and a missing Dynaformer
+give messages, never exceptions; bad input (an invalid mission, an unknown policy, out-of-range
+``q_max``/``r0``, an explicit ``agent_path`` that cannot be loaded) and a missing bundled agent
+(``dqn`` without ``agent_path``, :func:`bundled_agent_path`) raise :class:`~uam_studio.errors.InputError`.
 """
 
 from __future__ import annotations
@@ -29,22 +29,23 @@ from typing import Any
 
 import numpy as np
 
+from uam_studio.bundled import bundled_path, require_bundled
 from uam_studio.errors import InputError
 from uam_studio.planning.check import Plan, PlanCheck, check_plan
 from uam_studio.planning.mission import SCENARIOS, VERTIPORT, Mission, load_mission, mission_from_dict
 
 POLICIES = ("dqn", "oracle", "greedy")
-BUNDLED_DIR = Path(__file__).resolve().parents[2] / "pretrained"
 MAX_POINTS = 2000  # samples per series in the result (JSON size)
 DECIMALS = 4
 
-__all__ = ["BUNDLED_DIR", "MAX_POINTS", "POLICIES", "bundled_agent_path", "load_agent_cached", "plan_mission",
+__all__ = ["MAX_POINTS", "POLICIES", "bundled_agent_path", "load_agent_cached", "plan_mission",
            "rollout_agent"]
 
 
 def bundled_agent_path(scenario: str) -> Path:
-    """The bundled DQN agent of ``scenario``: ``pretrained/dqn_<scenario>.zip``."""
-    return BUNDLED_DIR / f"dqn_{scenario}.zip"
+    """The bundled DQN agent of ``scenario``, ``dqn_<scenario>.zip`` (:func:`uam_studio.bundled.bundled_path`:
+    the user folder's ``pretrained/`` first, then the package data); it may not exist."""
+    return bundled_path(f"dqn_{scenario}.zip")
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -111,14 +112,7 @@ def _dqn_route(mission: Mission, agent_path: str | os.PathLike[str] | None, pred
     if not servable.any():
         return [], []
 
-    if agent_path is None:
-        path = bundled_agent_path(scenario)
-        if not path.is_file():
-            messages.append(f"no bundled DQN agent for scenario {scenario}; use --policy oracle or greedy "
-                            f"(looked for {path})")
-            return [], []
-    else:
-        path = Path(agent_path)
+    path = bundled_agent_path(scenario) if agent_path is None else Path(agent_path)
 
     plan = rollout_agent(mission, path, predictor, messages, lookahead=lookahead)
     messages.extend(m for m in plan.messages if not m.startswith("end of discharge"))  # physics check says it
@@ -241,7 +235,7 @@ def rollout_agent(mission: Mission, agent: Any, predictor: Any = None,
                          "loaded; using the physics-only health features")
     trained_for = card.get("scenario")
     if trained_for is not None and trained_for != scenario:
-        notes.append(f"note: the agent was trained for scenario {trained_for}, the mission is {scenario}")
+        notes.append(f"the agent was trained for scenario {trained_for}, the mission is {scenario}")
     env = UAMPlanningEnv(mission=mission, scenario=scenario, backend="physics", health_fn=health_fn)
     if env.observation_space != model.observation_space or env.action_space != model.action_space:
         raise InputError("agent", f"{agent}: incompatible with this environment (agent expects "
@@ -342,7 +336,8 @@ def plan_mission(
     :param policy: ``"dqn"``, ``"oracle"`` or ``"greedy"``.
     :param q_max: override the mission's q_max (C).
     :param r0: override the mission's r0 (ohm).
-    :param agent_path: the DQN agent (default ``pretrained/dqn_<scenario>.zip``; its absence is a message).
+    :param agent_path: the DQN agent (default: the bundled ``dqn_<scenario>.zip``, :func:`bundled_agent_path`;
+        its absence raises InputError).
     :param predictor: a Dynaformer predictor (``predict(context_current_a, context_voltage_v, current_a,
         dt_s)``), None for the bundled one (its absence is a message), or False to skip the prediction.
     :param lookahead: dqn only: policy rollout over the agent's K best safe actions (and the greedy
@@ -354,7 +349,8 @@ def plan_mission(
         "eod_s"}``), ``safe``, ``min_voltage_v`` (None for an empty route) and ``messages``. Series
         are rounded to 4 decimals and thinned to at most :data:`MAX_POINTS` samples (the lowest
         physics and predicted voltages are always kept).
-    :raises InputError: bad input (see the module docstring); never for a hard mission.
+    :raises InputError: bad input or a missing bundled agent (see the module docstring); never for a
+        hard mission.
     """
     if policy not in POLICIES:
         raise InputError("policy", f"{policy!r} is not a policy; allowed: {', '.join(POLICIES)}")
@@ -365,6 +361,9 @@ def plan_mission(
         m = m.with_battery(q_max, r0)
     if m.scenario not in SCENARIOS:  # pragma: no cover - Mission validates it
         raise InputError("scenario", f"{m.scenario!r} is not a scenario")
+    if policy == "dqn" and agent_path is None:  # an install without the agent: an error, not an empty plan
+        require_bundled(f"dqn_{m.scenario}.zip", "agent", "agent",
+                        "plan with the oracle or greedy policy, or give an agent file")
     messages: list[str] = []
 
     pred_model = _load_predictor(predictor, messages)

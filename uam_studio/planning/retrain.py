@@ -27,9 +27,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from uam_studio.atomic_io import remove_stale_temps
+from uam_studio.bundled import HOME_ENV, is_bundled, user_home
 from uam_studio.errors import InputError, check_range
 from uam_studio.planning.mission import SCENARIOS, Mission, mission_to_dict
-from uam_studio.planning.policy import BUNDLED_DIR
 
 __all__ = [
     "DQN_REWARD_DEFAULTS",
@@ -46,7 +47,6 @@ __all__ = [
     "user_home",
 ]
 
-HOME_ENV = "UAM_STUDIO_HOME"
 DQN_REWARD_DEFAULTS = {"alpha": 1.0, "beta": 1.0, "gamma": 5.0}  # the paper's figures (as UAMPlanningEnv)
 STATS_WINDOW = 100  # final_stats average the last 100 episodes
 MAX_STEPS = 10_000_000
@@ -55,22 +55,9 @@ MAX_STEPS = 10_000_000
 # ----------------------------------------------------------------------------- user folder
 
 
-def user_home() -> Path:
-    """The user folder: ``$UAM_STUDIO_HOME`` if set, else ``~/.uam_studio`` (not created here)."""
-    env = os.environ.get(HOME_ENV, "").strip()
-    return Path(env).expanduser() if env else Path.home() / ".uam_studio"
-
-
 def agents_dir() -> Path:
     """Where retrained agents are saved: ``<user_home()>/agents``."""
     return user_home() / "agents"
-
-
-def is_bundled(path: str | os.PathLike[str]) -> bool:
-    """True if ``path`` is the bundled ``pretrained/`` folder or inside it."""
-    bundled = BUNDLED_DIR.resolve()
-    p = Path(path).resolve()
-    return p == bundled or bundled in p.parents
 
 
 @dataclass(frozen=True)
@@ -227,6 +214,7 @@ def retrain_dqn(
     stop_event: threading.Event | None = None,
     progress_bar: bool = False,
     source: str | None = None,
+    card_path: str | os.PathLike[str] | None = None,
 ) -> RetrainResult:
     """Train a DQN agent (:func:`~uam_studio.planning.training.train_dqn`) and save it with its card.
 
@@ -239,7 +227,11 @@ def retrain_dqn(
     :param stop_event: set it to stop early; the agent trained so far is saved, with
         ``"stopped_early": true`` in its card.
     :param source: a short note on where the run came from (``"cli"``, ``"app"``), kept in the card.
+    :param card_path: also write the card as this JSON file, consistent with the agent (see
+        :func:`~uam_studio.planning.training.save_agent`).
     :raises InputError: ``agent_path`` inside ``pretrained/``.
+
+    Stale temp files left in the agent's folder by killed saves are deleted before training.
     """
     from uam_studio import __version__ as version
     from uam_studio.planning.env import OBS_DIM
@@ -248,6 +240,7 @@ def retrain_dqn(
     agent = Path(agent_path)
     if is_bundled(agent):
         raise InputError("agent_path", f"{agent}: must not be in the bundled pretrained/ folder")
+    remove_stale_temps(agent.parent)
     tally = _Tally()
 
     def _on_episode(e) -> None:
@@ -276,7 +269,7 @@ def retrain_dqn(
     }
     if source is not None:
         card["source"] = source
-    save_agent(model, agent, card)
+    save_agent(model, agent, card, card_file=card_path)
     return RetrainResult(agent, card, tally.n, int(model.num_timesteps), stopped, model)
 
 

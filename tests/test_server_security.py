@@ -1,0 +1,244 @@
+"""``uam-studio serve`` answers only this machine by default: it listens on loopback, refuses (403)
+every request whose Host, or Origin when present, is not one of its own names (DNS rebinding, other
+sites' pages), websocket included; and a port it cannot bind is one line and exit 2.
+
+The served tests start ``python -m uam_studio.cli serve --no-show`` in a subprocess on a free port.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import http.client
+import ipaddress
+import os
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("panel")
+
+from tornado.httpclient import HTTPClientError, HTTPRequest  # noqa: E402
+from tornado.websocket import websocket_connect  # noqa: E402
+
+from uam_studio.app.serve import allowed_hosts, split_host  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+EVIL = "evil.example"
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _cli(*args: str) -> list[str]:
+    return [sys.executable, "-m", "uam_studio.cli", *args]
+
+
+def _get(port: int, path: str, host: str, origin: str | None = None) -> int:
+    """Status of ``GET path`` sent to 127.0.0.1:port with the given Host (and Origin) headers."""
+    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=120)
+    try:
+        conn.putrequest("GET", path, skip_host=True)
+        conn.putheader("Host", host)
+        if origin is not None:
+            conn.putheader("Origin", origin)
+        conn.endheaders()
+        resp = conn.getresponse()
+        resp.read()
+        return resp.status
+    finally:
+        conn.close()
+
+
+class _Server:
+    """``uam-studio serve --no-show --port P *args`` in a subprocess, up once ``/liveness`` answers."""
+
+    def __init__(self, tmp: Path, *args: str) -> None:
+        self.port = _free_port()
+        self.log = tmp / f"serve-{self.port}.log"
+        env = {**os.environ, "UAM_STUDIO_HOME": str(tmp / "home"), "PYTHONPATH": str(ROOT)}
+        with open(self.log, "w") as log:
+            self.proc = subprocess.Popen(_cli("serve", "--no-show", "--port", str(self.port), *args),
+                                         cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
+        deadline = time.monotonic() + 120
+        while True:
+            try:
+                if _get(self.port, "/liveness", f"127.0.0.1:{self.port}") == 200:
+                    return
+            except OSError:
+                pass
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                self.stop()
+                pytest.fail(f"uam-studio serve did not start: {self.log.read_text()[-2000:]}")
+            time.sleep(0.2)
+
+    def stop(self) -> None:
+        self.proc.terminate()
+        try:
+            self.proc.wait(20)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory) -> Iterator[_Server]:
+    srv = _Server(tmp_path_factory.mktemp("serve"))
+    yield srv
+    srv.stop()
+
+
+def _listeners(port: int) -> list[str]:
+    """Addresses of the TCP sockets listening on ``port`` (from /proc/net/tcp and tcp6)."""
+    found = []
+    for name, family in (("tcp", socket.AF_INET), ("tcp6", socket.AF_INET6)):
+        path = Path("/proc/net") / name
+        if not path.exists():
+            continue
+        for line in path.read_text().splitlines()[1:]:
+            local, state = line.split()[1], line.split()[3]
+            addr_hex, port_hex = local.split(":")
+            if state != "0A" or int(port_hex, 16) != port:  # 0A: LISTEN
+                continue
+            raw = bytes.fromhex(addr_hex)
+            raw = b"".join(raw[i:i + 4][::-1] for i in range(0, len(raw), 4))  # host-order 32-bit words
+            found.append(socket.inet_ntop(family, raw))
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/net/tcp").exists(), reason="needs Linux /proc/net")
+def test_default_listens_on_loopback_only(server):
+    addrs = _listeners(server.port)
+    assert addrs, "no listening socket found"
+    assert all(ipaddress.ip_address(a).is_loopback for a in addrs), addrs
+
+
+@pytest.mark.parametrize("path", ["/", "/liveness", "/static/js/bokeh.min.js", "/autoload.js", "/no-such-page"])
+def test_http_foreign_host_is_refused(server, path):
+    assert _get(server.port, path, f"{EVIL}:{server.port}") == 403
+    assert _get(server.port, path, EVIL) == 403
+
+
+@pytest.mark.parametrize("path", ["/", "/liveness", "/static/js/bokeh.min.js"])
+@pytest.mark.parametrize("name", ["127.0.0.1", "localhost", "LocalHost"])
+def test_http_own_host_is_served(server, path, name):
+    assert _get(server.port, path, f"{name}:{server.port}") == 200
+
+
+def test_http_foreign_origin_is_refused(server):
+    own = f"127.0.0.1:{server.port}"
+    assert _get(server.port, "/", own, origin=f"http://{EVIL}:{server.port}") == 403
+    assert _get(server.port, "/", own, origin="null") == 403
+    assert _get(server.port, "/", own, origin=f"http://{own}") == 200
+
+
+def _ws(port: int, host: str, origin: str | None) -> int:
+    """101 if a websocket handshake with ``/ws`` succeeds with these Host/Origin headers, else the HTTP status."""
+    headers = {"Host": host, **({"Origin": origin} if origin else {})}
+
+    async def handshake() -> int:
+        try:
+            conn = await websocket_connect(HTTPRequest(f"ws://127.0.0.1:{port}/ws", headers=headers,
+                                                       request_timeout=60))
+        except HTTPClientError as err:
+            return err.code
+        conn.close()
+        return 101
+
+    # A thread of its own: an earlier test (Playwright's sync API) may leave an event loop running in
+    # this one, where asyncio.run refuses to start.
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        return pool.submit(asyncio.run, handshake()).result()
+
+
+def test_websocket_foreign_host_is_refused(server):
+    port = server.port
+    # DNS rebinding: the page's own origin is the rebound name, and so is Host.
+    assert _ws(port, f"{EVIL}:{port}", f"http://{EVIL}:{port}") == 403
+    assert _ws(port, f"{EVIL}:{port}", f"http://localhost:{port}") == 403
+    assert _ws(port, f"{EVIL}:{port}", None) == 403
+
+
+def test_websocket_foreign_origin_is_refused(server):
+    port = server.port
+    assert _ws(port, f"127.0.0.1:{port}", f"http://{EVIL}:{port}") == 403
+    assert _ws(port, f"localhost:{port}", f"http://{EVIL}") == 403
+
+
+@pytest.mark.parametrize("name", ["127.0.0.1", "localhost"])
+def test_websocket_own_origin_is_accepted(server, name):
+    port = server.port
+    assert _ws(port, f"{name}:{port}", f"http://{name}:{port}") == 101
+
+
+def test_allow_origin_adds_a_name(tmp_path):
+    srv = _Server(tmp_path, "--allow-origin", "classroom.example", "--allow-origin", "10.0.0.5:8080")
+    try:
+        port = srv.port
+        assert _get(port, "/liveness", f"classroom.example:{port}") == 200
+        assert _get(port, "/liveness", "10.0.0.5:8080") == 200
+        assert _get(port, "/liveness", f"10.0.0.5:{port}") == 403
+        assert _get(port, "/liveness", f"{EVIL}:{port}") == 403
+        assert _ws(port, f"classroom.example:{port}", f"http://classroom.example:{port}") == 101
+        assert _ws(port, f"classroom.example:{port}", f"http://{EVIL}:{port}") == 403
+    finally:
+        srv.stop()
+
+
+def test_port_in_use_is_one_line_and_exit_2(tmp_path):
+    env = {**os.environ, "UAM_STUDIO_HOME": str(tmp_path), "PYTHONPATH": str(ROOT)}
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        res = subprocess.run(_cli("serve", "--no-show", "--port", str(port)), cwd=ROOT, env=env,
+                             capture_output=True, text=True, timeout=180)
+    assert res.returncode == 2, (res.returncode, res.stderr[-2000:])
+    assert res.stdout == ""
+    lines = res.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: --port:") and str(port) in lines[0], res.stderr
+
+
+def test_port_in_use_starts_no_warm_up(monkeypatch):
+    """The port is bound before the warm-up thread starts: a thread still inside torch when the
+    process exits on the bind error aborted it (exit 134, "terminate called without an active exception")."""
+    import uam_studio.app.serve as serve_mod
+    import uam_studio.app.session as session_mod
+    import uam_studio.app.state as state_mod
+
+    started: list[str] = []
+    monkeypatch.setattr(state_mod, "warm_up", lambda: started.append("warm_up"))
+    monkeypatch.setattr(serve_mod, "warm_up", state_mod.warm_up, raising=False)
+    monkeypatch.setattr(session_mod, "configure_server_threads", lambda: None)  # keep this process's torch threads
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        with pytest.raises(OSError):
+            serve_mod.serve(port=taken.getsockname()[1], show=False)
+    time.sleep(0.5)
+    assert started == []
+
+
+@pytest.mark.parametrize("value", ["http://host:5006", "host:port", "host:0", ":5006", "::1", ""])
+def test_bad_allow_origin_is_refused(value, capsys):
+    from uam_studio.cli import main
+
+    assert main(["serve", "--no-show", "--allow-origin", value]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: --allow-origin:") and len(err.splitlines()) == 1, err
+
+
+def test_allowed_hosts():
+    assert allowed_hosts(5006) == ["127.0.0.1:5006", "localhost:5006", "[::1]:5006"]
+    assert allowed_hosts(80, "0.0.0.0", ["Lab-PC", "[fe80::1]:8000", "lab-pc:80"]) == [
+        "127.0.0.1:80", "localhost:80", "[::1]:80", "0.0.0.0:80", "lab-pc:80", "[fe80::1]:8000"]
+    assert allowed_hosts(5006, "::1") == ["127.0.0.1:5006", "localhost:5006", "[::1]:5006"]
+    assert split_host("[::1]:5006") == ("[::1]", 5006)
+    assert split_host("Example.ORG") == ("example.org", None)

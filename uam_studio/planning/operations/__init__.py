@@ -1,0 +1,23 @@
+"""Flying a mission in real time: the hidden world, the operator that sees only the forecast and its
+sensors, and the flight loop that records both sides.
+
+Public API: :func:`fly_mission` -> :class:`FlightRecord`, :class:`World`, :class:`Operator`,
+:func:`parse_event` (``"wind+30@1200"``), :class:`WindEvent`.
+"""
+
+from uam_studio.planning.operations.fly import FlightRecord, fly_mission
+from uam_studio.planning.operations.operator import Decision, Operator
+from uam_studio.planning.operations.world import (
+    DEFAULT_FORECAST_SIGMA_KT,
+    DEFAULT_SENSOR_NOISE_MA,
+    DEFAULT_SENSOR_NOISE_MV,
+    Readings,
+    WindEvent,
+    World,
+    parse_event,
+)
+
+__all__ = [
+    "DEFAULT_FORECAST_SIGMA_KT", "DEFAULT_SENSOR_NOISE_MA", "DEFAULT_SENSOR_NOISE_MV", "Decision",
+    "FlightRecord", "Operator", "Readings", "WindEvent", "World", "fly_mission", "parse_event",
+]

@@ -1,0 +1,273 @@
+"""Fly a mission in a world the planner cannot see: :func:`fly_mission` -> :class:`FlightRecord`.
+
+The loop is the only place that touches both sides. It takes the sensor readings from the
+:class:`~uam_studio.planning.operations.world.World` and hands them to the
+:class:`~uam_studio.planning.operations.operator.Operator`, and it flies the legs the operator
+chooses. The operator gets the mission with its forecast winds and a placeholder cell.
+
+Two references are flown in the same world (same actual winds, same events):
+
+* the **blind** plan: the operator's pre-flight plan (after the take-off check) flown to the end
+  with no re-planning;
+* the **hindsight** oracle: the exact plan for the true cell and the actual winds (with scripted
+  events, the winds after every event, on every leg).
+
+A flight that breaches the cut-off scores 0 priority.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0, simulate
+from uam_studio.errors import InputError
+from uam_studio.flight import leg_profile
+from uam_studio.planning.actions import DT_S, N_MAX
+from uam_studio.planning.mission import VERTIPORT, Battery, Mission
+from uam_studio.planning.operations.operator import HEALTH_Z, PLAN_WIND_Z, WIND_Z, Decision, Operator
+from uam_studio.planning.operations.world import (
+    DEFAULT_FORECAST_SIGMA_KT,
+    DEFAULT_SENSOR_NOISE_MA,
+    DEFAULT_SENSOR_NOISE_MV,
+    WindEvent,
+    World,
+    actual_winds_mission,
+)
+from uam_studio.planning.oracle import oracle_plan
+
+
+@dataclass
+class FlightRecord:
+    """One flight, both sides.
+
+    Executed: ``route`` (nodes in order; ``"vertiport"`` is a recharge), ``altitudes_m`` (m) and
+    ``actual_winds_kts`` (kt) of each leg, ``events`` (each re-plan as a :class:`Decision`),
+    ``breached`` (the cell fell below the cut-off), ``reached`` and ``reached_priority`` (0 when
+    breached), ``charging_cycles`` (returns to the vertiport).
+    Time series at 1 Hz from the first take-off: ``time_s`` (s), ``measured_voltage_v`` and
+    ``measured_current_a`` (the sensors), ``true_voltage_v`` (the world's cell), and
+    ``predicted_voltage_v`` (the operator's prediction for each leg at the decision that chose it,
+    from its health estimate and predicted wind; NaN-free: the take-off check holds the measurement).
+    References: ``static_*`` (the pre-flight plan flown blind) and ``hindsight_*`` (exact oracle
+    knowing the true cell and actual winds).
+    """
+
+    mission: str
+    scenario: str
+    seed: int
+    forecast_sigma_kt: float
+    sensor_noise_mv: float
+    sensor_noise_ma: float
+    wind_events: list[str]
+    route: list[str] = field(default_factory=list)
+    altitudes_m: list[float] = field(default_factory=list)
+    actual_winds_kts: list[float] = field(default_factory=list)
+    forecast_winds_kts: list[float] = field(default_factory=list)
+    leg_end_s: list[float] = field(default_factory=list)
+    events: list[Decision] = field(default_factory=list)
+    breached: bool = False
+    reached: list[str] = field(default_factory=list)
+    reached_priority: int = 0
+    charging_cycles: int = 0
+    min_voltage_v: float = 0.0
+    time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    measured_voltage_v: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    measured_current_a: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    true_voltage_v: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    predicted_voltage_v: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    static_route: list[str] = field(default_factory=list)
+    static_altitudes_m: list[float] = field(default_factory=list)
+    static_priority: int = 0
+    static_breached: bool = False
+    hindsight_route: list[str] = field(default_factory=list)
+    hindsight_altitudes_m: list[float] = field(default_factory=list)
+    hindsight_priority: int = 0
+    hindsight_exact: bool = True
+    true_q_max: float = 0.0
+    true_r0: float = 0.0
+    wall_s: float = 0.0
+
+    @property
+    def replan_s(self) -> list[float]:
+        """Wall time (s) of each decision."""
+        return [d.compute_s for d in self.events]
+
+    def to_dict(self, series: bool = True) -> dict[str, Any]:
+        """JSON-ready dict (finite numbers only); ``series=False`` leaves out the time series."""
+        out: dict[str, Any] = {}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, np.ndarray):
+                if not series:
+                    continue
+                v = [round(float(x), 5) for x in v]
+            elif f.name == "events":
+                v = [d.to_dict() for d in v]
+            elif isinstance(v, float):
+                v = round(v, 6)
+            out[f.name] = v
+        out["replan_s"] = [round(x, 4) for x in self.replan_s]
+        return out
+
+
+def _priority(mission: Mission, reached: Sequence[str]) -> int:
+    return int(sum(mission.node(n).priority for n in reached if n != VERTIPORT))
+
+
+def _fly_fixed(world: World, route: Sequence[str], alts: Sequence[float], takeoff: np.ndarray) -> tuple[bool, list[str]]:
+    """Fly ``route`` blind in ``world``; returns (breached, destinations reached)."""
+    reached: list[str] = []
+    if not route:
+        return False, reached
+    world.takeoff_check(takeoff)
+    if world.breached:
+        return True, reached
+    for to, alt in zip(route, alts):
+        r = world.fly_leg(to, alt)
+        if not r.landed:
+            return True, reached
+        if to != VERTIPORT:
+            reached.append(to)
+    return False, reached
+
+
+def _first_takeoff(mission: Mission) -> np.ndarray:
+    """The take-off every first leg starts with (the same vertical take-off at every level)."""
+    m = mission
+    d = min((m.distance_km(VERTIPORT, x.name) for x in m.destinations), default=30.0)
+    return np.asarray(leg_profile(max(d, 10.0), 500.0, 0.0, DT_S).current_a, dtype=float)
+
+
+def fly_mission(mission: Mission, policy: str = "oracle", seed: int = 0,
+                forecast_sigma_kt: float = DEFAULT_FORECAST_SIGMA_KT,
+                sensor_noise_mv: float = DEFAULT_SENSOR_NOISE_MV,
+                sensor_noise_ma: float = DEFAULT_SENSOR_NOISE_MA,
+                events: Sequence[WindEvent] = (), scenario: str | None = None,
+                health_z: float = HEALTH_Z, wind_z: float = WIND_Z, plan_wind_z: float = PLAN_WIND_Z,
+                references: bool = True) -> FlightRecord:
+    """Fly ``mission`` once: the operator plans from the take-off check, re-plans at every arrival.
+
+    :param mission: the mission; its ``battery`` is the world's true cell, its winds the forecast.
+    :param policy: the operator's planner: ``"oracle"`` (exact search on its cautious belief).
+    :param seed: seeds the forecast errors and the sensor noise.
+    :param forecast_sigma_kt: std (kt) of the forecast error per node, [0, 60]; the operator is told it.
+    :param sensor_noise_mv: voltage sensor noise std (mV), [0, 100]; the operator is told it.
+    :param sensor_noise_ma: current sensor noise std (mA), [0, 1000].
+    :param events: scripted wind changes (:func:`~uam_studio.planning.operations.world.parse_event`).
+    :param health_z: the operator's margin on its health estimate (std).
+    :param wind_z: the operator's margin on each unflown leg's wind (std) for its safety check.
+    :param plan_wind_z: the wind margin (std) of the belief it searches plans on.
+    :param references: also fly the blind pre-flight plan and the hindsight oracle.
+    :raises InputError: for bad input, naming the field; an event that starts after the flight
+        (and its references) ended is an error of field ``event``.
+    """
+    t_wall = time.perf_counter()
+    if policy != "oracle":
+        raise InputError("policy", f"{policy!r} is not an in-flight policy; allowed: oracle")
+    if not 1 <= len(mission.destinations) <= N_MAX:
+        raise InputError("destinations", f"{len(mission.destinations)} destinations; allowed 1 to {N_MAX}")
+    scenario = scenario or mission.scenario
+    world = World(mission, forecast_sigma_kt, sensor_noise_mv, sensor_noise_ma, events, seed)
+    known = dataclasses.replace(mission, battery=Battery(DEFAULT_Q_MAX, DEFAULT_R0))  # the operator's view
+    op = Operator(known, scenario, world.forecast_sigma_kt, world.sensor_noise_mv, health_z, wind_z, plan_wind_z)
+    rec = FlightRecord(mission.name, scenario, int(seed), world.forecast_sigma_kt, world.sensor_noise_mv,
+                       world.sensor_noise_ma, [e.text for e in world.events],
+                       true_q_max=mission.battery.q_max, true_r0=mission.battery.r0)
+    takeoff = _first_takeoff(mission)
+    series_t, series_i, series_v, series_true, series_pred = [], [], [], [], []
+
+    def take(r, true_v: np.ndarray, pred: np.ndarray) -> None:
+        series_t.append(r.time_s)
+        series_i.append(r.current_a)
+        series_v.append(r.voltage_v)
+        series_true.append(true_v)
+        series_pred.append(pred)
+        op.observe(r.time_s, r.current_a, r.voltage_v)
+
+    r = world.takeoff_check(takeoff)
+    take(r, world.last_true_voltage_v, r.voltage_v)
+    first = True
+    while not world.breached:
+        d = op.decide()
+        rec.events.append(d)
+        if d.next_to is None:
+            break
+        if first:
+            op.start_leg_at(0.0)
+        pred = _predict_leg(op, d, first)
+        r = world.fly_leg(d.next_to, d.next_altitude_m)
+        leg = world.legs[-1]
+        take(r, world.last_true_voltage_v, _fit_length(pred, r.time_s.size))
+        rec.route.append(leg.to)
+        rec.altitudes_m.append(leg.altitude_m)
+        rec.actual_winds_kts.append(round(leg.wind_kts, 3))
+        rec.forecast_winds_kts.append(mission.node(leg.to).wind_kts)
+        rec.leg_end_s.append(leg.end_s)
+        if not r.landed:
+            break
+        op.arrived(d.next_to)
+        first = False
+    rec.breached = world.breached
+    rec.reached = [n for n in rec.route if n != VERTIPORT]
+    if rec.breached:
+        rec.reached = rec.reached[:-1] if rec.route and rec.route[-1] != VERTIPORT else rec.reached
+    rec.reached_priority = 0 if rec.breached else _priority(mission, rec.reached)
+    rec.charging_cycles = sum(1 for n in rec.route if n == VERTIPORT)
+    rec.time_s = np.concatenate(series_t)
+    rec.measured_current_a = np.concatenate(series_i)
+    rec.measured_voltage_v = np.concatenate(series_v)
+    rec.true_voltage_v = np.concatenate(series_true)
+    rec.predicted_voltage_v = np.concatenate(series_pred)
+    rec.min_voltage_v = float(min(leg.min_voltage_v for leg in world.legs)) if world.legs else float(
+        rec.true_voltage_v.min())
+    end_s = world.time_s
+    if references:
+        first_plan = next((e for e in rec.events if e.kind == "plan"), None)
+        rec.static_route = list(first_plan.route) if first_plan else []
+        rec.static_altitudes_m = list(first_plan.altitudes_m) if first_plan else []
+        blind = World(mission, forecast_sigma_kt, sensor_noise_mv, sensor_noise_ma, events, seed)
+        rec.static_breached, static_reached = _fly_fixed(blind, rec.static_route, rec.static_altitudes_m, takeoff)
+        rec.static_priority = 0 if rec.static_breached else _priority(mission, static_reached)
+        end_s = max(end_s, blind.time_s)
+        winds = {n: world.wind(n, float("inf")) for n in mission.node_names}
+        hind = oracle_plan(actual_winds_mission(mission, winds), scenario)
+        rec.hindsight_route, rec.hindsight_altitudes_m = list(hind.route), list(hind.altitudes_m)
+        rec.hindsight_priority = _priority(mission, [n for n in hind.route if n != VERTIPORT])
+        rec.hindsight_exact = not world.events
+    late = [e for e in world.events if e.start_s > end_s]
+    if late:
+        raise InputError("event", f"{late[0].text} starts at {late[0].start_s:g} s, after the flight ended "
+                                  f"({end_s:.0f} s); allowed: a start within the flight")
+    rec.wall_s = time.perf_counter() - t_wall
+    return rec
+
+
+def _predict_leg(op: Operator, d: Decision, first: bool) -> np.ndarray:
+    """The operator's predicted voltage (V) for the leg it chose: its median health, predicted wind."""
+    m = op.forecast_mission
+    wind, _ = op.winds.predict(d.next_to)
+    wind = float(np.clip(wind, -39.0, 39.0))
+    dwell = m.node(d.next_to).dwell_s if d.next_to != VERTIPORT else 0.0
+    prof = leg_profile(m.distance_km(d.node, d.next_to), d.next_altitude_m, wind, DT_S, dwell)
+    cur, _ = op.segment.arrays()
+    skip = cur.size if first else 0
+    future = np.asarray(prof.current_a, dtype=float)[skip:]
+    hist = np.clip(cur, -50, 50)
+    res = simulate(np.concatenate([hist, future]), DT_S, d.q_max_c, d.r0_ohm, 2.5)
+    return np.asarray(res.voltage_v[hist.size:], dtype=float)
+
+
+def _fit_length(a: np.ndarray, n: int) -> np.ndarray:
+    if a.size >= n:
+        return a[:n]
+    pad = a[-1] if a.size else 0.0
+    return np.concatenate([a, np.full(n - a.size, pad)])
+
+
+__all__ = ["FlightRecord", "fly_mission"]

@@ -1,0 +1,443 @@
+"""The operator: what the aircraft knows, and how it decides in flight.
+
+It sees the mission with its *forecast* winds, the stated accuracy of that forecast, and the
+sensor readings; never the true cell nor the actual winds. At each decision point (after the
+take-off check and at every arrival) it
+
+1. estimates the health (q_max, R0) with its uncertainty from **all** readings since the last
+   full charge (:func:`uam_studio.battery.fit.fit_health`), combined by precision with the
+   estimates of earlier charges and with the fleet prior (:func:`fleet_prior`: the paper's health
+   box; a 20 s take-off says much about R0 and little about q_max, which the flight then sharpens);
+2. estimates the wind: the actual wind of each flown leg follows from its measured duration
+   (cruise time = distance / ground speed); the shift common to all legs is estimated from those
+   residuals with a Gaussian prior, and every unflown leg is predicted as forecast + shift;
+3. plans the rest exactly (:func:`~uam_studio.planning.oracle.feasible_sorties` continued from its
+   present node and estimated battery state) on its *expected* belief (median health, predicted
+   winds), allowing only first legs after which the aircraft can still get home on its *cautious*
+   belief: the cell ``health_z`` std to the weak side, every unflown leg's wind ``wind_z`` std
+   to the headwind side;
+4. flies that first leg only, and re-plans on arrival.
+
+The margins come only from its own uncertainty.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+
+from uam_studio.battery import BatteryState, full_charge, simulate
+from uam_studio.battery.fit import Q_REF_C, HealthEstimate, fit_health
+from uam_studio.errors import InputError, check_range
+from uam_studio.flight import leg_profile
+from uam_studio.flight.tables import WIND_RANGE_KTS
+from uam_studio.planning.actions import ALTITUDES_M, DT_S, N_MAX, N_TARGETS, VERTIPORT_SLOT, LegTable
+from uam_studio.planning.mission import SCENARIOS, VERTIPORT, Battery, Mission
+from uam_studio.planning.oracle import Sortie, feasible_sorties, fly_batch, sortie_cover_table
+
+HEALTH_Z = 1.64  # std of the health estimate the belief cell is taken at (one-sided 95%)
+WIND_Z = 1.64  # std of a leg's predicted wind the cautious belief takes
+PLAN_WIND_Z = 0.0  # std of a leg's predicted wind the expected belief takes
+SHIFT_PRIOR_KT = 10.0  # kt, prior std of a wind shift common to every leg
+OBSERVED_WIND_SD_KT = 1.0  # kt, std of a wind measured by flying its leg
+Q_PLAN_RANGE = (2000.0, 12000.0)  # C, belief cell bounds
+R0_PLAN_RANGE = (0.005, 1.5)  # ohm
+MIN_FIT_SAMPLES = 20
+FLEET_Q_RANGE = (5000.0, 8000.0)  # C, the paper's range of q_max: the fleet the cell comes from
+FLEET_R0_RANGE = (0.017, 0.45)  # ohm, the paper's range of R0
+
+
+@dataclass(frozen=True)
+class Decision:
+    """One (re-)plan: when, where, what it knew, what it chose and why.
+
+    ``time_s`` (s since the first take-off), ``node``, ``reason``, the health estimate
+    (``q_max_c``, ``q_max_sd_c``, ``r0_ohm``, ``r0_sd_ohm``), the belief cell it planned with
+    (``plan_q_max_c``, ``plan_r0_ohm``), the estimated common wind shift (``wind_shift_kts`` with
+    ``wind_shift_sd_kts``), the planned remaining ``route`` and ``altitudes_m``, the next leg
+    (``next_to``, ``next_altitude_m``; None: the flight ends) and ``compute_s`` (s of wall time).
+    """
+
+    time_s: float
+    node: str
+    kind: str
+    reason: str
+    q_max_c: float
+    q_max_sd_c: float
+    r0_ohm: float
+    r0_sd_ohm: float
+    plan_q_max_c: float
+    plan_r0_ohm: float
+    wind_shift_kts: float
+    wind_shift_sd_kts: float
+    route: tuple[str, ...]
+    altitudes_m: tuple[float, ...]
+    next_to: str | None
+    next_altitude_m: float | None
+    compute_s: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        d["route"], d["altitudes_m"] = list(self.route), list(self.altitudes_m)
+        return {k: (round(v, 6) if isinstance(v, float) else v) for k, v in d.items()}
+
+
+@lru_cache(maxsize=4096)
+def _duration_curve(distance_km: float, altitude_m: float, dwell_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Leg duration (s) over a 1 kt grid of winds (kt): monotone, for inverting a measured duration."""
+    winds = np.arange(WIND_RANGE_KTS[0], WIND_RANGE_KTS[1] + 0.5, 1.0)
+    dur = np.array([math.ceil(leg_profile(distance_km, altitude_m, float(w), DT_S, dwell_s).duration_s / DT_S - 1e-9)
+                    for w in winds], dtype=float)
+    return winds, dur
+
+
+def wind_from_duration(distance_km: float, altitude_m: float, dwell_s: float, duration_s: float) -> float:
+    """The wind (kt) under which a leg takes ``duration_s`` (s): the inverse of the leg's timing."""
+    winds, dur = _duration_curve(round(distance_km, 6), float(altitude_m), float(dwell_s))
+    return float(np.interp(duration_s, dur, winds))
+
+
+class WindBelief:
+    """Forecast winds plus an estimated common shift; flown legs are known.
+
+    :param forecast: kt by node name (the mission's winds).
+    :param sigma_kt: the forecast's stated error std per node (kt).
+    """
+
+    def __init__(self, forecast: dict[str, float], sigma_kt: float) -> None:
+        self.forecast = dict(forecast)
+        self.sigma = max(float(sigma_kt), 1.0)
+        self.observed: dict[str, float] = {}
+        self.residuals: list[float] = []
+
+    def observe(self, node: str, wind_kts: float) -> float:
+        """Record the actual wind of a flown leg to ``node``; returns its residual to the forecast (kt)."""
+        r = float(wind_kts) - self.forecast[node]
+        self.observed[node] = float(wind_kts)
+        self.residuals.append(r)
+        return r
+
+    def shift(self) -> tuple[float, float]:
+        """Posterior mean and std (kt) of the wind shift common to all legs."""
+        prec = 1.0 / SHIFT_PRIOR_KT ** 2 + len(self.residuals) / self.sigma ** 2
+        mean = (sum(self.residuals) / self.sigma ** 2) / prec
+        return mean, math.sqrt(1.0 / prec)
+
+    def predict(self, node: str) -> tuple[float, float]:
+        """Predicted wind (kt) on a leg to ``node`` and its std (kt)."""
+        if node in self.observed:
+            return self.observed[node], OBSERVED_WIND_SD_KT
+        mean, sd = self.shift()
+        return self.forecast[node] + mean, math.sqrt(sd ** 2 + self.sigma ** 2)
+
+
+def combine(parts: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Precision-weighted mean and covariance of independent Gaussian estimates ``(mean [2], cov 2x2)``."""
+    prec = np.zeros((2, 2))
+    vec = np.zeros(2)
+    for mean, cov in parts:
+        p = np.linalg.inv(np.asarray(cov, dtype=float) + np.diag([1e-12, 1e-12]))
+        prec += p
+        vec += p @ np.asarray(mean, dtype=float)
+    cov = np.linalg.inv(prec)
+    return cov @ vec, cov
+
+
+def fleet_prior(q_range: tuple[float, float] = FLEET_Q_RANGE, r0_range: tuple[float, float] = FLEET_R0_RANGE
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The operator's prior on an unknown cell: the fleet's health box (the paper's ranges) as a
+    Gaussian in (w, r0), w = 6500 C / q_max, with the mean and std of a uniform draw from the box:
+    ``(mean [w, r0 ohm], covariance)``."""
+    w = (Q_REF_C / q_range[1], Q_REF_C / q_range[0])
+    mean = np.array([sum(w) / 2, sum(r0_range) / 2])
+    sd = np.array([w[1] - w[0], r0_range[1] - r0_range[0]]) / math.sqrt(12.0)
+    return mean, np.diag(sd ** 2)
+
+
+@dataclass
+class _Segment:
+    """Readings since the last full charge."""
+
+    current: list[np.ndarray] = field(default_factory=list)
+    voltage: list[np.ndarray] = field(default_factory=list)
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        if not self.current:
+            return np.zeros(0), np.zeros(0)
+        return np.concatenate(self.current), np.concatenate(self.voltage)
+
+
+class Operator:
+    """Decides the flight from the forecast and the readings (see the module docstring).
+
+    :param mission: the mission as the operator knows it: forecast winds and the cut-off. Its
+        ``battery`` is never read (the operator's cell is its estimate); the flight loop hands it a
+        mission whose battery is a placeholder.
+    :param scenario: overrides ``mission.scenario``.
+    :param forecast_sigma_kt: the forecast's stated error std (kt).
+    :param sensor_noise_mv: the voltage sensor's stated noise std (mV), or None to estimate it.
+    :param health_z: margin on the health estimate (std).
+    :param wind_z: margin on each unflown leg's wind (std).
+    """
+
+    def __init__(self, mission: Mission, scenario: str | None = None, forecast_sigma_kt: float = 13.0,
+                 sensor_noise_mv: float | None = None, health_z: float = HEALTH_Z, wind_z: float = WIND_Z,
+                 plan_wind_z: float = PLAN_WIND_Z) -> None:
+        scenario = scenario or mission.scenario
+        if scenario not in SCENARIOS:
+            raise InputError("scenario", f"{scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}")
+        if not 1 <= len(mission.destinations) <= N_MAX:
+            raise InputError("destinations", f"{len(mission.destinations)} destinations; allowed 1 to {N_MAX}")
+        self.forecast_mission = mission
+        self.scenario = scenario
+        self.eod_v = mission.eod_v
+        self.health_z = check_range("health_z", health_z, 0.0, 5.0)
+        self.wind_z = check_range("wind_z", wind_z, 0.0, 5.0)
+        self.plan_wind_z = check_range("plan_wind_z", plan_wind_z, 0.0, 5.0)
+        self.noise_v = None if sensor_noise_mv is None else max(float(sensor_noise_mv), 0.5) * 1e-3
+        self.prior = fleet_prior()
+        self.winds = WindBelief({n: mission.node(n).wind_kts for n in mission.node_names}, forecast_sigma_kt)
+        self.names = tuple(d.name for d in mission.destinations)
+        self.node = VERTIPORT
+        self.visited: list[str] = []
+        self.time_s = 0.0
+        self.segment = _Segment()
+        self.past: list[HealthEstimate] = []
+        self.estimate: HealthEstimate | None = None
+        self.decisions: list[Decision] = []
+        self.sorties = 0
+        self._last_route: tuple[str, ...] | None = None
+        self._leg_start_s = 0.0
+        self._leg: tuple[str, str, float] | None = None
+
+    # ------------------------------------------------------------------ sensing
+    def observe(self, time_s: np.ndarray, current_a: np.ndarray, voltage_v: np.ndarray) -> None:
+        """Take readings (s, A, V) at 1 Hz."""
+        if len(time_s):
+            self.segment.current.append(np.asarray(current_a, dtype=float))
+            self.segment.voltage.append(np.asarray(voltage_v, dtype=float))
+            self.time_s = float(time_s[-1])
+
+    def arrived(self, to: str) -> str:
+        """The aircraft landed at ``to`` (the leg it was sent on); returns what the leg told about the wind."""
+        if self._leg is None or self._leg[1] != to:
+            raise InputError("arrived", f"{to!r} is not where the operator sent the aircraft")
+        frm, _, alt = self._leg
+        m = self.forecast_mission
+        duration = self.time_s - self._leg_start_s
+        dwell = m.node(to).dwell_s if to != VERTIPORT else 0.0
+        wind = wind_from_duration(m.distance_km(frm, to), alt, dwell, duration)
+        resid = self.winds.observe(to, wind)
+        self.node = to
+        self._leg = None
+        if to == VERTIPORT:
+            self.sorties += 1
+            est = self._fit()
+            if est is not None:
+                self.past.append(est)
+            self.segment = _Segment()
+        else:
+            self.visited.append(to)
+        return f"wind to {to} {wind:+.0f} kt ({resid:+.0f} kt against the forecast)"
+
+    def _fit(self) -> HealthEstimate | None:
+        cur, volt = self.segment.arrays()
+        if cur.size < MIN_FIT_SAMPLES:
+            return None
+        return fit_health(cur, volt, DT_S, noise_v=self.noise_v, eod_v=self.eod_v)
+
+    def health(self) -> tuple[float, float, float, float]:
+        """(w, its std, r0 ohm, its std) from all readings so far and the fleet prior; w = 6500 C / q_max."""
+        est = self._fit()
+        self.estimate = est if est is not None else self.estimate
+        fits = self.past + ([est] if est is not None else [])
+        if not fits:
+            raise InputError("readings", f"at least {MIN_FIT_SAMPLES} s of readings are needed before planning")
+        mean, cov = combine([self.prior] + [(np.array([e.w, e.r0]), np.asarray(e.cov_w)) for e in fits])
+        return float(mean[0]), float(math.sqrt(cov[0, 0])), float(mean[1]), float(math.sqrt(cov[1, 1]))
+
+    # ------------------------------------------------------------------ planning
+    def _belief(self, health: tuple[float, float, float, float], health_z: float, wind_z: float
+                ) -> tuple[Mission, float, float]:
+        """The mission as the operator believes it, each quantity ``z`` std to the cautious side:
+        the cell (less q_max, more R0) and every leg's wind (more headwind)."""
+        w, w_sd, r, r_sd = health
+        q_plan = float(np.clip(Q_REF_C / max(w + health_z * w_sd, 1e-3), *Q_PLAN_RANGE))
+        r_plan = float(np.clip(r + health_z * r_sd, *R0_PLAN_RANGE))
+        lo, hi = WIND_RANGE_KTS
+        m = self.forecast_mission
+
+        def w(node: str) -> float:
+            mean, sd = self.winds.predict(node)
+            return float(np.clip(mean + wind_z * sd, lo, hi))
+
+        dests = tuple(dataclasses.replace(d, wind_kts=w(d.name)) for d in m.destinations)
+        vp = dataclasses.replace(m.vertiport, wind_kts=w(VERTIPORT))
+        belief = dataclasses.replace(m, vertiport=vp, destinations=dests, battery=Battery(q_plan, r_plan))
+        return belief, q_plan, r_plan
+
+    def _state(self, q_plan: float, r_plan: float) -> BatteryState:
+        """Battery state of a believed cell after the readings since the last full charge."""
+        cur, _ = self.segment.arrays()
+        if cur.size == 0:
+            return full_charge(q_plan)
+        res = simulate(np.clip(cur, -50, 50), DT_S, q_plan, r_plan, 2.5)
+        return res.final_state
+
+    def _safe_moves(self, legs: LegTable, here: int, state: np.ndarray, visited: int) -> np.ndarray:
+        """bool [N_TARGETS, N_ALTITUDES]: next legs after which the aircraft can still get home, both
+        legs flown on ``legs``' (cautious) cell and winds from ``state``."""
+        q, r0 = legs.mission.battery.q_max, legs.mission.battery.r0
+        n_alt = len(ALTITUDES_M)
+        safe = np.zeros((N_TARGETS, n_alt), dtype=bool)
+        firsts = [(j, a) for j in range(len(self.names)) if not visited >> j & 1
+                  for a in range(n_alt) if legs.feasible[here, j, a]]
+        if here != VERTIPORT_SLOT:
+            firsts += [(VERTIPORT_SLOT, a) for a in range(n_alt) if legs.feasible[here, VERTIPORT_SLOT, a]]
+        if not firsts:
+            return safe
+        ok, x_end, _ = fly_batch([legs.current(here, j, a) for j, a in firsts],
+                                 np.repeat(state[None, :], len(firsts), 0), q, r0, self.eod_v)
+        back = [(k, a) for k, (j, _) in enumerate(firsts) if ok[k] and j != VERTIPORT_SLOT
+                for a in range(n_alt) if legs.feasible[j, VERTIPORT_SLOT, a]]
+        home_ok = np.zeros(len(firsts), dtype=bool)
+        if back:
+            ok2, _, _ = fly_batch([legs.current(firsts[k][0], VERTIPORT_SLOT, a) for k, a in back],
+                                  x_end[[k for k, _ in back]], q, r0, self.eod_v)
+            for (k, _), good in zip(back, ok2):
+                home_ok[k] |= bool(good)
+        for k, (j, a) in enumerate(firsts):
+            safe[j, a] = ok[k] and (j == VERTIPORT_SLOT or home_ok[k])
+        return safe
+
+    def decide(self) -> Decision:
+        """Re-plan from here; the returned decision's ``next_to`` / ``next_altitude_m`` is the next leg.
+
+        The plan is searched on the expected belief (median health, predicted winds); its first leg must
+        be one after which the aircraft can still get home on the cautious belief (``health_z``,
+        ``wind_z``). Only that first leg is committed: the rest is re-planned at the next arrival.
+        """
+        import time
+
+        t0 = time.perf_counter()
+        health = self.health()
+        w, w_sd, r, r_sd = health
+        q, q_sd = Q_REF_C / w, Q_REF_C * w_sd / w ** 2
+        expected, q_exp, r_exp = self._belief(health, 0.0, self.plan_wind_z)
+        cautious, q_plan, r_plan = self._belief(health, self.health_z, self.wind_z)
+        slot = {n: k for k, n in enumerate(self.names)}
+        here = VERTIPORT_SLOT if self.node == VERTIPORT else slot[self.node]
+        visited = 0
+        for n in self.visited:
+            visited |= 1 << slot[n]
+        c_legs = LegTable(cautious)
+        moves = self._safe_moves(c_legs, here, self._state(q_plan, r_plan).as_array()[0], visited)
+        state = self._state(q_exp, r_exp).as_array()[0]
+        route, alts, why = self._plan(LegTable(expected), here, state, visited, moves)
+        if route is None:
+            route, alts, why = self._best_effort_home(c_legs, here, self._state(q_plan, r_plan).as_array()[0])
+        shift, shift_sd = self.winds.shift()
+        kind = "plan" if not self.decisions else "replan"
+        if not route:
+            reason = why
+        elif self._last_route is not None and tuple(route) == self._last_route:
+            reason = "plan unchanged"
+        else:
+            reason = why if self._last_route is None else f"plan changed: {why}"
+        nxt = route[0] if route else None
+        d = Decision(self.time_s, self.node, kind, reason, q, q_sd, r, r_sd, q_plan, r_plan, shift, shift_sd,
+                     tuple(route), tuple(alts), nxt, alts[0] if route else None, time.perf_counter() - t0)
+        self._last_route = tuple(route[1:])
+        self.decisions.append(d)
+        if nxt is not None:
+            self._leg = (self.node, nxt, float(alts[0]))
+            self._leg_start_s = self.time_s
+        return d
+
+    def start_leg_at(self, time_s: float) -> None:
+        """The clock (s) at which the leg just decided took off (the first leg: 0, before the check)."""
+        self._leg_start_s = float(time_s)
+
+    def _plan(self, legs: LegTable, here: int, state: np.ndarray, visited: int, moves: np.ndarray
+              ) -> tuple[list[str] | None, list[float], str]:
+        """The best plan on ``legs`` (expected belief) whose first leg is in ``moves``; None: only the
+        way home is left and it is not safe on the cautious belief."""
+        n = len(self.names)
+        prio = legs.priority[:N_MAX]
+        q, r0 = legs.mission.battery.q_max, legs.mission.battery.r0
+
+        def names(s: Sortie) -> tuple[list[str], list[float]]:
+            return [self.names[k] for k in s.nodes] + [VERTIPORT], [ALTITUDES_M[a] for a in s.alts]
+
+        def priority(mask: int) -> int:
+            return int(sum(prio[k] for k in range(n) if mask >> k & 1))
+
+        if self.scenario == "single_flight":
+            if here != VERTIPORT_SLOT or visited:
+                return [], [], "single flight done"
+            levels = [a for a in range(len(ALTITUDES_M)) if moves[0, a]] or \
+                [a for a in range(len(ALTITUDES_M)) if legs.feasible[VERTIPORT_SLOT, 0, a]]
+            if not levels:
+                return [], [], f"{self.names[0]} cannot be reached at any level"
+            cur = [legs.current(VERTIPORT_SLOT, 0, a) for a in levels]
+            ok, _, vmin = fly_batch(cur, np.repeat(state[None, :], len(levels), 0), q, r0, self.eod_v)
+            best = levels[int(np.argmax(np.where(ok, vmin, -np.inf)))]
+            return [self.names[0]], [ALTITUDES_M[best]], f"highest expected minimum voltage ({vmin.max():.3f} V)"
+
+        if here == VERTIPORT_SLOT and self.scenario == "single_charge" and self.sorties >= 1:
+            return [], [], "back home: the charge is used"
+        unvisited_ok = np.array([k < n and not visited >> k & 1 for k in range(N_MAX)])
+        if here == VERTIPORT_SLOT:
+            start = None
+        else:
+            start = (here, state, visited)
+        cont = feasible_sorties(legs, allowed=unvisited_ok, start=start, first_moves=moves)
+        if here == VERTIPORT_SLOT:
+            cont = {m: s for m, s in cont.items() if m}
+            if not cont:
+                return [], [], "no unvisited destination can be reached safely"
+        elif not cont:
+            return None, [], ""
+        if self.scenario == "single_charge":
+            best = max(cont.values(), key=lambda s: (priority(s.mask), -s.time_s, s.min_voltage_v))
+            route, alts = names(best)
+            return route, alts, f"expected priority {priority(best.mask)} this charge"
+        # multi charge: this sortie's rest, then the fewest fresh sorties for what is left
+        fresh = feasible_sorties(legs, allowed=unvisited_ok)
+        fresh = {m: s for m, s in fresh.items() if m}
+        universe = 0
+        for m in list(fresh) + [m & ~visited for m in cont]:
+            universe |= m
+        table = sortie_cover_table(fresh, universe)
+        best_key, best = None, None
+        for m, s in cont.items():
+            rest = universe & ~(m & ~visited)
+            if rest not in table:
+                continue
+            key = (table[rest][0], table[rest][1] + s.time_s, -s.min_voltage_v)
+            if best_key is None or key < best_key:
+                best_key, best = key, s
+        if best is None:
+            best = max(cont.values(), key=lambda s: (bin(s.mask).count("1"), -s.time_s))
+            route, alts = names(best)
+            return route, alts, "the rest cannot all be covered; visiting what this charge reaches"
+        route, alts = names(best)
+        return route, alts, f"expected {best_key[0]} more charges after this one"
+
+    def _best_effort_home(self, legs: LegTable, here: int, state: np.ndarray) -> tuple[list[str], list[float], str]:
+        q, r0 = legs.mission.battery.q_max, legs.mission.battery.r0
+        levels = [a for a in range(len(ALTITUDES_M)) if legs.feasible[here, VERTIPORT_SLOT, a]] or [0]
+        cur = [legs.current(here, VERTIPORT_SLOT, a) for a in levels]
+        _, _, vmin = fly_batch(cur, np.repeat(state[None, :], len(levels), 0), q, r0, self.eod_v)
+        best = levels[int(np.argmax(vmin))]
+        return [VERTIPORT], [ALTITUDES_M[best]], ("no way home is safe on the cautious belief: going home at the "
+                                                   f"level with the highest minimum voltage ({vmin.max():.3f} V)")
+
+
+__all__ = ["HEALTH_Z", "WIND_Z", "Decision", "Operator", "WindBelief", "combine", "fleet_prior",
+           "wind_from_duration"]
