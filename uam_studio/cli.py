@@ -6,7 +6,8 @@ code. Bad input of any kind (an :class:`~uam_studio.errors.InputError`, or a val
 argparse rejects) prints one line ``error: ...`` to stderr and exits with code 2.
 
 Commands: ``serve`` (start the Panel app), ``simulate`` (fly a route of a mission file and report voltage and EOD), ``plan`` (plan
-a mission with the DQN agent, the oracle or the greedy baseline; physics-checked), ``train``
+a mission with the DQN agent, the oracle or the greedy baseline; physics-checked), ``fly`` (fly it in
+a world the operator cannot see, re-planning from its sensors), ``train``
 (``dynaformer`` or ``dqn``; never into ``pretrained/``) and ``evaluate``.
 """
 
@@ -181,6 +182,67 @@ def _run_plan(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# --------------------------------------------------------------------------- fly
+
+
+def _add_fly_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("mission", metavar="MISSION.json", help="mission file: its battery is the true cell, its "
+                                                           "winds the forecast")
+    p.add_argument("--policy", choices=["oracle"], default="oracle",
+                   help="the operator's planner: oracle (exact search on what it believes; default)")
+    p.add_argument("--seed", type=int, default=0, help="seeds the forecast errors and the sensor noise")
+    p.add_argument("--forecast-sigma", type=float, default=13.0, metavar="KT",
+                   help="std of the forecast error of each node's wind (kt, 0-60; default 13)")
+    p.add_argument("--sensor-noise-mv", type=float, default=5.0, metavar="MV",
+                   help="voltage sensor noise std (mV, 0-100; default 5)")
+    p.add_argument("--sensor-noise-ma", type=float, default=20.0, metavar="MA",
+                   help="current sensor noise std (mA, 0-1000; default 20)")
+    p.add_argument("--event", action="append", default=[], metavar="wind+KT@S",
+                   help="scripted wind change, e.g. wind+30@1200: 30 kt more headwind on legs taking off "
+                        "from t = 1200 s (repeatable)")
+    p.add_argument("--q-max", type=float, default=None, help="override the true cell's q_max (C)")
+    p.add_argument("--r0", type=float, default=None, help="override the true cell's r0 (ohm)")
+    p.add_argument("--json", action="store_true", help="print the flight record as JSON")
+    p.add_argument("--series", action="store_true", help="with --json: include the 1 Hz time series")
+
+
+def _run_fly(args: argparse.Namespace) -> int:
+    from uam_studio.planning import load_mission
+    from uam_studio.planning.actions import check_destination_count
+    from uam_studio.planning.operations import fly_mission, parse_event
+
+    events = [parse_event(e) for e in args.event]
+    mission = load_mission(args.mission).with_battery(args.q_max, args.r0)
+    check_destination_count(len(mission.destinations))
+    rec = fly_mission(mission, args.policy, seed=args.seed, forecast_sigma_kt=args.forecast_sigma,
+                      sensor_noise_mv=args.sensor_noise_mv, sensor_noise_ma=args.sensor_noise_ma, events=events)
+    if args.json:
+        json.dump(rec.to_dict(series=args.series), sys.stdout, allow_nan=False)
+        sys.stdout.write("\n")
+        return EXIT_OK
+    print(f"{mission.name} ({rec.scenario}): seed {rec.seed}, forecast sigma {rec.forecast_sigma_kt:g} kt, "
+          f"sensor noise {rec.sensor_noise_mv:g} mV / {rec.sensor_noise_ma:g} mA, events: "
+          f"{', '.join(rec.wind_events) or 'none'}")
+    legs = iter(zip(rec.route, rec.altitudes_m, rec.actual_winds_kts, rec.forecast_winds_kts, rec.leg_end_s))
+    for d in rec.events:
+        print(f"t={d.time_s:>6.0f} s at {d.node}: {d.kind}: {d.reason}")
+        print(f"           knows q_max {d.q_max_c:.0f} +- {d.q_max_sd_c:.0f} C, R0 {d.r0_ohm:.3f} +- "
+              f"{d.r0_sd_ohm:.3f} ohm, wind shift {d.wind_shift_kts:+.1f} kt; plans "
+              f"{' -> '.join(d.route) or 'nothing more'}")
+        if d.next_to is not None:
+            to, alt, wind, forecast, end = next(legs)
+            print(f"           flies to {to} at {alt:g} m: wind {wind:+.0f} kt (forecast {forecast:+.0f}), "
+                  f"lands at {end:.0f} s")
+    reached = ", ".join(rec.reached) or "none"
+    verdict = "BREACHED the cut-off: priority 0" if rec.breached else f"priority {rec.reached_priority}"
+    print(f"flown: reached {reached}; {verdict}; {rec.charging_cycles} recharges; min {rec.min_voltage_v:.3f} V")
+    print(f"blind pre-flight plan: {' -> '.join(rec.static_route) or 'nothing'}: "
+          f"{'BREACHED, priority 0' if rec.static_breached else f'priority {rec.static_priority}'}")
+    exact = "" if rec.hindsight_exact else " (winds after the events on every leg)"
+    print(f"hindsight oracle (true cell, actual winds{exact}): priority {rec.hindsight_priority}")
+    return EXIT_OK
+
+
 # --------------------------------------------------------------------------- train
 
 _DYNAFORMER_ONLY = ("n_train", "device", "no_resume")
@@ -314,7 +376,15 @@ def _run_train_dqn(args: argparse.Namespace) -> int:
 def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", choices=["dynaformer"], help="what to evaluate")
     p.add_argument("--weights", default=None, help="weights file (default: the bundled model)")
-    p.add_argument("--n", type=int, default=400, help="missions per held-out set (default 400)")
+    p.add_argument("--table", choices=["default", "noise"], default="default",
+                   help="default: the held-out sets, beside the physics fit; noise: EOD timing over sensor noise "
+                        "(0, 1, 5, 10 mV) x context (20, 60, 120, 600 s) x log start (aligned, at rest), beside the "
+                        "physics fit and the take-off estimator, with 90%% interval coverage and latency")
+    p.add_argument("--n", type=int, default=None,
+                   help="missions per held-out set (default 400; --table noise: 200 flights)")
+    p.add_argument("--compare", default=None, metavar="WEIGHTS",
+                   help="--table noise: one more column, another weights file with its own health estimator "
+                        "(e.g. a transformer-encoder model)")
     p.add_argument("--seed", type=int, default=12345)
     p.add_argument("--json", action="store_true", help="print the metrics as JSON")
 
@@ -322,12 +392,22 @@ def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
 def _run_evaluate(args: argparse.Namespace) -> int:
     import json
 
-    from .dynaformer.evaluate import evaluate, format_report
+    from .dynaformer.evaluate import evaluate, format_noise_table, format_report, noise_table
     from .dynaformer.predictor import load_predictor
 
-    if args.n < 10:
+    n = args.n if args.n is not None else (200 if args.table == "noise" else 400)
+    if n < 10:
         raise _CliExit("--n: must be >= 10", EXIT_INPUT)
-    metrics = evaluate(load_predictor(args.weights), n=args.n, seed=args.seed)
+    if args.compare is not None and args.table != "noise":
+        raise _CliExit("--compare: only with --table noise", EXIT_INPUT)
+    pred = load_predictor(args.weights)
+    if args.table == "noise":
+        other = load_predictor(args.compare) if args.compare is not None else None
+        compare = {other.model.cfg.health if other.model.cfg.health != "takeoff" else "other": other} if other else None
+        metrics = noise_table(pred, n=n, seed=args.seed, compare=compare)
+        print(json.dumps(metrics, indent=2) if args.json else format_noise_table(metrics))
+        return EXIT_OK
+    metrics = evaluate(pred, n=n, seed=args.seed)
     print(json.dumps(metrics, indent=2) if args.json else format_report(metrics))
     return EXIT_OK
 
@@ -386,6 +466,12 @@ COMMANDS: dict[str, Command] = {
         "plan a mission with a policy (dqn, oracle, greedy), checked with the physics model",
         _add_plan_arguments,
         _run_plan,
+    ),
+    "fly": Command(
+        "fly a mission in a hidden world: the operator estimates health and wind from its sensors and "
+        "re-plans at every arrival",
+        _add_fly_arguments,
+        _run_fly,
     ),
     "train": Command("train a model (writes to a run folder, never over pretrained/)", _add_train_arguments, _run_train),
     "evaluate": Command("evaluate a model on held-out synthetic data", _add_evaluate_arguments, _run_evaluate),

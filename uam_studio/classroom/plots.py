@@ -7,6 +7,8 @@ HoloViews object that a notebook displays or combines with ``+`` and ``*``.
   coloured by charging cycle (the paper's mission maps).
 - :func:`curves`: several labelled (x, y) series in one overlay, with an optional horizontal line
   (e.g. the EOD cut-off).
+- :func:`flight_voltage`: one flown mission's measured, predicted and true voltage against the
+  cut-off, with the operator's decisions marked on the timeline.
 """
 
 from __future__ import annotations
@@ -19,8 +21,9 @@ import holoviews.plotting.bokeh  # noqa: F401  (registers the bokeh backend, so 
 import numpy as np
 
 from uam_studio.planning.mission import VERTIPORT, Mission
+from uam_studio.planning.operations import FlightRecord
 
-__all__ = ["curves", "mission_map", "sorties"]
+__all__ = ["curves", "flight_voltage", "mission_map", "sorties"]
 
 PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
 
@@ -81,3 +84,29 @@ def curves(series: Mapping[str, tuple[Sequence[float], Sequence[float]]], xlabel
     if hline is not None:
         items.append(hv.HLine(hline).opts(color="gray", line_dash="dashed", line_width=1))
     return hv.Overlay(items).opts(title=title, width=width, height=height, legend_position="right", **opts)
+
+
+def flight_voltage(rec: FlightRecord, eod_v: float = 3.0, title: str | None = None, width: int = 760,
+                   height: int = 320) -> hv.Overlay:
+    """A flight's voltage (V) over time (s): the sensor's readings, the operator's prediction for each leg
+    (made when it chose the leg), the world's noise-free truth, the cut-off, and a dotted line at each
+    decision (hover: its reason)."""
+    t = rec.time_s
+    items: list[Any] = [
+        hv.Curve((t, rec.measured_voltage_v), "time_s", "voltage_v", label="measured (sensor)").opts(
+            color="#9e9e9e", line_width=1, alpha=0.7),
+        hv.Curve((t, rec.predicted_voltage_v), "time_s", "voltage_v", label="predicted by the operator").opts(
+            color="#1f77b4", line_width=2, line_dash="dashed"),
+        hv.Curve((t, rec.true_voltage_v), "time_s", "voltage_v", label="true (physics, hidden)").opts(
+            color="#2ca02c", line_width=1.5),
+        hv.HLine(eod_v, label="EOD cut-off").opts(color="#d62728", line_dash="dashed", line_width=1.5),
+    ]
+    marks = hv.Points([(d.time_s, eod_v, d.reason) for d in rec.events], kdims=["time_s", "voltage_v"],
+                      vdims=["decision"], label="decisions").opts(
+        marker="triangle", size=10, color="black", tools=["hover"])
+    items += [hv.VLine(d.time_s).opts(color="black", line_dash="dotted", line_width=1) for d in rec.events]
+    items.append(marks)
+    lo = min(eod_v - 0.05, float(np.min(rec.true_voltage_v)) - 0.05) if t.size else eod_v - 0.05
+    verdict = "BREACHED" if rec.breached else f"priority {rec.reached_priority}"
+    return hv.Overlay(items).opts(title=title or f"{rec.mission}: {verdict}", width=width, height=height,
+                                  legend_position="right", ylim=(lo, 4.25))

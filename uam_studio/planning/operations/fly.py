@@ -51,7 +51,7 @@ class FlightRecord:
     ``breached`` (the cell fell below the cut-off), ``reached`` and ``reached_priority`` (0 when
     breached), ``charging_cycles`` (returns to the vertiport).
     Time series at 1 Hz from the first take-off: ``time_s`` (s), ``measured_voltage_v`` and
-    ``measured_current_a`` (the sensors), ``true_voltage_v`` (the world's cell), and
+    ``measured_current_a`` (the sensors), ``true_voltage_v`` and ``true_current_a`` (the world), and
     ``predicted_voltage_v`` (the operator's prediction for each leg at the decision that chose it,
     from its health estimate and predicted wind; NaN-free: the take-off check holds the measurement).
     References: ``static_*`` (the pre-flight plan flown blind) and ``hindsight_*`` (exact oracle
@@ -80,6 +80,7 @@ class FlightRecord:
     measured_voltage_v: np.ndarray = field(default_factory=lambda: np.zeros(0))
     measured_current_a: np.ndarray = field(default_factory=lambda: np.zeros(0))
     true_voltage_v: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    true_current_a: np.ndarray = field(default_factory=lambda: np.zeros(0))
     predicted_voltage_v: np.ndarray = field(default_factory=lambda: np.zeros(0))
     static_route: list[str] = field(default_factory=list)
     static_altitudes_m: list[float] = field(default_factory=list)
@@ -180,18 +181,19 @@ def fly_mission(mission: Mission, policy: str = "oracle", seed: int = 0,
                        world.sensor_noise_ma, [e.text for e in world.events],
                        true_q_max=mission.battery.q_max, true_r0=mission.battery.r0)
     takeoff = _first_takeoff(mission)
-    series_t, series_i, series_v, series_true, series_pred = [], [], [], [], []
+    series_t, series_i, series_v, series_true, series_true_i, series_pred = [], [], [], [], [], []
 
-    def take(r, true_v: np.ndarray, pred: np.ndarray) -> None:
+    def take(r, pred: np.ndarray) -> None:
         series_t.append(r.time_s)
         series_i.append(r.current_a)
         series_v.append(r.voltage_v)
-        series_true.append(true_v)
+        series_true.append(world.last_true_voltage_v)
+        series_true_i.append(world.last_true_current_a)
         series_pred.append(pred)
         op.observe(r.time_s, r.current_a, r.voltage_v)
 
     r = world.takeoff_check(takeoff)
-    take(r, world.last_true_voltage_v, r.voltage_v)
+    take(r, r.voltage_v)
     first = True
     while not world.breached:
         d = op.decide()
@@ -203,7 +205,7 @@ def fly_mission(mission: Mission, policy: str = "oracle", seed: int = 0,
         pred = _predict_leg(op, d, first)
         r = world.fly_leg(d.next_to, d.next_altitude_m)
         leg = world.legs[-1]
-        take(r, world.last_true_voltage_v, _fit_length(pred, r.time_s.size))
+        take(r, _fit_length(pred, r.time_s.size))
         rec.route.append(leg.to)
         rec.altitudes_m.append(leg.altitude_m)
         rec.actual_winds_kts.append(round(leg.wind_kts, 3))
@@ -223,6 +225,7 @@ def fly_mission(mission: Mission, policy: str = "oracle", seed: int = 0,
     rec.measured_current_a = np.concatenate(series_i)
     rec.measured_voltage_v = np.concatenate(series_v)
     rec.true_voltage_v = np.concatenate(series_true)
+    rec.true_current_a = np.concatenate(series_true_i)
     rec.predicted_voltage_v = np.concatenate(series_pred)
     rec.min_voltage_v = float(min(leg.min_voltage_v for leg in world.legs)) if world.legs else float(
         rec.true_voltage_v.min())

@@ -14,8 +14,8 @@ take-off check and at every arrival) it
 3. plans the rest exactly (:func:`~uam_studio.planning.oracle.feasible_sorties` continued from its
    present node and estimated battery state) on its *expected* belief (median health, predicted
    winds), allowing only first legs after which the aircraft can still get home on its *cautious*
-   belief: the cell ``health_z`` std to the weak side, every unflown leg's wind ``wind_z`` std
-   to the headwind side;
+   belief: the cell ``health_z`` std to the weak side, and the two legs' winds at a joint one-sided
+   ``wind_z`` bound (:meth:`Operator._safe_moves`);
 4. flies that first leg only, and re-plans on arrival.
 
 The margins come only from its own uncertainty.
@@ -41,9 +41,11 @@ from uam_studio.planning.mission import SCENARIOS, VERTIPORT, Battery, Mission
 from uam_studio.planning.oracle import Sortie, feasible_sorties, fly_batch, sortie_cover_table
 
 HEALTH_Z = 1.64  # std of the health estimate the belief cell is taken at (one-sided 95%)
-WIND_Z = 1.64  # std of a leg's predicted wind the cautious belief takes
-PLAN_WIND_Z = 0.0  # std of a leg's predicted wind the expected belief takes
-SHIFT_PRIOR_KT = 10.0  # kt, prior std of a wind shift common to every leg
+WIND_Z = 1.64  # one-sided joint bound (std) on the next leg's and the way home's winds
+PLAN_WIND_Z = 0.5  # std of a leg's predicted wind the expected belief takes
+SHIFT_PRIOR_KT = 5.0  # kt, prior std of a wind shift common to every leg
+EVENT_PRIOR_KT = 30.0  # kt, prior std of the shift after a surprise
+SURPRISE_Z = 2.5  # a flown leg's wind this many std off its prediction is a surprise
 OBSERVED_WIND_SD_KT = 1.0  # kt, std of a wind measured by flying its leg
 Q_PLAN_RANGE = (2000.0, 12000.0)  # C, belief cell bounds
 R0_PLAN_RANGE = (0.005, 1.5)  # ohm
@@ -103,7 +105,13 @@ def wind_from_duration(distance_km: float, altitude_m: float, dwell_s: float, du
 
 
 class WindBelief:
-    """Forecast winds plus an estimated common shift; flown legs are known.
+    """Forecast winds plus an estimated shift common to every leg; flown legs are known.
+
+    Each flown leg's actual wind gives a residual against the forecast. The common shift has a
+    Gaussian prior (std ``SHIFT_PRIOR_KT``) and each residual is the shift plus the node's own forecast
+    error (std ``sigma_kt``). A residual further than ``SURPRISE_Z`` std from its prediction is a
+    surprise (the weather changed): the shift is then re-estimated from the residuals since, under a
+    wide prior (``EVENT_PRIOR_KT``), and winds measured before it are moved by the change.
 
     :param forecast: kt by node name (the mission's winds).
     :param sigma_kt: the forecast's stated error std per node (kt).
@@ -112,27 +120,37 @@ class WindBelief:
     def __init__(self, forecast: dict[str, float], sigma_kt: float) -> None:
         self.forecast = dict(forecast)
         self.sigma = max(float(sigma_kt), 1.0)
-        self.observed: dict[str, float] = {}
+        self.observed: dict[str, tuple[float, float]] = {}  # node -> (wind kt, shift when measured)
         self.residuals: list[float] = []
+        self.prior_kt = SHIFT_PRIOR_KT
+        self.surprises = 0
 
-    def observe(self, node: str, wind_kts: float) -> float:
-        """Record the actual wind of a flown leg to ``node``; returns its residual to the forecast (kt)."""
+    def observe(self, node: str, wind_kts: float) -> tuple[float, bool]:
+        """Record the actual wind (kt) of a flown leg to ``node``; returns (residual to the forecast, kt;
+        whether it was a surprise)."""
         r = float(wind_kts) - self.forecast[node]
-        self.observed[node] = float(wind_kts)
+        mean, sd = self.shift()
+        surprise = abs(r - mean) > SURPRISE_Z * math.sqrt(sd ** 2 + self.sigma ** 2)
+        if surprise:
+            self.residuals = []
+            self.prior_kt = EVENT_PRIOR_KT
+            self.surprises += 1
         self.residuals.append(r)
-        return r
+        self.observed[node] = (float(wind_kts), self.shift()[0])
+        return r, surprise
 
     def shift(self) -> tuple[float, float]:
         """Posterior mean and std (kt) of the wind shift common to all legs."""
-        prec = 1.0 / SHIFT_PRIOR_KT ** 2 + len(self.residuals) / self.sigma ** 2
+        prec = 1.0 / self.prior_kt ** 2 + len(self.residuals) / self.sigma ** 2
         mean = (sum(self.residuals) / self.sigma ** 2) / prec
         return mean, math.sqrt(1.0 / prec)
 
     def predict(self, node: str) -> tuple[float, float]:
         """Predicted wind (kt) on a leg to ``node`` and its std (kt)."""
-        if node in self.observed:
-            return self.observed[node], OBSERVED_WIND_SD_KT
         mean, sd = self.shift()
+        if node in self.observed:
+            wind, shift_then = self.observed[node]
+            return wind + mean - shift_then, math.sqrt(OBSERVED_WIND_SD_KT ** 2 + sd ** 2)
         return self.forecast[node] + mean, math.sqrt(sd ** 2 + self.sigma ** 2)
 
 
@@ -214,6 +232,7 @@ class Operator:
         self._last_route: tuple[str, ...] | None = None
         self._leg_start_s = 0.0
         self._leg: tuple[str, str, float] | None = None
+        self.last_observation = ""
 
     # ------------------------------------------------------------------ sensing
     def observe(self, time_s: np.ndarray, current_a: np.ndarray, voltage_v: np.ndarray) -> None:
@@ -232,7 +251,7 @@ class Operator:
         duration = self.time_s - self._leg_start_s
         dwell = m.node(to).dwell_s if to != VERTIPORT else 0.0
         wind = wind_from_duration(m.distance_km(frm, to), alt, dwell, duration)
-        resid = self.winds.observe(to, wind)
+        resid, surprise = self.winds.observe(to, wind)
         self.node = to
         self._leg = None
         if to == VERTIPORT:
@@ -243,7 +262,11 @@ class Operator:
             self.segment = _Segment()
         else:
             self.visited.append(to)
-        return f"wind to {to} {wind:+.0f} kt ({resid:+.0f} kt against the forecast)"
+        note = f"wind to {to} {wind:+.0f} kt ({resid:+.0f} kt against the forecast)"
+        if surprise:
+            note += "; a surprise: the wind estimate is reset"
+        self.last_observation = note
+        return note
 
     def _fit(self) -> HealthEstimate | None:
         cur, volt = self.segment.arrays()
@@ -289,29 +312,59 @@ class Operator:
         res = simulate(np.clip(cur, -50, 50), DT_S, q_plan, r_plan, 2.5)
         return res.final_state
 
-    def _safe_moves(self, legs: LegTable, here: int, state: np.ndarray, visited: int) -> np.ndarray:
-        """bool [N_TARGETS, N_ALTITUDES]: next legs after which the aircraft can still get home, both
-        legs flown on ``legs``' (cautious) cell and winds from ``state``."""
-        q, r0 = legs.mission.battery.q_max, legs.mission.battery.r0
+    def _leg_current(self, frm: str, to: str, altitude_m: float, wind_kts: float) -> np.ndarray:
+        m = self.forecast_mission
+        dwell = m.node(to).dwell_s if to != VERTIPORT else 0.0
+        wind = float(np.clip(wind_kts, *WIND_RANGE_KTS))
+        return np.asarray(leg_profile(m.distance_km(frm, to), altitude_m, wind, DT_S, dwell).current_a)
+
+    def _safe_moves(self, legs: LegTable, here: int, state: np.ndarray, visited: int, q: float, r0: float
+                    ) -> np.ndarray:
+        """bool [N_TARGETS, N_ALTITUDES]: next legs after which the aircraft can still get home.
+
+        Both legs are flown on the cautious cell (``q``, ``r0``) from ``state``. Their winds are the
+        point of a joint one-sided ``wind_z`` bound: the two legs' wind errors are independent
+        Gaussians (std from :meth:`WindBelief.predict`), each leg's charge grows with its wind in
+        proportion to its length, and the bound puts each leg's wind at
+        ``mean + wind_z * sd^2 * d / sqrt(sum(sd^2 d^2))``. A wind already measured has a small std,
+        so all the margin then goes to the unknown one.
+        """
         n_alt = len(ALTITUDES_M)
         safe = np.zeros((N_TARGETS, n_alt), dtype=bool)
-        firsts = [(j, a) for j in range(len(self.names)) if not visited >> j & 1
-                  for a in range(n_alt) if legs.feasible[here, j, a]]
+        frm = self.names[here] if here != VERTIPORT_SLOT else VERTIPORT
+        home_mean, home_sd = self.winds.predict(VERTIPORT)
+        firsts, returns = [], []
+        for j in range(len(self.names)):
+            if visited >> j & 1:
+                continue
+            to = self.names[j]
+            mean, sd = self.winds.predict(to)
+            d1, d2 = legs.dist[here, j], legs.dist[j, VERTIPORT_SLOT]
+            norm = math.sqrt((sd * d1) ** 2 + (home_sd * d2) ** 2) or 1.0
+            w1 = mean + self.wind_z * sd ** 2 * d1 / norm
+            w2 = home_mean + self.wind_z * home_sd ** 2 * d2 / norm
+            for a in range(n_alt):
+                if legs.feasible[here, j, a]:
+                    firsts.append((j, a, self._leg_current(frm, to, ALTITUDES_M[a], w1)))
+                    returns.append([(b, self._leg_current(to, VERTIPORT, ALTITUDES_M[b], w2))
+                                    for b in range(n_alt) if legs.feasible[j, VERTIPORT_SLOT, b]])
         if here != VERTIPORT_SLOT:
-            firsts += [(VERTIPORT_SLOT, a) for a in range(n_alt) if legs.feasible[here, VERTIPORT_SLOT, a]]
+            w = home_mean + self.wind_z * home_sd
+            for a in range(n_alt):
+                if legs.feasible[here, VERTIPORT_SLOT, a]:
+                    firsts.append((VERTIPORT_SLOT, a, self._leg_current(frm, VERTIPORT, ALTITUDES_M[a], w)))
+                    returns.append([])
         if not firsts:
             return safe
-        ok, x_end, _ = fly_batch([legs.current(here, j, a) for j, a in firsts],
-                                 np.repeat(state[None, :], len(firsts), 0), q, r0, self.eod_v)
-        back = [(k, a) for k, (j, _) in enumerate(firsts) if ok[k] and j != VERTIPORT_SLOT
-                for a in range(n_alt) if legs.feasible[j, VERTIPORT_SLOT, a]]
+        ok, x_end, _ = fly_batch([c for _, _, c in firsts], np.repeat(state[None, :], len(firsts), 0), q, r0,
+                                 self.eod_v)
+        back = [(k, c) for k, rets in enumerate(returns) if ok[k] for _, c in rets]
         home_ok = np.zeros(len(firsts), dtype=bool)
         if back:
-            ok2, _, _ = fly_batch([legs.current(firsts[k][0], VERTIPORT_SLOT, a) for k, a in back],
-                                  x_end[[k for k, _ in back]], q, r0, self.eod_v)
+            ok2, _, _ = fly_batch([c for _, c in back], x_end[[k for k, _ in back]], q, r0, self.eod_v)
             for (k, _), good in zip(back, ok2):
                 home_ok[k] |= bool(good)
-        for k, (j, a) in enumerate(firsts):
+        for k, (j, a, _) in enumerate(firsts):
             safe[j, a] = ok[k] and (j == VERTIPORT_SLOT or home_ok[k])
         return safe
 
@@ -329,26 +382,38 @@ class Operator:
         w, w_sd, r, r_sd = health
         q, q_sd = Q_REF_C / w, Q_REF_C * w_sd / w ** 2
         expected, q_exp, r_exp = self._belief(health, 0.0, self.plan_wind_z)
-        cautious, q_plan, r_plan = self._belief(health, self.health_z, self.wind_z)
+        cautious, q_plan, r_plan = self._belief(health, self.health_z, 0.0)
         slot = {n: k for k, n in enumerate(self.names)}
         here = VERTIPORT_SLOT if self.node == VERTIPORT else slot[self.node]
         visited = 0
         for n in self.visited:
             visited |= 1 << slot[n]
-        c_legs = LegTable(cautious)
-        moves = self._safe_moves(c_legs, here, self._state(q_plan, r_plan).as_array()[0], visited)
+        moves = self._safe_moves(LegTable(cautious), here, self._state(q_plan, r_plan).as_array()[0], visited,
+                                 q_plan, r_plan)
         state = self._state(q_exp, r_exp).as_array()[0]
         route, alts, why = self._plan(LegTable(expected), here, state, visited, moves)
         if route is None:
-            route, alts, why = self._best_effort_home(c_legs, here, self._state(q_plan, r_plan).as_array()[0])
+            route, alts, why = self._best_effort_home(LegTable(expected), here, state)
         shift, shift_sd = self.winds.shift()
         kind = "plan" if not self.decisions else "replan"
-        if not route:
+        learned = []
+        if self.last_observation:
+            learned.append(self.last_observation)
+        prev = self.decisions[-1] if self.decisions else None
+        if prev is not None and abs(q - prev.q_max_c) > max(2 * prev.q_max_sd_c, 0.03 * prev.q_max_c):
+            learned.append(f"q_max estimate {prev.q_max_c:.0f} -> {q:.0f} C "
+                           f"({'weaker' if q < prev.q_max_c else 'stronger'} battery than thought)")
+        if prev is not None and abs(r - prev.r0_ohm) > max(2 * prev.r0_sd_ohm, 0.01):
+            learned.append(f"R0 estimate {prev.r0_ohm:.3f} -> {r:.3f} ohm")
+        if not route or why.startswith("no way home"):
             reason = why
         elif self._last_route is not None and tuple(route) == self._last_route:
             reason = "plan unchanged"
+        elif self._last_route is None:
+            reason = why
         else:
-            reason = why if self._last_route is None else f"plan changed: {why}"
+            reason = "plan changed: " + "; ".join(learned + [why])
+        self.last_observation = ""
         nxt = route[0] if route else None
         d = Decision(self.time_s, self.node, kind, reason, q, q_sd, r, r_sd, q_plan, r_plan, shift, shift_sd,
                      tuple(route), tuple(alts), nxt, alts[0] if route else None, time.perf_counter() - t0)
@@ -430,13 +495,20 @@ class Operator:
         return route, alts, f"expected {best_key[0]} more charges after this one"
 
     def _best_effort_home(self, legs: LegTable, here: int, state: np.ndarray) -> tuple[list[str], list[float], str]:
+        """Home when no way is safe on the cautious belief: the level that is safe on the expected belief
+        with the highest minimum voltage, else the one that gets furthest before the cut-off."""
         q, r0 = legs.mission.battery.q_max, legs.mission.battery.r0
         levels = [a for a in range(len(ALTITUDES_M)) if legs.feasible[here, VERTIPORT_SLOT, a]] or [0]
-        cur = [legs.current(here, VERTIPORT_SLOT, a) for a in levels]
-        _, _, vmin = fly_batch(cur, np.repeat(state[None, :], len(levels), 0), q, r0, self.eod_v)
-        best = levels[int(np.argmax(vmin))]
-        return [VERTIPORT], [ALTITUDES_M[best]], ("no way home is safe on the cautious belief: going home at the "
-                                                   f"level with the highest minimum voltage ({vmin.max():.3f} V)")
+        best, best_key = levels[0], None
+        for a in levels:
+            cur = legs.current(here, VERTIPORT_SLOT, a)
+            res = simulate(cur, DT_S, q, r0, self.eod_v, initial_state=BatteryState.from_array(state[None, :]))
+            key = (0.0, float(res.min_voltage_v)) if not res.eod_reached else (-1.0 + float(res.eod_s) / cur.size, 0.0)
+            if best_key is None or key > best_key:
+                best, best_key = a, key
+        return [VERTIPORT], [ALTITUDES_M[best]], (
+            "no way home is safe on the cautious belief: going home at the level most likely to make it "
+            f"({ALTITUDES_M[best]:g} m)")
 
 
 __all__ = ["HEALTH_Z", "WIND_Z", "Decision", "Operator", "WindBelief", "combine", "fleet_prior",

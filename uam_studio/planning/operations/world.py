@@ -126,6 +126,7 @@ class World:
         self._checked_s = 0  # samples of the current leg already flown by the take-off check
         self._takeoff_current: np.ndarray | None = None
         self.last_true_voltage_v = np.zeros(0)  # noise-free voltage (V) of the last stretch flown
+        self.last_true_current_a = np.zeros(0)  # and its current (A)
 
     # ------------------------------------------------------------------ truth
     def wind(self, to: str, t_s: float) -> float:
@@ -144,6 +145,7 @@ class World:
         k = current.size if not res.eod_reached else int(np.argmax(~res.valid)) + 1
         self.state = res.final_state
         self.last_true_voltage_v = np.asarray(res.voltage_v[:k], dtype=float)
+        self.last_true_current_a = np.asarray(current[:k], dtype=float)
         return current[:k], self.last_true_voltage_v, float(res.min_voltage_v), bool(res.eod_reached)
 
     # ------------------------------------------------------------------ the flight

@@ -1,0 +1,213 @@
+"""Flying a mission in a hidden world: the operator, the world, the record and the `fly` command."""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from uam_studio.errors import InputError
+from uam_studio.flight import leg_profile
+from uam_studio.planning import load_mission
+from uam_studio.planning.mission import VERTIPORT, Battery
+from uam_studio.planning.operations import Operator, World, fly_mission, parse_event
+from uam_studio.planning.operations import world as world_module
+from uam_studio.studies.flying import fly_many, study_missions, summarize
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "assets" / "example_mission.json"
+OPERATOR_SRC = ROOT / "uam_studio" / "planning" / "operations" / "operator.py"
+
+
+@pytest.fixture(scope="module")
+def example():
+    return load_mission(EXAMPLE)
+
+
+@pytest.fixture(scope="module")
+def flights():
+    """40 seeded flights (20 single charge, 20 multi charge, 5-8 destinations), forecast sigma 13 kt,
+    5 mV / 20 mA sensor noise, with their references; missions and seeds apart from the tuning ones."""
+    out = []
+    for scenario, seed in (("single_charge", 31337), ("multi_charge", 31338)):
+        out += fly_many(study_missions(20, seed, scenario), first_seed=7000)
+    return out
+
+
+# --------------------------------------------------------------------------- the record
+
+
+def test_record_holds_both_sides(example):
+    rec = fly_mission(example, seed=3)
+    d = rec.to_dict()
+    for key in ("route", "altitudes_m", "actual_winds_kts", "events", "breached", "reached_priority",
+                "static_route", "static_priority", "static_breached", "hindsight_priority"):
+        assert key in d
+    json.dumps(d, allow_nan=False)  # finite numbers only
+    assert len(rec.route) == len(rec.altitudes_m) == len(rec.actual_winds_kts) >= 2
+    assert rec.route[-1] == VERTIPORT
+    n = rec.time_s.size
+    assert n == rec.measured_voltage_v.size == rec.true_voltage_v.size == rec.predicted_voltage_v.size
+    np.testing.assert_allclose(np.diff(rec.time_s), 1.0)
+    noise = rec.measured_voltage_v - rec.true_voltage_v
+    assert 0.003 < noise.std() < 0.007  # the 5 mV sensor
+    assert rec.events[0].kind == "plan" and rec.events[0].time_s == 20.0
+    assert all(e.kind == "replan" for e in rec.events[1:])
+    assert len(rec.events) == len(rec.route) + 1  # a decision after the take-off check and at every arrival
+    # the estimate sharpens: q_max's std after the first leg is far below the take-off's
+    assert rec.events[1].q_max_sd_c < 0.2 * rec.events[0].q_max_sd_c
+    assert abs(rec.events[-1].q_max_c - example.battery.q_max) < 5 * rec.events[-1].q_max_sd_c + 20
+
+
+def test_winds_are_the_forecast_plus_a_seeded_error(example):
+    a, b, c = (World(example, seed=s) for s in (1, 1, 2))
+    assert a.base_winds == b.base_winds != c.base_winds
+    still = World(example, forecast_sigma_kt=0.0, seed=1)
+    assert still.base_winds == {n: example.node(n).wind_kts for n in example.node_names}
+    ev = World(example, forecast_sigma_kt=0.0, events=[parse_event("wind+30@1200")])
+    assert ev.wind("Hayward", 1199.0) == example.node("Hayward").wind_kts
+    assert ev.wind("Hayward", 1200.0) == min(39.0, example.node("Hayward").wind_kts + 30)
+
+
+# --------------------------------------------------------------------------- the operator never reads the truth
+
+
+def test_operator_module_never_imports_the_world():
+    tree = ast.parse(OPERATOR_SRC.read_text())
+    imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    imported |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    assert not any("world" in (m or "") for m in imported)
+    assert "World" not in OPERATOR_SRC.read_text()
+
+
+def _replaying(recorded: list, monkeypatch) -> None:
+    """Make every World hand out ``recorded``'s readings in order instead of sensing its own cell."""
+    stream = iter(recorded)
+    monkeypatch.setattr(world_module.World, "_sense", lambda self, *a, **k: next(stream))
+
+
+def test_decisions_unchanged_when_the_true_cell_is_swapped(example, monkeypatch):
+    """Same sensor stream, another true cell (a weaker one and a stronger one): the same decisions."""
+    recorded = []
+    orig = world_module.World._sense
+
+    def tap(self, *a, **k):
+        r = orig(self, *a, **k)
+        recorded.append(r)
+        return r
+
+    monkeypatch.setattr(world_module.World, "_sense", tap)
+    base = fly_mission(example, seed=5, references=False)
+    monkeypatch.undo()
+    for q, r0 in ((7000.0, 0.15), (8000.0, 0.05)):
+        _replaying(list(recorded), monkeypatch)
+        swapped = fly_mission(example.with_battery(q, r0), seed=5, references=False)
+        monkeypatch.undo()
+        assert swapped.true_q_max == q and swapped.true_r0 == r0
+        assert [dataclasses.replace(e, compute_s=0.0) for e in swapped.events] == \
+            [dataclasses.replace(e, compute_s=0.0) for e in base.events]
+        assert swapped.route == base.route and swapped.altitudes_m == base.altitudes_m
+
+
+def test_operator_ignores_the_battery_it_is_handed(example):
+    """Operators given missions with different cells decide alike on the same readings."""
+    world = World(example, seed=11)
+    r = world.takeoff_check(np.asarray(leg_profile(30.0, 500.0, 0.0).current_a))
+    ops = [Operator(dataclasses.replace(example, battery=Battery(q, r0)), forecast_sigma_kt=13.0,
+                    sensor_noise_mv=5.0) for q, r0 in ((5000.0, 0.4), (8000.0, 0.02))]
+    decisions = []
+    for op in ops:
+        op.observe(r.time_s, r.current_a, r.voltage_v)
+        decisions.append(dataclasses.replace(op.decide(), compute_s=0.0))
+    assert decisions[0] == decisions[1]
+
+
+# --------------------------------------------------------------------------- many flights
+
+
+@pytest.mark.slow
+def test_forty_flights_no_breach_and_near_hindsight(flights):
+    single = summarize(f for f in flights if f.scenario == "single_charge")
+    multi = summarize(f for f in flights if f.scenario == "multi_charge")
+    assert single.breaches == multi.breaches == 0
+    assert single.ratio >= 0.85 and multi.ratio >= 0.95, (single, multi)
+    assert single.priority >= single.blind_priority and multi.priority >= multi.blind_priority
+
+
+@pytest.mark.slow
+@pytest.mark.reference
+def test_forty_flights_reflown_on_progpy_never_breach(flights):
+    models = pytest.importorskip("progpy.models", reason="install the 'reference' extra (progpy)")
+    for rec in flights:
+        ends = [int(round(t)) for t, n in zip(rec.leg_end_s, rec.route) if n == VERTIPORT]
+        start = 0
+        for end in ends:
+            cur = rec.true_current_a[start:end]
+            m = models.BatteryElectroChemEOD(qMobile=rec.true_q_max, Ro=rec.true_r0)
+
+            def load(t, x=None, cur=cur, m=m):
+                return m.InputContainer({"i": float(cur[min(int(t), cur.size - 1)])})
+
+            res = m.simulate_to_threshold(load, dt=1.0, save_freq=1.0, horizon=float(cur.size))
+            v = np.array([float(z["v"]) for z in res.outputs])[1:]
+            assert not m.threshold_met(res.states[-1])["EOD"], (rec.mission, rec.seed)
+            assert v.size == cur.size and v.min() > rec.true_voltage_v.min() - 1e-6 >= 3.0 - 1e-6
+            np.testing.assert_allclose(v, rec.true_voltage_v[start:end], atol=1e-6)
+            start = end
+
+
+# --------------------------------------------------------------------------- bad input and the CLI
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    ({"forecast_sigma_kt": -1.0}, "forecast_sigma_kt"),
+    ({"sensor_noise_mv": -0.5}, "sensor_noise_mv"),
+    ({"sensor_noise_ma": float("nan")}, "sensor_noise_ma"),
+    ({"policy": "dqn"}, "policy"),
+    ({"events": [parse_event("wind+10@99999")]}, "event"),
+])
+def test_bad_input_names_the_field(example, kwargs, field):
+    with pytest.raises(InputError) as err:
+        fly_mission(example, **kwargs)
+    assert err.value.field == field and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("text", ["gust@100", "wind+30", "wind+30@-5", "wind+300@100", ""])
+def test_unknown_event_is_refused(text):
+    with pytest.raises(InputError) as err:
+        parse_event(text)
+    assert err.value.field == "event"
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "uam_studio.cli", "fly", *args], capture_output=True, text=True,
+                          timeout=300, cwd=ROOT)
+
+
+def test_cli_fly_json_and_log():
+    out = _cli(str(EXAMPLE), "--seed", "2", "--json")
+    assert out.returncode == 0, out.stderr
+    d = json.loads(out.stdout)
+    assert d["route"][-1] == "vertiport" and d["reached_priority"] >= 1 and "time_s" not in d
+    log = _cli(str(EXAMPLE), "--seed", "2", "--event", "wind+20@1500")
+    assert log.returncode == 0, log.stderr
+    assert "t=    20 s at vertiport: plan" in log.stdout and "hindsight oracle" in log.stdout
+    assert "wind+20@1500" in log.stdout
+
+
+@pytest.mark.parametrize("args, field", [
+    (["--forecast-sigma", "-3"], "forecast_sigma_kt"),
+    (["--event", "storm"], "event"),
+    (["--event", "wind+10@90000"], "event"),
+    (["--sensor-noise-mv", "-1"], "sensor_noise_mv"),
+])
+def test_cli_fly_bad_input_is_one_line(args, field):
+    out = _cli(str(EXAMPLE), *args)
+    assert out.returncode == 2 and out.stdout == ""
+    assert out.stderr.startswith(f"error: {field}") and len(out.stderr.strip().splitlines()) == 1

@@ -1,0 +1,5 @@
+"""Studies: library code behind the notebooks' experiments and benchmarks/RESULTS.md.
+
+:mod:`~uam_studio.studies.flying`: many seeded flights of the in-flight operator, their summary and
+the sweep over forecast error and sensor noise.
+"""
