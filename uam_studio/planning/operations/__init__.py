@@ -5,7 +5,7 @@ Public API: :func:`fly_mission` -> :class:`FlightRecord`, :class:`World`, :class
 :func:`parse_event` (``"wind+30@1200"``), :class:`WindEvent`.
 """
 
-from uam_studio.planning.operations.fly import FlightRecord, fly_mission
+from uam_studio.planning.operations.fly import FlightRecord, fly_mission, position_at
 from uam_studio.planning.operations.operator import Decision, Operator
 from uam_studio.planning.operations.world import (
     DEFAULT_FORECAST_SIGMA_KT,
@@ -20,4 +20,5 @@ from uam_studio.planning.operations.world import (
 __all__ = [
     "DEFAULT_FORECAST_SIGMA_KT", "DEFAULT_SENSOR_NOISE_MA", "DEFAULT_SENSOR_NOISE_MV", "Decision",
     "FlightRecord", "Operator", "Readings", "WindEvent", "World", "fly_mission", "parse_event",
+    "position_at",
 ]

@@ -266,6 +266,23 @@ def _predict_leg(op: Operator, d: Decision, first: bool) -> np.ndarray:
     return np.asarray(res.voltage_v[hist.size:], dtype=float)
 
 
+def position_at(rec: FlightRecord, mission: Mission, t_s: float) -> tuple[float, float, int]:
+    """Where the aircraft of ``rec`` is at ``t_s`` (s): ``(x_km, y_km, leg index)``, moving linearly in
+    time along each flown leg between its take-off and its landing (-1 before the first leg's start;
+    the last leg's index after the flight)."""
+    nodes = [VERTIPORT] + list(rec.route)
+    starts = [0.0] + list(rec.leg_end_s[:-1])
+    for k, (start, end) in enumerate(zip(starts, rec.leg_end_s)):
+        if t_s <= end or k == len(rec.route) - 1:
+            a, b = mission.node(nodes[k]), mission.node(nodes[k + 1])
+            f = float(np.clip((t_s - start) / max(end - start, 1e-9), 0.0, 1.0))
+            if rec.breached and k == len(rec.route) - 1:
+                f = min(f, 0.999)
+            return a.x_km + f * (b.x_km - a.x_km), a.y_km + f * (b.y_km - a.y_km), k
+    vp = mission.vertiport
+    return vp.x_km, vp.y_km, -1
+
+
 def _fit_length(a: np.ndarray, n: int) -> np.ndarray:
     if a.size >= n:
         return a[:n]
@@ -273,4 +290,4 @@ def _fit_length(a: np.ndarray, n: int) -> np.ndarray:
     return np.concatenate([a, np.full(n - a.size, pad)])
 
 
-__all__ = ["FlightRecord", "fly_mission"]
+__all__ = ["FlightRecord", "fly_mission", "position_at"]
