@@ -134,7 +134,7 @@ def test_table_output(runs):
         (["simulate", str(EXAMPLE), *SAFE_ROUTE, "--dt", "abc"], "error: argument --dt: invalid float value"),
         (["simulate", str(EXAMPLE), *SAFE_ROUTE, "--eod-v", "5"], "error: eod_v: "),
         (["simulate", "missing.json", *SAFE_ROUTE], "error: file: "),
-        (["fly", str(EXAMPLE)], "error: argument COMMAND: invalid choice"),
+        (["soar", str(EXAMPLE)], "error: argument COMMAND: invalid choice"),
     ],
 )
 def test_argument_errors_in_process(capsys, argv, start):

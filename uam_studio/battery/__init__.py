@@ -1,9 +1,20 @@
 """Batched Daigle & Kulkarni (2013) Li-ion electrochemistry model of one 18650 cell.
 
 Public API: :func:`simulate` (current in A), :func:`simulate_constant_power`
-(power in W), :class:`SimulationResult`, :class:`BatteryState`, :func:`full_charge`.
+(power in W), :class:`SimulationResult`, :class:`BatteryState`, :func:`full_charge`; health from
+measured current and voltage (:mod:`uam_studio.battery.fit`): :func:`fit_health` ->
+:class:`HealthEstimate` (q_max in C, R0 in ohm, covariance), :func:`eod_interval_s`,
+:func:`voltage_band`.
 """
 
+from .fit import (
+    HealthEstimate,
+    eod_interval_s,
+    eod_intervals,
+    fit_health,
+    fit_health_batch,
+    voltage_band,
+)
 from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0, CellParameters
 from .simulate import (
     EOD_RANGE,
@@ -18,6 +29,7 @@ from .state import STATE_NAMES, BatteryState, full_charge
 
 __all__ = [
     "BatteryState", "CellParameters", "DEFAULT_CELL", "DEFAULT_EOD_V", "DEFAULT_Q_MAX", "DEFAULT_R0",
-    "EOD_RANGE", "Q_MAX_RANGE", "R0_RANGE", "STATE_NAMES", "SimulationResult", "full_charge",
-    "rest_voltage", "simulate", "simulate_constant_power",
+    "EOD_RANGE", "HealthEstimate", "Q_MAX_RANGE", "R0_RANGE", "STATE_NAMES", "SimulationResult",
+    "eod_interval_s", "eod_intervals", "fit_health", "fit_health_batch", "full_charge", "rest_voltage",
+    "simulate", "simulate_constant_power", "voltage_band",
 ]

@@ -1,10 +1,14 @@
-"""Held-out evaluation of a Dynaformer: EOD timing (RTE), voltage RMSE, health correlations.
+"""Held-out evaluation of a Dynaformer: EOD timing (RTE), voltage RMSE, health correlations, each
+beside the physics model's maximum-likelihood fit (:mod:`uam_studio.battery.fit`), the reference.
 
 RTE = |t_EOD,pred - t_EOD,true| / t_EOD,true with EOD at 3.0 V, on profiles whose
 true EOD falls inside the profile. RMSE is over the true-valid samples (above 3.0 V).
 The predictor returns the observed context as observed, so an EOD inside the context
 (cells whose voltage drops below 3.0 V during the take-off) scores RTE 0; the
 ``*_after_context`` figures count only EODs after the context: the predictions proper.
+
+:func:`evaluate` is the default report (``uam-studio evaluate dynaformer``); :func:`noise_table`
+the table over sensor noise x context length x log start (``--table noise``).
 """
 
 from __future__ import annotations
@@ -97,6 +101,8 @@ def evaluate(pred: DynaformerPredictor, n: int = 400, seed: int = 12345,
         ds = make_dataset(n, seed=seed + 1000 * (k + 1), **kw)
         datasets[name] = ds
         out["sets"][name] = eod_metrics(ds, predict_set(pred, ds))
+        phys = eod_metrics(ds, physics_fit_eod(ds))
+        out["sets"][name]["physics_fit"] = {k: phys[k] for k in ("median_rte", "median_rte_after_context", "rmse_mv")}
     flight = datasets["interpolation_flight"]
     for ctx in contexts:
         for noise in noises_mv:
@@ -109,12 +115,16 @@ def evaluate(pred: DynaformerPredictor, n: int = 400, seed: int = 12345,
 def format_report(m: dict) -> str:
     lines = [f"weights: {m['weights']}",
              "set                      n   n_eod  median RTE  p90 RTE  RMSE mV  EOD agree  "
-             "| EOD after context: n  median RTE"]
+             "| EOD after context: n  median RTE | physics fit: median RTE  after context"]
     for name, s in m["sets"].items():
         med, p90, later = (("-" if s.get(k) is None else f"{s[k]:.4f}")
                            for k in ("median_rte", "p90_rte", "median_rte_after_context"))
+        ph = s.get("physics_fit", {})
+        p_med, p_later = (("-" if ph.get(k) is None else f"{ph[k]:.4f}")
+                          for k in ("median_rte", "median_rte_after_context"))
         lines.append(f"{name:22s} {s['n']:4d} {s['n_eod']:6d}  {med:>10s} {p90:>8s} {s['rmse_mv']:8.1f} "
-                     f"{s['eod_agreement']:9.3f}  | {s.get('n_eod_after_context', 0):20d}  {later:>10s}")
+                     f"{s['eod_agreement']:9.3f}  | {s.get('n_eod_after_context', 0):20d}  {later:>10s} "
+                     f"| {p_med:>23s}  {p_later:>13s}")
     lines.append("health (interpolation flight contexts): context s, noise mV -> |r| with r0, |r| with q_max")
     for h in m["health"]:
         lines.append(f"  {h['context_s']:4d} s {h['noise_mv']:3d} mV   r0~PC{h['r0_pc']}: {h['abs_r_r0']:.3f}   "
@@ -123,15 +133,20 @@ def format_report(m: dict) -> str:
 
 
 # ----------------------------------------------------------------------------- physics-fit reference
-def physics_fit_eod(ds, context_s: int = 20, noise_v: float = 0.0, seed: int = 0) -> np.ndarray:
+def physics_fit_eod(ds, context_s: int = 20, noise_v: float = 0.0, seed: int = 0, batch: int = 64) -> np.ndarray:
     """The physics fit's predicted voltage [N, T] for a DischargeSet: (q_max, R0) fitted by maximum
-    likelihood (:func:`uam_studio.battery.fit.fit_health_batch`) on the same ``context_s`` contexts
-    (and voltage noise, V) as :func:`predict_set`, then the physics model along the whole profile.
-    The context is returned as observed, as the Dynaformer does."""
+    likelihood (:func:`uam_studio.battery.fit.fit_health_batch`) on the same noisy ``context_s``
+    contexts as :func:`predict_set` (same seed, batch and draws), then the physics model along the
+    whole profile. The context is returned as observed, as the Dynaformer does."""
     rng = np.random.default_rng(seed)
     n = ds.current_a.shape[1]
     ci = ds.current_a[:, :context_s].astype(float)
-    cv = np.clip(ds.voltage_v[:, :context_s] + rng.normal(size=(len(ds), context_s)) * noise_v, 0.0, 5.0)
+    cv = ds.voltage_v[:, :context_s].astype(float)
+    order = np.argsort(ds.length)
+    for s in range(0, len(ds), batch):
+        idx = order[s:s + batch]
+        cv[idx] += rng.normal(size=(idx.size, context_s)) * noise_v
+    cv = np.clip(cv, 0.0, 5.0)
     ests = fit_health_batch(ci, cv)
     res = simulate(ds.current_a.astype(float), 1.0, np.array([e.q_max for e in ests]),
                    np.array([e.r0 for e in ests]), eod_v=2.5)
@@ -189,8 +204,8 @@ def noise_table(pred: DynaformerPredictor, n: int = 200, seed: int = 12345,
     The flights are ``evaluate``'s interpolation-flight set (same seed). Per cell (alignment,
     context L s, noise N mV): the flights whose true EOD falls after the context; the context's
     voltage gets Gaussian noise of N mV and its current ``CURRENT_NOISE_A_PER_V`` x N mA (20 mA at
-    10 mV); the planned profile is the measured context current followed by the true future
-    current. "aligned": the log starts at the take-off, the context is its first L s. "rest": the
+    10 mV); both go to the health estimates, and the planned profile (the whole flight plan's
+    current from the log's start) is predicted. "aligned": the log starts at the take-off, the context is its first L s. "rest": the
     log starts 5-30 s (uniform, per flight) before the take-off, at rest (0 A, the full cell's rest
     voltage); the context is that rest plus the same L s of flight, and all times count from the
     log's start. Columns:
@@ -244,8 +259,7 @@ def _noise_cell(pred, cur, volt, length, true_t, ctx_len, r0, q_max, sv, si, rng
         ci = cur[grp, :c] + noise_i[grp, :c]
         cv = np.clip(volt[grp, :c] + noise_v[grp, :c], 0.0, 5.0)
         t_max = int(length[grp].max())
-        prof = np.concatenate([ci, cur[grp, c:t_max]], axis=1)
-        prof = np.where(np.arange(t_max)[None, :] < length[grp, None], prof, 0.0)
+        prof = np.where(np.arange(t_max)[None, :] < length[grp, None], cur[grp, :t_max], 0.0)
         ests = fit_health_batch(ci, cv)
         for s in range(0, grp.size, batch):
             sl, g = slice(s, s + batch), grp[s:s + batch]

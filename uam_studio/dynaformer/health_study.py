@@ -25,7 +25,7 @@ import numpy as np
 from ..battery import simulate
 from ..errors import InputError, check_range
 from ..flight import leg_profile
-from .evaluate import EOD_V, eod_metrics, health_correlations, predict_set
+from .evaluate import EOD_V, eod_metrics, health_correlations, physics_fit_eod, predict_set
 
 __all__ = ["PhysicsComparison", "accuracy_table", "compare_with_physics", "health_grid",
            "takeoff_context_current"]
@@ -124,7 +124,9 @@ def accuracy_table(predictor: Any, ds, contexts_s: Sequence[int] = (20, 60, 400)
     :return: one row per pair: ``context_s``, ``noise_mv``, ``median_rte``, ``median_rte_after_context``
         (EODs after the observed context only), ``p90_rte``, ``rmse_mv``,
         ``eod_agreement`` (see :func:`~uam_studio.dynaformer.evaluate.eod_metrics`), ``abs_r_r0`` and
-        ``abs_r_q_max`` (\\|Pearson r\\| of the health components with R0 and q_max).
+        ``abs_r_q_max`` (\\|Pearson r\\| of the health components with R0 and q_max), and the reference:
+        ``physics_median_rte_after_context``, the physics model's maximum-likelihood fit of the same
+        contexts (:func:`~uam_studio.dynaformer.evaluate.physics_fit_eod`).
     """
     rows = []
     for ctx in contexts_s:
@@ -132,8 +134,10 @@ def accuracy_table(predictor: Any, ds, contexts_s: Sequence[int] = (20, 60, 400)
             v = predict_set(predictor, ds, context_s=int(ctx), noise_v=float(noise) / 1000.0, seed=seed)
             m = eod_metrics(ds, v, context_s=int(ctx))
             h = health_correlations(predictor, ds, int(ctx), float(noise) / 1000.0, seed=seed)
+            phys = eod_metrics(ds, physics_fit_eod(ds, int(ctx), float(noise) / 1000.0, seed=seed), context_s=int(ctx))
             rows.append({"context_s": int(ctx), "noise_mv": float(noise),
                          **{k: m[k] for k in ("median_rte", "median_rte_after_context", "p90_rte", "rmse_mv",
                                               "eod_agreement")},
-                         "abs_r_r0": h["abs_r_r0"], "abs_r_q_max": h["abs_r_q_max"]})
+                         "abs_r_r0": h["abs_r_r0"], "abs_r_q_max": h["abs_r_q_max"],
+                         "physics_median_rte_after_context": phys["median_rte_after_context"]})
     return rows

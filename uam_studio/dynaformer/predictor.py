@@ -1,9 +1,16 @@
-"""The public Dynaformer API: load weights, predict voltage, estimate health.
+"""The public Dynaformer API: load weights, estimate health, predict voltage, with uncertainty.
 
     from uam_studio.dynaformer import load_pretrained
     p = load_pretrained()
+    est = p.health_estimate(ctx_i, ctx_v)         # physics fit of the whole context: q_max, R0, covariance
     v = p.predict(ctx_i, ctx_v, current_a)       # V on current_a's time grid
+    lo, med, hi = p.eod_interval_s(ctx_i, ctx_v, current_a)   # s from the log's start, 90%
+    v_lo, v_med, v_hi = p.voltage_band(ctx_i, ctx_v, current_a)
     pcs = p.health(ctx_i, ctx_v)                  # [..., 2] principal components
+
+The context (current in A, voltage in V, from the log's first sample, at least 20 s) may be noisy,
+start at rest or under load, and be as long as the flight so far. ``health_source="model"`` uses
+the weights' own estimator instead (the take-off regression on the first 20 s).
 """
 
 from __future__ import annotations
@@ -16,8 +23,9 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from scipy.ndimage import median_filter
 
-from ..battery import rest_voltage
+from ..battery import rest_voltage, simulate
 from ..battery.fit import (
     MIN_CONTEXT_S,
     HealthEstimate,
@@ -83,8 +91,8 @@ CAL_PROBS = (0.5, 0.6, 0.7, 0.75, 0.8, 0.85, 0.9, 0.925, 0.95, 0.975, 0.99, 0.99
 # (``decoder_error_scores(load_pretrained())``: 400 flights, seed 424242). Other weights are
 # calibrated on first use (200 flights, a few seconds).
 BUNDLED_DECODER_LAMBDA: dict[str, tuple[float, ...]] = {
-    "ee9b4431cd2cfc3d30a57b697b2f8017eadcdf385e08a0c57c6298551e7b4e52":  # pretrained/dynaformer.pt (session 8)
-        (0.7289, 1.0064, 1.4257, 1.7271, 1.9916, 2.5405, 3.406, 3.8057, 4.0789, 5.8538, 7.3204, 7.3837),
+    "ee9b4431cd2cfc3d30a57b697b2f8017eadcdf385e08a0c57c6298551e7b4e52":  # pretrained/dynaformer.pt (717,637 bytes)
+        (0.7153, 0.8919, 1.4137, 1.751, 1.9916, 2.4693, 2.8463, 3.575, 3.9269, 4.7143, 7.3204, 7.3645),
 }
 
 
@@ -119,10 +127,13 @@ class DynaformerPredictor:
     """A loaded Dynaformer plus its health PCA. Thread-safe for inference.
 
     Health source (``health_source`` of every method): ``"fit"`` reads the whole context with the
-    physics model's maximum-likelihood fit (:func:`uam_studio.battery.fit.fit_health`) and hands the
-    decoder that (R0, 1/q_max); ``"model"`` uses the weights' own estimator (the take-off regression
-    on the first 20 s, or the transformer encoder of older weights). Default (None): ``"fit"`` for
-    weights whose decoder reads (R0, 1/q_max) (``health="takeoff"``), ``"model"`` otherwise.
+    physics model's maximum-likelihood fit (:func:`uam_studio.battery.fit.fit_health`); the decoder
+    then reads that cell as it was trained to: the take-off estimator's reading of the fitted cell's
+    noise-free take-off, simulated along the profile's first 20 s (:meth:`_reobserved_latent`).
+    ``"model"`` uses the weights' own estimator on the measured context (the take-off regression on
+    the first 20 s, or the transformer encoder of older weights). Default (None): ``"fit"`` for
+    weights whose decoder reads (R0, 1/q_max) (``health="takeoff"``), ``"model"`` otherwise. The
+    health PCs (:meth:`health`) of the fit are those of its (R0, 1/q_max) in the decoder's units.
     """
 
     def __init__(self, model, pca: dict, meta: dict, source: str) -> None:
@@ -164,7 +175,7 @@ class DynaformerPredictor:
             raise InputError("context_current_a", "|current| must be <= 50 A")
         if np.any((cv < 0) | (cv > 5)):
             raise InputError("context_voltage_v", "voltages must be in [0, 5] V")
-        if batch is not None and ci.shape[0] not in (1, batch):
+        if batch is not None and batch != 1 and ci.shape[0] not in (1, batch):
             raise InputError("context_current_a", f"batch {ci.shape[0]} does not match current_a batch {batch}")
         return ci, cv, single_i
 
@@ -221,12 +232,13 @@ class DynaformerPredictor:
         return cur, single
 
     @torch.no_grad()
-    def _decode(self, latent: torch.Tensor, grid: np.ndarray, skip_rest: bool,
-                estimates: list[HealthEstimate] | None = None) -> np.ndarray:
+    def _decode(self, latent: torch.Tensor | None, grid: np.ndarray, skip_rest: bool,
+                estimates: list[HealthEstimate] | None = None, points: np.ndarray | None = None) -> np.ndarray:
         """Decoded voltage (V) [B, n] for latents [B, d] and a 1 s current grid [B, n] (A). With
         ``skip_rest``, each row's leading rest (:func:`_leading_rest`) is cut before decoding and
         filled with the rested full cell's voltage. With ``estimates`` (one per row), each row's
-        pre-roll (:func:`uam_studio.battery.fit.with_preroll`) is decoded before it and dropped."""
+        pre-roll (:func:`uam_studio.battery.fit.with_preroll`) is decoded before it and dropped.
+        With ``points`` [B, 2] (q_max C, r0 ohm) instead of latents: :meth:`_reobserved_latent`."""
         n_out = grid.shape[1]
         grid, k_pre = with_preroll(estimates, grid, 1.0) if estimates is not None else (grid, 0)
         b, n = grid.shape
@@ -235,6 +247,8 @@ class DynaformerPredictor:
         g = np.zeros((b, padded), np.float32)
         for r in range(b):
             g[r, :n - k0[r]] = grid[r, k0[r]:]
+        if points is not None:
+            latent = self._reobserved_latent(points, g)
         v = self.model.decode(latent, torch.as_tensor(g)).numpy()[:, :n].astype(np.float64)
         if skip_rest and k0.any():
             out = np.full((b, n), float(rest_voltage()))
@@ -242,6 +256,24 @@ class DynaformerPredictor:
                 out[r, k0[r]:] = v[r, :n - k0[r]]
             v = out
         return v[:, k_pre:k_pre + n_out]
+
+    def _reobserved_latent(self, points: np.ndarray, grid: np.ndarray) -> torch.Tensor:
+        """The decoder's latent [B, 2] for cells (q_max C, r0 ohm) ``points`` [B, 2] about to be decoded
+        along ``grid`` [B, n] (A, 1 s): the take-off estimator's reading of each cell's noise-free
+        first ``health_window`` s of that grid, simulated with the physics model. The decoder was
+        trained on exactly these readings (of noise-free take-offs), whose small systematic errors
+        on some loads it has learned to expect; feeding it (R0, 1/q_max) directly
+        (:func:`_clamped_latent`) costs accuracy on generic loads. The reading is sensitive to current
+        noise (20 mA moves it by about 1% of q_max), so the window's current is median-filtered over 9
+        samples first (no change to a noise-free take-off; about half the noise's effect)."""
+        w = self.model.cfg.health_window
+        if grid.shape[1] < w:
+            return _clamped_latent(points[:, 1], points[:, 0])
+        first = median_filter(np.asarray(grid[:, :w], np.float64), size=(1, 9), mode="nearest")
+        volt = simulate(first, 1.0, np.clip(points[:, 0], 1.0, None), np.clip(points[:, 1], 0.0, None),
+                        eod_v=2.5).voltage_v  # held below 2.5 V, as in the training data
+        return self.model.takeoff(torch.as_tensor(first, dtype=torch.float32),
+                                  torch.as_tensor(volt, dtype=torch.float32))
 
     def _finish(self, v: np.ndarray, cur: np.ndarray, dt: float, n: int, obs: np.ndarray) -> np.ndarray:
         """1 s grid -> current_a's grid, clipped to [0, 5] V, the observed context written back."""
@@ -258,7 +290,8 @@ class DynaformerPredictor:
     @torch.no_grad()
     def latent(self, context_current_a, context_voltage_v, dt_s: float = 1.0, health_source: str | None = None,
                noise_v: float | None = None) -> np.ndarray:
-        """Health latent [B, latent_dim] the decoder reads (for analysis)."""
+        """Health latent [B, latent_dim] (for analysis): the model's own estimate, or for the fit its
+        (R0, 1/q_max) in the decoder's scaled units."""
         dt = check_range("dt_s", dt_s, 1e-3, 60.0, " s")
         lat, *_ = self._latent(self._source(health_source), context_current_a, context_voltage_v, dt, None,
                                noise_v, None)
@@ -329,7 +362,8 @@ class DynaformerPredictor:
             latent = latent.expand(b, -1)
         if ests is not None and len(ests) != b:
             ests = ests * b
-        v = self._decode(latent, grid, skip_rest=source == "fit", estimates=ests)
+        points = np.array([[e.q_max, e.r0] for e in ests]) if ests is not None else None
+        v = self._decode(latent, grid, skip_rest=source == "fit", estimates=ests, points=points)
         v = self._finish(v, cur, dt, grid.shape[1], obs)
         return v[0] if (single and single_ctx) else v
 
@@ -397,10 +431,9 @@ class DynaformerPredictor:
         b = cur.shape[0]
         ends = interval_ends(ests, np.ascontiguousarray(cur), dt, lv, eod)  # [b, 2, 2] (q_max, r0)
         pts = np.concatenate([np.array([[e.q_max, e.r0] for e in ests])[:, None], ends], axis=1)  # [b, 3, 2]
-        lat = _clamped_latent(pts[..., 1].ravel(), pts[..., 0].ravel())
         grid = _to_grid(cur, dt, hold=True)
-        v = self._decode(lat, np.repeat(grid, 3, axis=0), skip_rest=True,
-                         estimates=[e for e in ests for _ in range(3)]).reshape(b, 3, -1)
+        v = self._decode(None, np.repeat(grid, 3, axis=0), skip_rest=True, estimates=[e for e in ests for _ in range(3)],
+                         points=pts.reshape(-1, 2)).reshape(b, 3, -1)
         h_v, h_t = self.decoder_error(lv)
         curves = np.concatenate([v, (v[:, 0] - h_v)[:, None], (v[:, 0] + h_v)[:, None]], axis=1)  # [b, 5, n]
         curves = np.stack([self._finish(curves[:, k], cur, dt, grid.shape[1], obs) for k in range(5)], axis=1)
@@ -434,10 +467,9 @@ class DynaformerPredictor:
                                                                dt_s, level, noise_v, estimate, health_source)
         b = cur.shape[0]
         pts = np.stack([e.sigma_points() for e in ests])  # [b, 5, 2]
-        lat = _clamped_latent(pts[..., 1].ravel(), pts[..., 0].ravel())
         grid = _to_grid(cur, dt, hold=True)
-        v = self._decode(lat, np.repeat(grid, 5, axis=0), skip_rest=True,
-                         estimates=[e for e in ests for _ in range(5)]).reshape(b, 5, -1)
+        v = self._decode(None, np.repeat(grid, 5, axis=0), skip_rest=True, estimates=[e for e in ests for _ in range(5)],
+                         points=pts.reshape(-1, 2)).reshape(b, 5, -1)
         h_v, h_t = self.decoder_error(lv)
         z = two_sided_z(lv)
         low, med, high = (np.empty((b, v.shape[2])) for _ in range(3))
@@ -475,9 +507,10 @@ def _sha256(path) -> str:
 def decoder_error_scores(pred: DynaformerPredictor, n: int = DECODER_CAL_N, seed: int = DECODER_CAL_SEED,
                          eod_v: float = 3.0) -> np.ndarray:
     """The decoder's own EOD error on ``n`` synthetic flights (training ranges, ``seed``), given the
-    exact health and a 20 s observed context: per flight whose true EOD falls after the context, the
-    smallest lam >= 0 such that [min(crossing of the curve - lam a, (1 - lam b) t_med),
-    max(crossing of the curve + lam a, (1 + lam b) t_med)] holds the true EOD ((a, b) =
+    exact health (read as in :meth:`DynaformerPredictor._reobserved_latent`) and a 20 s observed
+    context: per flight whose true EOD falls after the context, the smallest lam >= 0 such that
+    [min(crossing of the curve - lam a, (1 - lam b) t_med), max(crossing of the curve + lam a,
+    (1 + lam b) t_med)] holds the true EOD ((a, b) =
     :data:`DECODER_ERROR_SHAPE`; t_med: the decoded EOD). Closed form per side: the voltage part needs
     lam a > (min of the curve up to the true EOD) - eod_v (low side) or >= eod_v - (min before it)
     (high side); the time part lam b >= |t_med - t_true| / t_med on the side it is missing."""
@@ -488,12 +521,12 @@ def decoder_error_scores(pred: DynaformerPredictor, n: int = DECODER_CAL_N, seed
     t = np.arange(ds.voltage_v.shape[1])[None, :]
     true_t, _ = crossing_times(np.where(t < ds.length[:, None], ds.voltage_v, 5.0), 1.0, eod_v)
     keep = np.where(np.isfinite(true_t) & (true_t > 20))[0]
-    lat = _clamped_latent(ds.r0[keep], ds.q_max[keep])
+    points = np.column_stack([ds.q_max[keep], ds.r0[keep]])
     cur = ds.current_a[keep].astype(np.float64)
     scores = []
     for s in range(0, keep.size, 64):
         rows = keep[s:s + 64]
-        v = pred._decode(lat[s:s + 64], cur[s:s + 64], skip_rest=True)
+        v = pred._decode(None, cur[s:s + 64], skip_rest=True, points=points[s:s + 64])
         v[:, :20] = ds.voltage_v[rows, :20]
         v = np.where(t < ds.length[rows, None], v, 5.0)
         med, _ = crossing_times(v, 1.0, eod_v)
