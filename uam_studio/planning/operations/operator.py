@@ -492,6 +492,12 @@ class Operator:
             route, alts = names(best)
             return route, alts, "the rest cannot all be covered; visiting what this charge reaches"
         route, alts = names(best)
+        rest = universe & ~(best.mask & ~visited)
+        while rest:  # the later sorties of the plan, as the cover table has them
+            later = fresh[table[rest][2]]
+            more, more_alts = names(later)
+            route, alts = route + more, alts + more_alts
+            rest ^= later.mask
         return route, alts, f"expected {best_key[0]} more charges after this one"
 
     def _best_effort_home(self, legs: LegTable, here: int, state: np.ndarray) -> tuple[list[str], list[float], str]:
