@@ -24,6 +24,7 @@ EXPECTED = [
     "06_multi_charge.ipynb",
     "07_reward_shaping.ipynb",
     "08_dqn_vs_oracle.ipynb",
+    "09_flying_with_surprises.ipynb",
 ]
 
 
