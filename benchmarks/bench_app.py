@@ -1,7 +1,10 @@
-"""App benchmarks (issue #5): replanning latency, first page load, and a training session beside a planning one.
+"""App benchmarks: replanning latency, page load, the planner comparison's cost, the Battery lab, and a
+training session beside a planning one.
 
     python benchmarks/bench_app.py latency      # slider change -> updated plan and views, in process (server side)
-    python benchmarks/bench_app.py pageload     # browser: first page loads of a served app
+    python benchmarks/bench_app.py pageload     # browser: page loads of a served app, to the first plan
+    python benchmarks/bench_app.py replan       # browser: slider key -> the summary of that exact input
+    python benchmarks/bench_app.py lab          # browser: Battery lab slider key -> its table redrawn
     python benchmarks/bench_app.py concurrency  # browser: two sessions, one retraining, the other replanning
     python benchmarks/bench_app.py all --append benchmarks/RESULTS.md
 
@@ -10,14 +13,22 @@ Bokeh document as in a session, and the R0 slider moved ``--n`` times; each samp
 the widget change to the plan and every view (summary, map, plots) updated. Reference, in the same
 run: the bare library call ``plan_mission`` for the same inputs. Policies: the bundled DQN (if
 ``pretrained/dqn_single_charge.zip`` exists; otherwise that is reported), greedy and the oracle.
+Each policy is measured with the planner comparison off and on (``--compare off,process``): on, the
+agent/greedy/oracle comparison of each new plan runs in the app's comparison child process, and each
+slider move waits long enough for it to start (the oracle on 8 destinations then runs for seconds
+while the next plan is measured); the share of samples taken while it ran is reported.
 
-pageload and concurrency serve the app with ``uam-studio serve`` in a subprocess, built once before
-the first page (:class:`uam_studio.app.serve.ServedApp`), and drive Debian's chromium
+pageload, replan, lab and concurrency serve the app with ``uam-studio serve`` in a subprocess, built
+once before the first page (:class:`uam_studio.app.serve.ServedApp`), and drive Debian's chromium
 (``/usr/bin/chromium``) with playwright. The page load is the time from ``goto`` to the first plan
-shown in the summary. Concurrency: session B moves the q_max
-slider with the keyboard (one 50 C step at a time) and waits for the summary of that exact input;
-first with nothing else running, then while session A retrains a DQN agent, once with the training in
-a child process (the app's default) and once in a thread of the server (for comparison).
+shown in the summary, for each of ``--loads`` new pages (the median is the goal's number), with the
+comparison off (``UAM_STUDIO_COMPARE=off``) and on (the default). replan: the q_max slider moved
+with the keyboard (one 50 C step at a time), timed to the summary of that exact input, with a pause
+between moves so that the comparison of each plan runs meanwhile (on) or not (off). lab: the Battery
+lab's R0 slider moved one step, timed to the end-of-discharge table of the new value. Concurrency:
+session B moves the q_max slider as in replan; first with nothing else running, then while session A
+retrains a DQN agent, once with the training in a child process (the app's default) and once in a
+thread of the server (for comparison).
 """
 
 from __future__ import annotations
@@ -72,13 +83,13 @@ def _load() -> str:
 # ----------------------------------------------------------------------------- latency (server side)
 
 
-def bench_latency(n: int, n_oracle: int) -> list[str]:
+def bench_latency(n: int, n_oracle: int, compares: list[str]) -> list[str]:
     import torch
     from bokeh.document import Document
 
     from uam_studio.app.planner import PlannerView
     from uam_studio.app.session import configure_server_threads
-    from uam_studio.app.state import PlannerState, predictor
+    from uam_studio.app.state import COMPARE_DELAY_S, PlannerState, comparison_runner, predictor
     from uam_studio.planning import mission_from_dict
     from uam_studio.planning.policy import bundled_agent_path, plan_mission
 
@@ -91,32 +102,43 @@ def bench_latency(n: int, n_oracle: int) -> list[str]:
     if not bundled_agent_path("single_charge").is_file():
         lines.append("  dqn: no bundled agent pretrained/dqn_single_charge.zip, not measured")
         policies.remove("dqn")
+    if "process" in compares:
+        comparison_runner("process").start()  # its imports take seconds: not inside a sample
     for policy in policies:
         count = n_oracle if policy == "oracle" else n
-        r0s = list(np.round(np.linspace(0.05, 0.25, count), 4))
-        state = PlannerState(mission=mission, background=True, policy=policy)
-        assert state.wait_idle(600)  # (results are applied in the worker thread here: build views after)
-        view = PlannerView(state)
-        view.__panel__().get_root(Document())  # the views' Bokeh models, as in a session
-        view.r0.value = 0.3
-        assert state.wait_idle(600)  # warm (agent loaded, caches filled)
-        app, bare = [], []
-        for r0 in r0s:
-            t0 = time.perf_counter()
-            view.r0.value = float(r0)
-            assert state.wait_idle(600)
-            app.append(time.perf_counter() - t0)
-            assert state.plan_request.mission.battery.r0 == r0 and state.plan_error == "", state.plan_error
-        for r0 in r0s:
-            t0 = time.perf_counter()
-            plan_mission(mission, policy, r0=float(r0), predictor=pred)
-            bare.append(time.perf_counter() - t0)
-        route = " ".join(state.plan["route"])
-        ratio = percentile_ms(app, 95) / percentile_ms(bare, 95)
-        lines.append(f"  {policy:6s} app: {_stats(app)}")
-        lines.append(f"  {policy:6s} bare plan_mission: {_stats(bare)}; RATIO app/bare p95 {ratio:.2f}x "
-                     f"(last route: {route})")
-        state.close()
+        bare = []
+        for compare in compares:
+            # every value new to the plan cache: the 4th decimal differs between the two passes
+            r0s = [round(float(r), 4) + (0.0001 if compare != "off" else 0.0)
+                   for r in np.linspace(0.05, 0.25, count)]
+            state = PlannerState(mission=mission, background=True, policy=policy, compare=compare)
+            assert state.wait_idle(600)  # (results are applied in the worker thread here: build views after)
+            view = PlannerView(state)
+            view.__panel__().get_root(Document())  # the views' Bokeh models, as in a session
+            view.r0.value = 0.3
+            assert state.wait_idle(600)  # warm (agent loaded, caches filled)
+            app, overlapped = [], 0
+            for r0 in r0s:
+                if compare != "off":
+                    time.sleep(COMPARE_DELAY_S + 0.2)  # the previous plan's comparison is running now
+                    overlapped += comparison_runner(compare).busy
+                t0 = time.perf_counter()
+                view.r0.value = float(r0)
+                assert state.wait_idle(600)
+                app.append(time.perf_counter() - t0)
+                assert state.plan_request.mission.battery.r0 == r0 and state.plan_error == "", state.plan_error
+            note = f"; a comparison was running at {overlapped} of {len(r0s)} samples" if compare != "off" else ""
+            lines.append(f"  {policy:6s} app, comparison {compare:7s}: {_stats(app)}{note}")
+            state.close()
+            if compare != "off":
+                comparison_runner(compare).wait_idle(600)
+            if not bare:
+                for r0 in r0s:
+                    t0 = time.perf_counter()
+                    plan_mission(mission, policy, r0=float(r0), predictor=pred)
+                    bare.append(time.perf_counter() - t0)
+                lines.append(f"  {policy:6s} bare plan_mission: {_stats(bare)} (last route: "
+                             f"{' '.join(state.plan['route'])})")
     lines.append(f"  load average after {_load()}")
     return lines
 
@@ -143,38 +165,103 @@ def _first_plan(page, timeout_ms: int = 120_000) -> None:
     page.locator(".uam-plan-summary[data-busy='false']").get_by_text("Route:").wait_for(timeout=timeout_ms)
 
 
-def bench_pageload(n: int) -> list[str]:
+def _settle(seconds: float = 20.0) -> None:
+    """Give a just-started server's warm-up (comparison child imports, example comparison) time to end."""
+    time.sleep(seconds)
+
+
+def bench_pageload(n: int, compares: list[str]) -> list[str]:
     from playwright.sync_api import sync_playwright
 
     lines = [f"pageload: load average before {_load()}"]
-    with Served() as srv, sync_playwright() as p:
-        lines.append(f"  server start (imports, one app build): {srv.startup_s:.1f} s")
-        browser = _browser(p)
-        loads, dom = [], []
-        outside: list[str] = []
-        for _ in range(n):
-            ctx = browser.new_context(viewport={"width": 1500, "height": 1100})
-            page = ctx.new_page()
-            page.on("request", lambda r: outside.append(r.url)
-                    if not r.url.startswith(("http://127.0.0.1", "ws://127.0.0.1", "data:", "blob:")) else None)
-            t0 = time.perf_counter()
-            page.goto(srv.url, wait_until="load")
-            dom.append(time.perf_counter() - t0)
-            _first_plan(page)
-            loads.append(time.perf_counter() - t0)
-            ctx.close()
-        browser.close()
-    lines.append(f"  first page load (goto -> first plan in the summary): {loads[0]:.2f} s; "
-                 f"later loads median {statistics.median(loads[1:] or loads):.2f} s, max {max(loads):.2f} s "
-                 f"(n={n})")
-    lines.append(f"  document 'load' event: first {dom[0]:.2f} s, median {statistics.median(dom):.2f} s")
-    lines.append(f"  requests outside the server (CDN etc.): {len(outside)}")
+    for compare in compares:
+        with Served(UAM_STUDIO_COMPARE=compare) as srv, sync_playwright() as p:
+            _settle()
+            browser = _browser(p)
+            loads, dom, table = [], [], []
+            outside: list[str] = []
+            for _ in range(n):
+                ctx = browser.new_context(viewport={"width": 1366, "height": 768})
+                page = ctx.new_page()
+                page.on("request", lambda r, out=outside: out.append(r.url)
+                        if not r.url.startswith(("http://127.0.0.1", "ws://127.0.0.1", "data:", "blob:")) else None)
+                t0 = time.perf_counter()
+                page.goto(srv.url, wait_until="load")
+                dom.append(time.perf_counter() - t0)
+                _first_plan(page)
+                loads.append(time.perf_counter() - t0)
+                if compare != "off":
+                    page.locator(".uam-plan-compare[data-pending='false']").get_by_text("Oracle (exact)").wait_for(
+                        timeout=120_000)
+                    table.append(time.perf_counter() - t0)
+                ctx.close()
+            browser.close()
+        lines.append(f"  comparison {compare}: server start {srv.startup_s:.1f} s; page load (goto -> first plan "
+                     f"in the summary) median {statistics.median(loads):.2f} s, first {loads[0]:.2f} s, "
+                     f"max {max(loads):.2f} s (n={n}; goal median <= 2.5 s)")
+        lines.append(f"    document 'load' event: median {statistics.median(dom):.2f} s"
+                     + (f"; comparison table complete: median {statistics.median(table):.2f} s" if table else ""))
+        lines.append(f"    requests outside the server (CDN etc.): {len(outside)}")
     lines.append(f"  load average after {_load()}")
     return lines
 
 
-def _replan_times(page, k: int) -> list[float]:
-    """Move the q_max slider k times by one step down and time each updated plan.
+def bench_replan(k: int, compares: list[str], pause_s: float) -> list[str]:
+    from playwright.sync_api import sync_playwright
+
+    lines = [f"replan (browser, q_max key -> summary of that input, {pause_s:g} s between moves): "
+             f"load average before {_load()}"]
+    for compare in compares:
+        with Served(UAM_STUDIO_COMPARE=compare) as srv, sync_playwright() as p:
+            _settle()
+            browser = _browser(p)
+            page = browser.new_page(viewport={"width": 1366, "height": 768})
+            page.goto(srv.url)
+            _first_plan(page)
+            policy = page.locator(".uam-plan-summary").get_attribute("data-inputs").split(";")[0]
+            _replan_times(page, 2)  # warm
+            times = _replan_times(page, k, pause_s)
+            browser.close()
+        lines.append(f"  comparison {compare:7s} ({policy}): {_stats(times)}   (goal p95 <= 250 ms)")
+    lines.append(f"  load average after {_load()}")
+    return lines
+
+
+def bench_lab(k: int) -> list[str]:
+    from playwright.sync_api import sync_playwright
+
+    lines = [f"lab (browser, Battery lab R0 key -> end-of-discharge table of the new value): load average "
+             f"before {_load()}"]
+    with Served() as srv, sync_playwright() as p:
+        browser = _browser(p)
+        page = browser.new_page(viewport={"width": 1366, "height": 768})
+        page.goto(srv.url)
+        _first_plan(page)
+        page.locator(".bk-tab", has_text="Battery lab").click()
+        table = page.locator(".uam-lab-summary")
+        table.get_by_text("this setting").wait_for(timeout=120_000)
+        handle = page.locator(".bk-input-group", has=page.get_by_text("R0 (ohm)")).locator(".noUi-handle")
+        times = []
+        for _ in range(k):
+            before = table.inner_text()
+            handle.focus()
+            t0 = time.perf_counter()
+            handle.press("PageUp")  # a big step: every curve's end changes
+            page.wait_for_function("([el, old]) => el.innerText !== old", arg=[table.element_handle(), before],
+                                   timeout=120_000)
+            times.append(time.perf_counter() - t0)
+            if "0.45" in page.locator(".bk-input-group", has=page.get_by_text("R0 (ohm)")).inner_text():
+                handle.press("Home")
+                page.wait_for_timeout(1500)
+        browser.close()
+    lines.append(f"  Battery lab change: {_stats(times)}")
+    lines.append(f"  load average after {_load()}")
+    return lines
+
+
+def _replan_times(page, k: int, pause_s: float = 0.0) -> list[float]:
+    """Move the q_max slider k times by one step down and time each updated plan, ``pause_s`` after
+    the previous one.
 
     Always the same direction, so every value is new: the app caches plans by their inputs
     (``compute_plan``), and a value seen before would be answered from the cache, not planned.
@@ -184,6 +271,7 @@ def _replan_times(page, k: int) -> list[float]:
     q = float(summary.get_attribute("data-inputs").split(";q_max=")[1].split(";")[0])
     out = []
     for _ in range(k):
+        page.wait_for_timeout(1000 * pause_s)
         key = "ArrowLeft"
         q -= 50.0
         handle.focus()
@@ -236,21 +324,30 @@ def bench_concurrency(k: int, steps: int, runner: str) -> list[str]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=["latency", "pageload", "concurrency", "all"], nargs="?", default="all")
+    ap.add_argument("what", choices=["latency", "pageload", "replan", "lab", "concurrency", "all"], nargs="?",
+                    default="all")
     ap.add_argument("--n", type=int, default=40, help="slider changes per policy (latency)")
     ap.add_argument("--n-oracle", type=int, default=8, help="slider changes for the oracle (seconds each)")
     ap.add_argument("--loads", type=int, default=5, help="page loads (pageload)")
-    ap.add_argument("--k", type=int, default=15, help="replans per phase (concurrency)")
+    ap.add_argument("--k", type=int, default=15, help="replans per phase (replan, concurrency) or changes (lab)")
+    ap.add_argument("--compare", default="off,process",
+                    help="planner comparison modes to measure with (latency, pageload, replan)")
+    ap.add_argument("--pause", type=float, default=1.0, help="seconds between slider moves (replan)")
     ap.add_argument("--steps", type=int, default=200_000, help="training steps of session A (concurrency)")
     ap.add_argument("--runners", default="process,thread",
                     help="where session A trains: the app's default child process, and/or a thread (concurrency)")
     ap.add_argument("--append", default=None, metavar="FILE", help="append the results as a section to FILE")
     args = ap.parse_args()
     lines: list[str] = []
+    compares = args.compare.split(",")
     if args.what in ("latency", "all"):
-        lines += bench_latency(args.n, args.n_oracle)
+        lines += bench_latency(args.n, args.n_oracle, compares)
     if args.what in ("pageload", "all"):
-        lines += bench_pageload(args.loads)
+        lines += bench_pageload(args.loads, compares)
+    if args.what in ("replan", "all"):
+        lines += bench_replan(args.k, compares, args.pause)
+    if args.what in ("lab", "all"):
+        lines += bench_lab(args.k)
     if args.what in ("concurrency", "all"):
         for runner in args.runners.split(","):
             lines += bench_concurrency(args.k, args.steps, runner)

@@ -7,6 +7,7 @@ The tests are skipped only if no chromium is installed.
 
 from __future__ import annotations
 
+import re
 import shutil
 import time
 from pathlib import Path
@@ -89,11 +90,34 @@ def browser_context_args(browser_context_args):
     return {**browser_context_args, "viewport": {"width": 1500, "height": 1100}}
 
 
+# Everything that sticks out sideways: the page, #main (the template's scrolling container) and every
+# visible element, shadow roots included, whose box ends right of the viewport.
+JS_OVERFLOW = """() => {
+  const out = [];
+  const d = document.documentElement, m = document.getElementById('main');
+  if (d.scrollWidth > d.clientWidth) out.push(`page: scrollWidth ${d.scrollWidth} > ${d.clientWidth}`);
+  if (m && m.scrollWidth > m.clientWidth) out.push(`#main: scrollWidth ${m.scrollWidth} > ${m.clientWidth}`);
+  const limit = (m ? m.getBoundingClientRect().left + m.clientWidth : d.clientWidth) + 0.5;
+  const walk = (root) => {
+    for (const el of root.querySelectorAll('*')) {
+      const r = el.getBoundingClientRect();
+      if (r.width > 0 && r.height > 0 && r.right > limit && getComputedStyle(el).visibility !== 'hidden') {
+        out.push(`${el.tagName.toLowerCase()}.${[...el.classList].join('.')}: right ${Math.round(r.right)} > ${Math.round(limit)}`);
+      }
+      if (el.shadowRoot) walk(el.shadowRoot);
+    }
+  };
+  walk(document);
+  return out.slice(0, 10);
+}"""
+
+
 def _open(page, url):
     page.set_default_timeout(TIMEOUT_MS)
     page.goto(url)
     summary = page.locator(".uam-plan-summary")
     summary.get_by_text("Route:").wait_for()
+    page.locator(".tabulator-row").first.wait_for()  # the table loads right after the page
     return summary
 
 
@@ -116,8 +140,8 @@ def test_planner_map_table_slider_update_route_and_summary(page, app_url):
             if not r.url.startswith(("http://127.0.0.1", "ws://127.0.0.1", "data:", "blob:")) else None)
     summary = _open(page, app_url)
     text0 = summary.inner_text()
-    for needle in ("Route: vertiport", "Altitudes:", "Min predicted voltage:", "Margin to EOD", "Safe:"):
-        assert needle in text0
+    for needle in ("Route: vertiport", "Reached:", "physics: safe by", "predicted: safe by", "(90%: "):
+        assert needle in text0, needle
     assert page.get_by_text("q_max (C)").count() == 1 and page.get_by_text("R0 (ohm)").count() == 1
 
     # 1. click the map: a new destination D1 appears in the table
@@ -167,7 +191,7 @@ def test_planner_map_table_slider_update_route_and_summary(page, app_url):
     text2 = current.inner_text()
     r0 = float(text2.split("R0 ")[1].split(" ohm")[0])
     assert r0 > 0.2, text2
-    assert text2.split("Min predicted voltage:")[1] != text1.split("Min predicted voltage:")[1]
+    assert text2.split("predicted:")[1] != text1.split("predicted:")[1]
     assert page.locator(".uam-error").get_by_text("Not applied").count() == 0
     assert outside == []
 
@@ -214,6 +238,17 @@ def test_retraining_curve_grows_and_agent_is_selectable(page, app_url):
         raise AssertionError(f"training did not finish; curve lengths seen: {lengths}")
     assert len(set(lengths)) >= 2 and lengths == sorted(lengths) and lengths[0] > 0, lengths
     assert page.locator(".uam-train-status").get_by_text("saved").count() == 1
+    progress = page.locator(".uam-train-progress-text").inner_text()
+    assert re.match(r"\d+ of 2000 steps \(100%\) \u00b7 \d+:\d\d elapsed$", progress), progress
+    # the bar is drawn whole: the <progress> inside its widget's box, above the text below it
+    boxes = page.evaluate("""() => { const find = (root) => { for (const el of root.querySelectorAll('*')) {
+        if (el.tagName === 'PROGRESS') return el; if (el.shadowRoot) { const f = find(el.shadowRoot); if (f) return f; } }
+        return null; };
+      const bar = find(document).getBoundingClientRect();
+      return {bar: [bar.top, bar.bottom], height: bar.height}; }""")
+    text_box = page.locator(".uam-train-progress-text").bounding_box()
+    assert boxes["height"] >= 10 and boxes["bar"][1] <= text_box["y"] + 0.5, (boxes, text_box)
+    assert page.locator(".uam-train-reference").get_by_text("exact oracle").count() == 1
 
     page.locator(".bk-tab", has_text="Planner").click()
     policy = page.locator(".bk-input-group", has=page.get_by_text("Policy", exact=True)).locator("select")
@@ -254,3 +289,94 @@ def test_training_session_does_not_block_another_session(browser, app_url):
     finally:
         trainer.close()
         planner.close()
+
+
+def _outside_requests(page) -> list[str]:
+    """Collect (in the returned list) every request the page makes to a host other than this machine."""
+    from urllib.parse import urlsplit
+
+    outside: list[str] = []
+
+    def check(request) -> None:
+        parts = urlsplit(request.url)
+        if parts.scheme in ("data", "blob"):  # in the page itself
+            return
+        if parts.hostname not in ("127.0.0.1", "localhost", "::1"):
+            outside.append(request.url)
+
+    page.on("request", check)
+    return outside
+
+
+@pytest.mark.parametrize("size", [(1366, 768), (1920, 1080)], ids=["1366x768", "1920x1080"])
+def test_layout_fits_the_screen_with_the_plan_above_the_fold(browser, app_url, size):
+    """No sideways overflow on any tab; the summary, the map and the voltage plot fully on screen without
+    scrolling; the planner comparison names the three planners with their numbers; nothing leaves the machine."""
+    width, height = size
+    page = browser.new_page(viewport={"width": width, "height": height})
+    requests: list[str] = []
+    page.on("request", lambda r: requests.append(r.url))
+    outside = _outside_requests(page)
+    try:
+        summary = _open(page, app_url)
+        page.locator(".uam-plan-summary[data-busy='false']").wait_for()
+        compare = page.locator(".uam-plan-compare[data-pending='false']")
+        compare.wait_for(timeout=120_000)
+        page.wait_for_function("() => [...window.Bokeh.index.all_views()].filter("
+                               "v => v.model.type === 'Figure').length >= 4")  # map, voltage and the deferred plots
+        for name, locator in (("summary", summary), ("map", page.locator(".uam-map").first),
+                              ("voltage plot", page.locator(".uam-voltage").first)):
+            box = locator.bounding_box()
+            assert box is not None, name
+            assert box["x"] >= 0 and box["y"] >= 0, (name, box)
+            assert box["x"] + box["width"] <= width and box["y"] + box["height"] <= height, (name, box, size)
+        text = compare.inner_text()
+        for label in ("DQN (bundled)", "Greedy", "Oracle (exact)"):
+            row = [line for line in text.splitlines() if line.startswith(label)]
+            assert row and any(ch.isdigit() for ch in row[0]), (label, text)
+        assert "Gap to oracle" in text and "priority" in text
+
+        for tab in ("Planner", "Battery lab", "Retrain"):
+            page.locator(".bk-tab", has_text=tab).click()
+            if tab == "Battery lab":
+                page.locator(".uam-lab-summary").get_by_text("this setting").wait_for()
+            elif tab == "Retrain":
+                page.locator(".uam-train-status").get_by_text("episodes:").wait_for()
+            page.wait_for_timeout(1000)  # layout settles
+            assert page.evaluate(JS_OVERFLOW) == [], (tab, size)
+        assert requests and outside == [], outside
+    finally:
+        page.close()
+
+
+# The x ranges of the Battery lab's two figures and the legend labels of its voltage figure.
+JS_LAB = """() => { const out = {ranges: [], legend: []};
+  for (const v of window.Bokeh.index.all_views()) { const m = v.model;
+    if ((m.type === 'Figure' || m.type === 'Plot') && m.title && m.title.text &&
+        (m.title.text.startsWith('Per-cell current') || m.title.text.startsWith('Voltage (physics'))) {
+      out.ranges.push([m.x_range.start, m.x_range.end]);
+      if (m.title.text.startsWith('Voltage'))
+        out.legend = [...m.center, ...m.right, ...m.above, ...m.below, ...m.left].filter(c => c.type === 'Legend')
+          .flatMap(l => l.items.map(i => i.label.value));
+    } }
+  return out; }"""
+
+
+def test_battery_lab_table_legend_and_time_axis_follow_a_change(page, app_url):
+    _open(page, app_url)
+    page.locator(".bk-tab", has_text="Battery lab").click()
+    table = page.locator(".uam-lab-summary")
+    table.get_by_text("altitude 500 m").wait_for()
+    assert "nan" not in table.inner_text() and "not reached (lowest" in table.inner_text()
+    page.wait_for_function(f"() => ({JS_LAB})().ranges.length === 2")
+    lab = page.evaluate(JS_LAB)
+    assert lab["legend"] == ["altitude 500 m", "altitude 1000 m", "altitude 2000 m", "altitude 3000 m",
+                             "this setting", "EOD 3 V"]
+    assert lab["ranges"][0] == lab["ranges"][1]  # one time axis for current and voltage
+    handle = page.locator(".bk-input-group", has=page.get_by_text("R0 (ohm)")).locator(".noUi-handle")
+    handle.focus()
+    handle.press("End")  # R0 0.45 ohm: the cell cannot take off
+    table.locator("tr", has_text="this setting").get_by_text("0.2 min").wait_for()
+    assert "nan" not in table.inner_text()
+    lab = page.evaluate(JS_LAB)
+    assert lab["ranges"][0] == lab["ranges"][1]

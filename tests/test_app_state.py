@@ -7,7 +7,9 @@ Every test runs with ``UAM_STUDIO_HOME`` in a temporary folder.
 from __future__ import annotations
 
 import json
+import re
 import threading
+import time
 import zipfile
 from pathlib import Path
 
@@ -278,6 +280,11 @@ def test_retrain_state_trains_saves_and_the_planner_can_use_it(home):
     assert value in planner.policy_objects.values()
     assert planner.apply(policy=value), planner.error
     assert planner.plan_error == "" and planner.plan["policy"] == "dqn" and planner.plan["route"]
+    from uam_studio.app.planner import summary_html
+
+    label = planner.policy_label(value)
+    assert label.startswith("Retrained: ") and path.stem in label and str(path) not in label
+    assert f"<b>Policy:</b> {label}" in summary_html(planner)  # its label, never the file path
     planner.close()
 
 
@@ -354,8 +361,31 @@ def test_battery_lab_families(vary):
     c = lab.curves()
     assert c["error"] == "" and len(c["setting"]) == 1 and len(c["family"]) >= 4
     for curve in c["family"] + c["setting"]:
-        assert curve["current_a"].size == curve["time_s"].size >= curve["voltage_v"].size > 0
+        assert curve["current_a"].size == curve["time_s"].size <= BatteryLabState.MAX_POINTS + 1
+        assert curve["voltage_time_s"].size == curve["voltage_v"].size > 0
         assert np.all(np.isfinite(curve["voltage_v"]))
+        assert curve["eod_s"] is None or np.isfinite(curve["eod_s"])  # never NaN: "nan min" in the table
+    assert c["t_end_s"] == max(float(cv["time_s"][-1]) for cv in c["family"] + c["setting"])
+    values = [cv["value"][{"altitude": "altitude_m", "wind": "wind_kts", "R0": "r0", "q_max": "q_max"}[vary]]
+              for cv in c["family"]]
+    assert values == sorted(values)  # the legend's order: ascending numbers, not text
+
+
+def test_battery_lab_curve_that_never_reaches_eod_has_its_lowest_voltage():
+    c = BatteryLabState(vary="altitude", legs=3).curves()
+    low = [cv for cv in c["family"] if cv["label"] == "altitude 500 m"][0]
+    assert low["eod_s"] is None and 3.0 < low["min_voltage_v"] < 3.6
+
+
+def test_battery_lab_in_the_background_keeps_the_newest_and_flags_busy():
+    applied = []
+    lab = BatteryLabState(background=True, dispatch=lambda cb: (applied.append(1), cb()))
+    for r0 in (0.1, 0.2, 0.3):
+        lab.r0 = r0
+    deadline = time.monotonic() + 60
+    while lab.busy and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not lab.busy and lab.result["setting"][0]["value"]["r0"] == 0.3
 
 
 def test_battery_lab_r0_shortens_the_flight_and_short_legs_are_skipped():
@@ -402,8 +432,6 @@ def test_cached_dqn_plan_is_not_reused_for_another_agent_file(monkeypatch, tmp_p
 
 
 def test_planning_activity_keeps_training_paused_for_a_grace_period():
-    import time
-
     from uam_studio.app.state import PlanningActivity
 
     act = PlanningActivity(grace_s=0.3)
@@ -430,7 +458,7 @@ def test_planning_activity_keeps_training_paused_for_a_grace_period():
 def test_warm_up_plans_what_a_new_session_shows_first():
     from uam_studio.app.state import compute_plan, warm_up
 
-    warm_up()
+    warm_up(compare="off")
     s = PlannerState(auto=False)
     res = compute_plan(s.request())
     assert res["cached"] and res["error"] is None and res["plan"]["route"]
@@ -450,3 +478,109 @@ def test_training_setup_init_agent_sets_fine_tuning(tmp_path):
     with pytest.raises(InputError) as err:
         training_setup(steps=10, init_agent=tmp_path / "missing.zip")
     assert err.value.field == "init_agent" and "not found" in str(err.value)
+
+
+# ----------------------------------------------------------------------------- verdict, band, comparison
+
+
+def test_band_is_the_predictions_band_and_the_verdict_names_both_sources():
+    s = _state()
+    band = s.band
+    assert band is not None and band["level"] == 0.9
+    pred = np.asarray(s.plan["predicted"]["voltage_v"])
+    lo, hi = np.asarray(band["low_v"]), np.asarray(band["high_v"])
+    assert lo.shape == hi.shape == pred.shape and np.all(lo <= pred + 1e-3) and np.all(pred <= hi + 1e-3)
+    v = s.verdict()
+    assert v["level"] == "safe" and re.fullmatch(
+        r"physics: safe by 0\.\d\d V; predicted: safe by 0\.\d\d V \(90%: \+0\.\d\d V to \+0\.\d\d V\)", v["text"]), v
+    assert v["physics_margin_v"] == pytest.approx(s.plan["min_voltage_v"] - 3.0)
+    s.close()
+
+
+def test_verdict_disagrees_where_physics_is_safe_and_the_dynaformer_is_not():
+    """The issue's case: R0 0.286 ohm, +0.017 V on physics, below EOD on the Dynaformer (bundled agent)."""
+    s = PlannerState(policy="dqn")
+    assert s.apply(r0=0.286)
+    v = s.verdict()
+    assert s.plan["safe"] and v["physics_margin_v"] > 0 > v["predicted_margin_v"]
+    assert v["level"] == "disagree" and "physics safe, Dynaformer below EOD" in v["headline"]
+    assert "physics: safe by 0.017 V" in v["text"] and "predicted: below EOD by" in v["text"]
+    s.close()
+
+
+def test_failed_takeoff_has_its_voltage_trace_and_an_unsafe_verdict():
+    s = _state()
+    assert s.apply(r0=0.45)
+    assert s.plan["route"] == [] and s.band is None
+    t = s.takeoff
+    assert t is not None and len(t["time_s"]) == len(t["voltage_v"]) > 5 and t["voltage_v"][-1] < 3.0
+    v = s.verdict()
+    assert v["level"] == "unsafe" and "cannot take off" in v["headline"] and f"{t['eod_s']:.0f} s" in v["text"]
+    assert s.apply(r0=0.117215) and s.takeoff is None and s.band is not None
+    s.close()
+
+
+def test_comparison_inline_names_three_planners_and_the_gap_to_the_oracle():
+    from uam_studio.app.state import comparison_table
+
+    s = PlannerState(compare="inline")  # the bundled DQN, as the served app starts
+    rows = {r["key"]: r for r in comparison_table(s.comparison)}
+    assert [r["label"] for r in comparison_table(s.comparison)] == ["DQN (bundled)", "Greedy", "Oracle (exact)"]
+    assert all(r["status"] == "done" for r in rows.values())
+    assert (rows["agent"]["priority"], rows["greedy"]["priority"], rows["oracle"]["priority"]) == (5, 6, 6)
+    assert rows["agent"]["gap"] == "-1 priority (-17%)" and rows["greedy"]["gap"] == "matches"
+    assert rows["agent"]["route"] == s.plan["route"]  # the same library call as the shown plan
+    assert not s.comparison_pending()
+    before = s.comparison
+    assert s.apply(policy="greedy") and s.comparison is before  # same mission and agent: same rows
+    s.close()
+
+
+def test_comparison_in_a_thread_waits_for_the_plan_to_settle_and_keeps_the_newest():
+    from uam_studio.app.state import comparison_runner
+
+    s = PlannerState(compare="thread", policy="greedy")
+    for r0 in (0.15, 0.16, 0.17):
+        s.apply(r0=r0)
+    assert s.comparison_pending()
+    runner = comparison_runner("thread")
+    deadline = time.monotonic() + 120
+    while s.comparison_pending() and time.monotonic() < deadline:
+        runner.wait_idle(1.0)
+    assert not s.comparison_pending() and "r0=0.17;" in s.comparison["inputs"]
+    assert {r["status"] for r in s.comparison["rows"].values()} == {"done"}
+    s.close()
+
+
+def test_comparison_in_a_child_process():
+    from uam_studio.app.state import ComparisonRunner, PlanRequest, compare_row
+
+    runner = ComparisonRunner("process")
+    mission = mission_from_dict({**EXAMPLE_MISSION, "name": "Child"})
+    got = []
+    runner.submit("t", [(PlanRequest(mission, "oracle"), got.append), (PlanRequest(mission, "dqn"), got.append)])
+    assert runner.wait_idle(300)
+    assert [r["status"] for r in got] == ["done", "done"] and got[0]["priority"] == 6
+    assert {k: v for k, v in got[1].items() if k != "elapsed_s"} == \
+        {k: v for k, v in compare_row(mission, "dqn").items() if k != "elapsed_s"}
+    runner.submit("t", [(PlanRequest(mission, "bogus"), got.append)])
+    assert runner.wait_idle(60) and got[-1]["status"] == "error" and "bogus" in got[-1]["error"]
+    runner._proc.terminate()
+
+
+def test_retrain_progress_text_and_oracle_reference():
+    planner = _state()
+    rs = RetrainState(source="map", compare="inline", runner="thread", steps=200)
+    assert rs.progress_text() == "not started"
+    rs.request_reference(planner.mission)
+    ref = rs.reference
+    assert ref["status"] == "done" and ref["reached"] == 3 and ref["cycles"] == 1 and "q_max 7600 C" in ref["cell"]
+    assert rs.start(planner.mission), rs.error
+    rs.join(120)
+    rs.poll()
+    text = rs.progress_text()
+    assert text.startswith(f"{rs.timesteps} of 200 steps (100%)") and "elapsed" in text and "left" not in text
+    rs.source = "random"
+    rs.request_reference(None)
+    assert rs.reference is None
+    planner.close()

@@ -5,6 +5,7 @@ Also the ``uam-studio serve`` argument errors (one line, exit 2), without starti
 
 from __future__ import annotations
 
+import numpy as np
 import panel as pn
 import pytest
 from bokeh.document import Document
@@ -22,11 +23,18 @@ def home(tmp_path, monkeypatch):
 
 
 def test_create_app_in_notebook_is_plain_tabs_and_renders():
+    from uam_studio.app.main import TABS
+
     app = create_app()
     assert isinstance(app, pn.Tabs)  # no template outside a server
-    assert [name for name, _ in zip(app._names, app)] == ["Planner", "Battery lab", "Retrain"]
+    names = [name for name, _ in zip(app._names, app)]
+    assert names == [title for title, _ in TABS]  # one list to extend
+    assert names[0] == "Planner" and {"Battery lab", "Retrain"} <= set(names)
     root = app.get_root(Document())
     assert root is not None
+    for name in ("Battery lab", "Retrain"):  # the later tabs are built when shown
+        app.active = names.index(name)
+    assert app.get_root(Document()) is not None
 
 
 def test_planner_view_contract():
@@ -38,7 +46,9 @@ def test_planner_view_contract():
     assert html.startswith("<div class='uam-plan-summary' data-busy='false' data-inputs='greedy;single_charge;")
     for name in state.plan["route"]:
         assert name in html
-    assert "Min predicted voltage" in html and "Altitudes:" in html and "Margin to EOD" in html
+    for needle in ("<b>Policy:</b> Greedy", "<b>Route:</b>", "<b>Reached:</b>", "class='uam-verdict' data-level='safe'",
+                   "physics: safe by", "predicted: safe by", "(90%: "):
+        assert needle in html, needle
     assert request_digest(state.plan_request).endswith("|Napa:2:20")
     # widget -> state -> plan -> summary, in place (no server)
     view.r0.value = 0.2
@@ -75,4 +85,119 @@ def test_retrain_view_start_from_widget_drives_the_state():
     assert state.start_from == "scratch" and view.start_from.value == "scratch"
     view.start_from.value = "bundled"
     assert state.start_from == "bundled"
+    planner.close()
+
+
+def _legend_labels(element) -> list[str]:
+    import holoviews as hv
+
+    plot = hv.renderer("bokeh").get_plot(element)
+    return [item.label.value for lg in plot.state.legend for item in lg.items if hasattr(item.label, "value")]
+
+
+def test_voltage_plot_always_shows_eod_with_a_legend_entry_and_the_band():
+    state = PlannerState(policy="greedy")
+    view = PlannerView(state)
+    data = view._voltage_data()
+    lo, hi = data["ylim"]
+    assert lo < 3.0 < hi and min(data["physics"][1]) > 3.3  # the default plan stays far above EOD
+    labels = _legend_labels(view._voltage_element(data))
+    assert labels == ["Dynaformer 90%", "physics", "Dynaformer", "EOD 3 V"]
+    assert len(data["band"][1]) == len(data["physics"][1]) > 0
+    state.apply(eod_v=2.5)
+    lo, hi = view._voltage_data()["ylim"]
+    assert lo < 2.5 < hi
+    state.close()
+
+
+def test_failed_takeoff_draws_the_takeoff_not_an_empty_plot():
+    state = PlannerState(policy="greedy")
+    view = PlannerView(state)
+    state.apply(r0=0.45)
+    data = view._voltage_data()
+    t, v = data["physics"]
+    assert len(t) > 5 and v[-1] < 3.0 and data["xlim"] == (0.0, t[-1]) and data["ylim"][0] < v.min()
+    assert "cannot take off" in summary_html(state) and "data-level='unsafe'" in summary_html(state)
+    state.close()
+
+
+def test_verdict_is_amber_where_the_models_disagree():
+    state = PlannerState(policy="dqn")
+    state.apply(r0=0.286)
+    html = summary_html(state)
+    assert "data-level='disagree'" in html and "#fff4e5" in html and "Models disagree" in html
+    state.close()
+
+
+def test_comparison_panel_names_the_three_planners_with_their_numbers():
+    from uam_studio.app.planner import comparison_html
+
+    state = PlannerState(compare="inline")
+    view = PlannerView(state)
+    view.__panel__().get_root(Document())
+    html = view.compare.object
+    assert html == comparison_html(state) and html.startswith("<div class='uam-plan-compare' data-pending='false'")
+    for label, prio in (("DQN (bundled)", ">5<"), ("Greedy", ">6<"), ("Oracle (exact)", ">6<")):
+        row = html.split(f">{label}<")[1].split("</tr>")[0]
+        assert prio in row and "3." in row, (label, row)
+    assert "-1 priority (-17%)" in html and "matches" in html and "reference" in html
+    state.close()
+
+
+def test_map_route_has_a_cycle_legend_and_out_and_back_labels_do_not_overlap():
+    from uam_studio.app.planner import altitude_labels
+
+    state = PlannerState(policy="greedy")
+    view = PlannerView(state)
+    root = view.__panel__().get_root(Document())
+    legends = [m for m in root.references() if type(m).__name__ == "Legend" and m.name == "uam-route-legend"]
+    assert len(legends) == 1 and [item.label.field for item in legends[0].items] == ["legend", "failed"]
+    assert set(view._route_data()["legend"]) == {"cycle 1"}
+
+    rows = [{"name": "A", "x_km": 30.0, "y_km": 0.0}, {"name": "B", "x_km": 0.0, "y_km": 30.0}]
+    plan = {"route": ["A", "vertiport", "B", "vertiport"], "altitudes_m": [1000, 500, 500, 500],
+            "reached": ["A", "B"], "safe": True}
+    legs = route_legs(plan, rows, (0.0, 0.0))
+    labels = altitude_labels(legs, [(0.0, 0.0), (30.0, 0.0), (0.0, 30.0)])
+    assert sorted(labels["text"]) == ["1000/500 m", "500 m"]  # one label per out-and-back pair
+    for x, y in zip(labels["x"], labels["y"]):
+        for nx, ny in [(0.0, 0.0), (30.0, 0.0), (0.0, 30.0)]:
+            assert np.hypot(x - nx, y - ny) > 10.0  # away from the places and their names
+    assert legs["legend"] == ["cycle 1", "cycle 1", "cycle 2", "cycle 2"]
+    state.close()
+
+
+def test_battery_lab_plots_share_time_and_sort_the_legend_by_value():
+    from uam_studio.app.battery_lab import BatteryLabView, eod_text
+    from uam_studio.app.state import BatteryLabState
+
+    view = BatteryLabView(BatteryLabState())
+    view.__panel__().get_root(Document())
+    c = view.state.result
+    data = view._plot_data(c)
+    labels = ["altitude 500 m", "altitude 1000 m", "altitude 2000 m", "altitude 3000 m", "this setting"]
+    assert _legend_labels(view._current_element(data, labels, "altitude")) == labels
+    assert _legend_labels(view._voltage_element(data, labels, "altitude")) == labels + ["EOD 3 V"]
+    figs = [m for pane in (view.current_plot, view.voltage_plot) for m in pane.get_root(Document()).references()
+            if type(m).__name__ == "figure"]
+    assert len(figs) == 2 and [(f.x_range.start, f.x_range.end) for f in figs] == [data["xlim"]] * 2
+    texts = [eod_text(cv) for cv in c["family"]]
+    assert texts[0].startswith("not reached (lowest 3.") and "nan" not in " ".join(texts)
+    view.state.vary = "wind"  # new factor: new legend
+    assert view._factor == "wind" and "wind -39 kt" in view.eod_table.object
+
+
+def test_retrain_view_shows_progress_numbers_and_the_oracle_line():
+    from uam_studio.app.retrain import RetrainView
+    from uam_studio.app.state import RetrainState
+
+    planner = PlannerState(policy="greedy")
+    view = RetrainView(RetrainState(runner="thread", compare="inline"), planner)
+    view.__panel__().get_root(Document())
+    assert "exact oracle" in view.reference_text.object and "3 of 4 destinations" in view.reference_text.object
+    el = view._reached_element(view.buffer.data, view.state.reference)
+    curves = el.values()
+    assert curves[-1].data.iloc[:, 1].tolist() == [3.0, 3.0]  # the oracle's line
+    assert el.opts.get().kwargs["xlim"] == (0.0, 50.0)  # before any episode: 50 episodes, not 0-1
+    assert view.progress_text.object == "<span class='uam-train-progress-text'>not started</span>"
     planner.close()

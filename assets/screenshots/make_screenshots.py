@@ -1,10 +1,12 @@
-"""Take the README's screenshots of the app's three tabs (playwright + Debian's chromium).
+"""Take the README's screenshots of the Planner, Battery lab and Retrain tabs at 1366x768 (a
+classroom laptop; playwright + Debian's chromium).
 
     python assets/screenshots/make_screenshots.py
 
 Serves the app with ``panel serve`` on a free port (user folder in a temporary directory), adds a
-destination on the map, switches to the Battery lab (varying R0) and runs a short retraining, and
-writes ``planner.png``, ``battery_lab.png`` and ``retrain.png`` next to this file.
+destination on the map and waits for the planner comparison, switches to the Battery lab (varying
+R0) and runs a short retraining, and writes ``planner.png``, ``battery_lab.png`` and ``retrain.png``
+next to this file. (The Fly tab's screenshot comes from its browser test.)
 """
 
 from __future__ import annotations
@@ -56,7 +58,7 @@ def main() -> None:
                 time.sleep(0.5)
         with sync_playwright() as p:
             browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
-            page = browser.new_page(viewport={"width": 1560, "height": 1250})
+            page = browser.new_page(viewport={"width": 1366, "height": 768})
             page.set_default_timeout(120_000)
             page.goto(f"http://127.0.0.1:{port}/main")
             page.locator(".uam-plan-summary[data-busy='false']").get_by_text("Route:").wait_for()
@@ -64,7 +66,9 @@ def main() -> None:
             page.mouse.click(fr["left"] + (-22 - fr["x0"]) / (fr["x1"] - fr["x0"]) * fr["width"],
                              fr["top"] + (fr["y1"] - 18) / (fr["y1"] - fr["y0"]) * fr["height"])
             page.locator(".uam-plan-summary[data-busy='false'][data-inputs*='|D1:']").wait_for()
-            page.mouse.move(5, 600)  # no hover tooltip in the picture
+            page.locator(".uam-plan-compare[data-pending='false'][data-inputs*='|D1:']").wait_for()
+            page.locator(".uam-plan-summary").click()  # the map loses its focus outline
+            page.mouse.move(5, 760)  # no hover tooltip in the picture
             page.wait_for_function("() => [...window.Bokeh.index.all_views()].filter("
                                    "v => v.model.type === 'Figure').length >= 4")  # plots load after the page
             time.sleep(2)
@@ -72,7 +76,8 @@ def main() -> None:
 
             page.locator(".bk-tab", has_text="Battery lab").click()
             page.locator(".bk-btn", has_text="R0").first.click()
-            time.sleep(3)
+            page.locator(".uam-lab-summary").get_by_text("R0 0.45 ohm").wait_for()
+            time.sleep(2)
             page.screenshot(path=str(HERE / "battery_lab.png"))
 
             page.locator(".bk-tab", has_text="Retrain").click()

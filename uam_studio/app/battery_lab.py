@@ -2,11 +2,15 @@
 
 One leg (distance, altitude, wind) flown by one cell (q_max, R0), ``legs`` times back to back, and a
 family of curves varying one factor (altitude, wind, R0 or q_max): per-cell current and voltage
-(physics model) with the EOD line. The numbers come from :class:`~uam_studio.app.state.BatteryLabState`.
+(physics model) with the EOD line, on one time axis. The numbers come from
+:class:`~uam_studio.app.state.BatteryLabState`; this view only draws its ``result``. The plots are
+built once per factor (their legend names the factor's values in ascending order) and a slider move
+only sends new data to them.
 """
 
 from __future__ import annotations
 
+import functools
 import html
 from typing import Any
 
@@ -15,11 +19,28 @@ import numpy as np
 import panel as pn
 import param
 
-from uam_studio.app.session import ensure_bokeh_backend
+from uam_studio.app.session import ensure_bokeh_backend, session_dispatcher
 from uam_studio.app.state import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE, VARY, BatteryLabState
+from uam_studio.app.style import heading
 from uam_studio.flight.tables import ALTITUDE_RANGE_M, WIND_RANGE_KTS
 
 FAMILY_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2")
+EOD_COLOR = "#d62728"
+SETTING = "this setting"
+BUSY_AFTER_MS = 150  # served: a change taking longer than this shows the busy indicator
+
+
+def family_labels(vary: str) -> list[str]:
+    """Legend labels of the family varying ``vary``, in the factor's (ascending) order."""
+    _, values, unit = VARY[vary]
+    return [f"{vary} {v:g} {unit}" for v in values]
+
+
+def eod_text(curve: dict[str, Any]) -> str:
+    """A curve's end of discharge: ``"71.0 min"``, or ``"not reached (lowest 3.412 V)"``."""
+    if curve["eod_s"] is None:
+        return f"not reached (lowest {curve['min_voltage_v']:.3f} V)"
+    return f"{curve['eod_s'] / 60.0:.1f} min"
 
 
 class BatteryLabView(pn.viewable.Viewer):
@@ -31,7 +52,7 @@ class BatteryLabView(pn.viewable.Viewer):
         ensure_bokeh_backend()
         super().__init__(state=state or BatteryLabState(), **params)
         s = self.state
-        w = 280
+        w = 250
         self.widgets = {
             "vary": pn.widgets.RadioButtonGroup(name="Vary", options=list(VARY), value=s.vary, width=w),
             "q_max": pn.widgets.FloatSlider(name="q_max (C)", start=APP_Q_RANGE[0], end=APP_Q_RANGE[1], step=50,
@@ -50,58 +71,116 @@ class BatteryLabView(pn.viewable.Viewer):
         }
         for key, wd in self.widgets.items():
             wd.link(s, value=key)
-        self.message = pn.pane.Alert("", alert_type="warning", visible=False, css_classes=["uam-lab-error"])
-        self.current_plot = pn.pane.HoloViews(linked_axes=False)
-        self.voltage_plot = pn.pane.HoloViews(linked_axes=False)
-        self.eod_table = pn.pane.HTML(css_classes=["uam-lab-summary"], sizing_mode="stretch_width")
-        s.param.watch(self._refresh, list(self.widgets))
-        self._refresh()
+        self.message = pn.pane.Alert("", alert_type="warning", visible=False, css_classes=["uam-lab-error"],
+                                     sizing_mode="stretch_width")
+        self.busy = pn.indicators.LoadingSpinner(value=s.busy, size=18, css_classes=["uam-lab-busy"],
+                                                 margin=(0, 5))
+        self.current_plot = pn.pane.HoloViews(linked_axes=False, sizing_mode="stretch_width",
+                                              css_classes=["uam-lab-current"])
+        self.voltage_plot = pn.pane.HoloViews(linked_axes=False, sizing_mode="stretch_width",
+                                              css_classes=["uam-lab-voltage"])
+        # The class sits on the content (inside the pane's shadow root), as the Planner's summary.
+        self.eod_table = pn.pane.HTML(sizing_mode="stretch_width")
+        self._busy_later = session_dispatcher(delay_ms=BUSY_AFTER_MS) or (lambda cb: cb())
+        self._factor: str | None = None
+        self._current_pipe: hv.streams.Pipe | None = None
+        self._voltage_pipe: hv.streams.Pipe | None = None
+        s.param.watch(self._on_result, "result")
+        s.param.watch(self._on_busy, "busy")
+        self._on_result()
 
     def __panel__(self) -> pn.viewable.Viewable:
         intro = pn.pane.Markdown(
             "One leg flown by one 18650 cell (the pack scaled to a cell), repeated without recharging. "
             "Pick the factor to vary: the thin curves sweep it over its range, the black curve is the "
-            "setting of the sliders.")
-        controls = pn.Column("### Leg and cell", *self.widgets.values(), width=310)
-        return pn.Column(intro, self.message, pn.Row(controls, pn.Column(self.current_plot, self.voltage_plot),
-                                                     pn.Column("### End of discharge", self.eod_table, width=320)))
+            "setting of the sliders.", sizing_mode="stretch_width", styles={"font-size": "13px"})
+        controls = pn.Column(heading("Leg and cell"), *self.widgets.values(), width=270)
+        plots = pn.Column(pn.Row(heading("Current and voltage"), self.busy),
+                          self.current_plot, self.voltage_plot, min_width=560, sizing_mode="stretch_width",
+                          styles={"flex": "1 1 560px"})
+        table = pn.Column(heading("End of discharge"), self.eod_table, width=300)
+        body = pn.FlexBox(controls, plots, table, flex_wrap="wrap", gap="10px", sizing_mode="stretch_width")
+        return pn.Column(intro, self.message, body, sizing_mode="stretch_width")
 
-    def _refresh(self, *events: Any) -> None:
-        c = self.state.curves()
-        self.message.object = c["error"]
+    def _on_busy(self, event: param.parameterized.Event) -> None:
+        """Served, the busy indicator appears only once a change has taken :data:`BUSY_AFTER_MS`
+        (each change sent to the browser costs it a page layout; a fast change would pay twice)."""
+        if event.new:
+            self._busy_later(lambda: setattr(self.busy, "value", bool(self.state.busy)))
+        else:
+            self.busy.value = False
+
+    def _on_result(self, *events: Any) -> None:
+        c = self.state.result
+        if c is None:
+            return
+        self.message.object = html.escape(c["error"])
         self.message.visible = bool(c["error"])
         if c["error"]:
             return
-        cur, volt = {}, {}
-        for k, curve in enumerate(c["family"]):
-            color = FAMILY_COLORS[k % len(FAMILY_COLORS)]
-            t = curve["time_s"] / 60.0
-            cur[curve["label"]] = hv.Curve((t, curve["current_a"]), "time (min)", "current (A)").opts(
-                color=color, line_width=1.2, alpha=0.8)
-            v = curve["voltage_v"]
-            volt[curve["label"]] = hv.Curve((t[: v.size], v), "time (min)", "voltage (V)").opts(
-                color=color, line_width=1.2, alpha=0.8)
-        me = c["setting"][0]
-        t = me["time_s"] / 60.0
-        cur["this setting"] = hv.Curve((t, me["current_a"]), "time (min)", "current (A)").opts(
-            color="black", line_width=2.5)
-        volt["this setting"] = hv.Curve((t[: me["voltage_v"].size], me["voltage_v"]), "time (min)",
-                                        "voltage (V)").opts(color="black", line_width=2.5)
-        eod = hv.HLine(self.state.eod_v).opts(color="#d62728", line_width=1.5, line_dash="dashed")
-        self.current_plot.object = hv.NdOverlay(cur, kdims="curve").opts(
-            width=620, height=260, title=f"Per-cell current, varying {c['factor']}", legend_position="right",
-            show_grid=True)
-        self.voltage_plot.object = (hv.NdOverlay(volt, kdims="curve") * eod).opts(
-            width=620, height=300, title=f"Voltage (physics model), varying {c['factor']}; EOD line dashed",
-            legend_position="right", show_grid=True)
-        rows = "".join(
-            f"<tr><td>{cv['label']}</td><td>{_eod_text(cv)}</td></tr>" for cv in [me, *c["family"]])
-        skipped = "".join(f"<li>not drawn: {html.escape(m)}</li>" for m in c["skipped"])
-        self.eod_table.object = (f"<table><tr><th>curve</th><th>end of discharge</th></tr>{rows}</table>"
-                                 + (f"<ul>{skipped}</ul>" if skipped else ""))
+        data = self._plot_data(c)
+        with pn.io.hold():
+            if c["factor"] != self._factor:  # new legend: new plots
+                self._factor = c["factor"]
+                self._current_pipe = hv.streams.Pipe(data=data)
+                self._voltage_pipe = hv.streams.Pipe(data=data)
+                labels = [*family_labels(c["factor"]), SETTING]
+                self.current_plot.object = hv.DynamicMap(
+                    functools.partial(self._current_element, labels=labels, factor=c["factor"]),
+                    streams=[self._current_pipe])
+                self.voltage_plot.object = hv.DynamicMap(
+                    functools.partial(self._voltage_element, labels=labels, factor=c["factor"]),
+                    streams=[self._voltage_pipe])
+            else:
+                self._current_pipe.send(data)
+                self._voltage_pipe.send(data)
+            me = c["setting"][0]
+            rows = "".join(f"<tr><td>{html.escape(cv['label'])}</td><td>{eod_text(cv)}</td></tr>"
+                           for cv in [me, *c["family"]])
+            skipped = "".join(f"<li>not drawn: {html.escape(m)}</li>" for m in c["skipped"])
+            self.eod_table.object = ("<div class='uam-lab-summary'><table><tr><th style='text-align:left'>curve</th>"
+                                     "<th style='text-align:left'>end of discharge</th></tr>"
+                                     f"{rows}</table>" + (f"<ul>{skipped}</ul>" if skipped else "") + "</div>")
 
+    @staticmethod
+    def _plot_data(c: dict[str, Any]) -> dict[str, Any]:
+        """Per legend label: (time min, current A) and (time min, voltage V); the shared time range and
+        the voltage range (always including the cut-off)."""
+        by_label = {cv["label"]: cv for cv in c["family"]}
+        by_label[SETTING] = c["setting"][0]
+        empty = (np.zeros(0), np.zeros(0))
+        labels = [*family_labels(c["factor"]), SETTING]
+        cur = {k: (by_label[k]["time_s"] / 60.0, by_label[k]["current_a"]) if k in by_label else empty
+               for k in labels}
+        volt = {k: (by_label[k]["voltage_time_s"] / 60.0, by_label[k]["voltage_v"]) if k in by_label else empty
+                for k in labels}
+        vs = np.concatenate([v for _, v in volt.values()] + [np.asarray([c["eod_v"]])])
+        return {"current": cur, "voltage": volt, "xlim": (0.0, c["t_end_s"] / 60.0),
+                "ylim": (float(vs.min()) - 0.05, float(vs.max()) + 0.05), "eod_v": c["eod_v"]}
 
-def _eod_text(curve: dict[str, Any]) -> str:
-    if curve["eod_s"] is None:
-        return f"not reached (min {np.min(curve['voltage_v']):.3f} V)"
-    return f"{curve['eod_s'] / 60.0:.1f} min"
+    @staticmethod
+    def _curves(series: dict[str, tuple], labels: list[str], ylabel: str) -> list[hv.Curve]:
+        out = []
+        for k, label in enumerate(labels):
+            style = dict(color="black", line_width=2.5) if label == SETTING else \
+                dict(color=FAMILY_COLORS[k % len(FAMILY_COLORS)], line_width=1.2, alpha=0.8)
+            out.append(hv.Curve(series[label], "time (min)", ylabel, label=label).opts(**style))
+        return out
+
+    def _current_element(self, data: dict[str, Any], labels: list[str], factor: str) -> hv.Overlay:
+        return hv.Overlay(self._curves(data["current"], labels, "current (A)")).opts(
+            hv.opts.Overlay(responsive=True, height=250, title=f"Per-cell current, varying {factor}",
+                            legend_position="right", show_grid=True, xlim=data["xlim"],
+                            fontsize={"title": "10pt", "legend": "8pt"}),
+            hv.opts.Curve(framewise=True))
+
+    def _voltage_element(self, data: dict[str, Any], labels: list[str], factor: str) -> hv.Overlay:
+        x0, x1 = data["xlim"]
+        eod = data["eod_v"]
+        line = hv.Curve(([x0, x1], [eod, eod]), "time (min)", "voltage (V)", label=f"EOD {eod:g} V").opts(
+            color=EOD_COLOR, line_width=1.5, line_dash="dashed")
+        return hv.Overlay([*self._curves(data["voltage"], labels, "voltage (V)"), line]).opts(
+            hv.opts.Overlay(responsive=True, height=290, title=f"Voltage (physics model), varying {factor}",
+                            legend_position="right", show_grid=True, xlim=data["xlim"], ylim=data["ylim"],
+                            fontsize={"title": "10pt", "legend": "8pt"}),
+            hv.opts.Curve(framewise=True))

@@ -1,23 +1,97 @@
-"""The app: three tabs (Planner, Battery lab, Retrain) on one set of state models.
+"""The app: tabs (Planner, Battery lab, Retrain) on one set of state models.
 
     panel serve uam_studio/app/main.py        # or: uam-studio serve [--port P]
 
 In Jupyter, ``create_app()`` returns a plain layout (no template); when served, it is wrapped in a
 template. Absolute imports only: ``panel serve`` runs this file as a script.
+
+The tabs are :data:`TABS`, a list of ``(title, build)`` pairs; ``build(session)`` gets the
+:class:`AppSession` (the shared Planner state, the session's dispatcher...) and returns the tab's
+view. Every tab but the first is built the first time it is shown.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
 import panel as pn
 
-from uam_studio.app.battery_lab import BatteryLabView
-from uam_studio.app.planner import PlannerView
-from uam_studio.app.retrain import RetrainView
 from uam_studio.app.session import configure_server_threads, in_server_session, session_dispatcher
-from uam_studio.app.state import BatteryLabState, PlannerState, RetrainState
+from uam_studio.app.state import PlannerState, compare_mode
 
 TITLE = "uam_studio: health-aware eVTOL mission planning"
 EXTENSIONS = ("tabulator",)
+
+
+@dataclass
+class AppSession:
+    """What the tabs of one session share.
+
+    :param planner: the Planner's state (the mission every tab works on).
+    :param served: built for a server session (not Jupyter).
+    :param dispatch: hands a worker thread's result to the session's thread (None outside a server).
+    :param compare: where plan comparisons run (:func:`~uam_studio.app.state.compare_mode`).
+    :param cleanups: called when the session ends (tabs add their own).
+    """
+
+    planner: PlannerState
+    served: bool
+    dispatch: Callable[[Callable[[], None]], None] | None
+    compare: str
+    cleanups: list[Callable[[], None]] = field(default_factory=list)
+
+
+def _planner_tab(session: AppSession) -> Any:
+    from uam_studio.app.planner import PlannerView
+
+    return PlannerView(session.planner)
+
+
+def _battery_lab_tab(session: AppSession) -> Any:
+    from uam_studio.app.battery_lab import BatteryLabView
+    from uam_studio.app.state import BatteryLabState
+
+    return BatteryLabView(BatteryLabState(background=session.served, dispatch=session.dispatch))
+
+
+def _retrain_tab(session: AppSession) -> Any:
+    from uam_studio.app.retrain import RetrainView
+    from uam_studio.app.state import RetrainState
+
+    view = RetrainView(RetrainState(dispatch=session.dispatch, compare=session.compare), session.planner)
+    session.cleanups.append(view.close)
+    return view
+
+
+def _fly_tab(session: AppSession) -> Any:
+    from uam_studio.app.fly import FlyView
+    from uam_studio.app.fly_state import FlyState
+
+    planner = session.planner
+    view = FlyView(FlyState(lambda: planner.mission, background=session.served, dispatch=session.dispatch))
+    session.cleanups.append(view.close)
+    return view
+
+
+TABS: list[tuple[str, Callable[[AppSession], Any]]] = [
+    ("Planner", _planner_tab),
+    ("Fly", _fly_tab),
+    ("Battery lab", _battery_lab_tab),
+    ("Retrain", _retrain_tab),
+]
+"""The tabs in order: (title, build). Append a pair to add a tab."""
+
+
+def _lazy(build: Callable[[AppSession], Any], session: AppSession) -> pn.viewable.Viewable:
+    """A pane that calls ``build(session)`` the first time it is rendered."""
+
+    @pn.depends()
+    def view() -> Any:
+        return build(session)
+
+    return pn.param.ParamFunction(view, lazy=True, sizing_mode="stretch_width")
 
 
 def create_app(template: bool | None = None) -> pn.viewable.Viewable:
@@ -25,27 +99,33 @@ def create_app(template: bool | None = None) -> pn.viewable.Viewable:
 
     :param template: wrap the tabs in a page template; default: only when building a server session
         (``panel serve`` / ``uam-studio serve``), never in Jupyter.
-    :return: the template, or a ``pn.Tabs`` with the three tabs.
+    :return: the template, or a ``pn.Tabs`` with one tab per entry of :data:`TABS`.
     """
     pn.extension(*EXTENSIONS, notifications=False)
     served = in_server_session()
     if served:
         configure_server_threads()
-    planner_state = PlannerState(background=served, dispatch=session_dispatcher())
-    planner = PlannerView(planner_state)
-    lab = BatteryLabView(BatteryLabState())
-    retrain = RetrainView(RetrainState(), planner_state)
-    tabs = pn.Tabs(("Planner", planner), ("Battery lab", lab), ("Retrain", retrain), dynamic=True,
-                   sizing_mode="stretch_width")
+    dispatch = session_dispatcher()
+    compare = compare_mode(served)
+    session = AppSession(PlannerState(background=served, dispatch=dispatch, compare=compare), served, dispatch,
+                         compare)
+    session.cleanups.append(session.planner.close)
+    tabs = []
+    for i, (title, build) in enumerate(TABS):
+        if i == 0:
+            tabs.append((title, build(session)))
+        else:  # built when first shown: a new page loads only what it shows
+            tabs.append((title, _lazy(build, session)))
+    app = pn.Tabs(*tabs, dynamic=True, sizing_mode="stretch_width")
     if served:
-        def _cleanup(_ctx) -> None:
-            planner_state.close()
-            retrain.close()
+        def _cleanup(_ctx: Any) -> None:
+            for fn in session.cleanups:
+                fn()
 
         pn.state.on_session_destroyed(_cleanup)
     if template if template is not None else served:
-        return pn.template.BootstrapTemplate(title=TITLE, main=[tabs], header_background="#1f4e79")
-    return tabs
+        return pn.template.BootstrapTemplate(title=TITLE, main=[app], header_background="#1f4e79")
+    return app
 
 
 if pn.state.served:

@@ -19,8 +19,17 @@ import pandas as pd
 import panel as pn
 import param
 
-from uam_studio.app.session import ensure_bokeh_backend, in_server_session
-from uam_studio.app.state import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE, PlannerState, population
+from uam_studio.app.session import ensure_bokeh_backend, in_server_session, session_dispatcher
+from uam_studio.app.state import (
+    APP_EOD_RANGE,
+    APP_Q_RANGE,
+    APP_R0_RANGE,
+    PlannerState,
+    comparison_table,
+    mission_digest,
+    population,
+)
+from uam_studio.app.style import NOTE_STYLE, heading
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.mission import COORD_RANGE_KM, SCENARIOS, VERTIPORT
 
@@ -38,13 +47,16 @@ def cycle_color(k: int) -> str:
 # ----------------------------------------------------------------------------- pure helpers
 
 
-LEG_COLUMNS = ("leg", "from", "to", "x0", "y0", "x1", "y1", "altitude_m", "cycle", "color", "completed", "label")
+LEG_COLUMNS = ("leg", "from", "to", "x0", "y0", "x1", "y1", "altitude_m", "cycle", "color", "completed", "label",
+               "legend")
+FAILED_LABEL = "would not make it (physics)"
 
 
 def route_legs(plan: dict[str, Any] | None, state_rows: list[dict[str, Any]], vertiport: tuple[float, float]) \
         -> dict[str, list]:
     """The legs of ``plan`` as columns (one entry per leg): from/to names and coordinates, altitude,
-    charging cycle (1-based), colour, whether it was completed (physics check) and a label."""
+    charging cycle (1-based), colour, whether it was completed (physics check), a label and the
+    map legend's entry (``"cycle k"`` or :data:`FAILED_LABEL`)."""
     out: dict[str, list] = {c: [] for c in LEG_COLUMNS}
     if not plan or not plan.get("route"):
         return out
@@ -63,12 +75,51 @@ def route_legs(plan: dict[str, Any] | None, state_rows: list[dict[str, Any]], ve
         row = {"leg": f"{i}: {'V' if prev == VERTIPORT else prev}\u2192{'V' if to == VERTIPORT else to}",
                "from": prev, "to": to, "x0": x0, "y0": y0, "x1": x1, "y1": y1, "altitude_m": float(alt),
                "cycle": cycle, "color": FAILED_COLOR if failed else cycle_color(cycle),
-               "completed": not failed, "label": f"{alt:g} m"}
+               "completed": not failed, "label": f"{alt:g} m",
+               "legend": FAILED_LABEL if failed else f"cycle {cycle}"}
         for c in LEG_COLUMNS:
             out[c].append(row[c])
         if to == VERTIPORT:
             cycle += 1
         prev = to
+    return out
+
+
+ALT_LABEL_OFFSET_KM = 4.0  # altitude labels sit this far beside their leg
+ALT_LABEL_SPOTS = ((0.5, 1), (0.5, -1), (0.35, 1), (0.35, -1), (0.65, 1), (0.65, -1))  # (along, side)
+
+
+def altitude_labels(legs: dict[str, list], nodes: list[tuple[float, float]] = ()) -> dict[str, list]:
+    """One map label per pair of places the route flies between: the altitudes of its legs in flying
+    order (``"500 m"``, or ``"1000/500 m"`` out and back), so out-and-back legs share one label.
+
+    Each label goes beside its leg, at the first of :data:`ALT_LABEL_SPOTS` (midpoint or a third of
+    the way, either side) that lies farthest from every place of ``nodes`` (x, y km; their markers
+    and the names drawn above them) and from the labels placed before it. Columns ``x``, ``y``, ``text``.
+    """
+    groups: dict[tuple[str, str], list[int]] = {}
+    for i, (a, b) in enumerate(zip(legs["from"], legs["to"])):
+        groups.setdefault(tuple(sorted((a, b))), []).append(i)
+    obstacles = [p for x, y in nodes for p in ((x, y), (x, y + 5.5))]
+    out: dict[str, list] = {"x": [], "y": [], "text": []}
+    for idx in groups.values():
+        i = idx[0]
+        x0, y0, x1, y1 = (float(legs[c][i]) for c in ("x0", "y0", "x1", "y1"))
+        dx, dy = x1 - x0, y1 - y0
+        norm = float(np.hypot(dx, dy)) or 1.0
+        nx, ny = -dy / norm, dx / norm
+        spots = [(x0 + t * dx + side * nx * ALT_LABEL_OFFSET_KM, y0 + t * dy + side * ny * ALT_LABEL_OFFSET_KM)
+                 for t, side in ALT_LABEL_SPOTS]
+        if obstacles:
+            clearance = [min(np.hypot(sx - ox, sy - oy) for ox, oy in obstacles) for sx, sy in spots]
+            best = spots[int(np.argmax(np.round(clearance, 1)))]  # ties: the earlier spot
+        else:
+            best = spots[0]
+        alts = [legs["altitude_m"][k] for k in idx]
+        out["x"].append(best[0])
+        out["y"].append(best[1])
+        out["text"].append(f"{alts[0]:g} m" if len(set(alts)) == 1 else "/".join(f"{a:g}" for a in alts) + " m")
+        obstacles.append(best)
     return out
 
 
@@ -84,6 +135,16 @@ def _equal(a: Any, b: Any) -> bool:
             return x.shape == y.shape and x.dtype == y.dtype and bool(np.array_equal(x, y))
         return all(_equal(x, y) for x, y in zip(a, b))
     return type(a) is type(b) and a == b
+
+
+def _display_index(values: np.ndarray, limit: int) -> np.ndarray:
+    """At most about ``limit`` indices of ``values``, evenly spread, with the first, the last and the
+    lowest sample (what a plot needs to show the minimum against EOD)."""
+    n = values.size
+    if n <= limit:
+        return np.arange(n)
+    idx = np.linspace(0, n - 1, limit).round().astype(int)
+    return np.unique(np.append(idx, int(np.argmin(values))))
 
 
 def _same_frame(a: pd.DataFrame, b: pd.DataFrame) -> bool:
@@ -104,26 +165,39 @@ def _fmt_v(x: float | None) -> str:
     return "-" if x is None else f"{x:.3f} V"
 
 
+VERDICT_STYLE = {  # level -> (background, border)
+    "safe": ("#e8f5e9", "#2e7d32"),
+    "uncertain": ("#fff4e5", "#ed6c02"),
+    "disagree": ("#fff4e5", "#ed6c02"),
+    "unsafe": ("#fdecea", "#d32f2f"),
+    "none": ("#f0f0f0", "#9e9e9e"),
+}
+
+
 def summary_html(state: PlannerState) -> str:
-    """The summary pane (``<div class="uam-plan-summary">``): route (names), altitudes, minimum
-    predicted and physics voltage, margin to EOD, safety, and the planner's notes.
+    """The summary pane (``<div class="uam-plan-summary">``): policy and cell, route with altitudes,
+    what it reaches, the safety verdict by source (``<div class="uam-verdict" data-level=...>``,
+    :meth:`PlannerState.verdict`) and the planner's notes.
 
     Attributes: ``data-busy`` ("true" while a newer plan is being computed) and ``data-inputs``
     (:func:`request_digest` of the request the shown plan was computed for)."""
     req = state.plan_request
     inputs = "" if req is None else request_digest(req)
     return (f"<div class='uam-plan-summary' data-busy='{str(bool(state.busy)).lower()}' "
-            f"data-inputs='{html.escape(inputs, quote=True)}'>{_summary_body(state)}</div>")
+            f"data-inputs='{html.escape(inputs, quote=True)}' style='font-size:13px;line-height:1.35'>"
+            f"{_summary_body(state)}</div>")
 
 
 def request_digest(req: Any) -> str:
     """What a plan was computed for, compactly (the summary's ``data-inputs`` attribute): policy,
     scenario, cell, EOD, return wind and ``name:priority:wind`` of each destination. Lets a test or a
     script wait for the plan of a given edit."""
-    m = req.mission
-    dests = "|".join(f"{d.name}:{d.priority}:{d.wind_kts:g}" for d in m.destinations)
-    return (f"{req.policy};{m.scenario};q_max={m.battery.q_max:g};r0={m.battery.r0:g};eod={m.eod_v:g};"
-            f"return_wind={m.vertiport.wind_kts:g};{dests}")
+    return f"{req.policy};{mission_digest(req.mission)}"
+
+
+def _p(body: str, cls: str = "") -> str:
+    c = f" class='{cls}'" if cls else ""
+    return f"<p{c} style='margin:0 0 5px 0'>{body}</p>"
 
 
 def _summary_body(state: PlannerState) -> str:
@@ -133,10 +207,9 @@ def _summary_body(state: PlannerState) -> str:
         return f"<p class='uam-plan-error'><b>Planning error:</b> {e(state.plan_error)}</p>"
     if plan is None or req is None:
         return "<p>planning...</p>"
-    eod = req.mission.eod_v
-    label = state.policy_objects.get(req.policy, req.policy) if req.policy.startswith("agent:") else plan["policy"]
-    parts = [f"<p><b>Policy:</b> {e(label)} &middot; <b>scenario:</b> {e(req.mission.scenario)} &middot; "
-             f"q_max {req.mission.battery.q_max:g} C, R0 {req.mission.battery.r0:g} ohm, EOD {eod:g} V</p>"]
+    m = req.mission
+    parts = [_p(f"<b>Policy:</b> {e(state.policy_label(req.policy))} &middot; <b>scenario:</b> {e(m.scenario)} "
+                f"&middot; q_max {m.battery.q_max:g} C, R0 {m.battery.r0:g} ohm, EOD {m.eod_v:g} V")]
     if plan["route"]:
         legs = []
         cycle = 1
@@ -144,34 +217,109 @@ def _summary_body(state: PlannerState) -> str:
             legs.append(f"<span style='color:{cycle_color(cycle)}'>{e(to)}</span> ({alt:g} m)")
             if to == VERTIPORT:
                 cycle += 1
-        parts.append("<p class='uam-route'><b>Route:</b> vertiport &rarr; " + " &rarr; ".join(legs) + "</p>")
-        parts.append("<p><b>Altitudes:</b> " + ", ".join(f"{a:g}" for a in plan["altitudes_m"]) + " m</p>")
+        parts.append(_p("<b>Route:</b> vertiport &rarr; " + " &rarr; ".join(legs), "uam-route"))
+        parts.append(_p(f"<b>Reached:</b> {len(plan['reached'])} of {len(m.destinations)} "
+                        f"(priority {plan['reached_priority']}) &middot; <b>charging cycles:</b> "
+                        f"{plan['charging_cycles']}"))
     else:
-        parts.append("<p class='uam-route'><b>Route:</b> none (nothing is flown)</p>")
-    pred = plan.get("predicted")
-    vmin_pred = min(pred["voltage_v"]) if pred and pred.get("voltage_v") else None
-    vmin = plan.get("min_voltage_v")
-    parts.append(f"<p><b>Min predicted voltage:</b> {_fmt_v(vmin_pred)} (Dynaformer) &middot; "
-                 f"<b>physics:</b> {_fmt_v(vmin)}</p>")
-    if plan["route"]:
-        margin = None if vmin is None else vmin - eod
-        mp = None if vmin_pred is None else vmin_pred - eod
-        parts.append(f"<p><b>Margin to EOD ({eod:g} V):</b> {'-' if margin is None else f'{margin:+.3f} V'} "
-                     f"(physics), {'-' if mp is None else f'{mp:+.3f} V'} (predicted)</p>")
-        safe = "yes" if plan["safe"] else f"NO (end of discharge at {plan['physics'].get('eod_s') or 0:.0f} s)"
-        parts.append(f"<p><b>Safe:</b> {safe} &middot; <b>charging cycles:</b> {plan['charging_cycles']} "
-                     f"&middot; <b>reached:</b> {len(plan['reached'])} of {len(req.mission.destinations)} "
-                     f"(priority {plan['reached_priority']})</p>")
+        parts.append(_p("<b>Route:</b> none (nothing is flown)", "uam-route"))
+    v = state.verdict()
+    bg, border = VERDICT_STYLE[v["level"]]
+    detail = f"<br>{e(v['text'])}" if v["text"] else ""
+    parts.append(f"<div class='uam-verdict' data-level='{v['level']}' style='background:{bg};border-left:4px solid "
+                 f"{border};padding:4px 8px;margin:0 0 5px 0'><b>{e(v['headline'])}</b>{detail}</div>")
     if plan.get("messages"):
-        parts.append("<ul class='uam-notes'>" + "".join(f"<li>{e(m)}</li>" for m in plan["messages"]) + "</ul>")
+        # at most about 3 lines tall (scrolls inside), so the voltage plot stays above the fold
+        parts.append("<ul class='uam-notes' style='margin:0;padding-left:18px;color:#444;max-height:4.2em;"
+                     "overflow-y:auto'>"
+                     + "".join(f"<li>{e(msg)}</li>" for msg in plan["messages"]) + "</ul>")
     return "\n".join(parts)
+
+
+def comparison_html(state: PlannerState) -> str:
+    """The planner comparison (``<div class="uam-plan-compare">``): for the shown plan's mission, the
+    agent, greedy and the exact oracle, each planned by ``plan_mission``: priority reached, places
+    reached, charging cycles, lowest physics voltage and the gap to the oracle
+    (:func:`~uam_studio.app.state.comparison_table`). The row of the selected policy is bold.
+
+    Attributes: ``data-pending`` ("true" while a row is being computed) and ``data-inputs`` (the
+    mission it compares, as in the summary's ``data-inputs`` without the policy)."""
+    c = state.comparison
+    e = html.escape
+    pending = str(state.comparison_pending()).lower()
+    inputs = html.escape(c["inputs"], quote=True) if c else ""
+    head = (f"<div class='uam-plan-compare' data-pending='{pending}' data-inputs='{inputs}' "
+            "style='font-size:13px'>")
+    if c is None:
+        return head + "<p style='margin:0;color:#666'>Planner comparison: off.</p></div>"
+    shown = state.plan_request.policy if state.plan_request is not None else ""
+    th = "style='text-align:{};padding:1px 8px 1px 0;border-bottom:1px solid #ccc;white-space:nowrap'"
+    td = "style='text-align:{};padding:1px 8px 1px 0;white-space:nowrap'"
+    cols = [("Planner", "left"), ("Priority", "right"), ("Reached", "right"), ("Cycles", "right"),
+            ("Min V", "right"), ("Gap to oracle", "left")]
+    rows = ["<tr>" + "".join(f"<th {th.format(al)}>{name}</th>" for name, al in cols) + "</tr>"]
+    for r in comparison_table(c):
+        weight = "font-weight:bold;" if r["policy"] == shown else ""
+        label = f"<td {td.format('left')}>{e(r['label'])}</td>"
+        if r.get("status") == "pending":
+            rows.append(f"<tr class='uam-compare-{r['key']}' style='{weight}'>{label}"
+                        f"<td colspan='5' style='color:#666'>computing...</td></tr>")
+        elif r.get("status") == "error":
+            rows.append(f"<tr class='uam-compare-{r['key']}' style='{weight}'>{label}"
+                        f"<td colspan='5' style='color:#b71c1c'>{e(r['error'] or 'failed')}</td></tr>")
+        else:
+            vmin = "-" if r["min_voltage_v"] is None else f"{r['min_voltage_v']:.3f}"
+            if not r["safe"]:
+                vmin += " (below EOD)"
+            cells = [(str(r["priority"]), "right"), (f"{r['reached']} of {r['of']}", "right"),
+                     (str(r["cycles"]), "right"), (vmin, "right"), (e(r["gap"]), "left")]
+            rows.append(f"<tr class='uam-compare-{r['key']}' style='{weight}'>{label}"
+                        + "".join(f"<td {td.format(al)}>{text}</td>" for text, al in cells) + "</tr>")
+    return (head + "<b>Planners on this mission</b> <span style='color:#555'>(<code>plan_mission</code>, as "
+            "the CLI; Min V: physics)</span>"
+            "<table style='border-collapse:collapse;margin-top:2px'>" + "".join(rows) + "</table></div>")
 
 
 # ----------------------------------------------------------------------------- the view
 
 
+BUSY_AFTER_MS = 150  # served: a plan taking longer than this shows the busy state
+VOLTAGE_POINTS = 800  # samples per series drawn in the voltage plot (its lowest points always kept)
+CONTROLS_WIDTH = 260
+MAP_FRAME_PX = 440  # the map's square frame (data area)
+WIDE_MIN_PX = 440  # narrowest width of the plan column and of the extra plots' column
+
+
+def _route_legend(plot: Any, element: Any) -> None:
+    """Bokeh hook of the map's route segments: one legend entry per value of the legs' ``legend``
+    column (``cycle 1``, ``cycle 2``...; ``failed`` for the legs that would not make it), grouped by
+    BokehJS from the data (the hover tool puts the columns in the data source), so the legend
+    follows every new plan without a new figure."""
+    from bokeh.models import Legend, LegendItem
+
+    fig = plot.state
+    renderer = plot.handles.get("glyph_renderer")
+    if renderer is None:
+        return
+    legend = next((lg for lg in fig.legend if getattr(lg, "name", None) == "uam-route-legend"), None)
+    if legend is None:
+        legend = Legend(items=[], name="uam-route-legend", location="top_left", label_text_font_size="8pt",
+                        padding=4, spacing=0, background_fill_alpha=0.8)
+        fig.add_layout(legend)
+    if not any(renderer in item.renderers for item in legend.items):
+        # one column name per renderer: BokehJS reads a field label from its item's first renderer only
+        field = "failed" if "failed" in [d.name for d in element.vdims] else "legend"
+        legend.items.append(LegendItem(label={"field": field}, renderers=[renderer]))
+
+
 class PlannerView(pn.viewable.Viewer):
-    """Map, table, controls, plots and summary of a :class:`PlannerState`."""
+    """Map, table, controls, plots, summary and planner comparison of a :class:`PlannerState`.
+
+    Layout (a wrapping flex row, sized for 1366 px wide screens and up): the controls, the map with
+    the table under it, the plan (summary, comparison, voltage against EOD) and the other plots
+    (altitude per leg, health estimate), which wrap below on narrow screens and stand beside the
+    plan on wide ones.
+    """
 
     state = param.ClassSelector(class_=PlannerState)
 
@@ -180,41 +328,46 @@ class PlannerView(pn.viewable.Viewer):
         super().__init__(state=state, **params)
         s = state
         self._syncing = False
-        self.scenario = pn.widgets.Select(name="Scenario", options=list(SCENARIOS), value=s.scenario, width=280)
-        self.policy = pn.widgets.Select(name="Policy", options=dict(s.policy_objects), value=s.policy, width=280)
+        self._busy_later = session_dispatcher(delay_ms=BUSY_AFTER_MS) or (lambda cb: cb())
+        self._busy_shown = bool(s.busy)
+        w = CONTROLS_WIDTH - 20
+        self.scenario = pn.widgets.Select(name="Scenario", options=list(SCENARIOS), value=s.scenario, width=w)
+        self.policy = pn.widgets.Select(name="Policy", options=dict(s.policy_objects), value=s.policy, width=w)
         self.q_max = pn.widgets.FloatSlider(name="q_max (C)", start=APP_Q_RANGE[0], end=APP_Q_RANGE[1], step=50,
-                                            value=s.q_max, width=280)
+                                            value=s.q_max, width=w)
         self.r0 = pn.widgets.FloatSlider(name="R0 (ohm)", start=APP_R0_RANGE[0], end=APP_R0_RANGE[1], step=0.001,
-                                         value=s.r0, format="0.000", width=280)
+                                         value=s.r0, format="0.000", width=w)
         self.eod = pn.widgets.FloatSlider(name="EOD cut-off (V)", start=APP_EOD_RANGE[0], end=APP_EOD_RANGE[1],
-                                          step=0.05, value=s.eod_v, format="0.00", width=280)
-        self.return_wind = pn.widgets.FloatSlider(name="Wind on return legs (kt, negative = tailwind)",
+                                          step=0.05, value=s.eod_v, format="0.00", width=w)
+        self.return_wind = pn.widgets.FloatSlider(name="Wind back to the vertiport (kt, - = tailwind)",
                                                   start=WIND_RANGE_KTS[0], end=WIND_RANGE_KTS[1], step=1,
-                                                  value=s.return_wind, width=280)
+                                                  value=s.return_wind, width=w)
         self._inputs = {"scenario": self.scenario, "policy": self.policy, "q_max": self.q_max, "r0": self.r0,
                         "eod_v": self.eod, "return_wind": self.return_wind}
-        for key, w in self._inputs.items():
-            w.param.watch(lambda ev, key=key: self._on_widget(key, ev), "value")
+        for key, wd in self._inputs.items():
+            wd.param.watch(lambda ev, key=key: self._on_widget(key, ev), "value")
         s.param.watch(self._on_state_input, list(self._inputs))
         s.param.watch(self._on_policy_objects, "policy_objects")
 
         self.download = pn.widgets.FileDownload(callback=self._download, filename="mission.json",
-                                                label="Save mission (JSON)", button_type="primary", width=280)
-        self.upload = pn.widgets.FileInput(accept=".json,application/json", multiple=False, width=280,
+                                                label="Save mission (JSON)", button_type="primary", width=w)
+        self.upload = pn.widgets.FileInput(accept=".json,application/json", multiple=False, width=w,
                                            name="Load mission (JSON)")
         self.upload.param.watch(self._on_upload, "value")
-        self.remove = pn.widgets.Button(name="Remove selected rows", width=135)
+        self.remove = pn.widgets.Button(name="Remove ticked rows", width=w)
         self.remove.on_click(self._on_remove)
-        self.reset = pn.widgets.Button(name="Reset to example", width=135)
+        self.reset = pn.widgets.Button(name="Reset to the example", width=w)
         self.reset.on_click(lambda _ev: s.reset_example())
         self.error = pn.pane.Alert("", alert_type="danger", visible=False, css_classes=["uam-error"],
-                                   sizing_mode="stretch_width")
+                                   sizing_mode="stretch_width", margin=(0, 10))
         self.notice = pn.pane.Alert("", alert_type="info", visible=False, css_classes=["uam-notice"],
-                                    sizing_mode="stretch_width")
+                                    sizing_mode="stretch_width", margin=(0, 10))
         s.param.watch(self._on_error, ["error", "notice"])
 
         self.table = pn.widgets.Tabulator(
-            self._frame(), show_index=False, selectable="checkbox", layout="fit_data_fill", height=260,
+            self._frame(), show_index=False, selectable="checkbox", layout="fit_columns", height=230,
+            widths={"name": 105, "x_km": 62, "y_km": 62, "priority": 88, "wind_kts": 84, "dwell_s": 84},
+            configuration={"columnDefaults": {"headerSort": False}},
             editors={"name": {"type": "input"},
                      "x_km": {"type": "number", "min": COORD_RANGE_KM[0], "max": COORD_RANGE_KM[1], "step": 0.1},
                      "y_km": {"type": "number", "min": COORD_RANGE_KM[0], "max": COORD_RANGE_KM[1], "step": 0.1},
@@ -228,6 +381,8 @@ class PlannerView(pn.viewable.Viewer):
         )
         self.table.on_edit(self._on_table_edit)
 
+        self._route_tpl = self._route_templates()
+        self._voltage_tpl = self._voltage_templates()
         self._points_pipe = hv.streams.Pipe(data=self._frame())
         self._route_pipe = hv.streams.Pipe(data=self._route_data())
         self._voltage_pipe = hv.streams.Pipe(data=self._voltage_data())
@@ -242,44 +397,61 @@ class PlannerView(pn.viewable.Viewer):
         names = hv.DynamicMap(self._names_element, streams=[self._points_pipe])
         h = MAP_HALF_KM
         self.map = pn.pane.HoloViews((route * names * points).opts(
-            hv.opts.Overlay(frame_width=500, frame_height=460, title="Map (km); route colour = charging cycle",
-                            show_grid=True, xlim=(-h, h), ylim=(-h, h), xlabel="x (km)", ylabel="y (km)")),
-            css_classes=["uam-map"], linked_axes=False)
+            hv.opts.Overlay(frame_width=MAP_FRAME_PX, frame_height=MAP_FRAME_PX, show_grid=True,
+                            title="Map (km): click to add, drag to move, select + Backspace to delete",
+                            xlim=(-h, h), ylim=(-h, h), xlabel="x (km)", ylabel="y (km)", fontsize={"title": "9.5pt"})),
+            css_classes=["uam-map"], linked_axes=False, margin=(0, 5))
         self.altitude_plot = pn.pane.HoloViews(
             hv.DynamicMap(self._altitude_element, streams=[self._route_pipe]), linked_axes=False)
         self.voltage_plot = pn.pane.HoloViews(
-            hv.DynamicMap(self._voltage_element, streams=[self._voltage_pipe]), linked_axes=False)
+            hv.DynamicMap(self._voltage_element, streams=[self._voltage_pipe]),
+            linked_axes=False, sizing_mode="stretch_width", css_classes=["uam-voltage"])
         self.health_plot = pn.pane.HoloViews(self._population_element() * hv.DynamicMap(
             self._health_element, streams=[self._health_pipe]), linked_axes=False)
         # The class sits on the content (inside the pane's shadow root), so that a locator for
         # ".uam-plan-summary" finds exactly one element whose text is the summary.
-        self.summary = pn.pane.HTML(summary_html(s), sizing_mode="stretch_width", min_height=160)
-        self.busy = pn.indicators.LoadingSpinner(value=s.busy, size=20, name="planning..." if s.busy else "",
-                                                 css_classes=["uam-busy"])
-        s.param.watch(self._on_plan, ["plan", "plan_error", "plan_request"])
+        self.summary = pn.pane.HTML(summary_html(s), sizing_mode="stretch_width", margin=(0, 10))
+        self.compare = pn.pane.HTML(comparison_html(s), sizing_mode="stretch_width", margin=(0, 10))
+        self.busy = pn.indicators.LoadingSpinner(value=s.busy, size=18, name="planning..." if s.busy else "",
+                                                 css_classes=["uam-busy"], margin=(0, 5))
+        # onlychanged=False: param's own equality test walks every sample of a plan (tens of ms);
+        # _send compares the plot data itself
+        s.param.watch(self._on_plan, ["plan", "plan_error", "plan_request", "band", "takeoff"], onlychanged=False)
         s.param.watch(self._on_busy, "busy")
+        s.param.watch(self._on_comparison, "comparison")
         s.param.watch(self._on_destinations, ["destinations", "vertiport_x_km", "vertiport_y_km"])
 
     # ------------------------------------------------------------------ layout
 
     def __panel__(self) -> pn.viewable.Viewable:
+        w = CONTROLS_WIDTH - 20
         controls = pn.Column(
-            "### Mission", self.scenario, self.policy, self.q_max, self.r0, self.eod, self.return_wind,
-            "### File", self.download, pn.pane.Markdown("Load a mission (JSON, as `uam-studio plan` reads):"),
-            self.upload, pn.Row(self.remove, self.reset), width=310,
+            heading("Mission"), self.scenario, self.policy, self.q_max, self.r0, self.eod, self.return_wind,
+            heading("File"), self.download, self.upload, self.remove, self.reset,
+            pn.pane.Markdown("Mission files: the JSON that `uam-studio plan` reads.", width=w, styles=NOTE_STYLE),
+            width=CONTROLS_WIDTH, css_classes=["uam-controls"],
         )
-        center = pn.Column(
-            pn.pane.Markdown("Click the map to add a destination, drag to move it, select it and press "
-                             "Backspace to delete it. Edit names, priorities (stars), the wind on legs *to* "
-                             "each destination (kt, negative = tailwind) and dwell times in the table."),
-            self.map, self.table, width=620,
-        )
-        # Served, the plots below the summary load right after the page (defer_load): the map, the table
-        # and the summary come first.
-        plots = (self.voltage_plot, self.altitude_plot, self.health_plot)
-        deferred = [pn.panel(lambda p=p: p, defer_load=True) for p in plots] if in_server_session() else plots
-        results = pn.Column(pn.Row("### Plan", self.busy), self.summary, *deferred, width=520)
-        return pn.Column(self.error, self.notice, pn.Row(controls, center, results))
+        hint = pn.pane.Markdown(
+            "Destinations: edit names, priorities (stars), the wind on legs *to* each one (kt, negative = "
+            "tailwind) and dwell times below; tick rows to remove them.", sizing_mode="stretch_width",
+            styles=NOTE_STYLE, margin=(0, 10))
+        table = pn.panel(lambda: self.table, defer_load=True, height=230, sizing_mode="stretch_width") \
+            if in_server_session() else self.table
+        center = pn.Column(self.map, hint, table, width=MAP_FRAME_PX + 100, css_classes=["uam-map-column"])
+        # Served, the plots that are not above the fold load right after the page (defer_load): the
+        # map, the table, the summary, the comparison and the voltage come first.
+        extras = (self.altitude_plot, self.health_plot)
+        if in_server_session():
+            extras = tuple(pn.panel(lambda p=p: p, defer_load=True) for p in extras)
+        results = pn.Column(pn.Row(heading("Plan"), self.busy), self.summary,
+                            self.compare, self.voltage_plot, min_width=WIDE_MIN_PX, sizing_mode="stretch_width",
+                            styles={"flex": f"1 1 {WIDE_MIN_PX}px"}, css_classes=["uam-results"])
+        more = pn.FlexBox(*extras, flex_wrap="wrap", gap="10px", min_width=WIDE_MIN_PX,
+                          sizing_mode="stretch_width", styles={"flex": f"1 1 {WIDE_MIN_PX}px"},
+                          css_classes=["uam-more-plots"])
+        body = pn.FlexBox(controls, center, results, more, flex_wrap="wrap", gap="10px",
+                          sizing_mode="stretch_width", css_classes=["uam-planner"])
+        return pn.Column(self.error, self.notice, body, sizing_mode="stretch_width")
 
     # ------------------------------------------------------------------ state -> views
 
@@ -321,11 +493,15 @@ class PlannerView(pn.viewable.Viewer):
             self._send("route", self._route_pipe, self._route_data())
 
     def _on_plan(self, *events: param.parameterized.Event) -> None:
-        with pn.io.hold():  # one batch of model changes per plan
+        with pn.io.hold():  # one batch of model changes per plan: each costs the browser a page layout
             self.summary.object = summary_html(self.state)
+            self.compare.object = comparison_html(self.state)  # the bold row follows the policy
             self._send("route", self._route_pipe, self._route_data())
             self._send("voltage", self._voltage_pipe, self._voltage_data())
             self._send("health", self._health_pipe, self._health_data())
+
+    def _on_comparison(self, event: param.parameterized.Event) -> None:
+        self.compare.object = comparison_html(self.state)
 
     def _send(self, key: str, pipe: hv.streams.Pipe, data: Any) -> None:
         """Send ``data`` on ``pipe`` unless it equals the last data sent there (re-rendering a plot
@@ -336,9 +512,23 @@ class PlannerView(pn.viewable.Viewer):
         pipe.send(data)
 
     def _on_busy(self, event: param.parameterized.Event) -> None:
-        self.summary.object = summary_html(self.state)  # data-busy
-        self.busy.value = bool(event.new)
-        self.busy.name = "planning..." if event.new else ""
+        """Served, the busy state is shown only once a plan has taken :data:`BUSY_AFTER_MS`: every
+        change sent to the browser costs it a page layout (about 0.15 s on a 2-core laptop), which a
+        fast plan would otherwise pay twice."""
+        if event.new:
+            self._busy_later(self._show_busy)
+        elif self._busy_shown:
+            self._busy_shown = False
+            self.summary.object = summary_html(self.state)  # data-busy
+            self.busy.value = False
+            self.busy.name = ""
+
+    def _show_busy(self) -> None:
+        if self.state.busy and not self._busy_shown:
+            self._busy_shown = True
+            self.summary.object = summary_html(self.state)  # data-busy
+            self.busy.value = True
+            self.busy.name = "planning..."
 
     def _on_error(self, *events: param.parameterized.Event) -> None:
         s = self.state
@@ -413,8 +603,13 @@ class PlannerView(pn.viewable.Viewer):
     # ------------------------------------------------------------------ plots
 
     def _route_data(self) -> dict[str, list]:
+        """:func:`route_legs` of the plan, plus ``nodes``: every place on the map (x, y km)."""
         s = self.state
-        return route_legs(s.plan, s.destination_rows(), (s.vertiport_x_km, s.vertiport_y_km))
+        rows = s.destination_rows()
+        data = route_legs(s.plan, rows, (s.vertiport_x_km, s.vertiport_y_km))
+        data["nodes"] = [(float(s.vertiport_x_km), float(s.vertiport_y_km))] + \
+            [(float(r["x_km"]), float(r["y_km"])) for r in rows]
+        return data
 
     @staticmethod
     def _points_element(data: pd.DataFrame) -> hv.Points:
@@ -429,28 +624,40 @@ class PlannerView(pn.viewable.Viewer):
         names = hv.Labels({"x": [r["x_km"] for r in rows], "y": [r["y_km"] + 3.5 for r in rows],
                            "text": [f"{r['name']} {'*' * int(r['priority'])}" for r in rows]},
                           kdims=["x", "y"], vdims="text").opts(text_font_size="9pt", text_font_style="bold",
-                                                               text_color="#222222")
+                                                               text_color="#222222", text_baseline="bottom")
         vp = hv.Points([(s.vertiport_x_km, s.vertiport_y_km)], kdims=["x_km", "y_km"]).opts(
             marker="square", size=16, color="#d62728")
         vp_label = hv.Labels([(s.vertiport_x_km, s.vertiport_y_km - 5.0, "vertiport")], kdims=["x", "y"],
-                             vdims="text").opts(text_font_size="9pt", text_color="#d62728")
+                             vdims="text").opts(text_font_size="9pt", text_color="#d62728", text_baseline="top")
         return names * vp * vp_label
 
     @staticmethod
-    def _route_element(data: dict[str, list]) -> hv.Overlay:
+    def _route_templates() -> dict[str, Any]:
+        """Styled empty elements of the route; each frame clones them with new data, keeping their
+        styles without an ``.opts`` call (which costs milliseconds) per frame."""
+        kd = ["x0", "y0", "x1", "y1"]
+        empty = {c: [] for c in ("x0", "y0", "x1", "y1", "color", "leg", "altitude_m")}
+        return {
+            "legs": hv.Segments({**empty, "legend": []}, kd, ["color", "leg", "altitude_m", "legend"]).opts(
+                color="color", line_width=4, alpha=0.85, tools=["hover"], hooks=[_route_legend]),
+            "lost": hv.Segments({**empty, "failed": []}, kd, ["color", "leg", "altitude_m", "failed"]).opts(
+                color=FAILED_COLOR, line_width=3, line_dash="dashed", tools=["hover"], hooks=[_route_legend]),
+            "labels": hv.Labels({"x": [], "y": [], "text": []}, ["x", "y"], "text").opts(
+                text_font_size="8pt", text_color="#333333", text_align="center", text_baseline="middle"),
+        }
+
+    def _route_element(self, data: dict[str, list]) -> hv.Overlay:
         done = np.asarray(data["completed"], dtype=bool)
-        cols = ("x0", "y0", "x1", "y1", "color", "leg", "altitude_m")
+        cols = ("x0", "y0", "x1", "y1", "color", "leg", "altitude_m", "legend")
 
         def pick(mask: np.ndarray) -> dict[str, Any]:
             return {c: [v for v, k in zip(data[c], mask) if k] for c in cols}
 
-        seg_kw = dict(kdims=["x0", "y0", "x1", "y1"], vdims=["color", "leg", "altitude_m"])
-        legs = hv.Segments(pick(done), **seg_kw).opts(color="color", line_width=4, alpha=0.85, tools=["hover"])
-        lost = hv.Segments(pick(~done), **seg_kw).opts(color=FAILED_COLOR, line_width=3, line_dash="dashed")
-        x0, y0, x1, y1 = (np.asarray(data[c], dtype=float) for c in ("x0", "y0", "x1", "y1"))
-        alt_labels = hv.Labels({"x": (x0 + x1) / 2, "y": (y0 + y1) / 2, "text": list(data["label"])},
-                               kdims=["x", "y"], vdims="text").opts(text_font_size="8pt", text_color="#333333")
-        return legs * lost * alt_labels
+        failed = pick(~done)
+        failed["failed"] = failed.pop("legend")
+        tpl = self._route_tpl
+        return (tpl["legs"].clone(pick(done)) * tpl["lost"].clone(failed)
+                * tpl["labels"].clone(altitude_labels(data, data.get("nodes", []))))
 
     @staticmethod
     def _altitude_element(data: dict[str, list]) -> hv.Overlay:
@@ -469,29 +676,57 @@ class PlannerView(pn.viewable.Viewer):
             hv.opts.Rectangles(xticks=ticks, xrotation=30, xlim=(0.4, max(n, 1) + 0.6), ylim=(0, 3300),
                                xlabel="", ylabel="altitude (m)", framewise=True),
             hv.opts.Labels(framewise=True),
-        ).opts(width=500, height=240, title="Cruise altitude per leg (colour = charging cycle)")
+        ).opts(width=WIDE_MIN_PX, height=240, title="Cruise altitude per leg (colour = charging cycle)")
 
     def _voltage_data(self) -> dict[str, Any]:
+        """The voltage plot's series (minutes, V): physics (the plan's, or the failed take-off's),
+        Dynaformer, its band, and the EOD line; with the axis ranges, which always include EOD.
+        Each series is drawn with at most :data:`VOLTAGE_POINTS` samples, its lowest ones kept."""
         s = self.state
         plan = s.plan or {}
-        phys = plan.get("physics") or {"time_s": [], "voltage_v": []}
-        pred = plan.get("predicted") or {"time_s": [], "voltage_v": []}
         eod = s.plan_request.mission.eod_v if s.plan_request is not None else s.eod_v
-        return {"physics": (np.asarray(phys["time_s"], float) / 60.0, np.asarray(phys["voltage_v"], float)),
-                "predicted": (np.asarray(pred["time_s"], float) / 60.0, np.asarray(pred["voltage_v"], float)),
-                "eod": eod}
+        phys = s.takeoff or plan.get("physics") or {"time_s": [], "voltage_v": []}
+        pred = plan.get("predicted") or {"time_s": [], "voltage_v": []}
+        band = s.band or {"time_s": [], "low_v": [], "high_v": [], "level": 0.9}
+        t = np.asarray(phys["time_s"], float) / 60.0
+        v = np.asarray(phys["voltage_v"], float)
+        tp, vp = np.asarray(pred["time_s"], float) / 60.0, np.asarray(pred["voltage_v"], float)
+        tb = np.asarray(band["time_s"], float) / 60.0
+        lo, hi = np.asarray(band["low_v"], float), np.asarray(band["high_v"], float)
+        values = np.concatenate([v, vp, lo, hi, [eod]])
+        t_end = float(t[-1]) if t.size and t[-1] > 0 else 1.0
+        i, ip, ib = (_display_index(x, VOLTAGE_POINTS) for x in (v, vp, lo))
+        return {"physics": (t[i], v[i]), "predicted": (tp[ip], vp[ip]), "band": (tb[ib], lo[ib], hi[ib]),
+                "level": float(band["level"]), "eod": float(eod), "xlim": (0.0, t_end),
+                "ylim": (float(values.min()) - 0.05, float(values.max()) + 0.05)}
 
     @staticmethod
-    def _voltage_element(data: dict[str, Any]) -> hv.Overlay:
-        t, v = data["physics"]
-        tp, vp = data["predicted"]
-        phys = hv.Curve((t, v), "time (min)", "voltage (V)", label="physics").opts(
-            color="#1f77b4", line_width=2, framewise=True)
-        pred = hv.Curve((tp, vp), "time (min)", "voltage (V)", label="Dynaformer").opts(
-            color="#ff7f0e", line_width=2, line_dash="dashed", framewise=True)
-        eod = hv.HLine(data["eod"], label="EOD").opts(color=FAILED_COLOR, line_width=1.5)
-        return (phys * pred * eod).opts(width=500, height=250, title="Voltage: predicted vs physics",
-                                        legend_position="right", show_grid=True)
+    def _voltage_templates() -> dict[str, Any]:
+        """Styled empty elements of the voltage plot (cloned with each frame's data, as the route's);
+        each frame's axes follow its data, which include the EOD line (framewise)."""
+        kd, vd = "time (min)", "voltage (V)"
+        empty = ([0.0], [0.0])
+        band = hv.Area(([0.0], [0.0], [0.0]), kd, [vd, "high"], label="Dynaformer 90%").opts(
+            color="#ff7f0e", alpha=0.25, line_alpha=0, framewise=True)
+        phys = hv.Curve(empty, kd, vd, label="physics").opts(color="#1f77b4", line_width=2, framewise=True)
+        pred = hv.Curve(empty, kd, vd, label="Dynaformer").opts(color="#ff7f0e", line_width=2, line_dash="dashed",
+                                                               framewise=True)
+        eod = hv.Curve(empty, kd, vd, label="EOD").opts(color=FAILED_COLOR, line_width=1.5, line_dash="dotted",
+                                                        framewise=True)
+        overlay = (band * phys * pred * eod).opts(responsive=True, height=240, legend_position="top", legend_cols=4,
+                                                  show_grid=True, fontsize={"legend": "8pt"})
+        return {"overlay": overlay, "band": band, "physics": phys, "predicted": pred, "eod": eod}
+
+    def _voltage_element(self, data: dict[str, Any]) -> hv.Overlay:
+        tpl = self._voltage_tpl
+        x0, x1 = data["xlim"]
+        tb, lo, hi = data["band"]
+        return tpl["overlay"].clone([
+            tpl["band"].clone((tb, lo, hi), label=f"Dynaformer {100 * data['level']:.0f}%"),
+            tpl["physics"].clone(data["physics"]),
+            tpl["predicted"].clone(data["predicted"]),
+            tpl["eod"].clone(([x0, x1], [data["eod"]] * 2), label=f"EOD {data['eod']:g} V"),
+        ])
 
     def _health_data(self) -> tuple[float, float] | None:
         return self.state.health
@@ -505,7 +740,8 @@ class PlannerView(pn.viewable.Viewer):
             df = pd.DataFrame({"PC1": pop.pc1, "PC2": pop.pc2, "R0 (ohm)": pop.r0, "q_max (C)": pop.q_max})
         return hv.Points(df, ["PC1", "PC2"], ["R0 (ohm)", "q_max (C)"], label="training population").opts(
             color="R0 (ohm)", cmap="viridis", colorbar=True, size=5, alpha=0.6, tools=["hover"],
-            width=500, height=280, title="Health estimate (Dynaformer PCs) vs population", show_grid=True)
+            width=WIDE_MIN_PX, height=280, title="Health estimate (Dynaformer PCs) vs population", show_grid=True,
+            legend_position="top", legend_cols=2)
 
     @staticmethod
     def _health_element(data: tuple[float, float] | None) -> hv.Points:

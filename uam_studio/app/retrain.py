@@ -1,10 +1,12 @@
 """The Retrain tab: retrain a DQN agent on the current map or on random missions, live.
 
-Training runs in a background thread (:class:`~uam_studio.app.state.RetrainState`). This view
-drains its episode queue on a periodic callback of the session (so every widget and plot update
+Training runs in a child process or a thread (:class:`~uam_studio.app.state.RetrainState`). This
+view drains its episode queue on a periodic callback of the session (so every widget and plot update
 happens on the session's own thread) and streams the rows into a :class:`holoviews.streams.Buffer`
-behind the learning curves. A finished (or stopped) agent is saved in the user folder and appears
-in every session's Planner policy list.
+behind the learning curves, which show the exact oracle's plan of the map as a reference line
+(:attr:`RetrainState.reference`). The progress bar comes with steps, elapsed time and the time left.
+A finished (or stopped) agent is saved in the user folder and appears in every session's Planner
+policy list.
 """
 
 from __future__ import annotations
@@ -13,16 +15,19 @@ import html
 from typing import Any
 
 import holoviews as hv
+import numpy as np
 import pandas as pd
 import panel as pn
 import param
 
 from uam_studio.app.session import ensure_bokeh_backend
 from uam_studio.app.state import PlannerState, RetrainState, registry
+from uam_studio.app.style import NOTE_STYLE, heading
 from uam_studio.planning.mission import SCENARIOS
 from uam_studio.planning.retrain import agents_dir
 
 POLL_MS = 1000  # curves and progress once a second: each update re-renders two plots
+SETTINGS_WIDTH = 270  # px, the settings' widgets
 CURVE_COLUMNS = ["episode", "reached", "cycles", "reached_ma", "cycles_ma"]
 
 
@@ -37,60 +42,84 @@ class RetrainView(pn.viewable.Viewer):
         super().__init__(state=state, planner=planner, **params)
         s = state
         s.scenario = planner.scenario
-        w = 280
+        w = SETTINGS_WIDTH
         self.source = pn.widgets.RadioButtonGroup(
             name="Missions", options={"Current map": "map", "Random missions": "random"}, value=s.source, width=w)
         self.scenario = pn.widgets.Select(name="Scenario", options=list(SCENARIOS), value=s.scenario, width=w)
-        self.alpha = pn.widgets.FloatInput(name="alpha (reward per destination x priority)", value=s.alpha,
-                                           start=0, end=100, step=0.5, width=w)
-        self.beta = pn.widgets.FloatInput(name="beta (penalty per charging stop)", value=s.beta, start=0, end=100,
-                                          step=0.5, width=w)
-        self.gamma = pn.widgets.FloatInput(name="gamma (penalty for end of discharge)", value=s.gamma, start=0,
-                                           end=100, step=0.5, width=w)
+        third = (w - 20) // 3
+        self.alpha = pn.widgets.FloatInput(name="alpha", value=s.alpha, start=0, end=100, step=0.5, width=third,
+                                           description="reward per destination reached x its priority")
+        self.beta = pn.widgets.FloatInput(name="beta", value=s.beta, start=0, end=100, step=0.5, width=third,
+                                          description="penalty per charging stop")
+        self.gamma = pn.widgets.FloatInput(name="gamma", value=s.gamma, start=0, end=100, step=0.5, width=third,
+                                           description="penalty for an end of discharge")
         self.steps = pn.widgets.IntInput(name="Steps (environment transitions)", value=s.steps, start=100,
-                                         end=1_000_000, step=500, width=w)
-        self.seed = pn.widgets.IntInput(name="Seed", value=s.seed, start=0, width=w)
+                                         end=1_000_000, step=500, width=w - 90)
+        self.seed = pn.widgets.IntInput(name="Seed", value=s.seed, start=0, width=80)
         self.start_from = pn.widgets.RadioButtonGroup(
-            name="Start from", options={"Random weights": "scratch", "Bundled agent (fine-tune)": "bundled"},
+            name="Start from", options={"Random weights": "scratch", "Fine-tune bundled": "bundled"},
             value=s.start_from, width=w, css_classes=["uam-train-start-from"])
         for key in ("source", "scenario", "alpha", "beta", "gamma", "steps", "seed", "start_from"):
             getattr(self, key).link(s, value=key)
         planner.param.watch(lambda ev: setattr(self.scenario, "value", ev.new), "scenario")
 
-        self.start = pn.widgets.Button(name="Start", button_type="success", width=135,
+        self.start = pn.widgets.Button(name="Start", button_type="success", width=w // 2 - 5,
                                        css_classes=["uam-train-start"])
-        self.stop = pn.widgets.Button(name="Stop", button_type="danger", width=135, disabled=True,
+        self.stop = pn.widgets.Button(name="Stop", button_type="danger", width=w // 2 - 5, disabled=True,
                                       css_classes=["uam-train-stop"])
         self.start.on_click(self._on_start)
         self.stop.on_click(lambda _ev: s.stop())
-        self.progress = pn.indicators.Progress(name="progress", value=0, max=1000, width=w, bar_color="success",
-                                               css_classes=["uam-train-progress"])
+        # The bar inside keeps no margin of its own, so its whole height (border, shadow) is drawn.
+        self.progress = pn.indicators.Progress(name="progress", value=0, max=1000, width=w, height=18,
+                                               bar_color="success", css_classes=["uam-train-progress"],
+                                               margin=(10, 10, 6, 10),
+                                               stylesheets=["progress { margin: 0 !important; height: 18px; }"])
+        self.progress_text = pn.pane.HTML("", width=w, styles={"font-size": "12px"}, margin=(0, 10, 10, 10))
         self.status = pn.pane.HTML("", css_classes=["uam-train-status"], sizing_mode="stretch_width")
+        self.reference_text = pn.pane.HTML("", css_classes=["uam-train-reference"], sizing_mode="stretch_width",
+                                           styles={"font-size": "12px", "color": "#444"})
         self.error = pn.pane.Alert("", alert_type="danger", visible=False, css_classes=["uam-error"])
 
         self.buffer = hv.streams.Buffer(pd.DataFrame({c: [] for c in CURVE_COLUMNS}), length=200_000, index=False)
-        self.reached_plot = pn.pane.HoloViews(hv.DynamicMap(self._reached_element, streams=[self.buffer]),
-                                              linked_axes=False, css_classes=["uam-curve-reached"])
-        self.cycles_plot = pn.pane.HoloViews(hv.DynamicMap(self._cycles_element, streams=[self.buffer]),
-                                             linked_axes=False, css_classes=["uam-curve-cycles"])
+        ref = hv.streams.Params(parameterized=s, parameters=["reference"])
+        self.reached_plot = pn.pane.HoloViews(hv.DynamicMap(self._reached_element, streams=[self.buffer, ref]),
+                                              linked_axes=False, css_classes=["uam-curve-reached"],
+                                              sizing_mode="stretch_width")
+        self.cycles_plot = pn.pane.HoloViews(hv.DynamicMap(self._cycles_element, streams=[self.buffer, ref]),
+                                             linked_axes=False, css_classes=["uam-curve-cycles"],
+                                             sizing_mode="stretch_width")
         self._poller = None
         s.param.watch(self._on_status, ["running", "status", "error", "timesteps", "episodes", "agent_path"])
+        s.param.watch(self._on_reference_inputs, ["source", "scenario"])
+        s.param.watch(self._on_reference, "reference")
+        planner.param.watch(self._on_reference_inputs, "comparison")
         self._on_status()
+        self._on_reference_inputs()
+        self._on_reference()
 
     def __panel__(self) -> pn.viewable.Viewable:
+        w = SETTINGS_WIDTH
         intro = pn.pane.Markdown(
             "Retrain the masked DQN agent. *Current map* trains on the Planner's destinations with a random "
             "cell (q_max, R0) each episode; *random missions* draws a new mission every episode. "
             f"Agents are saved in `{html.escape(str(agents_dir()))}` (set `UAM_STUDIO_HOME` to move it), "
-            "never over the bundled ones, and appear in the Planner's policy list. *Bundled agent* fine-tunes "
-            "the scenario's bundled agent instead of starting from random weights: on an 8-destination map "
-            "this reached the exact oracle's priority in 3 minutes where random weights did not "
-            "(`benchmarks/RESULTS.md`).")
-        controls = pn.Column("### Settings", self.source, self.scenario, "Start from", self.start_from, self.alpha,
-                             self.beta, self.gamma, self.steps, self.seed, pn.Row(self.start, self.stop),
-                             self.progress, width=310)
-        return pn.Column(intro, self.error, pn.Row(controls, pn.Column(self.status, self.reached_plot,
-                                                                       self.cycles_plot)))
+            "never over the bundled ones, and appear in the Planner's policy list. *Fine-tune bundled* starts "
+            "from the scenario's bundled agent instead of random weights: on an 8-destination map this "
+            "reached the exact oracle's priority in 3 minutes where random weights did not "
+            "(`benchmarks/RESULTS.md`).", sizing_mode="stretch_width", styles={"font-size": "13px"})
+        rewards = pn.pane.HTML("alpha: reward per destination x priority; beta: penalty per charging stop; "
+                               "gamma: penalty for an end of discharge", width=w, styles=NOTE_STYLE,
+                               margin=(0, 10))
+        controls = pn.Column(heading("Settings"), self.source, self.scenario,
+                             pn.pane.HTML("Start from", margin=(4, 10, 0, 10)), self.start_from,
+                             pn.Row(self.alpha, self.beta, self.gamma), rewards, pn.Row(self.steps, self.seed),
+                             pn.Row(self.start, self.stop), self.progress, self.progress_text, width=w + 20,
+                             css_classes=["uam-train-settings"])
+        curves = pn.Column(self.status, self.reference_text, self.reached_plot, self.cycles_plot, min_width=520,
+                           sizing_mode="stretch_width", styles={"flex": "1 1 520px"})
+        return pn.Column(intro, self.error, pn.FlexBox(controls, curves, flex_wrap="wrap", gap="10px",
+                                                       sizing_mode="stretch_width"),
+                         sizing_mode="stretch_width")
 
     # ------------------------------------------------------------------ actions
 
@@ -109,11 +138,32 @@ class RetrainView(pn.viewable.Viewer):
             self._poller.stop()
             registry().refresh()  # the new agent appears in every session's Planner
 
+    def _on_reference_inputs(self, *events: Any) -> None:
+        req = self.planner.plan_request
+        if not self.state.running:  # a run keeps the reference of its own map
+            self.state.request_reference(req.mission if req is not None and self.state.source == "map" else None)
+
+    def _on_reference(self, *events: Any) -> None:
+        ref = self.state.reference
+        if self.state.source != "map":
+            text = "Reference line: none for random missions (each episode is another map)."
+        elif ref is None:
+            text = "Reference line: the exact oracle on this map (computing...)."
+        elif ref.get("status") != "done":
+            text = f"Reference line: the exact oracle on this map failed ({ref.get('error')})."
+        else:
+            text = (f"Reference line (dashed): the exact oracle's plan of this map for the Planner's cell "
+                    f"({ref['cell']}): {ref['reached']} of {ref['of']} destinations, "
+                    f"priority {ref['priority']}, {ref['cycles']} charging cycle{'s' * (ref['cycles'] != 1)}. "
+                    "Training draws a new cell each episode, so it is a guide, not a bound.")
+        self.reference_text.object = html.escape(text)
+
     def _on_status(self, *events: Any) -> None:
         s = self.state
         self.start.disabled = s.running
         self.stop.disabled = not s.running
         self.progress.value = int(round(1000 * s.progress))
+        self.progress_text.object = f"<span class='uam-train-progress-text'>{html.escape(s.progress_text())}</span>"
         self.error.object = html.escape(s.error)
         self.error.visible = bool(s.error)
         episodes = f"episodes: <b class='uam-episodes'>{s.episodes}</b>, steps: {s.timesteps}"
@@ -129,20 +179,35 @@ class RetrainView(pn.viewable.Viewer):
 
     @staticmethod
     def _curve_pair(data: pd.DataFrame, column: str, title: str, ylabel: str, raw_color: str,
-                    ma_color: str) -> hv.Overlay:
-        """Per-episode ``column`` and its moving average (``<column>_ma``) as one overlay."""
+                    ma_color: str, reference: float | None, ref_label: str) -> hv.Overlay:
+        """Per-episode ``column``, its moving average (``<column>_ma``) and the oracle's value as a
+        dashed line, with axes that fit them all (from the first episode on: 50 episodes wide)."""
+        n = float(data["episode"].max()) if len(data) else 0.0
+        x1 = max(50.0, n)
         raw = hv.Curve(data, "episode", column, label="per episode").opts(color=raw_color, line_width=1)
         ma = hv.Curve(data, "episode", f"{column}_ma", label=f"moving average ({RetrainState.MA_WINDOW})").opts(
             color=ma_color, line_width=2.5)
-        return (raw * ma).opts(width=620, height=260, title=title, ylabel=ylabel,
-                               legend_position="bottom_right", show_grid=True, framewise=True)
+        ref_y = [reference] * 2 if reference is not None else [np.nan] * 2
+        ref = hv.Curve(([0.0, x1], ref_y), "episode", column, label=ref_label).opts(
+            color="#333333", line_width=1.5, line_dash="dashed")
+        top = max([1.0, float(data[column].max()) if len(data) else 0.0, reference or 0.0])
+        return (raw * ma * ref).opts(
+            hv.opts.Overlay(responsive=True, height=240, title=title, ylabel=ylabel, legend_position="right",
+                            show_grid=True, xlim=(0.0, x1), ylim=(-0.05 * top, 1.1 * top + 0.1),
+                            fontsize={"title": "10pt", "legend": "8pt"}),
+            hv.opts.Curve(framewise=True))
+
+    @staticmethod
+    def _reference(reference: dict[str, Any] | None, key: str) -> tuple[float | None, str]:
+        value = float(reference[key]) if reference is not None and reference.get("status") == "done" else None
+        return value, "exact oracle (this map)"
 
     @classmethod
-    def _reached_element(cls, data: pd.DataFrame) -> hv.Overlay:
+    def _reached_element(cls, data: pd.DataFrame, reference: dict[str, Any] | None = None) -> hv.Overlay:
         return cls._curve_pair(data, "reached", "Destinations reached per episode", "destinations reached",
-                               "#9ecae1", "#08519c")
+                               "#9ecae1", "#08519c", *cls._reference(reference, "reached"))
 
     @classmethod
-    def _cycles_element(cls, data: pd.DataFrame) -> hv.Overlay:
+    def _cycles_element(cls, data: pd.DataFrame, reference: dict[str, Any] | None = None) -> hv.Overlay:
         return cls._curve_pair(data, "cycles", "Charging cycles per episode", "charging cycles",
-                               "#fdae6b", "#a63603")
+                               "#fdae6b", "#a63603", *cls._reference(reference, "cycles"))

@@ -38,12 +38,14 @@ def configure_server_threads() -> None:
         torch.set_num_threads(1)
 
 
-def session_dispatcher() -> Callable[[Callable[[], None]], None] | None:
+def session_dispatcher(delay_ms: int = 0) -> Callable[[Callable[[], None]], None] | None:
     """A function that runs a callback on this session's event loop with the document lock held
-    (``doc.add_next_tick_callback``, safe to call from any thread), or None outside a server session.
+    (``doc.add_next_tick_callback``, or ``doc.add_timeout_callback`` after ``delay_ms``; safe to
+    call from any thread), or None outside a server session.
 
     Worker threads (planning, training) hand their results back through it, so every change to
-    widgets, panes and plots happens on the session's own thread.
+    widgets, panes and plots happens on the session's own thread. A delay lets the event loop send
+    the changes made so far to the browser first.
     """
     if not in_server_session():
         return None
@@ -57,7 +59,10 @@ def session_dispatcher() -> Callable[[Callable[[], None]], None] | None:
                 cb()
 
         try:
-            doc.add_next_tick_callback(run)
+            if delay_ms > 0:
+                doc.add_timeout_callback(run, delay_ms)
+            else:
+                doc.add_next_tick_callback(run)
         except Exception:  # the session has gone: nothing to update
             pass
 

@@ -1,0 +1,199 @@
+"""The Fly tab: the Planner's mission flown in a world the operator cannot see, played back.
+
+The aircraft moves along the flown route on the map; the voltage plot shows the sensor's readings up
+to the playback time against the operator's prediction, the world's hidden truth and the EOD line,
+with every decision marked; the log lists the decisions made so far with their reasons. Controls:
+world seed, forecast error, sensor noise, playback speed, and a wind change injected at the playback
+time. Everything comes from :class:`~uam_studio.app.fly_state.FlyState`; this view only draws it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import holoviews as hv
+import numpy as np
+import pandas as pd
+import panel as pn
+import param
+
+from uam_studio.app.fly_state import SPEEDS, FlyState
+from uam_studio.app.session import ensure_bokeh_backend
+from uam_studio.planning import VERTIPORT
+
+TICK_MS = 250
+MAP_PX = 340
+EOD_COLOR = "#d62728"
+ROUTE_COLORS = ("#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b")
+
+
+class FlyView(pn.viewable.Viewer):
+    """Controls, map, voltage plot and decision log of a :class:`FlyState`."""
+
+    state = param.ClassSelector(class_=FlyState)
+
+    def __init__(self, state: FlyState, **params: Any) -> None:
+        ensure_bokeh_backend()
+        super().__init__(state=state, **params)
+        s = self.state
+        w = 200
+        self.fly_button = pn.widgets.Button(name="Fly the mission", button_type="primary", width=w)
+        self.play = pn.widgets.Toggle(name="Play / pause", value=s.playing, width=w)
+        self.speed = pn.widgets.Select(name="Playback speed (x)", options=list(SPEEDS), value=s.speed, width=w)
+        self.seed = pn.widgets.IntInput(name="World seed", value=s.seed, start=0, width=w)
+        self.sigma = pn.widgets.FloatSlider(name="Forecast error (kt, std)", start=0, end=40, step=1,
+                                            value=s.forecast_sigma_kt, width=w)
+        self.noise = pn.widgets.FloatSlider(name="Voltage sensor noise (mV)", start=0, end=20, step=0.5,
+                                            value=s.sensor_noise_mv, width=w)
+        self.inject_kts = pn.widgets.FloatSlider(name="Wind change (kt, + = headwind)", start=-40, end=40, step=5,
+                                                 value=s.inject_kts, width=w)
+        self.inject_button = pn.widgets.Button(name="Inject wind change now", button_type="warning", width=w)
+        self.clear_button = pn.widgets.Button(name="Clear wind changes", width=w)
+        self.clock = pn.widgets.FloatSlider(name="Playback time (s)", start=0, end=1, value=0, width=w)
+        self.status = pn.pane.Markdown("", css_classes=["uam-fly-status"], sizing_mode="stretch_width")
+        self.error = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width")
+        self.progress = pn.indicators.LoadingSpinner(value=False, size=24, name="flying...", visible=False)
+        self.log = pn.widgets.Tabulator(pd.DataFrame(columns=["t (s)", "at", "q_max (C)", "R0 (ohm)",
+                                                              "wind shift (kt)", "next", "reason"]),
+                                        disabled=True, show_index=False, height=220, sizing_mode="stretch_width",
+                                        css_classes=["uam-fly-log"], layout="fit_data_stretch")
+        self.pos = hv.streams.Pipe(data=[])
+        self.seen = hv.streams.Pipe(data=[])
+        self.measured = hv.streams.Pipe(data=([], []))
+        self.true = hv.streams.Pipe(data=([], []))
+        self.now = hv.streams.Pipe(data=0.0)
+        self.map_pane = pn.pane.HoloViews(self._map(), width=MAP_PX + 10, height=MAP_PX + 10)
+        self.volt_pane = pn.pane.HoloViews(self._voltage(), sizing_mode="stretch_width", height=MAP_PX)
+        self.fly_button.on_click(lambda _e: s.fly())
+        self.inject_button.on_click(lambda _e: s.inject())
+        self.clear_button.on_click(lambda _e: s.clear_events())
+        self.play.param.watch(lambda e: setattr(s, "playing", e.new), "value")
+        self.speed.param.watch(lambda e: setattr(s, "speed", e.new), "value")
+        self.seed.param.watch(lambda e: setattr(s, "seed", e.new), "value")
+        self.sigma.param.watch(lambda e: setattr(s, "forecast_sigma_kt", e.new), "value")
+        self.noise.param.watch(lambda e: setattr(s, "sensor_noise_mv", e.new), "value")
+        self.inject_kts.param.watch(lambda e: setattr(s, "inject_kts", e.new), "value")
+        self.clock.param.watch(self._on_clock, "value_throttled")
+        s.param.watch(self._on_record, "record")
+        s.param.watch(self._on_time, "t_s")
+        s.param.watch(lambda e: setattr(self.play, "value", e.new), "playing")
+        s.param.watch(lambda e: self.progress.param.update(value=e.new, visible=e.new), "running")
+        s.param.watch(self._on_text, ["status", "error"])
+        self._callback = None
+        self._layout = pn.Row(
+            pn.Column(self.fly_button, self.progress, self.play, self.speed, self.clock, pn.Spacer(height=10),
+                      self.inject_kts, self.inject_button, self.clear_button, pn.Spacer(height=10),
+                      self.seed, self.sigma, self.noise, width=230),
+            pn.Column(self.error, self.status, pn.Row(self.map_pane, self.volt_pane, sizing_mode="stretch_width"),
+                      self.log, sizing_mode="stretch_width"),
+            sizing_mode="stretch_width", css_classes=["uam-fly"])
+        if s.record is not None:
+            self._on_record()
+
+    # ------------------------------------------------------------------ figures
+    def _map(self) -> hv.Overlay:
+        s = self.state
+        m = s.mission_flown if s.mission_flown is not None else s._mission()
+        xs = [d.x_km for d in m.destinations]
+        ys = [d.y_km for d in m.destinations]
+        names = [f"{d.name} {'*' * d.priority}" for d in m.destinations]
+        dests = hv.Points((xs, ys, names), ["x_km", "y_km"], ["name"], label="destinations").opts(
+            size=10, color="#ff7f0e", line_color="black", tools=["hover"])
+        labels = hv.Labels((xs, ys, names), ["x_km", "y_km"], "name").opts(yoffset=3.0, text_font_size="9pt")
+        vp = hv.Points([(m.vertiport.x_km, m.vertiport.y_km)], ["x_km", "y_km"], label="vertiport").opts(
+            marker="square", size=14, color="black")
+        flown = hv.DynamicMap(lambda data: hv.Path(data, ["x_km", "y_km"], label="flown").opts(
+            color="#1f77b4", line_width=3), streams=[self.seen])
+        craft = hv.DynamicMap(lambda data: hv.Points(data, ["x_km", "y_km"], label="aircraft").opts(
+            marker="triangle", size=16, color=EOD_COLOR), streams=[self.pos])
+        pad = 8.0
+        allx, ally = np.array(xs + [m.vertiport.x_km]), np.array(ys + [m.vertiport.y_km])
+        x0, x1, y0, y1 = allx.min() - pad, allx.max() + pad, ally.min() - pad, ally.max() + pad
+        span = max(x1 - x0, y1 - y0)  # equal scales on both axes in a square frame
+        cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+        return (vp * dests * labels * flown * craft).opts(
+            title="flight", width=MAP_PX, height=MAP_PX, legend_position="bottom_right", show_legend=False,
+            xlim=(cx - span / 2, cx + span / 2), ylim=(cy - span / 2, cy + span / 2))
+
+    def _voltage(self) -> hv.Overlay:
+        """The voltage figure of the current record: its static layers (prediction, cut-off, decisions) and
+        the measured and true voltage up to the playback time, which :meth:`_on_time` streams in."""
+        s = self.state
+        r = s.record
+        eod = (s.mission_flown or s._mission()).eod_v
+        if r is None or r.time_s.size == 0:
+            empty = hv.Curve([], "time_s", "voltage_v").opts(responsive=True, height=MAP_PX)
+            return (empty * hv.HLine(eod, label="EOD").opts(color=EOD_COLOR, line_dash="dashed")).opts(
+                title="voltage: fly the mission to see it", ylim=(eod - 0.1, 4.25))
+        t = r.time_s
+        measured = hv.DynamicMap(lambda data: hv.Curve(data, "time_s", "voltage_v", label="measured").opts(
+            color="#7f7f7f", line_width=1), streams=[self.measured])
+        true = hv.DynamicMap(lambda data: hv.Curve(data, "time_s", "voltage_v", label="true (hidden)").opts(
+            color="#2ca02c", line_width=1.5), streams=[self.true])
+        now = hv.DynamicMap(lambda data: hv.VLine(float(data) if np.ndim(data) == 0 else 0.0).opts(
+            color="black", line_width=1), streams=[self.now])
+        marks = hv.Points([(d.time_s, eod + 0.02, d.reason) for d in r.events], ["time_s", "voltage_v"],
+                          ["decision"], label="decisions").opts(marker="triangle", size=10, color="black",
+                                                                tools=["hover"])
+        lo = min(eod, float(r.true_voltage_v.min())) - 0.08
+        return (hv.Curve((t, r.predicted_voltage_v), "time_s", "voltage_v", label="predicted by the operator").opts(
+            color="#1f77b4", line_dash="dashed", line_width=2)
+            * measured * true
+            * hv.HLine(eod, label="EOD cut-off").opts(color=EOD_COLOR, line_dash="dashed", line_width=2)
+            * marks * now).opts(title="voltage: measured vs predicted, and the cut-off", responsive=True,
+                                height=MAP_PX, legend_position="right", ylim=(lo, 4.25),
+                                xlim=(0, float(t[-1]) * 1.02))
+
+    # ------------------------------------------------------------------ updates
+    def _on_record(self, *_: Any) -> None:
+        s = self.state
+        self.clock.end = max(1.0, s.end_s)
+        self.map_pane.object = self._map()
+        self.volt_pane.object = self._voltage()
+        self._on_time()
+        self._ensure_timer()
+
+    def _on_time(self, *_: Any) -> None:
+        s = self.state
+        if s.record is None:
+            return
+        self.clock.value = min(s.t_s, self.clock.end)
+        x, y, leg = s.position()
+        m = s.mission_flown
+        nodes = [VERTIPORT] + list(s.record.route)
+        path = [(m.node(n).x_km, m.node(n).y_km) for n in nodes[: max(leg, 0) + 1]] + [(x, y)]
+        self.seen.send([path])
+        self.pos.send([(x, y)])
+        r = s.record
+        k = int(np.searchsorted(r.time_s, s.t_s, side="right"))
+        self.measured.send((r.time_s[:k], r.measured_voltage_v[:k]))
+        self.true.send((r.time_s[:k], r.true_voltage_v[:k]))
+        self.now.send(float(s.t_s))
+        rows = s.decisions_until()
+        self.log.value = pd.DataFrame(rows) if rows else self.log.value.iloc[0:0]
+
+    def _on_clock(self, event: param.parameterized.Event) -> None:
+        self.state.t_s = float(event.new)
+
+    def _on_text(self, *_: Any) -> None:
+        s = self.state
+        self.status.object = s.status
+        self.error.object = s.error
+        self.error.visible = bool(s.error)
+
+    def _ensure_timer(self) -> None:
+        if self._callback is None and pn.state.curdoc is not None and pn.state.curdoc.session_context is not None:
+            self._callback = pn.state.add_periodic_callback(lambda: self.state.tick(TICK_MS / 1000.0),
+                                                            period=TICK_MS)
+
+    def close(self) -> None:
+        """Stop the playback timer."""
+        if self._callback is not None:
+            self._callback.stop()
+            self._callback = None
+
+    def __panel__(self) -> pn.viewable.Viewable:
+        return self._layout
+
+
+__all__ = ["FlyView"]

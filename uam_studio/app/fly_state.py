@@ -1,0 +1,167 @@
+"""State of the Fly tab: one flight of the Planner's mission in a hidden world, played back.
+
+:class:`FlyState` holds the world's settings (seed, forecast error, sensor noise, scripted wind
+events), the :class:`~uam_studio.planning.operations.FlightRecord` of the last flight (from
+:func:`~uam_studio.planning.operations.fly_mission`, the call ``uam-studio fly`` makes) and the
+playback clock. Injecting a wind change re-flies the mission with one more event starting at the
+playback time: everything before it is the same flight (same seeds), so the playback goes on from
+where it was.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import param
+
+from uam_studio.errors import InputError
+from uam_studio.planning import Mission
+from uam_studio.planning.operations import FlightRecord, WindEvent, fly_mission, position_at
+from uam_studio.planning.operations.world import MAX_NOISE_MV, MAX_SIGMA_KT
+
+SPEEDS = (10, 30, 100, 300, 1000)  # playback speed-ups (simulated s per wall s)
+
+
+def _one_line(err: BaseException) -> str:
+    return " ".join(str(err).split())[:300]
+
+
+class FlyState(param.Parameterized):
+    """One flight and its playback (see the module docstring).
+
+    Inputs: ``seed``, ``forecast_sigma_kt`` (kt), ``sensor_noise_mv`` (mV), ``speed`` (playback
+    speed-up), ``inject_kts`` (kt, the wind change :meth:`inject` adds). Outputs: ``record``, ``t_s``
+    (the playback clock, s), ``mission_flown``, ``running`` (a flight is being computed), ``playing``, ``status``,
+    ``error`` (one line).
+    """
+
+    seed = param.Integer(default=0, bounds=(0, 10**9))
+    forecast_sigma_kt = param.Number(default=13.0, bounds=(0.0, MAX_SIGMA_KT))
+    sensor_noise_mv = param.Number(default=5.0, bounds=(0.0, MAX_NOISE_MV))
+    speed = param.Selector(default=100, objects=list(SPEEDS))
+    inject_kts = param.Number(default=25.0, bounds=(-60.0, 60.0))
+    events = param.List(default=[], item_type=WindEvent)
+    record = param.ClassSelector(class_=FlightRecord, default=None, allow_None=True)
+    mission_flown = param.ClassSelector(class_=Mission, default=None, allow_None=True)
+    t_s = param.Number(default=0.0, bounds=(0.0, None))
+    running = param.Boolean(default=False)
+    playing = param.Boolean(default=False)
+    status = param.String(default="")
+    error = param.String(default="")
+
+    def __init__(self, mission: Callable[[], Mission], background: bool = False,
+                 dispatch: Callable[[Callable[[], None]], None] | None = None, **params: Any) -> None:
+        """:param mission: returns the mission to fly (the Planner's current one).
+        :param background: fly in a thread (served app) instead of in place.
+        :param dispatch: hands a thread's result back to the session's thread."""
+        super().__init__(**params)
+        self._mission = mission
+        self.background = background
+        self.dispatch = dispatch
+        self._generation = 0
+
+    # ------------------------------------------------------------------ flying
+    def fly(self, keep_time: bool = False) -> None:
+        """Fly the Planner's mission with the current settings (the playback restarts unless ``keep_time``)."""
+        try:
+            mission = self._mission()
+        except InputError as err:
+            self.error = _one_line(err)
+            return
+        self._generation += 1
+        gen = self._generation
+        kwargs = dict(seed=self.seed, forecast_sigma_kt=self.forecast_sigma_kt, sensor_noise_mv=self.sensor_noise_mv,
+                      events=list(self.events))
+        self.running = True
+        self.status = "flying..."
+        if not keep_time:
+            self.param.update(t_s=0.0, playing=False)
+
+        def work() -> None:
+            try:
+                rec, err = fly_mission(mission, **kwargs), ""
+            except InputError as exc:
+                rec, err = None, _one_line(exc)
+            except Exception as exc:  # never a traceback in the app
+                rec, err = None, f"flight failed: {type(exc).__name__}: {_one_line(exc)}"
+
+            def done() -> None:
+                if gen != self._generation:
+                    return
+                self.running = False
+                if err:
+                    self.error, self.status = err, ""
+                    return
+                self.error = ""
+                self.param.update(record=rec, mission_flown=mission)
+                self.status = self.summary()
+                if not keep_time:
+                    self.playing = True
+
+            if self.dispatch is not None:
+                self.dispatch(done)
+            else:
+                done()
+
+        if self.background:
+            threading.Thread(target=work, daemon=True, name="uam-fly").start()
+        else:
+            work()
+
+    def inject(self) -> None:
+        """Add a wind change of ``inject_kts`` from the playback time on, and re-fly from there."""
+        if self.record is None:
+            self.error = "fly first: the wind change starts at the playback time"
+            return
+        self.events = [*self.events, WindEvent(round(self.t_s), float(self.inject_kts))]
+        self.fly(keep_time=True)
+
+    def clear_events(self) -> None:
+        """Remove the injected wind changes and fly again."""
+        self.events = []
+        self.fly()
+
+    # ------------------------------------------------------------------ playback
+    @property
+    def end_s(self) -> float:
+        """The last reading's time (s), 0 without a flight."""
+        return float(self.record.time_s[-1]) if self.record is not None and self.record.time_s.size else 0.0
+
+    def tick(self, wall_s: float) -> None:
+        """Advance the playback by ``wall_s`` seconds of wall time at the current speed."""
+        if not self.playing or self.record is None:
+            return
+        t = min(self.end_s, self.t_s + wall_s * float(self.speed))
+        self.t_s = t
+        if t >= self.end_s:
+            self.playing = False
+
+    def position(self) -> tuple[float, float, int]:
+        """The aircraft's (x_km, y_km, leg index) at the playback time."""
+        if self.record is None or self.mission_flown is None:
+            return 0.0, 0.0, -1
+        return position_at(self.record, self.mission_flown, self.t_s)
+
+    def decisions_until(self) -> list[dict[str, Any]]:
+        """The decisions made up to the playback time, newest first, as table rows."""
+        if self.record is None:
+            return []
+        return [{"t (s)": round(d.time_s), "at": d.node, "q_max (C)": f"{d.q_max_c:.0f} ± {d.q_max_sd_c:.0f}",
+                 "R0 (ohm)": f"{d.r0_ohm:.3f}", "wind shift (kt)": f"{d.wind_shift_kts:+.1f}",
+                 "next": d.next_to or "-", "reason": d.reason}
+                for d in reversed(self.record.events) if d.time_s <= self.t_s]
+
+    def summary(self) -> str:
+        """One line on the flight and its references."""
+        r = self.record
+        if r is None:
+            return ""
+        own = "BREACHED the cut-off (priority 0)" if r.breached else f"priority {r.reached_priority}"
+        blind = "breached" if r.static_breached else f"priority {r.static_priority}"
+        return (f"flown: {own}, {r.charging_cycles} recharges, min {r.min_voltage_v:.3f} V · blind pre-flight "
+                f"plan: {blind} · hindsight oracle: priority {r.hindsight_priority}")
+
+
+__all__ = ["SPEEDS", "FlyState"]
