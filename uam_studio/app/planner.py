@@ -22,7 +22,7 @@ import param
 from uam_studio.app.session import ensure_bokeh_backend, in_server_session
 from uam_studio.app.state import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE, PlannerState, population
 from uam_studio.flight.tables import WIND_RANGE_KTS
-from uam_studio.planning.mission import COORD_RANGE_KM, SCENARIOS, VERTIPORT
+from uam_studio.planning.missions.mission import COORD_RANGE_KM, SCENARIOS, VERTIPORT
 
 CYCLE_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22")
 FAILED_COLOR = "#d62728"

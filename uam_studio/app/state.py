@@ -11,8 +11,8 @@
   go through a queue that the view drains on its own (periodic) callback.
 - :class:`AgentRegistry`: the retrained agents in the user folder, shared by all sessions.
 
-Planning, physics and training all come from the library (:func:`~uam_studio.planning.policy.plan_mission`,
-:mod:`uam_studio.planning.retrain`, :func:`uam_studio.flight.leg_profile`,
+Planning, physics and training all come from the library (:func:`~uam_studio.planning.planner.plan_mission`,
+:mod:`uam_studio.planning.agents.retrain`, :func:`uam_studio.flight.leg_profile`,
 :func:`uam_studio.battery.simulate`); this module only holds state and calls them.
 """
 
@@ -38,8 +38,8 @@ import param
 
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight.tables import ALTITUDE_RANGE_M, WIND_RANGE_KTS
-from uam_studio.planning.actions import N_MAX, check_destination_count
-from uam_studio.planning.mission import (
+from uam_studio.planning.legs import N_MAX, check_destination_count
+from uam_studio.planning.missions.mission import (
     COORD_RANGE_KM,
     SCENARIOS,
     Battery,
@@ -99,7 +99,7 @@ class PlanningActivity:
     """Which sessions are planning right now, as a ``multiprocessing`` Event that retraining child
     processes watch: while any session plans (from the request to the views updated, plus
     :attr:`grace_s` for the server to send the changes and the browser to draw them), they pause
-    between episodes (:class:`~uam_studio.planning.retrain.RetrainProcess`)."""
+    between episodes (:class:`~uam_studio.planning.agents.retrain.RetrainProcess`)."""
 
     def __init__(self, grace_s: float = 1.0) -> None:
         self.grace_s = grace_s
@@ -209,7 +209,7 @@ def _one_line(err: BaseException) -> str:
 
 
 class AgentRegistry(param.Parameterized):
-    """Retrained agents in the user folder (:func:`uam_studio.planning.retrain.agents_dir`), newest first.
+    """Retrained agents in the user folder (:func:`uam_studio.planning.agents.retrain.agents_dir`), newest first.
 
     One instance per process (:func:`registry`); sessions watch :attr:`agents`.
     """
@@ -217,7 +217,7 @@ class AgentRegistry(param.Parameterized):
     agents = param.List(default=[], doc="AgentInfo of each agent found")
 
     def refresh(self) -> None:
-        from uam_studio.planning.retrain import list_agents
+        from uam_studio.planning.agents.retrain import list_agents
 
         found = list_agents()
         if [(a.path, a.card.get("timing")) for a in found] != [(a.path, a.card.get("timing")) for a in self.agents]:
@@ -229,7 +229,7 @@ def registry() -> AgentRegistry:
     """The process-wide :class:`AgentRegistry` (scanned on first use, after deleting the temp files
     that killed saves left in the agents folder)."""
     from uam_studio.atomic_io import remove_stale_temps
-    from uam_studio.planning.retrain import agents_dir
+    from uam_studio.planning.agents.retrain import agents_dir
 
     remove_stale_temps(agents_dir())
     reg = AgentRegistry()
@@ -259,7 +259,7 @@ class PlanRequest:
 def _agent_stamp(req: PlanRequest) -> tuple[str, int, int] | None:
     """(path, mtime ns, size) of the agent file a DQN plan uses (retrained, or the bundled one for the
     mission's scenario), so a plan cached for another or an older file is never reused."""
-    from uam_studio.planning.policy import bundled_agent_path
+    from uam_studio.planning.agents.rollout import bundled_agent_path
 
     if req.policy.startswith(AGENT_PREFIX):
         path = Path(req.policy[len(AGENT_PREFIX):])
@@ -312,7 +312,7 @@ def compute_plan(req: PlanRequest) -> dict[str, Any]:
 
 
 def _compute_plan(req: PlanRequest) -> dict[str, Any]:
-    from uam_studio.planning.policy import plan_mission
+    from uam_studio.planning.planner import plan_mission
 
     t0 = time.perf_counter()
     out: dict[str, Any] = {"plan": None, "error": None, "health": None, "request": req}
@@ -364,7 +364,7 @@ class PlannerState(param.Parameterized):
     ``destinations``, ``vertiport_x_km``, ``vertiport_y_km``, ``return_wind``, ``scenario``,
     ``q_max``, ``r0``, ``eod_v``, ``policy``.
 
-    Outputs: ``plan`` (:func:`~uam_studio.planning.policy.plan_mission`'s dict), ``plan_request``
+    Outputs: ``plan`` (:func:`~uam_studio.planning.planner.plan_mission`'s dict), ``plan_request``
     (what it was computed for), ``health`` (PC1, PC2), ``plan_error`` (a planner error, e.g. an
     unreadable agent), ``busy`` (a plan is being computed), ``plan_count``.
     """
@@ -685,7 +685,7 @@ class PlannerState(param.Parameterized):
 
 
 def _bundled_exists(scenario: str) -> bool:
-    from uam_studio.planning.policy import bundled_agent_path
+    from uam_studio.planning.agents.rollout import bundled_agent_path
 
     return bundled_agent_path(scenario).is_file()
 
@@ -758,9 +758,9 @@ class BatteryLabState(param.Parameterized):
 class RetrainState(param.Parameterized):
     """A DQN retraining run in the background (one per session at a time).
 
-    :meth:`start` validates the settings (:func:`uam_studio.planning.retrain.training_setup`) and
+    :meth:`start` validates the settings (:func:`uam_studio.planning.agents.retrain.training_setup`) and
     starts the run: in a child process (``runner="process"``, the served app's default:
-    :class:`~uam_studio.planning.retrain.RetrainProcess`, lower CPU priority, no GIL shared with
+    :class:`~uam_studio.planning.agents.retrain.RetrainProcess`, lower CPU priority, no GIL shared with
     the sessions) or in a thread of this process (``runner="thread"``). :meth:`stop` sets the stop
     flag (the agent trained so far is still saved). Neither touches the param values: :meth:`poll`,
     called on the session's own thread (a periodic callback in the app), drains the episodes into
@@ -809,7 +809,7 @@ class RetrainState(param.Parameterized):
     def start(self, mission: Mission | None = None) -> bool:
         """Start training on ``mission`` (``source == "map"``) or on random missions. Returns False
         (with :attr:`error` set) for bad settings or while a run is going."""
-        from uam_studio.planning.retrain import new_agent_path, training_setup
+        from uam_studio.planning.agents.retrain import new_agent_path, training_setup
 
         if self.running:
             self.error = "training: a run is already going; stop it first"
@@ -820,7 +820,7 @@ class RetrainState(param.Parameterized):
             return False
         init_agent = None
         if self.start_from == "bundled":
-            from uam_studio.planning.policy import bundled_agent_path
+            from uam_studio.planning.agents.rollout import bundled_agent_path
 
             init_agent = str(bundled_agent_path(self.scenario))
         try:
@@ -841,7 +841,7 @@ class RetrainState(param.Parameterized):
         self.param.update(running=True, timesteps=0, episodes=0, agent_path="",
                           status=f"{verb} {cfg.steps} steps on {'the current map' if m else 'random missions'}")
         if self.runner == "process":
-            from uam_studio.planning.retrain import RetrainProcess
+            from uam_studio.planning.agents.retrain import RetrainProcess
 
             self._proc = RetrainProcess(path, mission=m, source="app", pause_event=ACTIVITY.event,
                                         scenario=self.scenario, alpha=self.alpha, beta=self.beta,
@@ -857,7 +857,7 @@ class RetrainState(param.Parameterized):
     def _run(self, cfg: Any, env_fn: Callable[[], Any], path: Path, mission: Mission | None) -> None:
         import torch
 
-        from uam_studio.planning.retrain import retrain_dqn
+        from uam_studio.planning.agents.retrain import retrain_dqn
 
         torch.set_num_threads(1)  # leave the other core to the sessions
         try:

@@ -36,7 +36,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
-from ..errors import InputError
+from uam_studio.errors import InputError
 
 
 class WorkerError(RuntimeError):
