@@ -91,7 +91,8 @@ def bench_latency(n: int, n_oracle: int, compares: list[str]) -> list[str]:
     from uam_studio.app.session import configure_server_threads
     from uam_studio.app.state import COMPARE_DELAY_S, PlannerState, comparison_runner, predictor
     from uam_studio.planning import mission_from_dict
-    from uam_studio.planning.policy import bundled_agent_path, plan_mission
+    from uam_studio.planning.agents.rollout import bundled_agent_path
+    from uam_studio.planning.planner import plan_mission
 
     configure_server_threads()  # as the served app: one torch thread
     mission = mission_from_dict(MISSION)

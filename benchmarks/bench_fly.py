@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from uam_studio.planning.oracle import oracle_plan
+from uam_studio.planning.solvers.oracle import oracle_plan
 from uam_studio.studies.flying import fly_many, format_rows, study_missions, summarize, sweep
 
 

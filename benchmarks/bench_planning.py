@@ -76,15 +76,15 @@ def _vec_steps_per_s(n_workers: int, seconds: float, seed: int = 0, envs_per_wor
     """Env transitions per second of ``n_workers`` processes of physics (or Dynaformer) envs.
 
     ``envs_per_worker=1``: SB3's ``SubprocVecEnv`` (one env per process, one pipe round trip per
-    env step). More: :class:`~uam_studio.planning.vec_env.GroupedSubprocVecEnv` (a group of envs per
+    env step). More: :class:`~uam_studio.planning.agents.vec_env.GroupedSubprocVecEnv` (a group of envs per
     process, one round trip per group step). Random masked actions; each env's mask is read from
     its observation (the last ``N_ACTIONS`` entries). Finished episodes reset inside the workers.
     The clock starts after the workers have started and reset.
     """
     from stable_baselines3.common.vec_env import SubprocVecEnv
 
+    from uam_studio.planning.agents.vec_env import GroupedSubprocVecEnv
     from uam_studio.planning.env import N_FEATURES, make_env
-    from uam_studio.planning.vec_env import GroupedSubprocVecEnv
 
     if dynaformer:
         from uam_studio.dynaformer import load_pretrained
@@ -113,7 +113,7 @@ def throughput(seconds: float, workers: int = 2, repeats: int = 3, group: int = 
     """Steps/s of each backend. The physics backend, the goal's subject, is measured ``repeats``
     times (fresh env, seeds 0, 1, ...) and reported as the median: on this kind of machine one run
     swings by about +/-8% from run to run. So is the physics backend on both cores: ``workers``
-    processes of ``group`` envs each (:class:`~uam_studio.planning.vec_env.GroupedSubprocVecEnv`)."""
+    processes of ``group`` envs each (:class:`~uam_studio.planning.agents.vec_env.GroupedSubprocVecEnv`)."""
     from uam_studio.dynaformer import load_pretrained
 
     res = {}
@@ -147,7 +147,7 @@ def throughput(seconds: float, workers: int = 2, repeats: int = 3, group: int = 
 def gap(n: int, seed: int, agents: dict[str, str | None]) -> dict:
     from tqdm import tqdm
 
-    from uam_studio.planning.compare import compare_planners, summarize
+    from uam_studio.studies.compare import compare_planners, summarize
 
     out = {}
     for scenario, agent in agents.items():
@@ -175,12 +175,12 @@ def retrain(n_maps: int, budget_s: float, seed: int, init_agent: str | None = No
     from random weights. Scores: the agent alone (raw, the paper's setting), with the safety filter,
     and with policy rollout (planning time, not training time).
     """
-    from uam_studio.planning.check import check_plan
-    from uam_studio.planning.compare import ROLLOUT_K
+    from uam_studio.planning.agents.rollout import rollout_agent
+    from uam_studio.planning.agents.training import DQNTrainConfig, fine_tuning, train_dqn
     from uam_studio.planning.env import make_env
-    from uam_studio.planning.oracle import oracle_plan
-    from uam_studio.planning.policy import rollout_agent
-    from uam_studio.planning.training import DQNTrainConfig, fine_tuning, train_dqn
+    from uam_studio.planning.missions.check import check_plan
+    from uam_studio.planning.solvers.oracle import oracle_plan
+    from uam_studio.studies.compare import ROLLOUT_K
 
     rows = []
     for k, m in enumerate(held_out_missions(n_maps, seed, n_dest=(8, 8))):
@@ -222,7 +222,7 @@ def retrain(n_maps: int, budget_s: float, seed: int, init_agent: str | None = No
 
 
 def findings(quick: bool) -> dict:
-    from uam_studio.planning.findings import altitude_by_distance, fixed_altitude_reach, reward_sweep
+    from uam_studio.studies.findings import altitude_by_distance, fixed_altitude_reach, reward_sweep
 
     out: dict = {}
     print("1. best altitude by leg length (fresh cell; charge C per altitude 500/1000/2000/3000 m)")

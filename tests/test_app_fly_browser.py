@@ -34,32 +34,33 @@ def served(tmp_path_factory):
     assert not errors, errors[0][-3000:]
 
 
-def test_fly_tab_flies_plays_and_takes_a_wind_change(served):
-    from playwright.sync_api import sync_playwright
+@pytest.fixture(scope="session")
+def browser_type_launch_args(browser_type_launch_args):
+    return {**browser_type_launch_args, "executable_path": CHROMIUM, "args": ["--no-sandbox"]}
 
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
-        page = browser.new_page(viewport={"width": 1366, "height": 768})
-        outside = []
-        page.on("request", lambda r: outside.append(r.url) if not r.url.startswith(
-            ("http://127.0.0.1", "http://localhost", "ws://127.0.0.1", "ws://localhost", "data:", "blob:"))
-            else None)
-        page.goto(served.url, timeout=TIMEOUT_MS)
-        page.locator(".bk-tab", has_text="Fly").click(timeout=TIMEOUT_MS)
-        page.locator("button", has_text="Fly the mission").click(timeout=TIMEOUT_MS)
-        status = page.locator(".uam-fly-status")
-        status.get_by_text("hindsight oracle").wait_for(timeout=TIMEOUT_MS)
-        status.get_by_text("flown:").wait_for(timeout=TIMEOUT_MS)
-        # playback moves the clock and fills the decision log
-        log = page.locator(".uam-fly-log")
-        log.get_by_text("vertiport").first.wait_for(timeout=TIMEOUT_MS)
-        page.locator("button", has_text="Inject wind change now").click(timeout=TIMEOUT_MS)
-        status.get_by_text("hindsight oracle").wait_for(timeout=TIMEOUT_MS)
-        # the playback goes on from the injection: the next arrival's re-plan appears in the log
-        log.get_by_text(re.compile(r"plan (changed|unchanged)")).first.wait_for(timeout=TIMEOUT_MS)
-        if os.environ.get("UAM_SCREENSHOTS") == "1":
-            page.screenshot(path=str(ROOT / "assets" / "screenshots" / "fly_tab.png"))
-        width = page.evaluate("() => document.documentElement.scrollWidth")
-        assert width <= 1366 + 1, width
-        assert not outside, outside[:5]
-        browser.close()
+
+def test_fly_tab_flies_plays_and_takes_a_wind_change(browser, served):
+    page = browser.new_page(viewport={"width": 1366, "height": 768})
+    outside = []
+    page.on("request", lambda r: outside.append(r.url) if not r.url.startswith(
+        ("http://127.0.0.1", "http://localhost", "ws://127.0.0.1", "ws://localhost", "data:", "blob:"))
+        else None)
+    page.goto(served.url, timeout=TIMEOUT_MS)
+    page.locator(".bk-tab", has_text="Fly").click(timeout=TIMEOUT_MS)
+    page.locator("button", has_text="Fly the mission").click(timeout=TIMEOUT_MS)
+    status = page.locator(".uam-fly-status")
+    status.get_by_text("hindsight oracle").wait_for(timeout=TIMEOUT_MS)
+    status.get_by_text("flown:").wait_for(timeout=TIMEOUT_MS)
+    # playback moves the clock and fills the decision log
+    log = page.locator(".uam-fly-log")
+    log.get_by_text("vertiport").first.wait_for(timeout=TIMEOUT_MS)
+    page.locator("button", has_text="Inject wind change now").click(timeout=TIMEOUT_MS)
+    status.get_by_text("hindsight oracle").wait_for(timeout=TIMEOUT_MS)
+    # the playback goes on from the injection: the next arrival's re-plan appears in the log
+    log.get_by_text(re.compile(r"plan (changed|unchanged)")).first.wait_for(timeout=TIMEOUT_MS)
+    if os.environ.get("UAM_SCREENSHOTS") == "1":
+        page.screenshot(path=str(ROOT / "assets" / "screenshots" / "fly_tab.png"))
+    width = page.evaluate("() => document.documentElement.scrollWidth")
+    assert width <= 1366 + 1, width
+    assert not outside, outside[:5]
+    page.close()

@@ -25,7 +25,7 @@ from uam_studio.app.state import (
     registry,
 )
 from uam_studio.planning import load_mission, mission_from_dict
-from uam_studio.planning.retrain import (
+from uam_studio.planning.agents.retrain import (
     agents_dir,
     is_bundled,
     list_agents,
@@ -322,7 +322,7 @@ def test_retrain_stop_saves_the_agent_so_far(home):
 
 
 def test_retrain_process_reports_a_failure_in_the_child(home):
-    from uam_studio.planning.retrain import RetrainProcess
+    from uam_studio.planning.agents.retrain import RetrainProcess
 
     blocker = home / "not_a_folder"
     blocker.parent.mkdir(parents=True, exist_ok=True)
@@ -467,7 +467,7 @@ def test_warm_up_plans_what_a_new_session_shows_first():
 
 def test_training_setup_init_agent_sets_fine_tuning(tmp_path):
     from uam_studio.errors import InputError
-    from uam_studio.planning.training import FINE_TUNE
+    from uam_studio.planning.agents.training import FINE_TUNE
 
     agent = ROOT / "pretrained" / "dqn_single_charge.zip"
     cfg, _ = training_setup(steps=10, init_agent=agent)

@@ -8,8 +8,8 @@ import pytest
 from uam_studio.battery import simulate
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_profile
-from uam_studio.planning.check import Plan, check_plan, make_plan
-from uam_studio.planning.mission import Battery, Destination, Mission, Vertiport
+from uam_studio.planning.missions.check import Plan, check_plan, make_plan
+from uam_studio.planning.missions.mission import Battery, Destination, Mission, Vertiport
 
 
 def bay(q_max=6000.0, r0=0.15) -> Mission:

@@ -5,9 +5,9 @@ import pytest
 
 from uam_studio.errors import InputError
 from uam_studio.planning import ALTITUDES_M, held_out_missions
-from uam_studio.planning.compare import compare_planners, summarize
-from uam_studio.planning.findings import altitude_by_distance, fixed_altitude_reach, reward_sweep, with_wind
-from uam_studio.planning.training import DQNTrainConfig, train_dqn
+from uam_studio.planning.agents.training import DQNTrainConfig, train_dqn
+from uam_studio.studies.compare import compare_planners, summarize
+from uam_studio.studies.findings import altitude_by_distance, fixed_altitude_reach, reward_sweep, with_wind
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +58,7 @@ def test_altitude_by_distance_rows():
 
 
 def test_fixed_altitude_reach_never_beats_full_oracle():
-    from uam_studio.planning.oracle import oracle_plan
+    from uam_studio.planning.solvers.oracle import oracle_plan
 
     missions = held_out_missions(2, 99, n_dest=(3, 3))
     rows = fixed_altitude_reach(missions, (1000.0, 3000.0), wind_kts=39.0)
@@ -89,8 +89,8 @@ def test_reward_sweep_rows():
 
 
 def test_safety_filter_makes_every_plan_safe(tiny_agent):
-    from uam_studio.planning.check import check_plan
-    from uam_studio.planning.policy import rollout_agent
+    from uam_studio.planning.agents.rollout import rollout_agent
+    from uam_studio.planning.missions.check import check_plan
 
     missions = held_out_missions(6, 4040, n_dest=(5, 8))
     for m in missions:
@@ -106,9 +106,9 @@ def _reward(m, plan) -> int:
 def test_rollout_never_earns_less_than_either_base(tiny_agent):
     """Policy rollout with the filtered agent and the greedy rule as bases: safe, and at least the
     reward of the filtered agent and of the greedy planner; agent-only rollout at least the agent's."""
-    from uam_studio.planning.check import check_plan
-    from uam_studio.planning.greedy import greedy_plan
-    from uam_studio.planning.policy import rollout_agent
+    from uam_studio.planning.agents.rollout import rollout_agent
+    from uam_studio.planning.missions.check import check_plan
+    from uam_studio.planning.solvers.greedy import greedy_plan
 
     better = 0
     missions = held_out_missions(6, 5150, n_dest=(5, 8)) + held_out_missions(3, 5151, n_dest=(5, 7),
@@ -132,7 +132,7 @@ def test_rollout_never_earns_less_than_either_base(tiny_agent):
 def test_env_greedy_action_follows_the_greedy_planner(scenario):
     """Following ``UAMPlanningEnv.greedy_action`` flies the greedy planner's route."""
     from uam_studio.planning.env import UAMPlanningEnv
-    from uam_studio.planning.greedy import greedy_plan
+    from uam_studio.planning.solvers.greedy import greedy_plan
 
     for m in held_out_missions(5, 6262, n_dest=(4, 8), scenario=scenario):
         env = UAMPlanningEnv(mission=m, scenario=scenario)
@@ -167,8 +167,8 @@ def test_env_clone_is_independent():
 def test_ranked_actions_are_valid_and_sorted(tiny_agent):
     import torch as th
 
+    from uam_studio.planning.agents.training import ranked_actions
     from uam_studio.planning.env import UAMPlanningEnv
-    from uam_studio.planning.training import ranked_actions
 
     env = UAMPlanningEnv(mission=held_out_missions(1, 12)[0])
     obs, _ = env.reset(seed=0)
@@ -181,7 +181,7 @@ def test_ranked_actions_are_valid_and_sorted(tiny_agent):
 
 
 def test_per_mission_gaps_by_hand():
-    from uam_studio.planning.compare import PlanScore, per_mission_gaps
+    from uam_studio.studies.compare import PlanScore, per_mission_gaps
 
     def s(m, p, prio):
         return PlanScore(m, p, prio, 1, 1, True, 3.2, 0.0)

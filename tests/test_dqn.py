@@ -13,10 +13,10 @@ from gymnasium import spaces
 from stable_baselines3 import DQN
 from stable_baselines3.common.env_util import make_vec_env
 
-import uam_studio.planning.dqn as dqn_mod
+import uam_studio.planning.agents.dqn as dqn_mod
 from uam_studio.errors import InputError
-from uam_studio.planning.dqn import MaskedDQN, action_mask, masked_target
-from uam_studio.planning.training import (
+from uam_studio.planning.agents.dqn import MaskedDQN, action_mask, masked_target
+from uam_studio.planning.agents.training import (
     DQNTrainConfig,
     EpisodeStats,
     greedy_action,

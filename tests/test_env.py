@@ -10,15 +10,6 @@ from gymnasium.utils.env_checker import check_env
 
 from uam_studio.battery import simulate
 from uam_studio.errors import InputError
-from uam_studio.planning.actions import (
-    ALTITUDES_M,
-    N_ACTIONS,
-    N_MAX,
-    VERTIPORT_SLOT,
-    decode_action,
-    encode_action,
-)
-from uam_studio.planning.check import check_plan
 from uam_studio.planning.env import (
     FEATURE_NAMES,
     N_FEATURES,
@@ -28,7 +19,16 @@ from uam_studio.planning.env import (
     make_env,
     observe_takeoff,
 )
-from uam_studio.planning.mission import Battery, Destination, Mission, Vertiport
+from uam_studio.planning.legs import (
+    ALTITUDES_M,
+    N_ACTIONS,
+    N_MAX,
+    VERTIPORT_SLOT,
+    decode_action,
+    encode_action,
+)
+from uam_studio.planning.missions.check import check_plan
+from uam_studio.planning.missions.mission import Battery, Destination, Mission, Vertiport
 
 V = VERTIPORT_SLOT
 

@@ -15,7 +15,7 @@ import pytest
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_profile
 from uam_studio.planning import load_mission
-from uam_studio.planning.mission import VERTIPORT, Battery
+from uam_studio.planning.missions.mission import VERTIPORT, Battery
 from uam_studio.planning.operations import Operator, World, fly_mission, parse_event
 from uam_studio.planning.operations import world as world_module
 from uam_studio.studies.flying import fly_many, study_missions, summarize

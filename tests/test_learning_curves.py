@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from uam_studio.errors import InputError
+from uam_studio.planning.agents.learning_curves import EpisodeRecorder, episode_columns, moving_average
+from uam_studio.planning.agents.training import EpisodeStats
 from uam_studio.planning.env import UAMPlanningEnv
-from uam_studio.planning.learning_curves import EpisodeRecorder, episode_columns, moving_average
-from uam_studio.planning.training import EpisodeStats
 
 
 def test_moving_average():

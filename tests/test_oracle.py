@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 
 from uam_studio.battery import simulate
-from uam_studio.planning.actions import N_MAX, VERTIPORT_SLOT, LegTable
-from uam_studio.planning.check import check_plan
-from uam_studio.planning.generate import held_out_missions, random_mission
-from uam_studio.planning.greedy import greedy_plan
-from uam_studio.planning.mission import Battery, Destination, Mission, Vertiport, mission_to_dict
-from uam_studio.planning.oracle import feasible_sorties, fly_batch, min_sortie_cover, oracle_plan
+from uam_studio.planning.legs import N_MAX, VERTIPORT_SLOT, LegTable
+from uam_studio.planning.missions.check import check_plan
+from uam_studio.planning.missions.generate import held_out_missions, random_mission
+from uam_studio.planning.missions.mission import Battery, Destination, Mission, Vertiport, mission_to_dict
+from uam_studio.planning.solvers.greedy import greedy_plan
+from uam_studio.planning.solvers.oracle import feasible_sorties, min_sortie_cover, oracle_plan
+from uam_studio.planning.solvers.setup import fly_batch
 
 V = VERTIPORT_SLOT
 
@@ -181,7 +182,7 @@ def test_leg_table_charges_match_the_flight_model_exactly():
     """The vectorised per-mission charge table equals leg_charge_c on every feasible leg; the
     cheapest level and charge follow from it; infeasible legs are inf / None."""
     from uam_studio.flight import leg_charge_c
-    from uam_studio.planning.actions import ALTITUDES_M, N_ALTITUDES, N_TARGETS
+    from uam_studio.planning.legs import ALTITUDES_M, N_ALTITUDES, N_TARGETS
 
     n = 0
     for m in held_out_missions(6, 77, n_dest=(1, N_MAX), scenario="single_charge"):

@@ -1,4 +1,4 @@
-"""Tests for ``uam-studio plan``, ``uam-studio train dqn`` and :func:`uam_studio.planning.policy.plan_mission`.
+"""Tests for ``uam-studio plan``, ``uam-studio train dqn`` and :func:`uam_studio.planning.planner.plan_mission`.
 
 Everything runs in-process through ``main()`` (one interpreter start-up for the whole file); the
 DQN agent is trained once per module for 300 transitions (no gradient step: it only has to load
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from uam_studio.cli import main
-from uam_studio.planning.policy import MAX_POINTS, plan_mission
+from uam_studio.planning.planner import MAX_POINTS, plan_mission
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "assets" / "example_mission.json"
@@ -245,7 +245,7 @@ def test_prediction_is_per_sortie_with_takeoff_context():
 def test_bundled_agents_plan_any_map_safely(scenario):
     """The bundled agents load, plan maps they never saw (with the safety filter) and pass physics."""
     from uam_studio.planning import held_out_missions
-    from uam_studio.planning.policy import bundled_agent_path, load_agent_cached
+    from uam_studio.planning.agents.rollout import bundled_agent_path, load_agent_cached
 
     path = bundled_agent_path(scenario)
     assert path.is_file(), f"missing bundled agent {path}"

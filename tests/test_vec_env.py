@@ -10,9 +10,9 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from uam_studio.errors import InputError
+from uam_studio.planning.agents.training import DQNTrainConfig, train_dqn
+from uam_studio.planning.agents.vec_env import GroupedSubprocVecEnv, WorkerError
 from uam_studio.planning.env import N_FEATURES, UAMPlanningEnv, make_env
-from uam_studio.planning.training import DQNTrainConfig, train_dqn
-from uam_studio.planning.vec_env import GroupedSubprocVecEnv, WorkerError
 
 
 def _random_actions(obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:

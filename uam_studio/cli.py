@@ -142,8 +142,8 @@ def _add_plan_arguments(p: argparse.ArgumentParser) -> None:
 
 def _run_plan(args: argparse.Namespace) -> int:
     from uam_studio.planning import load_mission
-    from uam_studio.planning.actions import N_MAX, check_destination_count
-    from uam_studio.planning.policy import plan_mission
+    from uam_studio.planning.legs import N_MAX, check_destination_count
+    from uam_studio.planning.planner import plan_mission
 
     if args.agent is not None and args.policy != "dqn":
         raise _CliExit(f"--agent: only used with --policy dqn (not {args.policy})", EXIT_INPUT)
@@ -208,7 +208,7 @@ def _add_fly_arguments(p: argparse.ArgumentParser) -> None:
 
 def _run_fly(args: argparse.Namespace) -> int:
     from uam_studio.planning import load_mission
-    from uam_studio.planning.actions import check_destination_count
+    from uam_studio.planning.legs import check_destination_count
     from uam_studio.planning.operations import fly_mission, parse_event
 
     events = [parse_event(e) for e in args.event]
@@ -345,7 +345,7 @@ def _run_train_dqn(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from uam_studio.planning import SCENARIOS, load_mission
-    from uam_studio.planning.retrain import retrain_dqn, training_setup
+    from uam_studio.planning.agents.retrain import retrain_dqn, training_setup
 
     if args.scenario is not None and args.scenario not in SCENARIOS:
         raise _CliExit(f"--scenario: {args.scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}",

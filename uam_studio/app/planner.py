@@ -31,7 +31,7 @@ from uam_studio.app.state import (
 )
 from uam_studio.app.style import NOTE_STYLE, heading
 from uam_studio.flight.tables import WIND_RANGE_KTS
-from uam_studio.planning.mission import COORD_RANGE_KM, SCENARIOS, VERTIPORT
+from uam_studio.planning.missions.mission import COORD_RANGE_KM, SCENARIOS, VERTIPORT
 
 CYCLE_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22")
 FAILED_COLOR = "#d62728"

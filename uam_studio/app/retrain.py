@@ -23,8 +23,8 @@ import param
 from uam_studio.app.session import ensure_bokeh_backend
 from uam_studio.app.state import PlannerState, RetrainState, registry
 from uam_studio.app.style import NOTE_STYLE, heading
-from uam_studio.planning.mission import SCENARIOS
-from uam_studio.planning.retrain import agents_dir
+from uam_studio.planning.agents.retrain import agents_dir
+from uam_studio.planning.missions.mission import SCENARIOS
 
 POLL_MS = 1000  # curves and progress once a second: each update re-renders two plots
 SETTINGS_WIDTH = 270  # px, the settings' widgets

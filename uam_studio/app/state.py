@@ -16,8 +16,8 @@
   elapsed time and time left; the exact oracle's plan of the map as the curves' reference.
 - :class:`AgentRegistry`: the retrained agents in the user folder, shared by all sessions.
 
-Planning, physics and training all come from the library (:func:`~uam_studio.planning.policy.plan_mission`,
-:mod:`uam_studio.planning.retrain`, :func:`uam_studio.flight.leg_profile`,
+Planning, physics and training all come from the library (:func:`~uam_studio.planning.planner.plan_mission`,
+:mod:`uam_studio.planning.agents.retrain`, :func:`uam_studio.flight.leg_profile`,
 :func:`uam_studio.battery.simulate`, ``DynaformerPredictor.voltage_band``); this module holds state
 and calls them.
 """
@@ -43,8 +43,8 @@ import param
 
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight.tables import ALTITUDE_RANGE_M, WIND_RANGE_KTS
-from uam_studio.planning.actions import N_MAX, check_destination_count
-from uam_studio.planning.mission import (
+from uam_studio.planning.legs import N_MAX, check_destination_count
+from uam_studio.planning.missions.mission import (
     COORD_RANGE_KM,
     SCENARIOS,
     Battery,
@@ -113,7 +113,7 @@ class PlanningActivity:
     """Which sessions are planning right now, as a ``multiprocessing`` Event that retraining child
     processes watch: while any session plans (from the request to the views updated, plus
     :attr:`grace_s` for the server to send the changes and the browser to draw them), they pause
-    between episodes (:class:`~uam_studio.planning.retrain.RetrainProcess`)."""
+    between episodes (:class:`~uam_studio.planning.agents.retrain.RetrainProcess`)."""
 
     def __init__(self, grace_s: float = 1.0) -> None:
         self.grace_s = grace_s
@@ -232,7 +232,7 @@ def _one_line(err: BaseException) -> str:
 
 
 class AgentRegistry(param.Parameterized):
-    """Retrained agents in the user folder (:func:`uam_studio.planning.retrain.agents_dir`), newest first.
+    """Retrained agents in the user folder (:func:`uam_studio.planning.agents.retrain.agents_dir`), newest first.
 
     One instance per process (:func:`registry`); sessions watch :attr:`agents`.
     """
@@ -240,7 +240,7 @@ class AgentRegistry(param.Parameterized):
     agents = param.List(default=[], doc="AgentInfo of each agent found")
 
     def refresh(self) -> None:
-        from uam_studio.planning.retrain import list_agents
+        from uam_studio.planning.agents.retrain import list_agents
 
         found = list_agents()
         if [(a.path, a.card.get("timing")) for a in found] != [(a.path, a.card.get("timing")) for a in self.agents]:
@@ -252,7 +252,7 @@ def registry() -> AgentRegistry:
     """The process-wide :class:`AgentRegistry` (scanned on first use, after deleting the temp files
     that killed saves left in the agents folder)."""
     from uam_studio.atomic_io import remove_stale_temps
-    from uam_studio.planning.retrain import agents_dir
+    from uam_studio.planning.agents.retrain import agents_dir
 
     remove_stale_temps(agents_dir())
     reg = AgentRegistry()
@@ -290,7 +290,7 @@ def mission_digest(m: Mission) -> str:
 def _agent_stamp(req: PlanRequest) -> tuple[str, int, int] | None:
     """(path, mtime ns, size) of the agent file a DQN plan uses (retrained, or the bundled one for the
     mission's scenario), so a plan cached for another or an older file is never reused."""
-    from uam_studio.planning.policy import bundled_agent_path
+    from uam_studio.planning.agents.rollout import bundled_agent_path
 
     if req.policy.startswith(AGENT_PREFIX):
         path = Path(req.policy[len(AGENT_PREFIX):])
@@ -358,7 +358,7 @@ def _copy_plain(obj: Any) -> Any:
 
 
 def _compute_plan(req: PlanRequest) -> dict[str, Any]:
-    from uam_studio.planning.policy import plan_mission
+    from uam_studio.planning.planner import plan_mission
 
     t0 = time.perf_counter()
     out: dict[str, Any] = {"plan": None, "error": None, "health": None, "request": req}
@@ -403,8 +403,8 @@ BAND_METHOD = "voltage_band"  # DynaformerPredictor method giving (low, median, 
 
 def _sortie_cuts(sim: Any) -> list[int]:
     """Sample indices where the route's sorties start and end (a landing at the vertiport recharges),
-    as :func:`~uam_studio.planning.policy.plan_mission` cuts the route for the Dynaformer."""
-    from uam_studio.planning.mission import VERTIPORT
+    as :func:`~uam_studio.planning.planner.plan_mission` cuts the route for the Dynaformer."""
+    from uam_studio.planning.missions.mission import VERTIPORT
 
     cuts = [0]
     for leg in sim.legs:
@@ -418,7 +418,7 @@ def prediction_band(mission: Mission, plan: dict[str, Any], pred: Any, level: fl
         -> dict[str, Any] | None:
     """The Dynaformer's pointwise ``level`` voltage band along ``plan``'s route.
 
-    Each sortie is predicted as :func:`~uam_studio.planning.policy.plan_mission` predicts it (context:
+    Each sortie is predicted as :func:`~uam_studio.planning.planner.plan_mission` predicts it (context:
     the first 20 s of the take-off on the physics model; profile: the route's current since the last
     recharge), with the predictor's :data:`BAND_METHOD` (``voltage_band``). The band is returned on
     the plan's own time samples, its lowest values from every sample.
@@ -426,8 +426,8 @@ def prediction_band(mission: Mission, plan: dict[str, Any], pred: Any, level: fl
     :return: ``{"time_s", "low_v", "high_v", "level", "min_low_v", "min_high_v"}``, or None when the
         route is empty or the predictor has no :data:`BAND_METHOD`.
     """
-    from uam_studio.planning.check import check_plan
     from uam_studio.planning.env import CONTEXT_S, observe_takeoff
+    from uam_studio.planning.missions.check import check_plan
 
     band_fn = getattr(pred, BAND_METHOD, None)
     if band_fn is None or not plan.get("route"):
@@ -459,7 +459,7 @@ def takeoff_attempt(mission: Mission) -> dict[str, Any] | None:
     :return: ``{"time_s", "voltage_v", "eod_s"}``: the samples up to the first one below the cut-off.
     """
     from uam_studio.battery import simulate
-    from uam_studio.planning.actions import DT_S, takeoff_current
+    from uam_studio.planning.legs import DT_S, takeoff_current
 
     b = mission.battery
     sim = simulate(takeoff_current(), DT_S, float(b.q_max), float(b.r0), eod_v=float(mission.eod_v))
@@ -563,7 +563,7 @@ def _row_from_plan(plan: dict[str, Any], mission: Mission) -> dict[str, Any]:
 
 
 def _agent_reads_dynaformer(agent_path: str | None, scenario: str) -> bool:
-    from uam_studio.planning.policy import bundled_agent_path, load_agent_cached
+    from uam_studio.planning.agents.rollout import bundled_agent_path, load_agent_cached
 
     try:
         card = load_agent_cached(agent_path or bundled_agent_path(scenario))[1]
@@ -573,7 +573,7 @@ def _agent_reads_dynaformer(agent_path: str | None, scenario: str) -> bool:
 
 
 def compare_row(mission: Mission, policy: str) -> dict[str, Any]:
-    """One row of the plan comparison: :func:`~uam_studio.planning.policy.plan_mission` (the CLI's
+    """One row of the plan comparison: :func:`~uam_studio.planning.planner.plan_mission` (the CLI's
     call) for ``policy`` (``dqn``, ``oracle``, ``greedy`` or ``agent:<path>``) on ``mission``. The
     Dynaformer is loaded only for an agent that reads its health features (the route does not depend
     on it otherwise). Never raises.
@@ -581,7 +581,7 @@ def compare_row(mission: Mission, policy: str) -> dict[str, Any]:
     :return: ``{"status": "done" | "error", "error", "priority", "reached", "of", "cycles",
         "min_voltage_v", "safe", "route", "altitudes_m", "elapsed_s"}``.
     """
-    from uam_studio.planning.policy import plan_mission
+    from uam_studio.planning.planner import plan_mission
 
     t0 = time.perf_counter()
     name, agent_path = policy, None
@@ -856,7 +856,7 @@ class PlannerState(param.Parameterized):
     ``destinations``, ``vertiport_x_km``, ``vertiport_y_km``, ``return_wind``, ``scenario``,
     ``q_max``, ``r0``, ``eod_v``, ``policy``.
 
-    Outputs: ``plan`` (:func:`~uam_studio.planning.policy.plan_mission`'s dict), ``plan_request``
+    Outputs: ``plan`` (:func:`~uam_studio.planning.planner.plan_mission`'s dict), ``plan_request``
     (what it was computed for), ``health`` (PC1, PC2), ``plan_error`` (a planner error, e.g. an
     unreadable agent), ``busy`` (a plan is being computed), ``plan_count``.
     """
@@ -1280,7 +1280,7 @@ class PlannerState(param.Parameterized):
 
 
 def _bundled_exists(scenario: str) -> bool:
-    from uam_studio.planning.policy import bundled_agent_path
+    from uam_studio.planning.agents.rollout import bundled_agent_path
 
     return bundled_agent_path(scenario).is_file()
 
@@ -1447,9 +1447,9 @@ def _thin_index(n: int, limit: int, keep: int | None = None) -> np.ndarray:
 class RetrainState(param.Parameterized):
     """A DQN retraining run in the background (one per session at a time).
 
-    :meth:`start` validates the settings (:func:`uam_studio.planning.retrain.training_setup`) and
+    :meth:`start` validates the settings (:func:`uam_studio.planning.agents.retrain.training_setup`) and
     starts the run: in a child process (``runner="process"``, the served app's default:
-    :class:`~uam_studio.planning.retrain.RetrainProcess`, lower CPU priority, no GIL shared with
+    :class:`~uam_studio.planning.agents.retrain.RetrainProcess`, lower CPU priority, no GIL shared with
     the sessions) or in a thread of this process (``runner="thread"``). :meth:`stop` sets the stop
     flag (the agent trained so far is still saved). Neither touches the param values: :meth:`poll`,
     called on the session's own thread (a periodic callback in the app), drains the episodes into
@@ -1514,7 +1514,7 @@ class RetrainState(param.Parameterized):
     def start(self, mission: Mission | None = None) -> bool:
         """Start training on ``mission`` (``source == "map"``) or on random missions. Returns False
         (with :attr:`error` set) for bad settings or while a run is going."""
-        from uam_studio.planning.retrain import new_agent_path, training_setup
+        from uam_studio.planning.agents.retrain import new_agent_path, training_setup
 
         if self.running:
             self.error = "training: a run is already going; stop it first"
@@ -1525,7 +1525,7 @@ class RetrainState(param.Parameterized):
             return False
         init_agent = None
         if self.start_from == "bundled":
-            from uam_studio.planning.policy import bundled_agent_path
+            from uam_studio.planning.agents.rollout import bundled_agent_path
 
             init_agent = str(bundled_agent_path(self.scenario))
         try:
@@ -1548,7 +1548,7 @@ class RetrainState(param.Parameterized):
         self.param.update(running=True, timesteps=0, episodes=0, agent_path="",
                           status=f"{verb} {cfg.steps} steps on {'the current map' if m else 'random missions'}")
         if self.runner == "process":
-            from uam_studio.planning.retrain import RetrainProcess
+            from uam_studio.planning.agents.retrain import RetrainProcess
 
             self._proc = RetrainProcess(path, mission=m, source="app", pause_event=ACTIVITY.event,
                                         scenario=self.scenario, alpha=self.alpha, beta=self.beta,
@@ -1564,7 +1564,7 @@ class RetrainState(param.Parameterized):
     def _run(self, cfg: Any, env_fn: Callable[[], Any], path: Path, mission: Mission | None) -> None:
         import torch
 
-        from uam_studio.planning.retrain import retrain_dqn
+        from uam_studio.planning.agents.retrain import retrain_dqn
 
         torch.set_num_threads(1)  # leave the other core to the sessions
         try:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -263,7 +262,3 @@ def rest_voltage(q_max=DEFAULT_Q_MAX, cell: CellParameters = DEFAULT_CELL) -> fl
     v = output_voltage(x.__dict__, cell.q_total(q), cell)
     return float(v[0]) if np.ndim(q_max) == 0 else v
 
-
-def time_to_eod(result: SimulationResult) -> float:
-    """EOD time (s) of a single-trajectory result, or ``math.inf`` if not reached."""
-    return float(result.eod_s) if result.eod_reached else math.inf

@@ -20,7 +20,7 @@ import holoviews as hv
 import holoviews.plotting.bokeh  # noqa: F401  (registers the bokeh backend, so .opts() works before hv.extension)
 import numpy as np
 
-from uam_studio.planning.mission import VERTIPORT, Mission
+from uam_studio.planning.missions.mission import VERTIPORT, Mission
 from uam_studio.planning.operations import FlightRecord
 
 __all__ = ["curves", "flight_voltage", "mission_map", "sorties"]

@@ -2,14 +2,14 @@
 
 * Health estimator, two kinds (``DynaformerConfig.health``):
 
-  - ``"takeoff"`` (the default since session 8): :class:`TakeoffHealth`, a quadratic
+  - ``"takeoff"`` (the default): :class:`TakeoffHealth`, a quadratic
     regression on the first ``health_window`` s of the context (the take-off from full
     charge), fitted in closed form to (R0, 6500 C / q_max). Its 2-D output is both the
     health embedding and the decoder's latent. Unlike the transformer encoder, whose
     q_max estimate saturated at the edges of the training range, it extrapolates (median
     q_max error +48 / +18 C at 4000-5000 / 8000-9000 C on noise-free flights), but it is
     fragile to sensor noise (benchmarks/RESULTS.md).
-  - ``"transformer"`` (the sessions 5-7 model, still loadable):
+  - ``"transformer"``:
 
 * Encoder (``"transformer"`` only): the observed context (20 s by default, up to ``max_context`` samples) is
   cut into patches of ``patch`` samples (the paper's 20 s context is one patch);

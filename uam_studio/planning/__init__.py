@@ -1,33 +1,43 @@
-"""Mission planning: missions and their JSON format, and route simulation.
+"""Mission planning: missions and their JSON format, route simulation, the environment, planners and agents.
+
+Rooms (each imports only the ones below it; import-linter contract in pyproject.toml)::
+
+    planner.py     plan_mission: the one entry point of the CLI and the app
+    operations/    flying a mission in real time (world, operator, flight loop)
+    agents/        DQN networks, training, agent files, retraining, rollout (the only torch users)
+    env/           the Gymnasium environment and its battery backends
+    solvers/       the exact oracle, the greedy baseline and their shared setup
+    missions/      mission format, generation, route simulation, plan checks
+    legs.py        the discrete action space and the leg table of a mission
 
 Public API: :class:`Mission` (with :class:`Vertiport`, :class:`Destination`,
 :class:`Battery`), :func:`mission_from_dict`, :func:`mission_from_json`, :func:`mission_to_dict`,
 :func:`load_mission`, :func:`save_mission`, :func:`simulate_route`
 (-> :class:`RouteSimulation` with :class:`LegResult` per leg).
 
-Planning: the action space (:mod:`~uam_studio.planning.actions`: ``N_MAX``, ``ALTITUDES_M``,
+Planning: the action space (:mod:`~uam_studio.planning.legs`: ``N_MAX``, ``ALTITUDES_M``,
 ``N_ACTIONS``, :func:`encode_action`, :func:`decode_action`), the Gymnasium environment
 :class:`UAMPlanningEnv` (:func:`make_env`), random and held-out missions
 (:func:`random_mission`, :func:`held_out_missions`), planners returning a :class:`Plan`
 (:func:`oracle_plan`, exact; :func:`greedy_plan`, baseline) and the physics check
 :func:`check_plan` (-> :class:`PlanCheck`).
 
-``env``, ``oracle`` and ``greedy`` are imported lazily (attribute access), so
-``import uam_studio.planning`` stays light.
+``env`` and ``solvers`` are imported lazily (attribute access), so ``import uam_studio.planning``
+stays light (no gymnasium).
 """
 
 import importlib
 
-from uam_studio.planning.actions import (
+from uam_studio.planning.legs import (
     ALTITUDES_M,
     N_ACTIONS,
     N_MAX,
     decode_action,
     encode_action,
 )
-from uam_studio.planning.check import Plan, PlanCheck, check_plan, make_plan
-from uam_studio.planning.generate import held_out_missions, random_mission
-from uam_studio.planning.mission import (
+from uam_studio.planning.missions.check import Plan, PlanCheck, check_plan, make_plan
+from uam_studio.planning.missions.generate import held_out_missions, random_mission
+from uam_studio.planning.missions.mission import (
     COORD_RANGE_KM,
     SCENARIOS,
     VERTIPORT,
@@ -41,13 +51,13 @@ from uam_studio.planning.mission import (
     mission_to_dict,
     save_mission,
 )
-from uam_studio.planning.route import LegResult, RouteSimulation, simulate_route
+from uam_studio.planning.missions.route import LegResult, RouteSimulation, simulate_route
 
 _LAZY = {
     "UAMPlanningEnv": "env",
     "make_env": "env",
-    "oracle_plan": "oracle",
-    "greedy_plan": "greedy",
+    "oracle_plan": "solvers.oracle",
+    "greedy_plan": "solvers.greedy",
 }
 
 

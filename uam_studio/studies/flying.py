@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from uam_studio.planning.generate import held_out_missions
-from uam_studio.planning.mission import Mission
+from uam_studio.planning.missions.generate import held_out_missions
+from uam_studio.planning.missions.mission import Mission
 from uam_studio.planning.operations import FlightRecord, fly_mission
 
 

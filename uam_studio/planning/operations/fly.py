@@ -28,8 +28,8 @@ import numpy as np
 from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0, simulate
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_profile
-from uam_studio.planning.actions import DT_S, N_MAX
-from uam_studio.planning.mission import VERTIPORT, Battery, Mission
+from uam_studio.planning.legs import DT_S, N_MAX
+from uam_studio.planning.missions.mission import VERTIPORT, Battery, Mission
 from uam_studio.planning.operations.operator import HEALTH_Z, PLAN_WIND_Z, WIND_Z, Decision, Operator
 from uam_studio.planning.operations.world import (
     DEFAULT_FORECAST_SIGMA_KT,
@@ -39,7 +39,7 @@ from uam_studio.planning.operations.world import (
     World,
     actual_winds_mission,
 )
-from uam_studio.planning.oracle import oracle_plan
+from uam_studio.planning.solvers.oracle import oracle_plan
 
 
 @dataclass

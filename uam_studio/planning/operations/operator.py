@@ -11,7 +11,7 @@ take-off check and at every arrival) it
 2. estimates the wind: the actual wind of each flown leg follows from its measured duration
    (cruise time = distance / ground speed); the shift common to all legs is estimated from those
    residuals with a Gaussian prior, and every unflown leg is predicted as forecast + shift;
-3. plans the rest exactly (:func:`~uam_studio.planning.oracle.feasible_sorties` continued from its
+3. plans the rest exactly (:func:`~uam_studio.planning.solvers.oracle.feasible_sorties` continued from its
    present node and estimated battery state) on its *expected* belief (median health, predicted
    winds), allowing only first legs after which the aircraft can still get home on its *cautious*
    belief: the cell ``health_z`` std to the weak side, and the two legs' winds at a joint one-sided
@@ -36,9 +36,11 @@ from uam_studio.battery.fit import Q_REF_C, HealthEstimate, fit_health
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight import leg_profile
 from uam_studio.flight.tables import WIND_RANGE_KTS
-from uam_studio.planning.actions import ALTITUDES_M, DT_S, N_MAX, N_TARGETS, VERTIPORT_SLOT, LegTable
-from uam_studio.planning.mission import SCENARIOS, VERTIPORT, Battery, Mission
-from uam_studio.planning.oracle import Sortie, feasible_sorties, fly_batch, sortie_cover_table
+from uam_studio.planning.legs import ALTITUDES_M, DT_S, N_MAX, N_TARGETS, VERTIPORT_SLOT, LegTable
+from uam_studio.planning.missions.generate import PAPER_Q_RANGE, PAPER_R0_RANGE
+from uam_studio.planning.missions.mission import SCENARIOS, VERTIPORT, Battery, Mission
+from uam_studio.planning.solvers.oracle import Sortie, feasible_sorties, sortie_cover_table
+from uam_studio.planning.solvers.setup import fly_batch
 
 HEALTH_Z = 1.64  # std of the health estimate the belief cell is taken at (one-sided 95%)
 WIND_Z = 1.64  # one-sided joint bound (std) on the next leg's and the way home's winds
@@ -50,8 +52,8 @@ OBSERVED_WIND_SD_KT = 1.0  # kt, std of a wind measured by flying its leg
 Q_PLAN_RANGE = (2000.0, 12000.0)  # C, belief cell bounds
 R0_PLAN_RANGE = (0.005, 1.5)  # ohm
 MIN_FIT_SAMPLES = 20
-FLEET_Q_RANGE = (5000.0, 8000.0)  # C, the paper's range of q_max: the fleet the cell comes from
-FLEET_R0_RANGE = (0.017, 0.45)  # ohm, the paper's range of R0
+FLEET_Q_RANGE = PAPER_Q_RANGE  # C, the paper's range of q_max: the fleet the cell comes from
+FLEET_R0_RANGE = PAPER_R0_RANGE  # ohm, the paper's range of R0
 
 
 @dataclass(frozen=True)

@@ -16,10 +16,10 @@ import time
 import numpy as np
 
 from uam_studio.battery import full_charge
-from uam_studio.planning.actions import ALTITUDES_M, N_MAX, VERTIPORT_SLOT
-from uam_studio.planning.check import Plan, make_plan
-from uam_studio.planning.mission import VERTIPORT, Mission
-from uam_studio.planning.oracle import _too_close, fly_batch, prepare_mission
+from uam_studio.planning.legs import ALTITUDES_M, N_MAX, VERTIPORT_SLOT
+from uam_studio.planning.missions.check import Plan, make_plan
+from uam_studio.planning.missions.mission import VERTIPORT, Mission
+from uam_studio.planning.solvers.setup import fly_batch, prepare_mission, too_close
 
 
 def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
@@ -42,7 +42,7 @@ def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
     alts: list[float] = []
     n = len(dests)
     for k in range(n):
-        reason = _too_close(legs, k)
+        reason = too_close(legs, k)
         if reason is not None:
             msgs.append(reason)
     if scenario == "single_flight":
@@ -60,8 +60,7 @@ def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
     visited = np.zeros(N_MAX, dtype=bool)
     at, x = VERTIPORT_SLOT, fresh
     while True:
-        cands = [k for k in range(n) if servable[k] and not visited[k]]
-        cands.sort(key=lambda k: -legs.priority[k] / legs.dist[at, k])
+        cands = legs.greedy_order(at, [k for k in range(n) if servable[k] and not visited[k]])
         moved = False
         for k in cands:
             a = legs.cheapest_level(at, k)

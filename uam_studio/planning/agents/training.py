@@ -3,13 +3,13 @@
 Public API:
 
 - :class:`DQNTrainConfig`: every setting of a training run (also what a model card records).
-- :func:`train_dqn`: train a :class:`~uam_studio.planning.dqn.MaskedDQN` on ``n_envs`` copies of an
+- :func:`train_dqn`: train a :class:`~uam_studio.planning.agents.dqn.MaskedDQN` on ``n_envs`` copies of an
   env, streaming one :class:`EpisodeStats` per finished episode, stoppable with a ``threading.Event``.
 - :class:`EpisodeStatsCallback`, :class:`TqdmCallback`: the SB3 callbacks behind it.
 - :func:`save_agent` (atomic, with a model card inside the zip), :func:`load_agent`, :func:`load_card`.
 - :func:`greedy_action`: the deterministic masked action for one observation.
 
-Env convention (see :mod:`uam_studio.planning.dqn`): flat ``Box`` observations whose last
+Env convention (see :mod:`uam_studio.planning.agents.dqn`): flat ``Box`` observations whose last
 ``action_space.n`` entries are the action mask; ``info`` on each step has ``reached`` (list of
 destination names), ``charging_cycles`` (int), ``eod`` (bool), optionally ``reached_priority``.
 
@@ -36,10 +36,11 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from ..atomic_io import atomic_write_bytes
-from ..errors import InputError
-from .dqn import MaskedDQN, MaskedDQNPolicy
-from .vec_env import GroupedSubprocVecEnv
+from uam_studio.atomic_io import atomic_write_bytes
+from uam_studio.errors import InputError
+from uam_studio.planning.agents.dqn import MaskedDQN, MaskedDQNPolicy
+from uam_studio.planning.agents.vec_env import GroupedSubprocVecEnv
+from uam_studio.planning.env.environment import REWARD_DEFAULTS
 
 __all__ = [
     "CARD_NAME",
@@ -87,13 +88,13 @@ class DQNTrainConfig:
 
     scenario: str = "single_charge"
     steps: int = 50_000  # total env transitions (all envs together); ~5,000 episodes of ~10 steps
-    alpha: float = 1.0
-    beta: float = 1.0
-    gamma: float = 5.0
+    alpha: float = REWARD_DEFAULTS["alpha"]
+    beta: float = REWARD_DEFAULTS["beta"]
+    gamma: float = REWARD_DEFAULTS["gamma"]
     seed: int = 0
     n_envs: int = 4  # env copies: decorrelates consecutive samples
-    n_workers: int = 1  # 1: all copies here (DummyVecEnv); >= 2: GroupedSubprocVecEnv processes (slower for
-    # DQN at n_envs=8 on 2 cores: 354 vs 409-537 transitions/s, the gradient steps compete with the workers)
+    n_workers: int = 1  # 1: all copies here (DummyVecEnv); >= 2: GroupedSubprocVecEnv processes (on 2 cores
+    # slower for DQN: the gradient steps compete with the workers; benchmarks/RESULTS.md)
     learning_rate: float = 1e-3  # Adam; rl-zoo CartPole uses 2.3e-3, a bit lower is steadier here
     buffer_size: int = 50_000  # holds the whole run at the default budget: small episodes, no staleness issue
     learning_starts: int = 1000  # ~100 random (masked) episodes before the first update
@@ -250,7 +251,7 @@ def train_dqn(
         model trained so far is returned
     :param progress_bar: show a tqdm progress bar
     :param verbose: SB3 verbosity (0 silent, 1 rollout/train tables)
-    :return: the trained :class:`~uam_studio.planning.dqn.MaskedDQN` (greedy use: :func:`greedy_action`)
+    :return: the trained :class:`~uam_studio.planning.agents.dqn.MaskedDQN` (greedy use: :func:`greedy_action`)
     """
     if config.steps < 1:
         raise InputError("steps", f"{config.steps!r} is out of range; allowed >= 1")
@@ -546,10 +547,15 @@ def _spaces(p: Path, obs: Any, act: Any) -> tuple[gym.spaces.Box, gym.spaces.Dis
     return spaces.Box(low, high, shape=(n_obs,), dtype=np.dtype(dtype)), spaces.Discrete(n_act, start=start)
 
 
+# The policy's module as SB3 records it: today's, and uam_studio.planning.dqn (agents saved before the
+# planning package was split into rooms, the bundled ones among them).
+_OWN_POLICY_MODULES = (MaskedDQNPolicy.__module__, "uam_studio.planning.dqn")
+
+
 def _policy_class_name(pc: Any) -> str:
     """The class name in the readable fields SB3 writes beside a pickled policy class (its methods'
     reprs, ``<function Name.method at ...>``), prefixed by its module unless that is this package's
-    :mod:`~uam_studio.planning.dqn`; ``"unknown"`` if there is none."""
+    :mod:`~uam_studio.planning.agents.dqn`; ``"unknown"`` if there is none."""
     if not isinstance(pc, dict):
         return "unknown"
     names = [v[len("<function "):].split(".", 1)[0] for v in pc.values()
@@ -557,7 +563,7 @@ def _policy_class_name(pc: Any) -> str:
     if not names:
         return "unknown"
     module = pc.get("__module__")
-    return names[0] if module == MaskedDQNPolicy.__module__ else f"{module}.{names[0]}"
+    return names[0] if module in _OWN_POLICY_MODULES else f"{module}.{names[0]}"
 
 
 def _zip_entries(p: Path, zf: zipfile.ZipFile) -> set[str]:
@@ -598,7 +604,7 @@ def _read_json_entry(p: Path, zf: zipfile.ZipFile, name: str) -> dict[str, Any]:
 def _read_tensors_entry(p: Path, zf: zipfile.ZipFile, name: str) -> dict[str, Any]:
     """Entry ``name`` loaded with :func:`uam_studio.tensor_files.load_tensors` (``torch.load(weights_only=True)``:
     tensors, numbers, strings, containers only; anything else is refused before it is built)."""
-    from ..tensor_files import TensorFileError, load_tensors
+    from uam_studio.tensor_files import TensorFileError, load_tensors
 
     try:
         raw = zf.read(name)
@@ -620,7 +626,7 @@ def load_agent(path: str | os.PathLike[str], env: gym.Env | None = None) -> Mask
     :data:`OPTIONAL_AGENT_ENTRIES`). SB3's ``data`` entry and the card are read as plain JSON; the
     pickled (``":serialized:"``) values in ``data`` are never decoded, and a pickled value under a key
     SB3 does not pickle refuses the file. The network is rebuilt as a
-    :class:`~uam_studio.planning.dqn.MaskedDQNPolicy` from the card's ``network`` entry
+    :class:`~uam_studio.planning.agents.dqn.MaskedDQNPolicy` from the card's ``network`` entry
     (:func:`network_description`), or for files without one from the readable fields SB3 writes beside
     the pickled spaces and from ``policy_kwargs``; the training settings and counters come from the
     plain values of ``data``. The weights (``policy.pth``) and optimizer state (``policy.optimizer.pth``)

@@ -33,7 +33,7 @@ from uam_studio.battery import EOD_RANGE, Q_MAX_RANGE, R0_RANGE, full_charge, si
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight import ALTITUDE_RANGE_M, leg_feasible, leg_profile, min_leg_distance_km
 from uam_studio.flight.profile import MAX_DISTANCE_KM
-from uam_studio.planning.mission import VERTIPORT, Mission
+from uam_studio.planning.missions.mission import VERTIPORT, Mission
 
 DT_RANGE_S = (1e-3, 60.0)  # accepted by both leg_profile and simulate
 MAX_SAMPLES = 5_000_000  # whole route; guards against a tiny dt_s on a long route

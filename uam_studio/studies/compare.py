@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from uam_studio.planning.check import Plan, check_plan
-from uam_studio.planning.mission import Mission
+from uam_studio.planning.missions.check import Plan, check_plan
+from uam_studio.planning.missions.mission import Mission
 
 __all__ = ["ROLLOUT_K", "PlanScore", "compare_planners", "per_mission_gaps", "summarize"]
 
@@ -84,7 +84,7 @@ def compare_planners(
     :param missions: the missions (their own scenario, battery and cut-off are used)
     :param agent_path: DQN agent (zip path or trained model), needed for the ``dqn`` policies
     :param policies: any of ``"oracle"``, ``"greedy"``, ``"dqn"`` (the agent with the safety filter of
-        :func:`~uam_studio.planning.policy.rollout_agent`, as ``uam-studio plan`` runs it) and
+        :func:`~uam_studio.planning.agents.rollout.rollout_agent`, as ``uam-studio plan`` runs it) and
         ``"dqn_raw"`` (the agent's own greedy choices, the paper's setting) and ``"dqn_rollout"``
         (the filtered agent improved by policy rollout over its ``ROLLOUT_K`` best safe actions and
         the greedy rule's action, each continued by the filtered agent and by the greedy rule), and
@@ -93,9 +93,9 @@ def compare_planners(
     :return: one :class:`PlanScore` per mission and policy, missions in order
     """
     from uam_studio.errors import InputError
-    from uam_studio.planning.greedy import greedy_plan
-    from uam_studio.planning.oracle import oracle_plan
-    from uam_studio.planning.policy import rollout_agent
+    from uam_studio.planning.agents.rollout import rollout_agent
+    from uam_studio.planning.solvers.greedy import greedy_plan
+    from uam_studio.planning.solvers.oracle import oracle_plan
 
     if any(p.startswith("dqn") for p in policies) and agent_path is None:
         raise InputError("agent_path", "needed to compare the dqn policy")

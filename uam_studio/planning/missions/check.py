@@ -4,7 +4,7 @@ A :class:`Plan` is what every planner returns (the oracle, the greedy baseline, 
 DQN rollout): a route of node names (``"vertiport"`` recharges) with one cruise
 altitude per leg, what it reaches, and human-readable ``messages`` for everything
 it could not do. :func:`check_plan` flies a route through the *physics* battery
-model (:func:`uam_studio.planning.route.simulate_route`) and says whether it stays
+model (:func:`uam_studio.planning.missions.route.simulate_route`) and says whether it stays
 above the end-of-discharge cut-off, and if not, where it fails. Every plan, from
 any policy, should go through it before anyone trusts it.
 """
@@ -15,8 +15,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from uam_studio.planning.mission import Mission
-from uam_studio.planning.route import RouteSimulation, simulate_route
+from uam_studio.planning.missions.mission import Mission
+from uam_studio.planning.missions.route import RouteSimulation, simulate_route
 
 
 @dataclass(frozen=True)

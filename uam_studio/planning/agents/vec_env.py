@@ -1,7 +1,7 @@
 """A subprocess vector env that runs a *group* of environments in each worker process.
 
 SB3's ``SubprocVecEnv`` runs one environment per process, so every env step pays one pipe round
-trip (about 0.7 ms here) for about 1 ms of physics: on 2 cores it is no faster than one
+trip for about as much physics: on 2 cores it is no faster than one
 in-process env (``benchmarks/RESULTS.md``). :class:`GroupedSubprocVecEnv` gives each of
 ``n_workers`` processes a group of environments and steps the whole group per round trip, so the
 pipe cost is shared by the group and both cores do physics.
@@ -36,7 +36,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
-from ..errors import InputError
+from uam_studio.errors import InputError
 
 
 class WorkerError(RuntimeError):

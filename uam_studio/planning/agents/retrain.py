@@ -30,7 +30,8 @@ from typing import Any
 from uam_studio.atomic_io import remove_stale_temps
 from uam_studio.bundled import HOME_ENV, is_bundled, user_home
 from uam_studio.errors import InputError, check_range
-from uam_studio.planning.mission import SCENARIOS, Mission, mission_to_dict
+from uam_studio.planning.env.environment import REWARD_DEFAULTS
+from uam_studio.planning.missions.mission import SCENARIOS, Mission, mission_to_dict
 
 __all__ = [
     "DQN_REWARD_DEFAULTS",
@@ -47,7 +48,7 @@ __all__ = [
     "user_home",
 ]
 
-DQN_REWARD_DEFAULTS = {"alpha": 1.0, "beta": 1.0, "gamma": 5.0}  # the paper's figures (as UAMPlanningEnv)
+DQN_REWARD_DEFAULTS = REWARD_DEFAULTS  # the paper's figures (UAMPlanningEnv's defaults)
 STATS_WINDOW = 100  # final_stats average the last 100 episodes
 MAX_STEPS = 10_000_000
 
@@ -77,7 +78,7 @@ class AgentInfo:
 def list_agents(folder: str | os.PathLike[str] | None = None) -> list[AgentInfo]:
     """The agents (``*.zip`` with a readable model card) in ``folder`` (default :func:`agents_dir`),
     newest first. Unreadable files are skipped (they are not agents); a missing folder gives ``[]``."""
-    from uam_studio.planning.training import load_card
+    from uam_studio.planning.agents.training import load_card
 
     d = Path(folder) if folder is not None else agents_dir()
     if not d.is_dir():
@@ -136,12 +137,12 @@ def training_setup(
     :param safe_return: train with the environment's ``safe_return`` rule (a leg that would leave
         no way home ends the episode with ``-gamma``); off is the paper's setting.
     :param init_agent: fine-tune this agent (zip) instead of starting from random weights: its
-        network is copied in and exploration starts at :data:`~uam_studio.planning.training.FINE_TUNE` settings (epsilon 0.2, not 1).
+        network is copied in and exploration starts at :data:`~uam_studio.planning.agents.training.FINE_TUNE` settings (epsilon 0.2, not 1).
     :raises InputError: bad settings, or a map the environment cannot use (no destinations, more
         than 8, none far enough from the vertiport).
     """
+    from uam_studio.planning.agents.training import DQNTrainConfig, fine_tuning
     from uam_studio.planning.env import make_env
-    from uam_studio.planning.training import DQNTrainConfig, fine_tuning
 
     if scenario is not None and scenario not in SCENARIOS:
         raise InputError("scenario", f"{scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}")
@@ -216,26 +217,26 @@ def retrain_dqn(
     source: str | None = None,
     card_path: str | os.PathLike[str] | None = None,
 ) -> RetrainResult:
-    """Train a DQN agent (:func:`~uam_studio.planning.training.train_dqn`) and save it with its card.
+    """Train a DQN agent (:func:`~uam_studio.planning.agents.training.train_dqn`) and save it with its card.
 
-    :param config: a :class:`~uam_studio.planning.training.DQNTrainConfig` (see :func:`training_setup`).
+    :param config: a :class:`~uam_studio.planning.agents.training.DQNTrainConfig` (see :func:`training_setup`).
     :param env_fn: the env factory from :func:`training_setup`.
     :param agent_path: the agent zip to write (atomically); never inside ``pretrained/``.
     :param mission: the map trained on (recorded in the card), or None for random missions.
-    :param on_episode: called with each :class:`~uam_studio.planning.training.EpisodeStats`, in the
+    :param on_episode: called with each :class:`~uam_studio.planning.agents.training.EpisodeStats`, in the
         training thread.
     :param stop_event: set it to stop early; the agent trained so far is saved, with
         ``"stopped_early": true`` in its card.
     :param source: a short note on where the run came from (``"cli"``, ``"app"``), kept in the card.
     :param card_path: also write the card as this JSON file, consistent with the agent (see
-        :func:`~uam_studio.planning.training.save_agent`).
+        :func:`~uam_studio.planning.agents.training.save_agent`).
     :raises InputError: ``agent_path`` inside ``pretrained/``.
 
     Stale temp files left in the agent's folder by killed saves are deleted before training.
     """
     from uam_studio import __version__ as version
+    from uam_studio.planning.agents.training import save_agent, train_dqn
     from uam_studio.planning.env import OBS_DIM
-    from uam_studio.planning.training import save_agent, train_dqn
 
     agent = Path(agent_path)
     if is_bundled(agent):

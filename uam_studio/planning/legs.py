@@ -24,7 +24,7 @@ from uam_studio.flight import leg_charges_c, leg_profile, min_leg_distance_km
 from uam_studio.flight.profile import MAX_DISTANCE_KM
 
 if TYPE_CHECKING:
-    from uam_studio.planning.mission import Mission
+    from uam_studio.planning.missions.mission import Mission
 
 N_MAX = 8  # destination slots
 ALTITUDES_M = (500.0, 1000.0, 2000.0, 3000.0)  # the paper's cruise levels (m)
@@ -84,7 +84,7 @@ class LegTable:
     ``feasible[i, j, a]`` is True if the leg i -> j exists (both nodes present, i != j) and
     its length fits altitude ``ALTITUDES_M[a]`` (:func:`uam_studio.flight.min_leg_distance_km`,
     at most 500 km). :meth:`current` is the leg's per-cell current (A, 1 s samples) exactly as
-    :func:`uam_studio.planning.route.simulate_route` flies it: the wind and dwell of the node
+    :func:`uam_studio.planning.missions.route.simulate_route` flies it: the wind and dwell of the node
     flown to. Profiles are computed on first use and cached.
     """
 
@@ -158,6 +158,12 @@ class LegTable:
         """Charge (C) of leg i -> j at its lowest feasible level (the cheapest one in the paper's
         tables: climbing costs more than the cruise saves), ``inf`` if no level is feasible."""
         return float(self._cheapest[i, j])
+
+    def greedy_order(self, node: int, slots: list[int]) -> list[int]:
+        """``slots`` in the greedy rule's order from ``node``: best priority / distance first (ties keep
+        their order). The one home of the rule of :func:`~uam_studio.planning.solvers.greedy.greedy_plan`
+        and :meth:`~uam_studio.planning.env.UAMPlanningEnv.greedy_action`."""
+        return sorted(slots, key=lambda k: -self.priority[k] / max(self.dist[node, k], 1e-9))
 
     def name(self, k: int) -> str:
         """Node name of index ``k`` (``"vertiport"`` for N_MAX)."""

@@ -1,17 +1,15 @@
 """Gymnasium environment of the paper's health-aware eVTOL mission planning (DQN training).
 
-See :class:`UAMPlanningEnv` for the spaces, rewards and episode rules, and
-:class:`PhysicsBattery` / :class:`DynaformerBattery` for the two battery backends.
+See :class:`UAMPlanningEnv` for the spaces, rewards and episode rules; its battery backends
+(:class:`PhysicsBattery` / :class:`DynaformerBattery`) and the take-off health observation live in
+:mod:`~uam_studio.planning.env.backends`.
 """
 
 from __future__ import annotations
 
 import copy
 import dataclasses
-import functools
-from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -19,18 +17,22 @@ import numpy as np
 from gymnasium import spaces
 
 from uam_studio.battery import (
-    DEFAULT_CELL,
-    EOD_RANGE,
-    STATE_NAMES,
-    BatteryState,
-    full_charge,
     rest_voltage,
-    simulate,
 )
-from uam_studio.battery.solver import integrate_current
 from uam_studio.errors import InputError, check_positive, check_range
 from uam_studio.flight.tables import WIND_RANGE_KTS
-from uam_studio.planning.actions import (
+from uam_studio.planning.env.backends import (
+    CONTEXT_S,
+    HEALTH_CLIP,
+    BatteryBackend,
+    DynaformerBattery,
+    LegOutcome,
+    PhysicsBattery,
+    fallback_health,
+    observe_takeoff,
+    takeoff_context_current,
+)
+from uam_studio.planning.legs import (
     ALTITUDES_M,
     DT_S,
     MIN_LEG_KM,
@@ -40,15 +42,18 @@ from uam_studio.planning.actions import (
     N_TARGETS,
     VERTIPORT_SLOT,
     LegTable,
-    takeoff_current,
 )
-from uam_studio.planning.check import Plan
-from uam_studio.planning.generate import DEFAULT_Q_RANGE, DEFAULT_R0_RANGE, DEFAULT_RADIUS_KM, random_mission
-from uam_studio.planning.mission import SCENARIOS, Mission
+from uam_studio.planning.missions.check import Plan
+from uam_studio.planning.missions.generate import (
+    DEFAULT_Q_RANGE,
+    DEFAULT_R0_RANGE,
+    DEFAULT_RADIUS_KM,
+    random_mission,
+)
+from uam_studio.planning.missions.mission import SCENARIOS, Mission
 
-CONTEXT_S = 20  # s of take-off observed to infer the health (the paper's 20 s)
 MAX_EPISODE_STEPS = 2 * N_MAX + 2
-HEALTH_CLIP = 5.0
+REWARD_DEFAULTS = {"alpha": 1.0, "beta": 1.0, "gamma": 5.0}  # the paper's figures; the one home of these
 FEATURE_BOUND = 10.0
 
 # ----------------------------------------------------------------------------- observation layout
@@ -78,182 +83,6 @@ CHARGE_SCALE_C = 8000.0
 WIND_SCALE_KT = WIND_RANGE_KTS[1]
 
 
-# ----------------------------------------------------------------------------- health observation
-
-
-@functools.cache
-def takeoff_context_current() -> np.ndarray:
-    """Per-cell current (A) of the first 20 s of a take-off (vertical take-off, then climb at 500 m).
-
-    The first 20 s are the same for every leg flown at 500 m, and within 1 % for the other levels.
-    """
-    cur = np.array(takeoff_current()[:CONTEXT_S])
-    cur.setflags(write=False)
-    return cur
-
-
-def observe_takeoff(q_max: float, r0: float) -> tuple[np.ndarray, np.ndarray]:
-    """The 20 s observation of a take-off by a fresh cell (physics model): (current A, voltage V)."""
-    return np.array(takeoff_context_current()), np.array(_takeoff_voltage(float(q_max), float(r0)))
-
-
-@functools.lru_cache(maxsize=4096)
-def _takeoff_voltage(q_max: float, r0: float) -> np.ndarray:
-    # The environment's own leg solver (no per-call input checks): the same numbers as simulate(),
-    # which it falls back to for a cell that ends below the lowest cut-off within the window.
-    cell = PhysicsBattery()
-    cell.reset(q_max, r0, EOD_RANGE[0])
-    out = cell.fly_leg(takeoff_context_current())
-    if out.eod:
-        v = np.array(simulate(takeoff_context_current(), DT_S, q_max, r0, eod_v=EOD_RANGE[0]).voltage_v)
-    else:
-        v = np.array(out.voltage_v)
-    v.setflags(write=False)
-    return v
-
-
-@functools.cache
-def _fallback_calibration() -> tuple[float, ...]:
-    """Constants of :func:`fallback_health`, fitted once on a 7 x 7 grid of simulated cells."""
-    q, r = np.meshgrid(np.linspace(5000.0, 8000.0, 7), np.linspace(0.017, 0.45, 7))
-    cur = takeoff_context_current()
-    v = simulate(np.tile(cur, (q.size, 1)), DT_S, q.ravel(), r.ravel(), eod_v=EOD_RANGE[0]).voltage_v
-    f1 = (v[:, 0] - v[:, -1]) / cur.mean()
-    f2 = v[:, -6] - v[:, -1]
-    coef = np.polyfit(f1, f2, 2)
-    resid = f2 - np.polyval(coef, f1)
-    return (float(f1.mean()), float(f1.std()), *map(float, coef), float(resid.std()))
-
-
-def fallback_health(context_current_a: np.ndarray, context_voltage_v: np.ndarray) -> np.ndarray:
-    """Two PC-like health features from the 20 s take-off observation alone (no Dynaformer).
-
-    * ``h1``: standardised voltage drop over the window per ampere, ``(v[0] - v[-1]) / mean(i)``
-      (rises with R0, like the Dynaformer's PC1);
-    * ``h2``: standardised slope of the last 5 s, ``v[-6] - v[-1]``, minus its quadratic fit on
-      ``h1``'s raw value (falls with q_max, like PC2: a smaller cell sags faster).
-
-    Only observable quantities enter; the standardising constants are fitted once on a grid of
-    simulated cells (q_max 5000-8000 C, R0 0.017-0.45 ohm), never on the episode's own cell.
-    """
-    i = np.asarray(context_current_a, dtype=float).reshape(-1)
-    v = np.asarray(context_voltage_v, dtype=float).reshape(-1)
-    m1, s1, c2, c1, c0, s2 = _fallback_calibration()
-    f1 = (v[0] - v[-1]) / max(float(i.mean()), 1e-6)
-    f2 = v[-6] - v[-1] if v.size >= 6 else 0.0
-    h = np.array([(f1 - m1) / s1, (f2 - (c2 * f1 * f1 + c1 * f1 + c0)) / s2])
-    return np.clip(np.nan_to_num(h), -HEALTH_CLIP, HEALTH_CLIP)
-
-
-# ----------------------------------------------------------------------------- battery backends
-
-
-@dataclass(frozen=True)
-class LegOutcome:
-    """What one leg did to the battery.
-
-    ``voltage_v``: the leg's voltage samples (V), up to and including the first one below the
-    cut-off if ``eod``; ``min_voltage_v`` and ``end_voltage_v`` (V) of those samples.
-    """
-
-    voltage_v: np.ndarray
-    eod: bool
-    min_voltage_v: float
-    end_voltage_v: float
-
-
-class BatteryBackend(ABC):
-    """The environment's battery: reset once per episode, then fly legs; recharge at the vertiport."""
-
-    name = "backend"
-
-    @abstractmethod
-    def reset(self, q_max: float, r0: float, eod_v: float, context_current_a: np.ndarray,
-              context_voltage_v: np.ndarray) -> None:
-        """Start an episode with a fresh cell of health (q_max C, r0 ohm) and cut-off eod_v (V).
-
-        The context is the episode's 20 s take-off observation.
-        """
-
-    @abstractmethod
-    def fly_leg(self, current_a: np.ndarray) -> LegOutcome:
-        """Fly one leg with per-cell current ``current_a`` (A, 1 s samples) from the present state."""
-
-    @abstractmethod
-    def recharge(self) -> None:
-        """Full charge (landing at the vertiport in multi-charge missions)."""
-
-
-class PhysicsBattery(BatteryBackend):
-    """Ground truth: the electrochemistry model, leg by leg from the previous leg's final state.
-
-    Same solver and numbers as :func:`uam_studio.battery.simulate` (it calls the solver directly to
-    skip the per-call input checks: the environment's currents are valid by construction).
-    """
-
-    name = "physics"
-
-    def reset(self, q_max, r0, eod_v, context_current_a=None, context_voltage_v=None) -> None:
-        self.q_max, self.r0, self.eod_v = float(q_max), float(r0), float(eod_v)
-        self._q_total = np.array([DEFAULT_CELL.q_total(self.q_max)])
-        self._r0 = np.array([self.r0])
-        self.recharge()
-
-    def recharge(self) -> None:
-        self.state = full_charge(self.q_max)
-
-    def fly_leg(self, current_a: np.ndarray) -> LegOutcome:
-        cur = np.asarray(current_a, dtype=float)[None, :]
-        with np.errstate(all="ignore"):
-            v, seq = integrate_current(cur, self.state, self._q_total, self._r0, DT_S, DEFAULT_CELL)
-        v = v[0]
-        below = ~(v >= self.eod_v)  # NaN counts as below
-        if below.any():
-            v = np.nan_to_num(v[: int(np.argmax(below)) + 1], nan=0.0, posinf=0.0, neginf=0.0)
-            return LegOutcome(v, True, float(v.min()), float(v[-1]))
-        self.state = BatteryState(**{n: seq[n][:, -1].copy() for n in STATE_NAMES})
-        return LegOutcome(v, False, float(v.min()), float(v[-1]))
-
-
-class DynaformerBattery(BatteryBackend):
-    """The paper's setting: the learned model is the battery.
-
-    ``predictor.predict(context_current_a, context_voltage_v, current_a, dt_s=1.0)`` returns the
-    voltage (V) for ``current_a``, the whole profile flown since the last (re)charge; the context is
-    the episode's 20 s take-off observation. Each leg re-predicts the sortie so far plus the new leg;
-    the leg ends in EOD at its first predicted sample below the cut-off (the earlier legs of the
-    sortie were already flown and are not re-judged).
-    """
-
-    name = "dynaformer"
-
-    def __init__(self, predictor: Any) -> None:
-        if not callable(getattr(predictor, "predict", None)):
-            raise InputError("predictor", "expected an object with predict(context_current_a, "
-                                          "context_voltage_v, current_a, dt_s)")
-        self.predictor = predictor
-        self._sortie = np.zeros(0)
-
-    def reset(self, q_max, r0, eod_v, context_current_a=None, context_voltage_v=None) -> None:
-        self.eod_v = float(eod_v)
-        self.context = (np.asarray(context_current_a, dtype=float), np.asarray(context_voltage_v, dtype=float))
-        self.recharge()
-
-    def recharge(self) -> None:
-        self._sortie = np.zeros(0)
-
-    def fly_leg(self, current_a: np.ndarray) -> LegOutcome:
-        profile = np.concatenate([self._sortie, np.asarray(current_a, dtype=float)])
-        pred = np.asarray(self.predictor.predict(*self.context, profile, dt_s=DT_S), dtype=float).reshape(-1)
-        v = np.nan_to_num(pred[self._sortie.size: profile.size], nan=0.0, posinf=0.0, neginf=0.0)
-        below = v < self.eod_v
-        if below.any():
-            v = v[: int(np.argmax(below)) + 1]
-            return LegOutcome(v, True, float(v.min()), float(v[-1]))
-        self._sortie = profile
-        return LegOutcome(v, False, float(v.min()), float(v[-1]))
-
-
 # ----------------------------------------------------------------------------- environment
 
 
@@ -268,7 +97,7 @@ class UAMPlanningEnv(gym.Env):
 
     ``Discrete(36)``: ``a = target * 4 + altitude_index``; ``target`` 0-7 is a destination slot
     (``mission.destinations[target]``), 8 the vertiport; the altitude is
-    ``ALTITUDES_M[altitude_index]`` = 500, 1000, 2000, 3000 m (:mod:`uam_studio.planning.actions`).
+    ``ALTITUDES_M[altitude_index]`` = 500, 1000, 2000, 3000 m (:mod:`uam_studio.planning.legs`).
     An invalid action (see the mask) ends the episode with reward ``-gamma`` and
     ``info["invalid_action"] = True``; a masked agent never takes one.
 
@@ -316,7 +145,7 @@ class UAMPlanningEnv(gym.Env):
 
     At the vertiport, fully charged. The episode's mission is ``mission`` (optionally with a random
     cell and winds, ``randomize_battery``/``randomize_wind``), ``options["mission"]`` of
-    :meth:`reset`, or a fresh :func:`uam_studio.planning.generate.random_mission` (1-8 destinations
+    :meth:`reset`, or a fresh :func:`uam_studio.planning.missions.generate.random_mission` (1-8 destinations
     8-60 km out, priorities 1-3, winds U[-39, 39] kt, q_max U[5000, 8000] C, r0 U[0.017, 0.35] ohm).
     The health features come from the first 20 s of a take-off at 500 m simulated with the physics
     model for the episode's cell; ``health_fn`` is called once per episode.
@@ -350,7 +179,7 @@ class UAMPlanningEnv(gym.Env):
         each episode.
     :param randomize_wind: with a fixed mission, draw every node's wind from U[-39, 39] kt each episode.
     :param r0_range, q_range, radius_km: ranges for random cells and missions
-        (:mod:`uam_studio.planning.generate` explains the 0.35 ohm default).
+        (:mod:`uam_studio.planning.missions.generate` explains the 0.35 ohm default).
     :param max_steps: truncation length.
     :param safe_return: off (default) is the paper's setting. On, a destination leg after which
         the battery (this env's backend) could not fly home at the least-charge level, a leg that
@@ -375,9 +204,9 @@ class UAMPlanningEnv(gym.Env):
         backend: str | BatteryBackend = "physics",
         predictor: Any = None,
         health_fn: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
-        alpha: float = 1.0,
-        beta: float = 1.0,
-        gamma: float = 5.0,
+        alpha: float = REWARD_DEFAULTS["alpha"],
+        beta: float = REWARD_DEFAULTS["beta"],
+        gamma: float = REWARD_DEFAULTS["gamma"],
         randomize_battery: bool = False,
         randomize_wind: bool = False,
         r0_range=DEFAULT_R0_RANGE,
@@ -675,7 +504,7 @@ class UAMPlanningEnv(gym.Env):
         level (nothing more for an action that lands at the vertiport, or in single flight, which
         ends at the destination). It is flown on a copy of the
         backend (physics or Dynaformer: what this env believes), so the episode is not changed. A
-        planner uses it as a safety filter (:func:`uam_studio.planning.policy.rollout_agent`).
+        planner uses it as a safety filter (:func:`uam_studio.planning.agents.rollout.rollout_agent`).
         """
         a = int(action)
         if self._done or not (0 <= a < N_ACTIONS and self._mask[a]):
@@ -697,7 +526,7 @@ class UAMPlanningEnv(gym.Env):
 
     def greedy_action(self) -> int | None:
         """The greedy baseline's next action in this episode (the rule of
-        :func:`uam_studio.planning.greedy.greedy_plan`, on this env's battery): the unvisited
+        :func:`uam_studio.planning.solvers.greedy.greedy_plan`, on this env's battery): the unvisited
         destination with the best priority / distance from here whose leg, at its least-charge
         level, and the way home are safe (:meth:`lookahead_safe`); else the vertiport at its
         least-charge level; None when there is nothing left to do (at the vertiport, nothing fits)."""
@@ -705,7 +534,7 @@ class UAMPlanningEnv(gym.Env):
             return None
         legs, node = self._legs, self._node
         todo = [int(k) for k in np.flatnonzero(self._servable_slots & ~self._visited)]
-        for k in sorted(todo, key=lambda k: -legs.priority[k] / max(legs.dist[node, k], 1e-9)):
+        for k in legs.greedy_order(node, todo):
             level = legs.cheapest_level(node, k)
             if level is not None and self.lookahead_safe(k * N_ALTITUDES + level):
                 return k * N_ALTITUDES + level
@@ -733,7 +562,7 @@ class UAMPlanningEnv(gym.Env):
 
     def episode_plan(self, policy: str = "dqn") -> Plan:
         """The episode so far as a :class:`Plan` (as this env's backend saw it; check it with
-        :func:`uam_studio.planning.check.check_plan` for the physics verdict)."""
+        :func:`uam_studio.planning.missions.check.check_plan` for the physics verdict)."""
         msgs = []
         if self._eod:
             msgs.append(f"end of discharge on leg {len(self._route)} to {self._route[-1]} "
@@ -768,6 +597,7 @@ def make_env(**kwargs: Any) -> Callable[[], UAMPlanningEnv]:
 
 
 __all__ = [
+    "REWARD_DEFAULTS",
     "CONTEXT_S",
     "FEATURE_NAMES",
     "MAX_EPISODE_STEPS",

@@ -25,8 +25,9 @@ import numpy as np
 from uam_studio.battery import simulate
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_feasible, leg_profile
-from uam_studio.planning.actions import ALTITUDES_M
-from uam_studio.planning.mission import Mission
+from uam_studio.planning.env.environment import REWARD_DEFAULTS
+from uam_studio.planning.legs import ALTITUDES_M
+from uam_studio.planning.missions.mission import Mission
 
 __all__ = [
     "altitude_by_distance",
@@ -101,8 +102,8 @@ def fixed_altitude_reach(
     :return: one row per mission: ``mission``, and per altitude ``reached``/``priority``/``cycles``
         (dicts keyed by altitude in m)
     """
-    from uam_studio.planning.check import check_plan
-    from uam_studio.planning.oracle import oracle_plan
+    from uam_studio.planning.missions.check import check_plan
+    from uam_studio.planning.solvers.oracle import oracle_plan
 
     idx = []
     for a in altitudes_m:
@@ -151,11 +152,11 @@ def reward_sweep(
         ``cycles_per_destination``, ``mean_margin_v`` (min voltage - cut-off over safe plans),
         ``train_eod_rate`` (share of the last 20% of training episodes that ended at EOD), ``episodes``
     """
+    from uam_studio.planning.agents.rollout import rollout_agent
+    from uam_studio.planning.agents.training import DQNTrainConfig, train_dqn
     from uam_studio.planning.env import make_env
-    from uam_studio.planning.generate import held_out_missions
-    from uam_studio.planning.policy import rollout_agent
-    from uam_studio.planning.route import simulate_route
-    from uam_studio.planning.training import DQNTrainConfig, train_dqn
+    from uam_studio.planning.missions.generate import held_out_missions
+    from uam_studio.planning.missions.route import simulate_route
 
     if name not in ("alpha", "beta", "gamma"):
         raise InputError("name", f"{name!r} is not a reward weight; allowed: alpha, beta, gamma")
@@ -163,7 +164,7 @@ def reward_sweep(
         n_eval, eval_seed, scenario=scenario)
     rows = []
     for v in values:
-        w = {"alpha": 1.0, "beta": 1.0, "gamma": 5.0, **weights, name: float(v)}
+        w = {**REWARD_DEFAULTS, **weights, name: float(v)}
         cfg = DQNTrainConfig(scenario=scenario, steps=steps, seed=seed, **w)
         episodes: list[Any] = []
 

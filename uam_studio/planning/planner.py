@@ -1,0 +1,226 @@
+"""One entry point for planning a mission with any policy: :func:`plan_mission`.
+
+The CLI (``uam-studio plan``) and the Panel app call only this function. It
+
+1. runs the chosen planner: ``"oracle"`` (exact, :func:`~uam_studio.planning.solvers.oracle.oracle_plan`),
+   ``"greedy"`` (baseline, :func:`~uam_studio.planning.solvers.greedy.greedy_plan`) or ``"dqn"`` (a trained
+   masked DQN agent rolled out greedily in a :class:`~uam_studio.planning.env.UAMPlanningEnv` built
+   on this mission with the physics battery);
+2. re-checks the route with the physics model (:func:`~uam_studio.planning.missions.check.check_plan`):
+   ``reached``, ``charging_cycles``, ``safe`` and ``min_voltage_v`` always come from this check,
+   whoever planned the route;
+3. predicts the route's voltage with the Dynaformer, sortie by sortie (context: the first 20 s of
+   the take-off as the physics model flies it for this cell; profile: the route's current since the
+   last recharge), and concatenates the sorties.
+
+The result is a plain-JSON dict (see :func:`plan_mission`). Hard missions (no destinations, more
+than 8, unreachable destinations, a cell that cannot finish the take-off) and a missing Dynaformer
+give messages, never exceptions; bad input (an invalid mission, an unknown policy, out-of-range
+``q_max``/``r0``, an explicit ``agent_path`` that cannot be loaded) and a missing bundled agent
+(``dqn`` without ``agent_path``, :func:`~uam_studio.planning.agents.rollout.bundled_agent_path`) raise :class:`~uam_studio.errors.InputError`.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+
+from uam_studio.bundled import require_bundled
+from uam_studio.errors import InputError
+from uam_studio.planning.agents.rollout import dqn_route
+from uam_studio.planning.env import CONTEXT_S, observe_takeoff
+from uam_studio.planning.missions.check import PlanCheck, check_plan
+from uam_studio.planning.missions.mission import (
+    SCENARIOS,
+    VERTIPORT,
+    Mission,
+    load_mission,
+    mission_from_dict,
+)
+from uam_studio.planning.solvers.greedy import greedy_plan
+from uam_studio.planning.solvers.oracle import oracle_plan
+
+POLICIES = ("dqn", "oracle", "greedy")
+MAX_POINTS = 2000  # samples per series in the result (JSON size)
+DECIMALS = 4
+
+__all__ = ["MAX_POINTS", "POLICIES", "plan_mission"]
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def _as_mission(mission: Any) -> Mission:
+    if isinstance(mission, Mission):
+        return mission
+    if isinstance(mission, (str, os.PathLike)):
+        return load_mission(mission)
+    return mission_from_dict(mission)
+
+
+def _round_list(a: np.ndarray) -> list[float]:
+    a = np.nan_to_num(np.asarray(a, dtype=float), nan=0.0, posinf=0.0, neginf=0.0)
+    return [float(x) for x in np.round(a, DECIMALS)]
+
+
+def _round_opt(x: float | None) -> float | None:
+    return None if x is None else round(float(x), DECIMALS)
+
+
+def _sample_index(n: int, keep: list[int]) -> np.ndarray:
+    """At most ``MAX_POINTS`` indices of ``n`` samples, evenly spread, always with the first, last and ``keep``."""
+    if n <= MAX_POINTS:
+        return np.arange(n)
+    base = np.linspace(0, n - 1, MAX_POINTS - len(keep)).round().astype(int)
+    return np.unique(np.concatenate([base, np.asarray(keep, dtype=int)]))
+
+
+def _dedupe(messages: list[str]) -> list[str]:
+    out: list[str] = []
+    for m in messages:
+        if m and m not in out:
+            out.append(m)
+    return out
+
+
+# ----------------------------------------------------------------------------- Dynaformer prediction
+
+
+def _load_predictor(predictor: Any, messages: list[str]) -> Any:
+    if predictor is False:
+        return None
+    if predictor is not None:
+        return predictor
+    try:
+        from uam_studio.dynaformer import WeightsError, load_pretrained
+    except ImportError as err:  # torch missing
+        messages.append(f"Dynaformer unavailable ({err}); showing the physics model only")
+        return None
+    try:
+        return load_pretrained()
+    except WeightsError as err:
+        messages.append(f"no Dynaformer weights ({err}); showing the physics model only")
+        return None
+
+
+def _predict(check: PlanCheck, predictor: Any, messages: list[str]) -> np.ndarray | None:
+    """Dynaformer voltage on the physics route's time grid, sortie by sortie, or None."""
+    sim = check.sim
+    assert sim is not None
+    ci, cv = observe_takeoff(sim.q_max, sim.r0)
+    ci, cv = ci[:CONTEXT_S], cv[:CONTEXT_S]
+    cuts = [0]
+    for leg in sim.legs:
+        if leg.reached and leg.to == VERTIPORT and leg.end_s is not None:
+            cuts.append(int(round(leg.end_s / sim.dt_s)))
+    n = sim.current_a.size
+    cuts = sorted({c for c in cuts if c < n} | {n})
+    parts = []
+    try:
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            v = np.asarray(predictor.predict(ci, cv, sim.current_a[a:b], dt_s=sim.dt_s), dtype=float)
+            parts.append(v.reshape(-1)[: b - a])
+    except (InputError, ValueError, RuntimeError) as err:
+        messages.append(f"Dynaformer prediction failed ({' '.join(str(err).split())}); "
+                        "showing the physics model only")
+        return None
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
+# ----------------------------------------------------------------------------- entry point
+
+
+def plan_mission(
+    mission: Mission | dict | str | os.PathLike[str],
+    policy: str = "dqn",
+    q_max: float | None = None,
+    r0: float | None = None,
+    agent_path: str | os.PathLike[str] | None = None,
+    predictor: Any = None,
+    lookahead: int = 0,
+) -> dict[str, Any]:
+    """Plan ``mission`` with ``policy``, check it with the physics model, predict it with the Dynaformer.
+
+    :param mission: a :class:`Mission`, a dict in the mission JSON format, or a path to a mission file.
+    :param policy: ``"dqn"``, ``"oracle"`` or ``"greedy"``.
+    :param q_max: override the mission's q_max (C).
+    :param r0: override the mission's r0 (ohm).
+    :param agent_path: the DQN agent (default: the bundled ``dqn_<scenario>.zip``, :func:`~uam_studio.planning.agents.rollout.bundled_agent_path`;
+        its absence raises InputError).
+    :param predictor: a Dynaformer predictor (``predict(context_current_a, context_voltage_v, current_a,
+        dt_s)``), None for the bundled one (its absence is a message), or False to skip the prediction.
+    :param lookahead: dqn only: policy rollout over the agent's K best safe actions (and the greedy
+        rule's action) per step, continued by the filtered agent and by the greedy rule
+        (:func:`~uam_studio.planning.agents.rollout.rollout_agent`); 0 (default) for the filtered agent alone; 0-8.
+    :return: plain-JSON dict with exactly the keys ``policy``, ``route`` (node names, ``"vertiport"``
+        = recharge), ``altitudes_m``, ``charging_cycles``, ``reached`` (names), ``reached_priority``,
+        ``predicted`` (``{"time_s", "voltage_v"}`` or None), ``physics`` (``{"time_s", "voltage_v",
+        "eod_s"}``), ``safe``, ``min_voltage_v`` (None for an empty route) and ``messages``. Series
+        are rounded to 4 decimals and thinned to at most :data:`MAX_POINTS` samples (the lowest
+        physics and predicted voltages are always kept).
+    :raises InputError: bad input or a missing bundled agent (see the module docstring); never for a
+        hard mission.
+    """
+    if policy not in POLICIES:
+        raise InputError("policy", f"{policy!r} is not a policy; allowed: {', '.join(POLICIES)}")
+    if isinstance(lookahead, bool) or not isinstance(lookahead, (int, np.integer)) or not 0 <= lookahead <= 8:
+        raise InputError("lookahead", f"{lookahead!r} is out of range; allowed integers in [0, 8]")
+    m = _as_mission(mission)
+    if q_max is not None or r0 is not None:
+        m = m.with_battery(q_max, r0)
+    if m.scenario not in SCENARIOS:  # pragma: no cover - Mission validates it
+        raise InputError("scenario", f"{m.scenario!r} is not a scenario")
+    if policy == "dqn" and agent_path is None:  # an install without the agent: an error, not an empty plan
+        require_bundled(f"dqn_{m.scenario}.zip", "agent", "agent",
+                        "plan with the oracle or greedy policy, or give an agent file")
+    messages: list[str] = []
+
+    pred_model = _load_predictor(predictor, messages)
+    if policy == "oracle":
+        plan = oracle_plan(m)
+        route, alts = list(plan.route), list(plan.altitudes_m)
+        messages.extend(plan.messages)
+    elif policy == "greedy":
+        plan = greedy_plan(m)
+        route, alts = list(plan.route), list(plan.altitudes_m)
+        messages.extend(plan.messages)
+    else:
+        route, alts = dqn_route(m, agent_path, pred_model, messages, int(lookahead))
+
+    check = check_plan(m, route, alts)
+    reached = list(check.sim.reached) if check.sim is not None else []
+    if not check.safe:
+        messages.append(check.message)
+    prio = {d.name: d.priority for d in m.destinations}
+
+    physics: dict[str, Any] = {"time_s": [], "voltage_v": [], "eod_s": None}
+    predicted: dict[str, Any] | None = None
+    if check.sim is not None:
+        sim = check.sim
+        v_pred = _predict(check, pred_model, messages) if pred_model is not None else None
+        if v_pred is not None and v_pred.size != sim.voltage_v.size:
+            messages.append(f"Dynaformer returned {v_pred.size} samples for {sim.voltage_v.size}; "
+                            "showing the physics model only")
+            v_pred = None
+        keep = [int(np.argmin(sim.voltage_v))] + ([int(np.argmin(v_pred))] if v_pred is not None else [])
+        idx = _sample_index(sim.time_s.size, keep)
+        t = _round_list(sim.time_s[idx])
+        physics = {"time_s": t, "voltage_v": _round_list(sim.voltage_v[idx]), "eod_s": _round_opt(sim.eod_s)}
+        if v_pred is not None:
+            predicted = {"time_s": list(t), "voltage_v": _round_list(v_pred[idx])}
+
+    return {
+        "policy": policy,
+        "route": [str(r) for r in route],
+        "altitudes_m": [float(a) for a in alts],
+        "charging_cycles": int(check.sim.charging_cycles) if check.sim is not None else 0,
+        "reached": reached,
+        "reached_priority": int(sum(prio[n] for n in reached)),
+        "predicted": predicted,
+        "physics": physics,
+        "safe": bool(check.safe),
+        "min_voltage_v": _round_opt(check.min_voltage_v),
+        "messages": _dedupe(messages),
+    }

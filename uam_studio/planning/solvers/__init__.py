@@ -1,0 +1,9 @@
+"""Search-based planners over the discrete action space: the exact oracle (:mod:`.oracle`), the greedy
+baseline (:mod:`.greedy`) and what they share (:mod:`.setup`: the batched leg flight and the
+planners' preamble).
+"""
+
+from uam_studio.planning.solvers.greedy import greedy_plan
+from uam_studio.planning.solvers.oracle import oracle_plan
+
+__all__ = ["greedy_plan", "oracle_plan"]

@@ -1,0 +1,160 @@
+"""What the solvers share: the batched flight of many legs (:func:`fly_batch`, also used by
+:mod:`~uam_studio.planning.operations`) and the planners' preamble (:func:`prepare_mission` ->
+:class:`PlanSetup`: validate, pick the scenario, cap at N_MAX destinations, stop early if the cell
+cannot finish the take-off).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from uam_studio.battery import DEFAULT_CELL, BatteryState, simulate
+from uam_studio.battery.solver import integrate_current
+from uam_studio.errors import InputError
+from uam_studio.planning.legs import DT_S, MIN_LEG_KM, N_MAX, VERTIPORT_SLOT, LegTable, takeoff_current
+from uam_studio.planning.missions.check import Plan
+from uam_studio.planning.missions.mission import SCENARIOS, Mission, mission_from_dict
+
+_ROW_BATCH = 512  # trajectories integrated together (small blocks stay in cache: faster)
+_CHUNK_S = 128  # samples per integration pass
+
+
+def fly_batch(
+    currents: Sequence[np.ndarray], x0: np.ndarray, q_max: float, r0: float, eod_v: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Fly many legs of different lengths from many states in batched integrations.
+
+    :param currents: B per-cell currents (A, 1 s samples), any lengths.
+    :param x0: start states, shape [B, 8] (order of ``STATE_NAMES``).
+    :return: ``(ok [B], x_end [B, 8], v_min [B])``: no sample below ``eod_v``; state after the
+        last sample (the start state where not ok); lowest voltage (V), the failing sample
+        included. Same numbers as :func:`uam_studio.battery.simulate` leg by leg (same solver).
+    """
+    b = len(currents)
+    x_end = np.array(x0, dtype=float, copy=True).reshape(b, -1)
+    ok = np.ones(b, dtype=bool)
+    v_min = np.full(b, np.inf)
+    if b == 0:
+        return ok, x_end, v_min
+    lengths = np.fromiter((c.size for c in currents), dtype=np.int64, count=b)
+    order = np.argsort(lengths, kind="stable")
+    q_total = float(DEFAULT_CELL.q_total(q_max))
+    for s in range(0, b, _ROW_BATCH):
+        rows = order[s:s + _ROW_BATCH]
+        n_rows = rows.size
+        lens = lengths[rows]
+        cur = np.zeros((n_rows, int(lens.max())))
+        for k, r in enumerate(rows):
+            cur[k, : lens[k]] = currents[r]
+        state = x_end[rows]
+        alive = np.arange(n_rows)
+        with np.errstate(all="ignore"):
+            for start in range(0, cur.shape[1], _CHUNK_S):
+                alive = alive[lens[alive] > start]
+                if alive.size == 0:
+                    break
+                stop = min(cur.shape[1], start + _CHUNK_S)
+                width = stop - start
+                v, seq = integrate_current(
+                    cur[alive, start:stop], BatteryState.from_array(state[alive]),
+                    np.full(alive.size, q_total), np.full(alive.size, float(r0)), DT_S, DEFAULT_CELL)
+                n_real = np.minimum(lens[alive] - start, width)
+                real = np.arange(width)[None, :] < n_real[:, None]
+                below = ~(v >= eod_v) & real  # NaN counts as below
+                hit = below.any(axis=1)
+                v_min[rows[alive]] = np.minimum(v_min[rows[alive]], np.where(real, v, np.inf).min(axis=1))
+                last = n_real - 1
+                idx = np.arange(alive.size)
+                picked = np.stack([seq[n][idx, last] for n in ("tb", "vo", "vsn", "vsp", "qnb", "qns", "qpb",
+                                                                 "qps")], axis=-1)
+                keep = ~hit
+                state[alive[keep]] = picked[keep]
+                ok[rows[alive[hit]]] = False
+                alive = alive[keep]
+        x_end[rows] = np.where(ok[rows, None], state, x_end[rows])
+    v_min = np.nan_to_num(v_min, nan=0.0)
+    return ok, x_end, v_min
+
+
+# ----------------------------------------------------------------------------- planner preamble
+
+
+def _as_mission(mission: Any) -> tuple[Mission | None, list[str]]:
+    if isinstance(mission, Mission):
+        return mission, []
+    try:
+        return mission_from_dict(mission), []
+    except InputError as err:
+        return None, [f"invalid mission: {err}"]
+
+
+def takeoff_failure(q_max: float, r0: float, eod_v: float) -> str | None:
+    """A message if a fresh cell cannot finish the take-off and climb to 500 m (the least demanding
+    start of any leg) above the cut-off, else None."""
+    legs_start = takeoff_current()
+    res = simulate(legs_start, DT_S, q_max, r0, eod_v)
+    if not res.eod_reached:
+        return None
+    return (f"the battery cannot finish takeoff: the voltage falls below {eod_v:.2f} V after "
+            f"{res.eod_s:.0f} s of the {legs_start.size} s take-off and climb to 500 m "
+            f"(q_max {q_max:.0f} C, r0 {r0:.3f} ohm)")
+
+
+def too_close(legs: LegTable, k: int) -> str | None:
+    d = legs.dist[VERTIPORT_SLOT, k]
+    if d < MIN_LEG_KM[0]:
+        return (f"cannot reach {legs.names[k]} at any altitude: it is {d:.1f} km from the vertiport and "
+                f"the shortest leg is {MIN_LEG_KM[0]:.1f} km")
+    if not legs.feasible[VERTIPORT_SLOT, k].any():
+        return f"cannot reach {legs.names[k]} at any altitude: it is {d:.0f} km from the vertiport"
+    return None
+
+
+@dataclass
+class PlanSetup:
+    """What the planners share before searching: the mission capped at N_MAX destinations,
+    the user's full mission (plans are checked against it), scenario, messages, stats and the
+    leg table; ``early`` is a finished :class:`Plan` when there is nothing to plan."""
+
+    mission: Mission | None
+    full_mission: Mission | None
+    scenario: str | None
+    messages: list[str]
+    stats: dict[str, Any]
+    legs: LegTable | None = None
+    early: Plan | None = None
+
+
+def prepare_mission(mission: Any, scenario: str | None, policy: str) -> PlanSetup:
+    """The planners' shared preamble: validate the mission, pick the scenario, keep at most
+    N_MAX destinations, build the leg table and stop early if the battery cannot finish takeoff."""
+    mission, msgs = _as_mission(mission)
+    if mission is None:
+        return PlanSetup(None, None, scenario, msgs, {}, early=Plan(policy, messages=msgs))
+    scenario = scenario or mission.scenario
+    if scenario not in SCENARIOS:
+        msg = f"scenario: {scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}"
+        return PlanSetup(mission, mission, scenario, msgs, {}, early=Plan(policy, messages=[msg]))
+    stats: dict[str, Any] = {"scenario": scenario}
+    dests = mission.destinations
+    if not dests:
+        return PlanSetup(mission, mission, scenario, msgs, stats,
+                         early=Plan(policy, messages=["the mission has no destinations"], stats=stats))
+    full_mission = mission
+    if len(dests) > N_MAX:
+        extra = ", ".join(d.name for d in dests[N_MAX:])
+        msgs.append(f"the planner handles at most {N_MAX} destinations; not planned: {extra}")
+        mission = Mission(mission.name, mission.vertiport, dests[:N_MAX], mission.scenario, mission.battery,
+                          mission.eod_v)
+    setup = PlanSetup(mission, full_mission, scenario, msgs, stats, legs=LegTable(mission))
+    fail = takeoff_failure(mission.battery.q_max, mission.battery.r0, mission.eod_v)
+    if fail is not None:
+        setup.early = Plan(policy, messages=msgs + [fail], stats=stats)
+    return setup
+
+
+__all__ = ["PlanSetup", "fly_batch", "prepare_mission", "takeoff_failure", "too_close"]
