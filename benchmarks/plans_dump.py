@@ -1,0 +1,28 @@
+"""Dump the routes and altitudes the planners give on the gap benchmark's held-out missions, to check
+that a refactor leaves plans unchanged: run it on two checkouts and compare the JSON files.
+
+    python benchmarks/plans_dump.py OUT.json [N] [N_ORACLE]     # defaults 200 and 20
+
+Works on this layout (``uam_studio.planning.planner``) and on the flat one before it (``policy``).
+"""
+import json
+import sys
+
+try:
+    from uam_studio.planning.planner import plan_mission
+except ImportError:
+    from uam_studio.planning.policy import plan_mission
+from uam_studio.planning import held_out_missions
+
+out = {}
+n = int(sys.argv[2]) if len(sys.argv) > 2 else 200
+n_oracle = int(sys.argv[3]) if len(sys.argv) > 3 else 20
+for scenario in ("single_charge", "multi_charge"):
+    ms = held_out_missions(n, 20261121, scenario=scenario)
+    for pol in ("dqn", "greedy"):
+        out[f"{scenario}/{pol}"] = [(r["route"], r["altitudes_m"]) for r in
+                                    (plan_mission(m, pol, predictor=False) for m in ms)]
+    out[f"{scenario}/oracle"] = [(r["route"], r["altitudes_m"]) for r in
+                                 (plan_mission(m, "oracle", predictor=False) for m in ms[:n_oracle])]
+json.dump(out, open(sys.argv[1], "w"))
+print({k: len(v) for k, v in out.items()})
