@@ -63,28 +63,6 @@ JS_SUMMARY_R0_ABOVE = """(lo) => {
 }"""
 
 
-@pytest.fixture(scope="module")
-def app_url(tmp_path_factory):
-    """Serve the app in a subprocess (the way users start it) and yield its URL."""
-    from uam_studio.app.serve import ServedApp
-
-    home = tmp_path_factory.mktemp("uam_home")
-    try:
-        with ServedApp(home, timeout_s=180) as srv:
-            yield srv.url
-    except RuntimeError as err:
-        pytest.fail(str(err))
-    # Tracebacks other than a page closing with messages in flight are app errors.
-    blocks = (home / "serve.log").read_text().split("Traceback (most recent call last):")[1:]
-    errors = [b for b in blocks if "WebSocketClosedError" not in b and "StreamClosedError" not in b]
-    assert not errors, errors[0][-3000:]
-
-
-@pytest.fixture(scope="session")
-def browser_type_launch_args(browser_type_launch_args):
-    return {**browser_type_launch_args, "executable_path": CHROMIUM, "args": ["--no-sandbox"]}
-
-
 @pytest.fixture(scope="session")
 def browser_context_args(browser_context_args):
     return {**browser_context_args, "viewport": {"width": 1500, "height": 1100}}

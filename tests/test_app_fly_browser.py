@@ -1,6 +1,6 @@
 """Browser test of the Fly tab (pytest-playwright, Debian's chromium): fly, play back, inject a wind change.
 
-Its own ``uam-studio serve`` subprocess; the screenshot goes to ``assets/screenshots/fly_tab.png``
+Its own ``uam-studio serve`` subprocess (``app_url`` in tests/conftest.py); the screenshot goes to ``assets/screenshots/fly_tab.png``
 when ``UAM_SCREENSHOTS=1``.
 """
 
@@ -22,30 +22,13 @@ TIMEOUT_MS = 120_000
 pytestmark = pytest.mark.skipif(not Path(CHROMIUM).exists(), reason="chromium is not installed")
 
 
-@pytest.fixture(scope="module")
-def served(tmp_path_factory):
-    from uam_studio.app.serve import ServedApp
-
-    home = tmp_path_factory.mktemp("uam_fly_home")
-    with ServedApp(home, timeout_s=180) as srv:
-        yield srv
-    blocks = (home / "serve.log").read_text().split("Traceback (most recent call last):")[1:]
-    errors = [b for b in blocks if "WebSocketClosedError" not in b and "StreamClosedError" not in b]
-    assert not errors, errors[0][-3000:]
-
-
-@pytest.fixture(scope="session")
-def browser_type_launch_args(browser_type_launch_args):
-    return {**browser_type_launch_args, "executable_path": CHROMIUM, "args": ["--no-sandbox"]}
-
-
-def test_fly_tab_flies_plays_and_takes_a_wind_change(browser, served):
+def test_fly_tab_flies_plays_and_takes_a_wind_change(browser, app_url):
     page = browser.new_page(viewport={"width": 1366, "height": 768})
     outside = []
     page.on("request", lambda r: outside.append(r.url) if not r.url.startswith(
         ("http://127.0.0.1", "http://localhost", "ws://127.0.0.1", "ws://localhost", "data:", "blob:"))
         else None)
-    page.goto(served.url, timeout=TIMEOUT_MS)
+    page.goto(app_url, timeout=TIMEOUT_MS)
     page.locator(".bk-tab", has_text="Fly").click(timeout=TIMEOUT_MS)
     page.locator("button", has_text="Fly the mission").click(timeout=TIMEOUT_MS)
     status = page.locator(".uam-fly-status")

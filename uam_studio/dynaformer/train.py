@@ -7,7 +7,7 @@ With the default take-off health estimator (``DynaformerConfig.health == "takeof
 2. ``steps``: the decoder learns the voltage of whole discharges from that 2-D health
    estimate of each discharge's own noise-free take-off (weighted MSE, 4x near EOD).
 
-With the ``"transformer"`` encoder (the sessions 5-7 model), two stages:
+With the ``"transformer"`` encoder, two stages:
 
 1. ``encoder_steps``: the encoder and health head: the 2-D health embedding regresses
    the cell's R0 normalised to [-1, 1] and q_max normalised to [-0.5, 0.5] (so R0

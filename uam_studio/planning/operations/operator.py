@@ -36,7 +36,15 @@ from uam_studio.battery.fit import Q_REF_C, HealthEstimate, fit_health
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight import leg_profile
 from uam_studio.flight.tables import WIND_RANGE_KTS
-from uam_studio.planning.legs import ALTITUDES_M, DT_S, N_MAX, N_TARGETS, VERTIPORT_SLOT, LegTable
+from uam_studio.planning.legs import (
+    ALTITUDES_M,
+    DT_S,
+    N_MAX,
+    N_TARGETS,
+    VERTIPORT_SLOT,
+    LegTable,
+    check_destination_count,
+)
 from uam_studio.planning.missions.generate import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.planning.missions.mission import SCENARIOS, VERTIPORT, Battery, Mission
 from uam_studio.planning.solvers.oracle import Sortie, feasible_sorties, sortie_cover_table
@@ -211,8 +219,7 @@ class Operator:
         scenario = scenario or mission.scenario
         if scenario not in SCENARIOS:
             raise InputError("scenario", f"{scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}")
-        if not 1 <= len(mission.destinations) <= N_MAX:
-            raise InputError("destinations", f"{len(mission.destinations)} destinations; allowed 1 to {N_MAX}")
+        check_destination_count(len(mission.destinations))
         self.forecast_mission = mission
         self.scenario = scenario
         self.eod_v = mission.eod_v
