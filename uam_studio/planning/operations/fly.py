@@ -28,7 +28,7 @@ import numpy as np
 from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0, simulate
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_profile
-from uam_studio.planning.legs import DT_S, check_destination_count
+from uam_studio.planning.legs import DT_S, check_destination_count, takeoff_current
 from uam_studio.planning.missions.mission import VERTIPORT, Battery, Mission
 from uam_studio.planning.operations.operator import HEALTH_Z, PLAN_WIND_Z, WIND_Z, Decision, Operator
 from uam_studio.planning.operations.world import (
@@ -138,13 +138,6 @@ def _fly_fixed(world: World, route: Sequence[str], alts: Sequence[float], takeof
     return False, reached
 
 
-def _first_takeoff(mission: Mission) -> np.ndarray:
-    """The take-off every first leg starts with (the same vertical take-off at every level)."""
-    m = mission
-    d = min((m.distance_km(VERTIPORT, x.name) for x in m.destinations), default=30.0)
-    return np.asarray(leg_profile(max(d, 10.0), 500.0, 0.0, DT_S).current_a, dtype=float)
-
-
 def fly_mission(mission: Mission, policy: str = "oracle", seed: int = 0,
                 forecast_sigma_kt: float = DEFAULT_FORECAST_SIGMA_KT,
                 sensor_noise_mv: float = DEFAULT_SENSOR_NOISE_MV,
@@ -179,7 +172,7 @@ def fly_mission(mission: Mission, policy: str = "oracle", seed: int = 0,
     rec = FlightRecord(mission.name, scenario, int(seed), world.forecast_sigma_kt, world.sensor_noise_mv,
                        world.sensor_noise_ma, [e.text for e in world.events],
                        true_q_max=mission.battery.q_max, true_r0=mission.battery.r0)
-    takeoff = _first_takeoff(mission)
+    takeoff = np.asarray(takeoff_current(), dtype=float)  # every leg's vertical take-off and first climb
     series_t, series_i, series_v, series_true, series_true_i, series_pred = [], [], [], [], [], []
 
     def take(r, pred: np.ndarray) -> None:
