@@ -26,7 +26,8 @@ from uam_studio.flight.profile import MAX_DISTANCE_KM
 if TYPE_CHECKING:
     from uam_studio.planning.missions.mission import Mission
 
-N_MAX = 8  # destination slots
+N_MAX = 8  # destination slots of the discrete action space (the paper's DQN, the exact oracle)
+MAX_DESTINATIONS = 20  # the most destinations a mission may have (planners not tied to N_MAX)
 ALTITUDES_M = (500.0, 1000.0, 2000.0, 3000.0)  # the paper's cruise levels (m)
 N_ALTITUDES = len(ALTITUDES_M)
 VERTIPORT_SLOT = N_MAX  # target index of the vertiport
@@ -80,41 +81,47 @@ def takeoff_current() -> np.ndarray:
 class LegTable:
     """The legs of one mission over the discrete action space, with cached per-cell currents.
 
-    Node index ``k < N_MAX`` is ``mission.destinations[k]``, ``N_MAX`` the vertiport.
-    ``feasible[i, j, a]`` is True if the leg i -> j exists (both nodes present, i != j) and
+    Node index ``k < slots`` is ``mission.destinations[k]``, ``slots`` (:attr:`home`) the vertiport;
+    ``slots`` defaults to ``N_MAX``, the discrete action space's slots, and may be up to
+    :data:`MAX_DESTINATIONS` for planners that are not tied to it. ``feasible[i, j, a]`` is True if the leg i -> j exists (both nodes present, i != j) and
     its length fits altitude ``ALTITUDES_M[a]`` (:func:`uam_studio.flight.min_leg_distance_km`,
     at most 500 km). :meth:`current` is the leg's per-cell current (A, 1 s samples) exactly as
     :func:`uam_studio.planning.missions.route.simulate_route` flies it: the wind and dwell of the node
     flown to. Profiles are computed on first use and cached.
     """
 
-    def __init__(self, mission: Mission) -> None:
+    def __init__(self, mission: Mission, slots: int = N_MAX) -> None:
         dests = mission.destinations
-        if len(dests) > N_MAX:
-            raise InputError("mission.destinations", f"has {len(dests)} destinations; at most {N_MAX} allowed")
+        if not 1 <= slots <= MAX_DESTINATIONS:
+            raise InputError("slots", f"{slots!r} is out of range; allowed [1, {MAX_DESTINATIONS}]")
+        if len(dests) > slots:
+            raise InputError("mission.destinations", f"has {len(dests)} destinations; at most {slots} allowed")
         self.mission = mission
+        self.slots = int(slots)
+        self.home = self.slots  # node index of the vertiport
+        n_nodes = self.slots + 1
         self.n = len(dests)
         self.names = tuple(d.name for d in dests) + ("vertiport",)
         nodes = [*dests, mission.vertiport]
-        idx = list(range(self.n)) + [N_MAX]
+        idx = list(range(self.n)) + [self.home]
         self.index = idx  # node index of nodes[k]
-        self.present = np.zeros(N_TARGETS, dtype=bool)
+        self.present = np.zeros(n_nodes, dtype=bool)
         self.present[idx] = True
-        self.pos = np.zeros((N_TARGETS, 2))
-        self.wind = np.zeros(N_TARGETS)
-        self.dwell = np.zeros(N_TARGETS)
-        self.priority = np.zeros(N_TARGETS, dtype=int)
+        self.pos = np.zeros((n_nodes, 2))
+        self.wind = np.zeros(n_nodes)
+        self.dwell = np.zeros(n_nodes)
+        self.priority = np.zeros(n_nodes, dtype=int)
         for k, node in zip(idx, nodes):
             self.pos[k] = (node.x_km, node.y_km)
             self.wind[k] = node.wind_kts
             self.dwell[k] = getattr(node, "dwell_s", 0.0)
             self.priority[k] = getattr(node, "priority", 0)
-        self.dist = np.zeros((N_TARGETS, N_TARGETS))
+        self.dist = np.zeros((n_nodes, n_nodes))
         for i in idx:
             for j in idx:
                 # math.hypot, as Mission.distance_km, so feasibility matches simulate_route exactly
                 self.dist[i, j] = math.hypot(self.pos[i, 0] - self.pos[j, 0], self.pos[i, 1] - self.pos[j, 1])
-        ok = self.present[:, None] & self.present[None, :] & ~np.eye(N_TARGETS, dtype=bool)
+        ok = self.present[:, None] & self.present[None, :] & ~np.eye(n_nodes, dtype=bool)
         ok &= self.dist <= MAX_DISTANCE_KM
         self.feasible = ok[:, :, None] & (self.dist[:, :, None] >= np.asarray(MIN_LEG_KM)[None, None, :])
         self._cache: dict[tuple[int, int, int], np.ndarray] = {}
@@ -166,5 +173,5 @@ class LegTable:
         return sorted(slots, key=lambda k: -self.priority[k] / max(self.dist[node, k], 1e-9))
 
     def name(self, k: int) -> str:
-        """Node name of index ``k`` (``"vertiport"`` for N_MAX)."""
-        return self.names[-1] if k == N_MAX else self.names[k]
+        """Node name of index ``k`` (``"vertiport"`` for :attr:`home`)."""
+        return self.names[-1] if k == self.home else self.names[k]
