@@ -102,10 +102,11 @@ def test_zero_and_too_many_destinations_are_refused():
     mission = s.mission
     assert not s.set_destinations([])
     assert "at least 1 destination" in s.error and s.mission == mission
-    rows = [{"name": f"P{k}", "x_km": 10.0 + 8 * k, "y_km": 30.0, "priority": 1, "wind_kts": 0} for k in range(9)]
+    rows = [{"name": f"P{k}", "x_km": -150.0 + 8 * k, "y_km": 30.0, "priority": 1, "wind_kts": 0}
+            for k in range(21)]
     assert not s.set_destinations(rows)
-    assert "at most 8" in s.error and s.mission == mission
-    assert s.set_destinations(rows[:8]) and len(s.destinations) == 8
+    assert s.error == "destinations: 21 destinations; allowed 1 to 20" and s.mission == mission
+    assert s.set_destinations(rows[:20]) and len(s.destinations) == 20 and s.error == ""
 
 
 def test_new_map_point_gets_a_name_and_priority():
@@ -182,10 +183,13 @@ def test_invalid_file_is_a_message_and_keeps_the_mission(content, expect):
 
 def test_too_many_destinations_in_a_file():
     d = dict(EXAMPLE_MISSION)
-    d["destinations"] = [{"name": f"P{k}", "x_km": 10.0 + 8 * k, "y_km": 30.0, "priority": 1, "wind_kts": 0}
-                         for k in range(9)]
+    d["destinations"] = [{"name": f"P{k}", "x_km": -150.0 + 8 * k, "y_km": 30.0, "priority": 1, "wind_kts": 0}
+                         for k in range(21)]
     s = _state()
-    assert not s.load_json(json.dumps(d), "nine.json") and "at most 8" in s.error
+    assert not s.load_json(json.dumps(d), "many.json")
+    assert s.error == "file many.json: destinations: 21 destinations; allowed 1 to 20"
+    d["destinations"] = d["destinations"][:20]
+    assert s.load_json(json.dumps(d), "twenty.json") and len(s.destinations) == 20
 
 
 def test_reset_example():

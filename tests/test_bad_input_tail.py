@@ -44,10 +44,10 @@ def _hostile_files(tmp: Path) -> dict[str, Path]:
     newline = _example()
     newline["name"] = "Bay\nshuttle"
     files["newline_in_name"] = json.dumps(newline)
-    nine = _example()
-    nine["destinations"] = [{"name": f"P{k}", "x_km": 10.0 + 8 * k, "y_km": 30.0, "priority": 1, "wind_kts": 0}
-                            for k in range(9)]
-    files["nine_destinations"] = json.dumps(nine)
+    many = _example()  # one more than the 20 a mission may have
+    many["destinations"] = [{"name": f"P{k}", "x_km": 10.0 + 8 * k, "y_km": 30.0, "priority": 1, "wind_kts": 0}
+                            for k in range(21)]
+    files["many_destinations"] = json.dumps(many)
     out = {}
     for name, body in files.items():
         p = tmp / f"{name}.json"
@@ -60,7 +60,7 @@ def _hostile_files(tmp: Path) -> dict[str, Path]:
 def _cases(tmp: Path) -> dict[str, tuple[list[str], str]]:
     files = _hostile_files(tmp)
     plan = {name: (["plan", str(p), "--policy", "greedy"], "file" if name.startswith(("int", "nested"))
-                   else "destinations" if name.startswith("nine") else "")
+                   else "destinations" if name.startswith("many") else "")
             for name, p in files.items()}
     plan["int_401_digits"] = (plan["int_401_digits"][0], "battery.q_max")
     plan["escape_in_name"] = (plan["escape_in_name"][0], "destinations[0].name")
@@ -107,7 +107,7 @@ def runs(tmp_path_factory):
 
 @pytest.mark.parametrize("name", [
     "plan_int_401_digits", "plan_int_5000_digits", "plan_nested_100000", "plan_escape_in_name",
-    "plan_newline_in_name", "plan_nine_destinations", "simulate_int_401", "train_dqn_out_file",
+    "plan_newline_in_name", "plan_many_destinations", "simulate_int_401", "train_dqn_out_file",
     "train_dqn_out_under_file", "train_dqn_out_zip_under_file", "train_dynaformer_out_file",
     "train_dynaformer_no_cuda", "train_dynaformer_bad_device"])
 def test_cli_bad_input_is_one_line_and_exit_2(runs, name):
@@ -218,7 +218,7 @@ def test_mismatched_scenario_note_is_not_doubled(tmp_path):
     p = tmp_path / "m.json"
     p.write_text(json.dumps(d))
     agent = ROOT / "pretrained" / "dqn_single_charge.zip"
-    out = subprocess.run([sys.executable, "-m", "uam_studio.cli", "plan", str(p), "--agent", str(agent)],
-                         capture_output=True, text=True, timeout=300)
+    out = subprocess.run([sys.executable, "-m", "uam_studio.cli", "plan", str(p), "--policy", "dqn",
+                          "--agent", str(agent)], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert "note: note:" not in out.stdout and "note: the agent was trained for scenario" in out.stdout

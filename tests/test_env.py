@@ -281,6 +281,8 @@ def test_bad_arguments_and_missions():
         UAMPlanningEnv(scenario="tour")
     with pytest.raises(InputError, match="n_dest"):
         UAMPlanningEnv(n_dest=(0, 9))
+    with pytest.raises(InputError, match=r"n_dest: \(1, 9\) is out of range; allowed 1 <= lo <= hi <= 8"):
+        UAMPlanningEnv(n_dest=(1, 9))  # missions may have 20 destinations; the environment has 8 slots
 
 
 def test_make_env_factory_and_reset_options():

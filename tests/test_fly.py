@@ -178,6 +178,18 @@ def test_bad_input_names_the_field(example, kwargs, field):
     assert err.value.field == field and "\n" not in str(err.value)
 
 
+def test_fly_keeps_its_own_limit_of_eight_destinations(example):
+    """Plans go up to 20 destinations; the operator's exact sortie search, and so fly, stops at 8."""
+    from uam_studio.planning.missions.mission import Destination
+
+    nine = dataclasses.replace(example, destinations=tuple(
+        Destination(f"P{k}", 10.0 + 8 * k, 5.0, 1) for k in range(9)))
+    for call in (lambda: fly_mission(nine), lambda: Operator(nine)):
+        with pytest.raises(InputError) as err:
+            call()
+        assert str(err.value) == "destinations: 9 destinations; fly plans at most 8 (allowed 1 to 8)"
+
+
 @pytest.mark.parametrize("text", ["gust@100", "wind+30", "wind+30@-5", "wind+300@100", ""])
 def test_unknown_event_is_refused(text):
     with pytest.raises(InputError) as err:

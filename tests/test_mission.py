@@ -83,6 +83,37 @@ def test_zero_destinations_allowed():
     assert m.destinations == () and m.node_names == ("vertiport",)
 
 
+def test_at_most_twenty_destinations_in_a_file(tmp_path):
+    d = small_dict()
+    d["destinations"] = [{"name": f"P{k}", "x_km": -150.0 + 8 * k, "y_km": 10.0, "priority": 1, "wind_kts": 0.0}
+                         for k in range(21)]
+    with pytest.raises(InputError) as err:
+        mission_from_dict(d)
+    assert str(err.value) == "destinations: 21 destinations; allowed 1 to 20"
+    path = tmp_path / "many.json"
+    path.write_text(json.dumps(d))
+    with pytest.raises(InputError, match=r"^destinations: 21 destinations; allowed 1 to 20$"):
+        load_mission(path)
+    d["destinations"].pop()
+    assert len(mission_from_dict(d).destinations) == 20
+
+
+def test_generator_draws_up_to_twenty_destinations_and_keeps_small_draws():
+    from uam_studio.planning import held_out_missions, random_mission
+    from uam_studio.planning.missions.generate import MIN_SEPARATION_KM
+
+    (m,) = held_out_missions(1, 9494, n_dest=(20, 20), scenario="multi_charge")
+    pts = [(d.x_km, d.y_km) for d in m.destinations]
+    assert len(pts) == 20 and min(math.dist(a, b) for i, a in enumerate(pts) for b in pts[:i]) >= MIN_SEPARATION_KM
+    with pytest.raises(InputError, match=r"^n_dest: .*<= 20$"):
+        random_mission(np.random.default_rng(0), (1, 21))
+    # draws of 6-8 destinations are those from before the limit was 20 (values from that version)
+    (small,) = held_out_missions(1, 20261121)
+    assert len(small.destinations) == 7 and small.battery == Battery(6976.6, 0.08817)
+    assert [(d.name, d.x_km, d.y_km, d.priority) for d in small.destinations[:2]] == [
+        ("D1", 7.5, -43.1, 2), ("D2", -42.0, -11.5, 1)]
+
+
 def test_integral_float_priority_accepted():
     d = small_dict()
     d["destinations"][0]["priority"] = 2.0

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from uam_studio.battery import simulate
-from uam_studio.planning.legs import N_MAX, VERTIPORT_SLOT, LegTable
+from uam_studio.planning.legs import MAX_DESTINATIONS, N_MAX, VERTIPORT_SLOT, LegTable
 from uam_studio.planning.missions.check import check_plan
 from uam_studio.planning.missions.generate import held_out_missions, random_mission
 from uam_studio.planning.missions.mission import Battery, Destination, Mission, Vertiport, mission_to_dict
@@ -159,10 +159,11 @@ def test_hard_missions_give_messages_not_errors(planner):
     p = planner(_mission([ok], Battery(6000.0, 0.45)))
     assert p.route == () and "the battery cannot finish takeoff" in p.messages[0]
 
-    many = [Destination(f"P{k}", 10.0 + 8 * k, 0.0, 1) for k in range(N_MAX + 2)]
+    many = [Destination(f"P{k}", 10.0 + 8 * k, 0.0, 1) for k in range(MAX_DESTINATIONS + 2)]  # in code only
     p = planner(_mission(many, Battery(5500.0, 0.25), "multi_charge"))
-    assert "not planned: P8, P9" in p.messages[0] and p.stats["safe"]
-    assert set(p.reached) <= {f"P{k}" for k in range(N_MAX)}
+    assert "at most 20 destinations; not planned: P20, P21" in p.messages[0] and p.stats["safe"]
+    assert set(p.reached) <= {f"P{k}" for k in range(MAX_DESTINATIONS)} and p.reached
+    assert any("P19" in m for m in p.messages[1:])  # planned (out of reach), unlike P20 and P21
 
     bad = mission_to_dict(_mission([ok]))
     bad["destinations"].append(dict(bad["destinations"][0]))  # duplicate name

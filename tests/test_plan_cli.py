@@ -19,7 +19,7 @@ from uam_studio.planning.planner import MAX_POINTS, plan_mission
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "assets" / "example_mission.json"
 KEYS = {"policy", "route", "altitudes_m", "charging_cycles", "reached", "reached_priority", "predicted",
-        "physics", "safe", "min_voltage_v", "messages"}
+        "physics", "safe", "min_voltage_v", "exact", "messages"}
 
 
 def _example() -> dict:
@@ -52,6 +52,7 @@ def _check_result(res: dict, mission: dict) -> None:
     prio = {d["name"]: d["priority"] for d in mission["destinations"]}
     assert res["reached_priority"] == sum(prio[n] for n in res["reached"])
     assert type(res["safe"]) is bool
+    assert type(res["exact"]) is bool if res["policy"] == "oracle" else res["exact"] is None
     assert all(isinstance(m, str) for m in res["messages"])
     phys = res["physics"]
     assert set(phys) == {"time_s", "voltage_v", "eod_s"}
@@ -86,7 +87,7 @@ def agent(tmp_path_factory) -> Path:
 def test_plan_oracle_json(capsys):
     res = _plan_json(capsys, str(EXAMPLE), "--policy", "oracle")
     _check_result(res, _example())
-    assert res["policy"] == "oracle" and res["safe"] is True
+    assert res["policy"] == "oracle" and res["safe"] is True and res["exact"] is True
     assert res["route"][-1] == "vertiport" and res["charging_cycles"] == 1
     assert len(res["reached"]) >= 1 and res["physics"]["eod_s"] is None
 
@@ -125,11 +126,15 @@ def test_missing_bundled_agent_is_an_error_not_an_empty_plan(monkeypatch, tmp_pa
     monkeypatch.setattr(bundled, "package_dir", lambda: tmp_path)  # an install without the agents
     with pytest.raises(InputError, match=r"^agent: bundled agent dqn_single_charge.zip is not installed"):
         plan_mission(_example(), "dqn", predictor=False)
-    code = main(["plan", str(EXAMPLE)])
-    out, err = capsys.readouterr()
-    assert code == 2 and out == ""
-    assert len(err.splitlines()) == 1
-    assert err.startswith("error: agent: bundled agent dqn_single_charge.zip is not installed")
+    with pytest.raises(InputError, match=r"^agent: bundled agent attention_planner.pt is not installed"):
+        plan_mission(_example(), predictor=False)  # the default policy
+    for argv, name in ((["plan", str(EXAMPLE)], "attention_planner.pt"),
+                       (["plan", str(EXAMPLE), "--policy", "dqn"], "dqn_single_charge.zip")):
+        code = main(argv)
+        out, err = capsys.readouterr()
+        assert code == 2 and out == ""
+        assert len(err.splitlines()) == 1
+        assert err.startswith(f"error: agent: bundled agent {name} is not installed")
     assert plan_mission(_example(), "greedy", predictor=False)["route"]  # the other policies still plan
 
 
@@ -138,13 +143,13 @@ def test_trained_agent_plans_and_is_physics_checked(capsys, agent):
     _check_result(res, _example())
     assert res["policy"] == "dqn" and res["route"]
     # a weaker cell: the agent's route may now fail; the physics check must say so consistently
-    res = _plan_json(capsys, str(EXAMPLE), "--agent", str(agent), "--q-max", "5000", "--r0", "0.3")
+    res = _plan_json(capsys, str(EXAMPLE), "--policy", "dqn", "--agent", str(agent), "--q-max", "5000", "--r0", "0.3")
     _check_result(res, _example())
     if not res["safe"]:
         assert any(m.startswith("unsafe: voltage falls below") for m in res["messages"])
     # policy rollout on top of the agent: a physics-checked, safe plan reaching at least as much
-    base = _plan_json(capsys, str(EXAMPLE), "--agent", str(agent))
-    res = _plan_json(capsys, str(EXAMPLE), "--agent", str(agent), "--lookahead", "4")
+    base = _plan_json(capsys, str(EXAMPLE), "--policy", "dqn", "--agent", str(agent))
+    res = _plan_json(capsys, str(EXAMPLE), "--policy", "dqn", "--agent", str(agent), "--lookahead", "4")
     _check_result(res, _example())
     assert res["safe"] and res["reached_priority"] - res["charging_cycles"] >= (
         base["reached_priority"] - base["charging_cycles"])
@@ -172,7 +177,7 @@ def test_plan_argument_errors(capsys):
     assert main(["plan", str(EXAMPLE), "--policy", "oracle", "--r0", "9"]) == 2
     assert main(["plan", str(EXAMPLE), "--policy", "oracle", "--agent", "a.zip"]) == 2
     assert main(["plan", str(EXAMPLE), "--policy", "greedy", "--lookahead", "3"]) == 2
-    assert main(["plan", str(EXAMPLE), "--lookahead", "9"]) == 2
+    assert main(["plan", str(EXAMPLE), "--policy", "dqn", "--lookahead", "9"]) == 2
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 5 and "r0" in err[1] and "--agent" in err[2] and "--lookahead" in err[3]
     assert "lookahead" in err[4] and "[0, 8]" in err[4]
@@ -185,15 +190,54 @@ def _dest(name: str, x: float, y: float, priority: int = 1) -> dict:
     return {"name": name, "x_km": x, "y_km": y, "priority": priority, "wind_kts": 0.0}
 
 
-@pytest.mark.parametrize("policy", ["greedy", "dqn"])
-def test_more_than_eight_destinations(policy, agent):
+def _nine() -> dict:
     d = _example()
     angles = np.linspace(0, 2 * np.pi, 9, endpoint=False)
     d["destinations"] = [_dest(f"D{k}", 20 * np.cos(a), 20 * np.sin(a)) for k, a in enumerate(angles)]
-    res = plan_mission(d, policy, agent_path=agent if policy == "dqn" else None, predictor=False)
+    return d
+
+
+def test_nine_destinations_greedy_plans_them_all():
+    d = _nine()
+    res = plan_mission(d, "greedy", predictor=False)
     _check_result(res, d)
-    assert "D8" not in res["route"]
-    assert any("at most 8 destinations" in m and "D8" in m for m in res["messages"])
+    assert res["safe"] and not any("not planned" in m for m in res["messages"])
+    assert "D8" in res["route"] or any("D8" in m for m in res["messages"])  # planned with the others
+
+
+def test_nine_destinations_dqn_is_an_error_naming_its_limit(agent, capsys, tmp_path):
+    from uam_studio.errors import InputError
+
+    with pytest.raises(InputError, match=r"^destinations: 9 destinations; the dqn policy plans at most 8 "
+                                         r"\(allowed 1 to 8\)$"):
+        plan_mission(_nine(), "dqn", agent_path=agent, predictor=False)
+    code = main(["plan", _write(tmp_path, "nine.json", _nine()), "--policy", "dqn", "--agent", str(agent)])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == "" and len(err.splitlines()) == 1 and "at most 8" in err
+
+
+def _big(n: int, scenario: str) -> dict:
+    from uam_studio.planning import held_out_missions, mission_to_dict
+
+    return mission_to_dict(held_out_missions(1, 9292, n_dest=(n, n), scenario=scenario)[0])
+
+
+def test_oracle_on_twenty_destinations_is_the_reference(capsys, tmp_path):
+    d = _big(20, "multi_charge")
+    res = _plan_json(capsys, _write(tmp_path, "twenty.json", d), "--policy", "oracle")
+    _check_result(res, d)
+    assert res["exact"] is False and res["safe"] and len(res["reached"]) >= 15
+    assert any("reference solver" in m and "not proven optimal" in m for m in res["messages"])
+    assert res["charging_cycles"] == res["route"].count("vertiport") >= 2
+
+
+def test_twenty_one_destinations_in_a_file_exit_2(capsys, tmp_path):
+    d = _big(20, "single_charge")
+    d["destinations"].append(_dest("D21", 30.0, -41.0))
+    code = main(["plan", _write(tmp_path, "many.json", d), "--policy", "oracle"])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == ""
+    assert err.splitlines() == ["error: destinations: 21 destinations; allowed 1 to 20"]
 
 
 @pytest.mark.parametrize("policy", ["oracle", "greedy", "dqn"])

@@ -126,10 +126,13 @@ def _run_simulate(args: argparse.Namespace) -> int:
 
 def _add_plan_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("mission", metavar="MISSION.json", help="mission file (see assets/example_mission.json)")
-    p.add_argument("--policy", choices=["dqn", "oracle", "greedy"], default="dqn",
-                   help="dqn (trained agent, default), oracle (exact, knows the cell) or greedy (baseline)")
+    p.add_argument("--policy", choices=["attention", "dqn", "oracle", "greedy"], default="attention",
+                   help="attention (the bundled learned planner, default; 1-20 destinations), dqn (the paper's "
+                        "agent; at most 8 destinations), oracle (knows the cell; exact up to 8 destinations, "
+                        "an OR-Tools reference, not proven optimal, for 9-20) or greedy (baseline)")
     p.add_argument("--agent", default=None, metavar="FILE",
-                   help="DQN agent zip (default: the bundled pretrained/dqn_<scenario>.zip)")
+                   help="attention: a weights file (default: the bundled pretrained/attention_planner.pt); "
+                        "dqn: an agent zip (default: the bundled pretrained/dqn_<scenario>.zip)")
     p.add_argument("--lookahead", type=int, default=0, metavar="K",
                    help="dqn: improve the agent by policy rollout over its K best safe actions and the "
                         "greedy rule's action per step, each continued by the agent and by the greedy rule "
@@ -142,15 +145,15 @@ def _add_plan_arguments(p: argparse.ArgumentParser) -> None:
 
 def _run_plan(args: argparse.Namespace) -> int:
     from uam_studio.planning import load_mission
-    from uam_studio.planning.legs import N_MAX, check_destination_count
+    from uam_studio.planning.legs import MAX_DESTINATIONS, check_destination_count
     from uam_studio.planning.planner import plan_mission
 
-    if args.agent is not None and args.policy != "dqn":
-        raise _CliExit(f"--agent: only used with --policy dqn (not {args.policy})", EXIT_INPUT)
+    if args.agent is not None and args.policy not in ("attention", "dqn"):
+        raise _CliExit(f"--agent: only used with --policy attention or dqn (not {args.policy})", EXIT_INPUT)
     if args.lookahead and args.policy != "dqn":
         raise _CliExit(f"--lookahead: only used with --policy dqn (not {args.policy})", EXIT_INPUT)
     mission = load_mission(args.mission)
-    if len(mission.destinations) > N_MAX:
+    if len(mission.destinations) > MAX_DESTINATIONS:  # load_mission refuses them first; the limit, explicit
         check_destination_count(len(mission.destinations))
     res = plan_mission(mission, args.policy, q_max=args.q_max, r0=args.r0, agent_path=args.agent,
                        lookahead=args.lookahead)
@@ -243,21 +246,28 @@ def _run_fly(args: argparse.Namespace) -> int:
 
 # --------------------------------------------------------------------------- train
 
-_DYNAFORMER_ONLY = ("n_train", "device", "no_resume")
-_DQN_ONLY = ("scenario", "mission", "alpha", "beta", "gamma", "safe_return", "init_from")
+# which models each train option belongs to (the others refuse it)
+_OPTION_MODELS = {
+    "steps": ("dynaformer", "dqn"),
+    "device": ("dynaformer", "attention"),
+    **dict.fromkeys(("n_train", "no_resume"), ("dynaformer",)),
+    **dict.fromkeys(("scenario", "mission", "alpha", "beta", "gamma", "safe_return", "init_from"), ("dqn",)),
+    **dict.fromkeys(("oracle_missions", "search_missions", "epochs"), ("attention",)),
+}
 
 
 def _add_train_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", choices=["dynaformer", "dqn"], help="what to train")
+    p.add_argument("model", choices=["dynaformer", "dqn", "attention"], help="what to train")
     p.add_argument("--out", default=None,
                    help="run folder; default runs/dynaformer (dynaformer), runs/dqn_<scenario> (dqn: writes "
                         "agent.zip and card.json; a path ending in .zip names the agent file itself)")
     p.add_argument("--steps", type=int, default=None,
                    help="optimiser steps (dynaformer, default 12000) or env transitions (dqn, default 50000)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", default=None,
+                   help="dynaformer and attention: auto (CUDA when available, default), cpu or cuda")
     g = p.add_argument_group("dynaformer only")
     g.add_argument("--n-train", type=int, default=None, help="synthetic training discharges (default 24000)")
-    g.add_argument("--device", default=None, help="auto (CUDA when available, default), cpu or cuda")
     g.add_argument("--no-resume", action="store_true", default=None,
                    help="start from scratch even if a checkpoint exists")
     g = p.add_argument_group("dqn only")
@@ -275,6 +285,15 @@ def _add_train_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--init-from", default=None, metavar="AGENT",
                    help="fine-tune this agent zip (e.g. pretrained/dqn_single_charge.zip) instead of "
                         "starting from random weights; exploration starts at epsilon 0.2")
+
+
+    g = p.add_argument_group("attention only (the default planner; writes attention_planner.pt and card.json)")
+    g.add_argument("--oracle-missions", type=int, default=None,
+                   help="phase 1: missions of 2-8 destinations solved by the exact oracle (default 1200)")
+    g.add_argument("--search-missions", type=int, default=None,
+                   help="phase 2: missions of 9-20 destinations per scenario planned by the network's own "
+                        "beam search (default 300; 0 skips the phase)")
+    g.add_argument("--epochs", type=int, default=None, help="phase 1 epochs (default 40)")
 
 
 def _refuse_bundled(out) -> None:
@@ -303,19 +322,43 @@ def _check_out_folder(folder) -> None:
         raise _CliExit(f"--out: cannot write in {folder} ({err.strerror or err})", EXIT_INPUT) from None
 
 
-def _reject_options(args: argparse.Namespace, names: tuple[str, ...], model: str) -> None:
-    for name in names:
-        if getattr(args, name) is not None:
+def _reject_options(args: argparse.Namespace) -> None:
+    for name, models in _OPTION_MODELS.items():
+        if getattr(args, name) is not None and args.model not in models:
             flag = "--" + name.replace("_", "-")
-            raise _CliExit(f"{flag}: not an option of 'train {args.model}' (only of 'train {model}')", EXIT_INPUT)
+            raise _CliExit(f"{flag}: not an option of 'train {args.model}' (only of 'train {' / '.join(models)}')",
+                           EXIT_INPUT)
 
 
 def _run_train(args: argparse.Namespace) -> int:
+    _reject_options(args)
     if args.model == "dqn":
-        _reject_options(args, _DYNAFORMER_ONLY, "dynaformer")
         return _run_train_dqn(args)
-    _reject_options(args, _DQN_ONLY, "dqn")
+    if args.model == "attention":
+        return _run_train_attention(args)
     return _run_train_dynaformer(args)
+
+
+def _run_train_attention(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from .dynaformer.train import pick_device
+    from .planning.agents.attention.train import AttentionTrainConfig, train_attention
+
+    out = Path(args.out or "runs/attention")
+    _refuse_bundled(out)
+    cfg = AttentionTrainConfig(seed=args.seed)
+    cfg.device = str(pick_device(args.device or "auto"))
+    for name, lo in (("oracle_missions", 10), ("search_missions", 0), ("epochs", 1)):
+        value = getattr(args, name)
+        if value is not None:
+            if value < lo:
+                raise _CliExit(f"--{name.replace('_', '-')}: must be >= {lo}", EXIT_INPUT)
+            setattr(cfg, name, value)
+    _check_out_folder(out)
+    weights = train_attention(cfg, out)
+    print(f"wrote {weights}")
+    return EXIT_OK
 
 
 def _run_train_dynaformer(args: argparse.Namespace) -> int:
@@ -461,7 +504,7 @@ COMMANDS: dict[str, Command] = {
         _run_simulate,
     ),
     "plan": Command(
-        "plan a mission with a policy (dqn, oracle, greedy), checked with the physics model",
+        "plan a mission with a policy (attention, dqn, oracle, greedy), checked with the physics model",
         _add_plan_arguments,
         _run_plan,
     ),

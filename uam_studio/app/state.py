@@ -43,7 +43,7 @@ import param
 
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight.tables import ALTITUDE_RANGE_M, WIND_RANGE_KTS
-from uam_studio.planning.legs import N_MAX, check_destination_count
+from uam_studio.planning.legs import MAX_DESTINATIONS, check_destination_count
 from uam_studio.planning.missions.mission import (
     COORD_RANGE_KM,
     SCENARIOS,
@@ -984,8 +984,8 @@ class PlannerState(param.Parameterized):
             n = len(out["destinations"])
             if n == 0:
                 raise InputError("destinations", "a mission needs at least 1 destination (allowed 1 to "
-                                                 f"{N_MAX}); add another before removing the last one")
-            if n > N_MAX:
+                                                 f"{MAX_DESTINATIONS}); add another before removing the last one")
+            if n > MAX_DESTINATIONS:
                 check_destination_count(n)
         self._build(**out)  # the library validates the rest (names, priorities, coordinates...)
         return out

@@ -37,13 +37,16 @@ MIN_LEG_KM = tuple(min_leg_distance_km(h) for h in ALTITUDES_M)  # shortest leg 
 DT_S = 1.0  # sample step of every leg current (s)
 
 
-def check_destination_count(n: int) -> int:
-    """``n`` if a planner can plan a mission of ``n`` destinations (1 to ``N_MAX``), else :class:`InputError`."""
+def check_destination_count(n: int, limit: int = MAX_DESTINATIONS, who: str | None = None) -> int:
+    """``n`` if a mission of ``n`` destinations can be planned (1 to ``limit``, default
+    :data:`MAX_DESTINATIONS`), else :class:`InputError`, one line, e.g.
+    ``destinations: 21 destinations; allowed 1 to 20``. ``who`` names a part with its own, smaller
+    limit (``"fly"``: ``destinations: 9 destinations; fly plans at most 8 (allowed 1 to 8)``)."""
     if n < 1:
-        raise InputError("destinations", f"a mission needs at least 1 destination (allowed 1 to {N_MAX})")
-    if n > N_MAX:
-        raise InputError("destinations", f"{n} destinations; the planners handle at most {N_MAX} "
-                                         f"(allowed 1 to {N_MAX})")
+        raise InputError("destinations", f"a mission needs at least 1 destination (allowed 1 to {limit})")
+    if n > limit:
+        what = f"{who} plans at most {limit} (allowed 1 to {limit})" if who else f"allowed 1 to {limit}"
+        raise InputError("destinations", f"{n} destinations; {what}")
     return n
 
 

@@ -2,7 +2,10 @@
 
 The CLI (``uam-studio plan``) and the Panel app call only this function. It
 
-1. runs the chosen planner: ``"oracle"`` (exact, :func:`~uam_studio.planning.solvers.oracle.oracle_plan`),
+1. runs the chosen planner: ``"attention"`` (the default: the bundled attention network with beam
+   search behind the physics safety filter, any map of 1-20 destinations,
+   :func:`~uam_studio.planning.agents.attention.decode.attention_plan`), ``"oracle"`` (:func:`~uam_studio.planning.solvers.oracle.oracle_plan`: exact up to
+   8 destinations, an OR-Tools reference plan for 9-20, ``exact`` in the result says which),
    ``"greedy"`` (baseline, :func:`~uam_studio.planning.solvers.greedy.greedy_plan`) or ``"dqn"`` (a trained
    masked DQN agent rolled out greedily in a :class:`~uam_studio.planning.env.UAMPlanningEnv` built
    on this mission with the physics battery);
@@ -14,9 +17,10 @@ The CLI (``uam-studio plan``) and the Panel app call only this function. It
    last recharge), and concatenates the sorties.
 
 The result is a plain-JSON dict (see :func:`plan_mission`). Hard missions (no destinations, more
-than 8, unreachable destinations, a cell that cannot finish the take-off) and a missing Dynaformer
+than 20, unreachable destinations, a cell that cannot finish the take-off) and a missing Dynaformer
 give messages, never exceptions; bad input (an invalid mission, an unknown policy, out-of-range
-``q_max``/``r0``, an explicit ``agent_path`` that cannot be loaded) and a missing bundled agent
+``q_max``/``r0``, an explicit ``agent_path`` that cannot be loaded, more than 8 destinations for
+``dqn``) and a missing bundled agent
 (``dqn`` without ``agent_path``, :func:`~uam_studio.planning.agents.rollout.bundled_agent_path`) raise :class:`~uam_studio.errors.InputError`.
 """
 
@@ -42,7 +46,7 @@ from uam_studio.planning.missions.mission import (
 from uam_studio.planning.solvers.greedy import greedy_plan
 from uam_studio.planning.solvers.oracle import oracle_plan
 
-POLICIES = ("dqn", "oracle", "greedy")
+POLICIES = ("attention", "dqn", "oracle", "greedy")
 MAX_POINTS = 2000  # samples per series in the result (JSON size)
 DECIMALS = 4
 
@@ -134,7 +138,7 @@ def _predict(check: PlanCheck, predictor: Any, messages: list[str]) -> np.ndarra
 
 def plan_mission(
     mission: Mission | dict | str | os.PathLike[str],
-    policy: str = "dqn",
+    policy: str = "attention",
     q_max: float | None = None,
     r0: float | None = None,
     agent_path: str | os.PathLike[str] | None = None,
@@ -144,11 +148,12 @@ def plan_mission(
     """Plan ``mission`` with ``policy``, check it with the physics model, predict it with the Dynaformer.
 
     :param mission: a :class:`Mission`, a dict in the mission JSON format, or a path to a mission file.
-    :param policy: ``"dqn"``, ``"oracle"`` or ``"greedy"``.
+    :param policy: ``"attention"`` (default), ``"dqn"`` (the paper's agent), ``"oracle"`` or ``"greedy"``.
     :param q_max: override the mission's q_max (C).
     :param r0: override the mission's r0 (ohm).
-    :param agent_path: the DQN agent (default: the bundled ``dqn_<scenario>.zip``, :func:`~uam_studio.planning.agents.rollout.bundled_agent_path`;
-        its absence raises InputError).
+    :param agent_path: the agent: for ``"attention"`` a weights file (default: the bundled
+        ``attention_planner.pt``), for ``"dqn"`` an agent zip (default: the bundled ``dqn_<scenario>.zip``,
+        :func:`~uam_studio.planning.agents.rollout.bundled_agent_path`); a missing bundled agent raises InputError.
     :param predictor: a Dynaformer predictor (``predict(context_current_a, context_voltage_v, current_a,
         dt_s)``), None for the bundled one (its absence is a message), or False to skip the prediction.
     :param lookahead: dqn only: policy rollout over the agent's K best safe actions (and the greedy
@@ -157,7 +162,9 @@ def plan_mission(
     :return: plain-JSON dict with exactly the keys ``policy``, ``route`` (node names, ``"vertiport"``
         = recharge), ``altitudes_m``, ``charging_cycles``, ``reached`` (names), ``reached_priority``,
         ``predicted`` (``{"time_s", "voltage_v"}`` or None), ``physics`` (``{"time_s", "voltage_v",
-        "eod_s"}``), ``safe``, ``min_voltage_v`` (None for an empty route) and ``messages``. Series
+        "eod_s"}``), ``safe``, ``min_voltage_v`` (None for an empty route), ``exact`` (oracle: True for a
+        proven optimum, False for the reference solver's plan of 9-20 destinations; None for the other
+        policies) and ``messages``. Series
         are rounded to 4 decimals and thinned to at most :data:`MAX_POINTS` samples (the lowest
         physics and predicted voltages are always kept).
     :raises InputError: bad input or a missing bundled agent (see the module docstring); never for a
@@ -172,14 +179,27 @@ def plan_mission(
         m = m.with_battery(q_max, r0)
     if m.scenario not in SCENARIOS:  # pragma: no cover - Mission validates it
         raise InputError("scenario", f"{m.scenario!r} is not a scenario")
-    if policy == "dqn" and agent_path is None:  # an install without the agent: an error, not an empty plan
-        require_bundled(f"dqn_{m.scenario}.zip", "agent", "agent",
+    if agent_path is None and policy in ("dqn", "attention"):  # an install without it: an error, not an empty plan
+        require_bundled("attention_planner.pt" if policy == "attention" else f"dqn_{m.scenario}.zip", "agent", "agent",
                         "plan with the oracle or greedy policy, or give an agent file")
+    if agent_path is not None and policy not in ("dqn", "attention"):
+        raise InputError("agent_path", f"only used with the attention and dqn policies (not {policy})")
+    if lookahead and policy != "dqn":
+        raise InputError("lookahead", f"only used with the dqn policy (not {policy})")
     messages: list[str] = []
 
     pred_model = _load_predictor(predictor, messages)
+    exact: bool | None = None
     if policy == "oracle":
         plan = oracle_plan(m)
+        route, alts = list(plan.route), list(plan.altitudes_m)
+        messages.extend(plan.messages)
+        exact = bool(plan.stats.get("exact", True))
+    elif policy == "attention":
+        from uam_studio.planning.agents.attention.decode import attention_plan, load_policy_cached  # torch
+
+        net = load_policy_cached(agent_path)
+        plan = attention_plan(m, net)
         route, alts = list(plan.route), list(plan.altitudes_m)
         messages.extend(plan.messages)
     elif policy == "greedy":
@@ -222,5 +242,6 @@ def plan_mission(
         "physics": physics,
         "safe": bool(check.safe),
         "min_voltage_v": _round_opt(check.min_voltage_v),
+        "exact": exact,
         "messages": _dedupe(messages),
     }

@@ -22,7 +22,7 @@ import numpy as np
 from uam_studio.bundled import bundled_path
 from uam_studio.errors import InputError
 from uam_studio.planning.env import UAMPlanningEnv
-from uam_studio.planning.legs import N_ALTITUDES, VERTIPORT_SLOT
+from uam_studio.planning.legs import N_ALTITUDES, N_MAX, VERTIPORT_SLOT, check_destination_count
 from uam_studio.planning.missions.check import Plan
 from uam_studio.planning.missions.mission import Mission
 from uam_studio.planning.solvers.setup import prepare_mission, too_close
@@ -41,7 +41,12 @@ def bundled_agent_path(scenario: str) -> Path:
 
 def dqn_route(mission: Mission, agent_path: str | os.PathLike[str] | None, predictor: Any,
                messages: list[str], lookahead: int = 0) -> tuple[list[str], list[float]]:
-    """Roll the agent out greedily on ``mission`` (physics battery); messages for what went wrong."""
+    """Roll the agent out greedily on ``mission`` (physics battery); messages for what went wrong.
+
+    :raises InputError: more than ``N_MAX`` (8) destinations, the paper's action space (never cut
+        silently: plan larger missions with the oracle or greedy policy)."""
+    if len(mission.destinations) > N_MAX:
+        check_destination_count(len(mission.destinations), N_MAX, "the dqn policy")
     setup = prepare_mission(mission, None, "dqn")  # the oracle's and greedy's preamble
     if setup.early is not None:
         messages.extend(setup.early.messages)

@@ -255,6 +255,13 @@ class UAMPlanningEnv(gym.Env):
         if mission is not None:
             self._check_mission(mission)
         else:
+            try:  # missions may have up to 20 destinations; the environment has N_MAX slots
+                too_many = int(np.max(np.atleast_1d(n_dest))) > N_MAX
+            except (TypeError, ValueError):
+                too_many = False  # random_mission names what is wrong
+            if too_many:
+                raise InputError("n_dest", f"{n_dest!r} is out of range; allowed 1 <= lo <= hi <= {N_MAX} "
+                                           "(the environment's destination slots)")
             random_mission(np.random.default_rng(0), n_dest, scenario, self.r0_range, self.q_range,
                            self.radius_km)  # validates n_dest and the ranges now
 

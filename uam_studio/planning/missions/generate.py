@@ -1,6 +1,6 @@
 """Random missions for training and deterministic held-out missions for evaluation.
 
-:func:`random_mission` places 1-8 destinations around a vertiport at the origin,
+:func:`random_mission` places 1-8 (up to 20) destinations around a vertiport at the origin,
 ``radius_km`` (default 8-60 km) from it, at least :data:`MIN_SEPARATION_KM` apart so
 that every leg can be flown at least at 500 m (:func:`uam_studio.flight.min_leg_distance_km`
 is 6.1 km there). Priorities are integers 1-3, the wind on legs to each node is
@@ -27,7 +27,7 @@ import numpy as np
 
 from uam_studio.errors import InputError
 from uam_studio.flight.tables import WIND_RANGE_KTS
-from uam_studio.planning.legs import N_MAX
+from uam_studio.planning.legs import MAX_DESTINATIONS, N_MAX
 from uam_studio.planning.missions.mission import SCENARIOS, Battery, Destination, Mission, Vertiport
 
 PAPER_Q_RANGE = (5000.0, 8000.0)  # C, the paper's range of q_max (the one home of both ranges)
@@ -43,8 +43,8 @@ _MAX_TRIES = 2000
 def _n_range(n_dest) -> tuple[int, int]:
     lo, hi = (n_dest, n_dest) if np.isscalar(n_dest) else tuple(n_dest)
     lo, hi = int(lo), int(hi)
-    if not 1 <= lo <= hi <= N_MAX:
-        raise InputError("n_dest", f"{n_dest!r} is out of range; allowed 1 <= lo <= hi <= {N_MAX}")
+    if not 1 <= lo <= hi <= MAX_DESTINATIONS:
+        raise InputError("n_dest", f"{n_dest!r} is out of range; allowed 1 <= lo <= hi <= {MAX_DESTINATIONS}")
     return lo, hi
 
 
@@ -69,7 +69,8 @@ def random_mission(
 
     :param rng: numpy random generator (all randomness comes from it).
     :param n_dest: number of destinations, an int or an inclusive ``(lo, hi)`` range within
-        [1, 8]; ``single_flight`` missions always have exactly one destination.
+        [1, 20] (``MAX_DESTINATIONS``; default 1 to ``N_MAX = 8``, the DQN's slots);
+        ``single_flight`` missions always have exactly one destination.
     :param scenario: one of ``single_flight``, ``single_charge``, ``multi_charge``.
     :param r0_range: uniform range of the cell's ohmic resistance (ohm).
     :param q_range: uniform range of the cell's mobile charge q_max (C).

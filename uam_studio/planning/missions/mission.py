@@ -25,6 +25,8 @@ JSON format (public and stable)::
 Destination names must be non-empty, unique, free of commas (the CLI separates
 route entries with commas) and must not be ``"vertiport"`` (any case), the name
 of the vertiport node. A mission with no destinations is valid; planners report it.
+A file holds at most :data:`~uam_studio.planning.legs.MAX_DESTINATIONS` (20) destinations
+(``destinations: 21 destinations; allowed 1 to 20``).
 Unknown keys are rejected, so a misspelt optional field never passes silently.
 
 Every validation error is an :class:`~uam_studio.errors.InputError` whose field is
@@ -49,6 +51,7 @@ from uam_studio.battery import EOD_RANGE, Q_MAX_RANGE, R0_RANGE
 from uam_studio.errors import InputError, check_range, short_repr
 from uam_studio.flight.profile import MAX_DWELL_S
 from uam_studio.flight.tables import WIND_RANGE_KTS
+from uam_studio.planning.legs import MAX_DESTINATIONS, check_destination_count
 
 VERTIPORT = "vertiport"
 SCENARIOS = ("single_flight", "single_charge", "multi_charge")
@@ -278,6 +281,8 @@ def mission_from_dict(d: Any) -> Mission:
     raw = d["destinations"]
     if not isinstance(raw, list):
         raise InputError("destinations", f"expected a list, got {type(raw).__name__}")
+    if len(raw) > MAX_DESTINATIONS:
+        check_destination_count(len(raw))  # destinations: 21 destinations; allowed 1 to 20
     destinations = tuple(_destination_from_dict(i, x) for i, x in enumerate(raw))
     scenario = d["scenario"]
     if not isinstance(scenario, str) or scenario not in SCENARIOS:

@@ -28,7 +28,7 @@ import numpy as np
 from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0, simulate
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_profile
-from uam_studio.planning.legs import DT_S, check_destination_count, takeoff_current
+from uam_studio.planning.legs import DT_S, N_MAX, check_destination_count, takeoff_current
 from uam_studio.planning.missions.mission import VERTIPORT, Battery, Mission
 from uam_studio.planning.operations.operator import HEALTH_Z, PLAN_WIND_Z, WIND_Z, Decision, Operator
 from uam_studio.planning.operations.world import (
@@ -164,7 +164,7 @@ def fly_mission(mission: Mission, policy: str = "oracle", seed: int = 0,
     t_wall = time.perf_counter()
     if policy != "oracle":
         raise InputError("policy", f"{policy!r} is not an in-flight policy; allowed: oracle")
-    check_destination_count(len(mission.destinations))
+    check_destination_count(len(mission.destinations), N_MAX, "fly")  # the operator's exact search: 8 at most
     scenario = scenario or mission.scenario
     world = World(mission, forecast_sigma_kt, sensor_noise_mv, sensor_noise_ma, events, seed)
     known = dataclasses.replace(mission, battery=Battery(DEFAULT_Q_MAX, DEFAULT_R0))  # the operator's view

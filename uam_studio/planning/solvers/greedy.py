@@ -7,6 +7,7 @@ simulated with the physics model from the present state). When none fits: single
 home and stops; multi_charge flies home, recharges and starts a new sortie, until a fresh cell
 cannot fit any remaining destination. single_flight flies to ``destinations[0]`` at its
 lowest-charge level. Every move is checked before it is made, so greedy plans are always safe.
+It plans 1 to ``MAX_DESTINATIONS`` (20) destinations (:func:`~.setup.prepare_mission`).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import time
 import numpy as np
 
 from uam_studio.battery import full_charge
-from uam_studio.planning.legs import ALTITUDES_M, N_MAX, VERTIPORT_SLOT
+from uam_studio.planning.legs import ALTITUDES_M
 from uam_studio.planning.missions.check import Plan, make_plan
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
 from uam_studio.planning.solvers.setup import fly_batch, prepare_mission, too_close
@@ -41,6 +42,7 @@ def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
     route: list[str] = []
     alts: list[float] = []
     n = len(dests)
+    home = legs.home  # the vertiport's node index (legs.slots: max(N_MAX, n))
     for k in range(n):
         reason = too_close(legs, k)
         if reason is not None:
@@ -48,27 +50,27 @@ def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
     if scenario == "single_flight":
         if n > 1:
             msgs.append(f"single flight: planning the leg to {dests[0].name} only")
-        a = legs.cheapest_level(VERTIPORT_SLOT, 0)
-        if a is not None and fly(VERTIPORT_SLOT, 0, a, fresh)[0]:
+        a = legs.cheapest_level(home, 0)
+        if a is not None and fly(home, 0, a, fresh)[0]:
             route, alts = [dests[0].name], [ALTITUDES_M[a]]
         elif a is not None:
             msgs.append(f"cannot reach {dests[0].name} at its lowest-charge level ({ALTITUDES_M[a]:g} m)")
         stats["time_s"] = round(time.perf_counter() - t0, 4)
         return make_plan(full_mission, "greedy", route, alts, msgs, stats)
 
-    servable = legs.feasible[VERTIPORT_SLOT, :N_MAX].any(axis=1)
-    visited = np.zeros(N_MAX, dtype=bool)
-    at, x = VERTIPORT_SLOT, fresh
+    servable = legs.feasible[home, :legs.slots].any(axis=1)
+    visited = np.zeros(legs.slots, dtype=bool)
+    at, x = home, fresh
     while True:
         cands = legs.greedy_order(at, [k for k in range(n) if servable[k] and not visited[k]])
         moved = False
         for k in cands:
             a = legs.cheapest_level(at, k)
-            b = legs.cheapest_level(k, VERTIPORT_SLOT)
+            b = legs.cheapest_level(k, home)
             if a is None or b is None:
                 continue
             ok, x1 = fly(at, k, a, x)
-            if not ok or not fly(k, VERTIPORT_SLOT, b, x1)[0]:
+            if not ok or not fly(k, home, b, x1)[0]:
                 continue
             route.append(dests[k].name)
             alts.append(ALTITUDES_M[a])
@@ -77,11 +79,11 @@ def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
             break
         if moved:
             continue
-        if at == VERTIPORT_SLOT:  # a fresh cell fits nothing more
+        if at == home:  # a fresh cell fits nothing more
             break
         route.append(VERTIPORT)
-        alts.append(ALTITUDES_M[legs.cheapest_level(at, VERTIPORT_SLOT)])
-        at, x = VERTIPORT_SLOT, fresh
+        alts.append(ALTITUDES_M[legs.cheapest_level(at, home)])
+        at, x = home, fresh
         if scenario == "single_charge":
             break
     left = [dests[k].name for k in range(n) if servable[k] and not visited[k]]

@@ -54,13 +54,23 @@ The dominance assumption was also checked outside the tests on 44 random 5-desti
 over all 4 levels (the default random cells, 8-45 km): the feasible sets with and without pruning
 were identical in every case.
 
-Hard missions never raise: no destinations, more than 8 (the first 8 are planned), destinations
+Larger missions: :func:`oracle_plan` is exact up to :data:`EXACT_MAX` (``N_MAX = 8``)
+destinations (``stats["exact"] = True``). For 9-20 it returns the plan of the reference solver,
+OR-Tools routing re-checked on the physics model (:mod:`~uam_studio.planning.solvers.reference`),
+with ``stats["exact"] = False`` and a message saying so: the label search grows about tenfold a
+destination, and 9 destinations already take about 10 s for a fresh cell (r0 0.017-0.02 ohm,
+q_max 8000 C; 105-108 thousand legs flown). single_flight is one leg, exact at any size.
+:func:`feasible_sorties` and the cover work on a :class:`LegTable` of any number of slots
+(``legs.slots`` bits in the masks).
+
+Hard missions never raise: no destinations, more than 20 (the first 20 are planned), destinations
 no level can reach, a cell that cannot even finish the take-off all give a :class:`Plan` with an
 empty or partial route and one message per problem.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -74,13 +84,14 @@ from uam_studio.planning.legs import (
     DT_S,
     N_ALTITUDES,
     N_MAX,
-    N_TARGETS,
-    VERTIPORT_SLOT,
     LegTable,
 )
 from uam_studio.planning.missions.check import Plan, make_plan
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
+from uam_studio.planning.solvers.reference import reference_from_setup
 from uam_studio.planning.solvers.setup import fly_batch, prepare_mission, too_close
+
+EXACT_MAX = N_MAX  # the most destinations oracle_plan solves exactly; more go to the reference solver
 
 # +1: more is better, -1: less is better, 0: ignored; order of uam_studio.battery.STATE_NAMES
 # (tb, vo, vsn, vsp, qnb, qns, qpb, qps).
@@ -139,27 +150,29 @@ def feasible_sorties(
     :param alt_indices: levels allowed (indices into ``ALTITUDES_M``).
     :param dominance: prune dominated labels (see the module docstring); False enumerates every
         order and level (for testing; exponential).
-    :param allowed: bool [N_MAX], destination slots that may be visited (default: all present).
+    :param allowed: bool [legs.slots], destination slots that may be visited (default: all present).
     :param stats: filled with ``labels``, ``legs_flown``, ``pruned_eod``, ``pruned_dominated``.
     :param start: ``(node slot, battery state [8], visited mask)`` to continue a sortie already under
         way (default: the vertiport, a full charge, nothing visited). The sorties found then continue
         from that node and state; their ``mask`` includes the visited bits and ``time_s`` counts from
         the start.
-    :param first_moves: bool [N_TARGETS, N_ALTITUDES], the (target, level) pairs the first leg may
-        take (default: all).
+    :param first_moves: bool [legs.slots + 1, N_ALTITUDES], the (target, level) pairs the first leg
+        may take (default: all; target ``legs.home`` is the vertiport).
     :return: ``{mask: Sortie}``, bit k of ``mask`` for slot k.
     """
     m = legs.mission
     q, r0, eod = m.battery.q_max, m.battery.r0, m.eod_v
     alts = np.array(sorted(set(int(a) for a in alt_indices)), dtype=int)
-    ok_slot = legs.present[:N_MAX].copy() if allowed is None else np.asarray(allowed, bool) & legs.present[:N_MAX]
+    slots, home = legs.slots, legs.home
+    n_targets = slots + 1
+    ok_slot = legs.present[:slots].copy() if allowed is None else np.asarray(allowed, bool) & legs.present[:slots]
     feas = legs.feasible[:, :, alts]  # [from, to, level]
-    bit = 1 << np.arange(N_MAX)
+    bit = 1 << np.arange(slots, dtype=np.int64)
     good_sign = DOMINANCE_SIGN
 
     if start is None:
         mask = np.zeros(1, dtype=np.int64)
-        node = np.full(1, VERTIPORT_SLOT)
+        node = np.full(1, home)
         state = full_charge(q).as_array()
     else:
         mask = np.full(1, int(start[2]), dtype=np.int64)
@@ -174,9 +187,9 @@ def feasible_sorties(
     first_leg = True
     while mask.size:
         unvisited = (mask[:, None] & bit[None, :]) == 0
-        target_ok = np.zeros((mask.size, N_TARGETS), dtype=bool)
-        target_ok[:, :N_MAX] = unvisited & ok_slot[None, :]
-        target_ok[:, VERTIPORT_SLOT] = node != VERTIPORT_SLOT
+        target_ok = np.zeros((mask.size, n_targets), dtype=bool)
+        target_ok[:, :slots] = unvisited & ok_slot[None, :]
+        target_ok[:, home] = node != home
         cand = target_ok[:, :, None] & feas[node]
         if first_moves is not None and first_leg:
             cand &= np.asarray(first_moves, dtype=bool)[None, :, alts]
@@ -193,19 +206,19 @@ def feasible_sorties(
         t_new = t_s[li] + dur
         v_new = np.minimum(vmin[li], v_leg)
 
-        home = ok & (ti == VERTIPORT_SLOT)
-        for k in np.flatnonzero(home):
+        landed = ok & (ti == home)
+        for k in np.flatnonzero(landed):
             nodes, path_alts = paths[li[k]]
             s = Sortie(nodes, path_alts + (int(levels[k]),), int(mask[li[k]]), float(t_new[k]), float(v_new[k]))
             if _better(s, found.get(s.mask)):
                 found[s.mask] = s
 
-        fwd = np.flatnonzero(ok & (ti != VERTIPORT_SLOT))
+        fwd = np.flatnonzero(ok & (ti != home))
         new_mask = mask[li[fwd]] | bit[ti[fwd]]
         new_node = ti[fwd]
         new_state = x_end[fwd]
         if dominance and fwd.size > 1:
-            dom = _dominated(new_mask * N_TARGETS + new_node, new_state * good_sign[None, :])
+            dom = _dominated(new_mask * n_targets + new_node, new_state * good_sign[None, :])
             st["pruned_dominated"] += int(dom.sum())
             fwd, new_mask, new_node, new_state = fwd[~dom], new_mask[~dom], new_node[~dom], new_state[~dom]
         paths = [(paths[li[k]][0] + (int(ti[k]),), paths[li[k]][1] + (int(levels[k]),)) for k in fwd]
@@ -268,7 +281,9 @@ def min_sortie_cover(found: dict[int, Sortie], universe: int) -> list[Sortie]:
 
 def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iterable[int] = range(N_ALTITUDES),
                 dominance: bool = True) -> Plan:
-    """The exact optimal plan of ``mission`` (see the module docstring) as a :class:`Plan`.
+    """The exact optimal plan of ``mission`` (see the module docstring) as a :class:`Plan`; past
+    :data:`EXACT_MAX` destinations (up to 20), the reference solver's plan
+    (:mod:`~uam_studio.planning.solvers.reference`), not proven optimal. ``stats["exact"]`` says which.
 
     :param mission: the mission (a dict in the JSON format is validated first).
     :param scenario: overrides ``mission.scenario``.
@@ -277,11 +292,14 @@ def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iter
     """
     t0 = time.perf_counter()
     setup = prepare_mission(mission, scenario, "oracle")
-    if setup.early is not None:
-        return setup.early
+    if setup.early is not None:  # nothing to plan: the empty answer is exact
+        return dataclasses.replace(setup.early, stats={**setup.early.stats, "exact": True})
     mission, full_mission, scenario, msgs, stats, legs = (setup.mission, setup.full_mission, setup.scenario,
                                                           setup.messages, setup.stats, setup.legs)
     dests = mission.destinations
+    if scenario != "single_flight" and len(dests) > EXACT_MAX:
+        return reference_from_setup(setup, "oracle", alt_indices, t0)
+    stats["exact"] = True
     q, r0, eod = mission.battery.q_max, mission.battery.r0, mission.eod_v
 
     def done(route: list[str], alts: list[float]) -> Plan:
@@ -291,11 +309,11 @@ def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iter
     if scenario == "single_flight":
         if len(dests) > 1:
             msgs.append(f"single flight: planning the leg to {dests[0].name} only")
-        levels = [a for a in alt_indices if legs.feasible[VERTIPORT_SLOT, 0, a]]
+        levels = [a for a in alt_indices if legs.feasible[legs.home, 0, a]]
         if not levels:
             msgs.append(too_close(legs, 0) or f"cannot reach {dests[0].name} at any altitude")
             return done([], [])
-        currents = [legs.current(VERTIPORT_SLOT, 0, a) for a in levels]
+        currents = [legs.current(legs.home, 0, a) for a in levels]
         x0 = np.repeat(full_charge(q).as_array(), len(levels), axis=0)
         ok, _, vmin = fly_batch(currents, x0, q, r0, eod)
         stats["min_voltage_by_altitude_v"] = {ALTITUDES_M[a]: round(float(v), 4) for a, v in zip(levels, vmin)}
@@ -318,13 +336,13 @@ def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iter
                         "with this battery")
     if not found:
         return done([], [])
-    prio = legs.priority[:N_MAX]
+    prio = legs.priority[:legs.slots]
 
     def names(s: Sortie) -> tuple[list[str], list[float]]:
         return ([legs.names[k] for k in s.nodes] + [VERTIPORT], [ALTITUDES_M[a] for a in s.alts])
 
     if scenario == "single_charge":
-        best = max(found.values(), key=lambda s: (int(prio[[k for k in range(N_MAX) if s.mask >> k & 1]].sum()),
+        best = max(found.values(), key=lambda s: (int(prio[[k for k in range(legs.slots) if s.mask >> k & 1]].sum()),
                                                   -s.time_s, s.min_voltage_v))
         left = [legs.names[k] for k in range(len(dests)) if coverable >> k & 1 and not best.mask >> k & 1]
         if left:

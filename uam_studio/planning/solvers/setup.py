@@ -1,7 +1,7 @@
 """What the solvers share: the batched flight of many legs (:func:`fly_batch`, also used by
 :mod:`~uam_studio.planning.operations`) and the planners' preamble (:func:`prepare_mission` ->
-:class:`PlanSetup`: validate, pick the scenario, cap at N_MAX destinations, stop early if the cell
-cannot finish the take-off).
+:class:`PlanSetup`: validate, pick the scenario, cap at the policy's number of destinations, stop
+early if the cell cannot finish the take-off).
 """
 
 from __future__ import annotations
@@ -15,31 +15,47 @@ import numpy as np
 from uam_studio.battery import DEFAULT_CELL, BatteryState, simulate
 from uam_studio.battery.solver import integrate_current
 from uam_studio.errors import InputError
-from uam_studio.planning.legs import DT_S, MIN_LEG_KM, N_MAX, VERTIPORT_SLOT, LegTable, takeoff_current
+from uam_studio.planning.legs import (
+    DT_S,
+    MAX_DESTINATIONS,
+    MIN_LEG_KM,
+    N_MAX,
+    LegTable,
+    takeoff_current,
+)
 from uam_studio.planning.missions.check import Plan
 from uam_studio.planning.missions.mission import SCENARIOS, Mission, mission_from_dict
 
 _ROW_BATCH = 512  # trajectories integrated together (small blocks stay in cache: faster)
 _CHUNK_S = 128  # samples per integration pass
+_STATE_ORDER = ("tb", "vo", "vsn", "vsp", "qnb", "qns", "qpb", "qps")  # uam_studio.battery.STATE_NAMES
 
 
 def fly_batch(
-    currents: Sequence[np.ndarray], x0: np.ndarray, q_max: float, r0: float, eod_v: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    currents: Sequence[np.ndarray], x0: np.ndarray, q_max: float, r0: float, eod_v: float,
+    split: np.ndarray | None = None, chunk_s: int = _CHUNK_S,
+) -> tuple[np.ndarray, ...]:
     """Fly many legs of different lengths from many states in batched integrations.
 
     :param currents: B per-cell currents (A, 1 s samples), any lengths.
     :param x0: start states, shape [B, 8] (order of ``STATE_NAMES``).
+    :param split: optional [B] sample counts (1 to the row's length): also return the state after
+        that many samples of each row (e.g. the end of the first of two legs flown as one row).
+    :param chunk_s: samples per integration pass (shorter: rows that fail stop sooner; longer: fewer
+        passes for a few long rows).
     :return: ``(ok [B], x_end [B, 8], v_min [B])``: no sample below ``eod_v``; state after the
         last sample (the start state where not ok); lowest voltage (V), the failing sample
         included. Same numbers as :func:`uam_studio.battery.simulate` leg by leg (same solver).
+        With ``split``, a fourth array ``x_split [B, 8]``: the state after ``split`` samples (the
+        start state where the row failed before them).
     """
     b = len(currents)
     x_end = np.array(x0, dtype=float, copy=True).reshape(b, -1)
     ok = np.ones(b, dtype=bool)
     v_min = np.full(b, np.inf)
+    x_split = x_end.copy() if split is not None else None
     if b == 0:
-        return ok, x_end, v_min
+        return (ok, x_end, v_min) if x_split is None else (ok, x_end, v_min, x_split)
     lengths = np.fromiter((c.size for c in currents), dtype=np.int64, count=b)
     order = np.argsort(lengths, kind="stable")
     q_total = float(DEFAULT_CELL.q_total(q_max))
@@ -53,11 +69,11 @@ def fly_batch(
         state = x_end[rows]
         alive = np.arange(n_rows)
         with np.errstate(all="ignore"):
-            for start in range(0, cur.shape[1], _CHUNK_S):
+            for start in range(0, cur.shape[1], chunk_s):
                 alive = alive[lens[alive] > start]
                 if alive.size == 0:
                     break
-                stop = min(cur.shape[1], start + _CHUNK_S)
+                stop = min(cur.shape[1], start + chunk_s)
                 width = stop - start
                 v, seq = integrate_current(
                     cur[alive, start:stop], BatteryState.from_array(state[alive]),
@@ -69,15 +85,20 @@ def fly_batch(
                 v_min[rows[alive]] = np.minimum(v_min[rows[alive]], np.where(real, v, np.inf).min(axis=1))
                 last = n_real - 1
                 idx = np.arange(alive.size)
-                picked = np.stack([seq[n][idx, last] for n in ("tb", "vo", "vsn", "vsp", "qnb", "qns", "qpb",
-                                                                 "qps")], axis=-1)
+                picked = np.stack([seq[n][idx, last] for n in _STATE_ORDER], axis=-1)
                 keep = ~hit
+                if x_split is not None:
+                    at = np.asarray(split)[rows[alive]] - 1 - start  # the split's sample in this chunk
+                    k = np.flatnonzero((at >= 0) & (at < width))
+                    k = k[np.cumsum(below[k], axis=1)[np.arange(k.size), at[k]] == 0]  # not failed by then
+                    if k.size:
+                        x_split[rows[alive[k]]] = np.stack([seq[n][k, at[k]] for n in _STATE_ORDER], axis=-1)
                 state[alive[keep]] = picked[keep]
                 ok[rows[alive[hit]]] = False
                 alive = alive[keep]
         x_end[rows] = np.where(ok[rows, None], state, x_end[rows])
     v_min = np.nan_to_num(v_min, nan=0.0)
-    return ok, x_end, v_min
+    return (ok, x_end, v_min) if x_split is None else (ok, x_end, v_min, x_split)
 
 
 # ----------------------------------------------------------------------------- planner preamble
@@ -105,20 +126,21 @@ def takeoff_failure(q_max: float, r0: float, eod_v: float) -> str | None:
 
 
 def too_close(legs: LegTable, k: int) -> str | None:
-    d = legs.dist[VERTIPORT_SLOT, k]
+    d = legs.dist[legs.home, k]
     if d < MIN_LEG_KM[0]:
         return (f"cannot reach {legs.names[k]} at any altitude: it is {d:.1f} km from the vertiport and "
                 f"the shortest leg is {MIN_LEG_KM[0]:.1f} km")
-    if not legs.feasible[VERTIPORT_SLOT, k].any():
+    if not legs.feasible[legs.home, k].any():
         return f"cannot reach {legs.names[k]} at any altitude: it is {d:.0f} km from the vertiport"
     return None
 
 
 @dataclass
 class PlanSetup:
-    """What the planners share before searching: the mission capped at N_MAX destinations,
-    the user's full mission (plans are checked against it), scenario, messages, stats and the
-    leg table; ``early`` is a finished :class:`Plan` when there is nothing to plan."""
+    """What the planners share before searching: the mission capped at the policy's number of
+    destinations (:func:`destination_limit`), the user's full mission (plans are checked against it),
+    scenario, messages, stats and the leg table (``max(N_MAX, destinations)`` slots; N_MAX for the
+    DQN); ``early`` is a finished :class:`Plan` when there is nothing to plan."""
 
     mission: Mission | None
     full_mission: Mission | None
@@ -129,9 +151,16 @@ class PlanSetup:
     early: Plan | None = None
 
 
+def destination_limit(policy: str) -> int:
+    """The most destinations ``policy`` plans: N_MAX (8) for the paper's DQN (its action space), else
+    MAX_DESTINATIONS (20: the greedy rule, the oracle and its reference solver)."""
+    return N_MAX if policy == "dqn" else MAX_DESTINATIONS
+
+
 def prepare_mission(mission: Any, scenario: str | None, policy: str) -> PlanSetup:
     """The planners' shared preamble: validate the mission, pick the scenario, keep at most
-    N_MAX destinations, build the leg table and stop early if the battery cannot finish takeoff."""
+    :func:`destination_limit` destinations (the rest get a message), build the leg table and stop
+    early if the battery cannot finish takeoff."""
     mission, msgs = _as_mission(mission)
     if mission is None:
         return PlanSetup(None, None, scenario, msgs, {}, early=Plan(policy, messages=msgs))
@@ -145,16 +174,18 @@ def prepare_mission(mission: Any, scenario: str | None, policy: str) -> PlanSetu
         return PlanSetup(mission, mission, scenario, msgs, stats,
                          early=Plan(policy, messages=["the mission has no destinations"], stats=stats))
     full_mission = mission
-    if len(dests) > N_MAX:
-        extra = ", ".join(d.name for d in dests[N_MAX:])
-        msgs.append(f"the planner handles at most {N_MAX} destinations; not planned: {extra}")
-        mission = Mission(mission.name, mission.vertiport, dests[:N_MAX], mission.scenario, mission.battery,
+    limit = destination_limit(policy)
+    if len(dests) > limit:
+        extra = ", ".join(d.name for d in dests[limit:])
+        msgs.append(f"the planner handles at most {limit} destinations; not planned: {extra}")
+        mission = Mission(mission.name, mission.vertiport, dests[:limit], mission.scenario, mission.battery,
                           mission.eod_v)
-    setup = PlanSetup(mission, full_mission, scenario, msgs, stats, legs=LegTable(mission))
+    slots = N_MAX if policy == "dqn" else max(N_MAX, len(mission.destinations))
+    setup = PlanSetup(mission, full_mission, scenario, msgs, stats, legs=LegTable(mission, slots=slots))
     fail = takeoff_failure(mission.battery.q_max, mission.battery.r0, mission.eod_v)
     if fail is not None:
         setup.early = Plan(policy, messages=msgs + [fail], stats=stats)
     return setup
 
 
-__all__ = ["PlanSetup", "fly_batch", "prepare_mission", "takeoff_failure", "too_close"]
+__all__ = ["PlanSetup", "destination_limit", "fly_batch", "prepare_mission", "takeoff_failure", "too_close"]

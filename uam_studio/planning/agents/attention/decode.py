@@ -1,0 +1,372 @@
+"""Planning with the attention network: beam search behind the physics safety filter.
+
+:func:`attention_plan` decodes a route one decision at a time. Each decision scores every candidate
+(:mod:`~uam_studio.planning.agents.attention.features`) with the network
+(:mod:`~uam_studio.planning.agents.attention.model`); every leg is flown at its lowest-charge level.
+
+- **Safety filter** (default on): a destination is a candidate only if the physics battery model
+  (:func:`~uam_studio.planning.solvers.setup.fly_batch`, the mission's q_max, R0 and cut-off) flies
+  the leg there *and* the leg from there home without falling below the cut-off, from the battery
+  state the route has reached. So the vertiport can always be reached and every plan is safe. The
+  filter flies only the candidates the search would take (each beam's best ``expand`` by the
+  network, more only when none of those is safe; moves from a full charge at the vertiport are
+  flown once per plan). At the vertiport the network may stop only when no
+  destination is safe (a fresh cell that fits nothing more).
+- **Search** (:func:`default_search`): beam search. Each beam proposes its ``expand`` best safe
+  moves by the network; children in the same situation (same visited set, node and sorties) are
+  merged into the one with the most charge left; the ``beam_width`` best children go on, ranked by
+  the network's log-probability (multi_charge: fewer sorties first, which at one step is the same as
+  more destinations, then log-probability). Every finished route is kept and the best by the
+  scenario's objective is returned: single_charge the most priority (ties: less flight time);
+  multi_charge the most destinations, then the fewest sorties, then less time. The network is the
+  only policy: no hand-written rule proposes moves.
+- **Raw agent** (``safety_filter=False, beam_width=1``): the network's first choice at each step,
+  nothing flown during planning (the plan is checked by the caller, and an unsafe plan scores 0).
+
+single_flight has nothing to choose but the level of its one leg: with the filter, the level with
+the highest minimum voltage on the physics model; raw, the lowest-charge level.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from uam_studio.battery import full_charge
+from uam_studio.bundled import bundled_path
+from uam_studio.errors import InputError
+from uam_studio.planning.agents.attention.features import MissionTokens, mission_tokens, step_features
+from uam_studio.planning.agents.attention.model import AttentionConfig, AttentionPolicy
+from uam_studio.planning.legs import ALTITUDES_M, N_MAX, LegTable
+from uam_studio.planning.missions.check import Plan, make_plan
+from uam_studio.planning.missions.mission import VERTIPORT, Mission
+from uam_studio.planning.solvers.setup import fly_batch, prepare_mission, too_close
+from uam_studio.tensor_files import TensorFileError, load_tensors
+
+WEIGHTS_NAME = "attention_planner.pt"
+FORMAT = "uam_studio.attention/1"
+MAX_BEAM = 64
+MULTI_WIDE_MAX_DEST = 10  # multi_charge maps up to this size get the wide search
+
+
+def default_search(scenario: str, n_dest: int) -> tuple[int, int]:
+    """``(beam width, moves proposed per beam)`` of the default planner: (16, 4), and (8, 2) for
+    multi_charge maps of more than :data:`MULTI_WIDE_MAX_DEST` destinations (about 3n steps of
+    physics checks instead of n: the narrower search keeps a 20-destination plan within about 250 ms)."""
+    if scenario == "multi_charge" and n_dest > MULTI_WIDE_MAX_DEST:
+        return 8, 2
+    return 16, 4
+
+__all__ = ["FORMAT", "default_search", "WEIGHTS_NAME", "attention_plan", "bundled_weights_path", "load_policy",
+           "load_policy_cached"]
+
+
+# ----------------------------------------------------------------------------- weights
+
+
+def bundled_weights_path() -> Path:
+    """The bundled attention planner, ``attention_planner.pt`` (:func:`uam_studio.bundled.bundled_path`)."""
+    return bundled_path(WEIGHTS_NAME)
+
+
+def load_policy(path: str | os.PathLike[str] | None = None) -> tuple[AttentionPolicy, dict[str, Any]]:
+    """The network and its model card from a weights file (default: the bundled one).
+
+    The file is read with ``torch.load(weights_only=True)`` (:func:`uam_studio.tensor_files.load_tensors`):
+    nothing in it runs. :raises InputError: (field ``agent``) a missing, refused or malformed file.
+    """
+    p = Path(path) if path is not None else bundled_weights_path()
+    if not p.is_file():
+        raise InputError("agent", f"{p}: no such file (the attention planner's weights)")
+    try:
+        data = load_tensors(p)
+    except TensorFileError as err:
+        raise InputError("agent", f"{p}: {err}") from None
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise InputError("agent", f"{p}: not an attention planner file (format {FORMAT!r} expected)")
+    try:
+        config = AttentionConfig(**{k: int(v) for k, v in data["config"].items()})
+        net = AttentionPolicy(config)
+        net.load_state_dict(data["state_dict"])
+    except (KeyError, TypeError, ValueError, RuntimeError) as err:
+        raise InputError("agent", f"{p}: weights do not fit the network ({' '.join(str(err).split())[:120]})") from None
+    net.eval()
+    card = data.get("card") if isinstance(data.get("card"), dict) else {}
+    return net, card
+
+
+@functools.lru_cache(maxsize=4)
+def _cached(path: str, mtime_ns: int) -> tuple[AttentionPolicy, dict[str, Any]]:
+    return load_policy(path)
+
+
+def load_policy_cached(path: str | os.PathLike[str] | None = None) -> AttentionPolicy:
+    """:func:`load_policy`, cached by path and modification time (the app and the CLI plan often)."""
+    p = Path(path) if path is not None else bundled_weights_path()
+    try:
+        mtime = p.stat().st_mtime_ns
+    except OSError:
+        mtime = -1
+    return _cached(str(p), mtime)[0]
+
+
+# ----------------------------------------------------------------------------- search
+
+
+@dataclass
+class _Beam:
+    at: int  # token
+    visited: np.ndarray  # bool [n]
+    x: np.ndarray | None  # battery state [8] (None without the filter)
+    used_c: float  # C given since the last charge
+    sorties: int
+    tokens: list[int] = field(default_factory=list)  # tokens flown to, the vertiport = n
+    levels: list[int] = field(default_factory=list)
+    logp: float = 0.0
+    priority: int = 0
+    time_s: float = 0.0
+    stopped: bool = False  # chose to stop at the vertiport
+
+
+class _Search:
+    """One decode of one mission (see the module docstring)."""
+
+    def __init__(self, net: AttentionPolicy, tok: MissionTokens, legs: LegTable, scenario: str,
+                 beam_width: int, safety_filter: bool, expand: int | None = None) -> None:
+        self.net, self.tok, self.legs = net, tok, legs
+        self.multi = scenario == "multi_charge"
+        self.width = beam_width
+        self.filter = safety_filter
+        m = legs.mission
+        self.q, self.r0, self.eod = m.battery.q_max, m.battery.r0, m.eod_v
+        self.fresh = full_charge(self.q).as_array()[0]
+        self.legs_flown = 0
+        self.from_home: dict[int, np.ndarray | None] = {}  # token -> state there from a full charge (None: unsafe)
+        self.expand = expand or beam_width  # destinations checked per beam and step (more only when none is safe)
+        with torch.no_grad():
+            self.h, self.graph = net.encode(torch.from_numpy(tok.features).unsqueeze(0))
+
+    def level(self, a: int, b: int) -> int:
+        lv = self.legs.cheapest_level(int(self.tok.leg_index[a]), int(self.tok.leg_index[b]))
+        assert lv is not None
+        return lv
+
+    def current(self, a: int, b: int) -> np.ndarray:
+        return self.legs.current(int(self.tok.leg_index[a]), int(self.tok.leg_index[b]), self.level(a, b))
+
+    def log_probs(self, beams: list[_Beam]) -> tuple[np.ndarray, np.ndarray]:
+        feats = [step_features(self.tok, b.at, b.visited, b.used_c, b.sorties) for b in beams]
+        ctx = torch.from_numpy(np.stack([f[0] for f in feats]))
+        cand = torch.from_numpy(np.stack([f[1] for f in feats]))
+        mask = np.stack([f[2] for f in feats])
+        k = len(beams)
+        with torch.no_grad():
+            logits = self.net.decide(self.h.expand(k, -1, -1), self.graph.expand(k, -1),
+                                     torch.tensor([b.at for b in beams]), ctx, cand, torch.from_numpy(mask))
+            lp = torch.log_softmax(logits, dim=-1).numpy()
+        return lp, mask
+
+    def safe_children(self, beams: list[_Beam], lp: np.ndarray, mask: np.ndarray) -> list[list[tuple[int, np.ndarray, float]]]:
+        """For each beam, its safe destination moves ``(token, state after the leg, leg charge)``, checked
+        in the network's order: the best ``width``, then the rest only if none of those is safe."""
+        n = self.tok.n
+        out: list[list[tuple[int, np.ndarray, float]]] = [[] for _ in beams]
+        order = [[int(t) for t in np.argsort(-lp[i, :n], kind="stable") if mask[i, t]] for i in range(len(beams))]
+        todo = [(i, o[: self.expand]) for i, o in enumerate(order)]
+        for rnd in range(2):
+            rows: list[np.ndarray] = []
+            x0: list[np.ndarray] = []
+            split: list[int] = []
+            keys: list[tuple[int, int]] = []
+            for i, cands in todo:
+                b = beams[i]
+                fresh = b.x is self.fresh  # a full charge at the vertiport: the same for every beam
+                for t in cands:
+                    if fresh and t in self.from_home:
+                        x_t = self.from_home[t]
+                        if x_t is not None:
+                            out[i].append((t, x_t, float(self.tok.charge[n, t])))
+                        continue
+                    go = self.current(b.at, t)
+                    rows.append(np.concatenate([go, self.current(t, n)]))  # the leg there, then home
+                    split.append(go.size)
+                    x0.append(b.x)
+                    keys.append((i, t))
+            if not rows:
+                break
+            ok, _, _, x_there = fly_batch(rows, np.stack(x0), self.q, self.r0, self.eod, split=np.array(split),
+                                          chunk_s=256)
+            self.legs_flown += 2 * len(rows)
+            for k, (i, t) in enumerate(keys):
+                if beams[i].x is self.fresh:
+                    self.from_home[t] = x_there[k] if ok[k] else None
+                if ok[k]:
+                    out[i].append((t, x_there[k], float(self.tok.charge[beams[i].at, t])))
+            if rnd == 0:
+                todo = [(i, order[i][self.expand:]) for i in range(len(beams)) if not out[i] and len(order[i]) > self.expand]
+        return out
+
+    def run(self) -> tuple[_Beam, list[_Beam]]:
+        n = self.tok.n
+        start = _Beam(n, np.zeros(n, dtype=bool), self.fresh if self.filter else None, 0.0, 0)
+        active, finished = [start], []
+        for _ in range(4 * n + 4):  # each step visits a destination or ends a sortie
+            if not active:
+                break
+            lp, mask = self.log_probs(active)
+            safe = self.safe_children(active, lp, mask) if self.filter else None
+            children: list[_Beam] = []
+            for i, b in enumerate(active):
+                moves: list[tuple[int, np.ndarray | None, float]]
+                if safe is not None:
+                    moves = list(safe[i])
+                else:
+                    ranked = [int(t) for t in np.argsort(-lp[i], kind="stable") if mask[i, t] and t != n]
+                    moves = [(t, None, float(self.tok.charge[b.at, t])) for t in ranked[: self.expand]]
+                for t, x, c in moves:
+                    children.append(_Beam(t, b.visited.copy(), x, b.used_c + c, b.sorties, b.tokens + [t],
+                                          b.levels + [self.level(b.at, t)], b.logp + float(lp[i, t]),
+                                          b.priority + int(self.tok.priority[t]),
+                                          b.time_s + self.current(b.at, t).size))
+                    children[-1].visited[t] = True
+                # the vertiport: go home (end the sortie), or stop where already home
+                home_ok = b.at != n or (safe is None or not safe[i])
+                if home_ok and np.isfinite(lp[i, n]):
+                    children.append(self.home(b, float(lp[i, n])))
+            if self.filter:
+                children = self.distinct(children)
+            children.sort(key=self.rank)
+            active = []
+            for rank, c in enumerate(children):
+                if c.stopped or (c.at == n and (not self.multi or c.visited.all())):
+                    if rank < self.width or self.filter:  # finished routes outside the beam: safe, kept
+                        finished.append(c)
+                elif len(active) < self.width and rank < self.width:
+                    active.append(c)
+        finished += active  # the step limit: never reached in practice
+        if self.multi:
+            best = max(finished, key=lambda c: (int(c.visited.sum()), -c.sorties, -c.time_s, c.logp))
+        else:
+            best = max(finished, key=lambda c: (c.priority, -c.time_s, c.logp))
+        return best, finished
+
+    @staticmethod
+    def distinct(children: list[_Beam]) -> list[_Beam]:
+        """One child per (visited set, node, sorties): the one that has used the least charge since its
+        last charge (the others are the same situation with a weaker battery); ties: higher
+        log-probability."""
+        best: dict[tuple[bytes, int, int, bool], _Beam] = {}
+        for c in children:
+            key = (c.visited.tobytes(), c.at, c.sorties, c.stopped)
+            old = best.get(key)
+            if old is None or (c.used_c, -c.logp) < (old.used_c, -old.logp):
+                best[key] = c
+        return list(best.values())
+
+    def rank(self, c: _Beam) -> tuple[float, ...]:
+        """Beam order (smaller first): multi_charge with the filter, fewer sorties so far (at one step,
+        the same as more destinations), then the network's log-probability; otherwise the
+        log-probability alone."""
+        if self.multi and self.filter:
+            return (c.sorties, -c.logp)
+        return (-c.logp,)
+
+    def home(self, b: _Beam, lp: float) -> _Beam:
+        n = self.tok.n
+        if b.at == n:  # stop
+            return _Beam(n, b.visited, b.x, b.used_c, b.sorties, list(b.tokens), list(b.levels), b.logp + lp,
+                         b.priority, b.time_s, stopped=True)
+        return _Beam(n, b.visited, self.fresh if self.filter else None, 0.0, b.sorties + 1, b.tokens + [n],
+                     b.levels + [self.level(b.at, n)], b.logp + lp, b.priority,
+                     b.time_s + self.current(b.at, n).size)
+
+
+def _single_flight(legs: LegTable, safety_filter: bool, msgs: list[str]) -> tuple[list[str], list[float]]:
+    m = legs.mission
+    dest = m.destinations[0]
+    if len(m.destinations) > 1:
+        msgs.append(f"single flight: planning the leg to {dest.name} only")
+    levels = [a for a in range(len(ALTITUDES_M)) if legs.feasible[legs.home, 0, a]]
+    if not levels:
+        msgs.append(too_close(legs, 0) or f"cannot reach {dest.name} at any altitude")
+        return [], []
+    if not safety_filter:
+        a = legs.cheapest_level(legs.home, 0)
+        return [dest.name], [ALTITUDES_M[a]]
+    q, r0, eod = m.battery.q_max, m.battery.r0, m.eod_v
+    x0 = np.repeat(full_charge(q).as_array(), len(levels), axis=0)
+    ok, _, vmin = fly_batch([legs.current(legs.home, 0, a) for a in levels], x0, q, r0, eod)
+    if not ok.any():
+        msgs.append(f"cannot reach {dest.name} at any altitude: the voltage falls below {eod:.2f} V at every level")
+        return [], []
+    return [dest.name], [ALTITUDES_M[levels[int(np.argmax(np.where(ok, vmin, -np.inf)))]]]
+
+
+def attention_plan(mission: Mission | dict, net: AttentionPolicy | None = None, beam_width: int | None = None,
+                   safety_filter: bool = True, scenario: str | None = None, expand: int | None = None) -> Plan:
+    """Plan ``mission`` with the attention network (see the module docstring).
+
+    :param mission: the mission (1 to 20 destinations; a dict in the JSON format is validated first).
+    :param net: the network (default: the bundled one, :func:`load_policy_cached`).
+    :param beam_width: beams kept per step (1: the network's best choice only), 1 to 64; None for
+        :func:`default_search`.
+    :param expand: moves each beam proposes per step (its best safe ones by the network); None for
+        :func:`default_search`'s (at most ``beam_width``).
+    :param safety_filter: fly every candidate on the physics model before taking it (default True).
+    :param scenario: overrides ``mission.scenario``.
+    :return: a :class:`~uam_studio.planning.missions.check.Plan` (policy ``"attention"``); ``stats`` has
+        ``time_s``, ``beam_width``, ``safety_filter``, ``legs_flown`` and ``routes_finished``.
+    """
+    for name, value in (("beam_width", beam_width), ("expand", expand)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer))
+                                  or not 1 <= value <= MAX_BEAM):
+            raise InputError(name, f"{value!r} is out of range; allowed integers in [1, {MAX_BEAM}] or None")
+    t0 = time.perf_counter()
+    setup = prepare_mission(mission, scenario, "attention")
+    if setup.early is not None:
+        return setup.early
+    mission, full, scenario, msgs, stats = setup.mission, setup.full_mission, setup.scenario, setup.messages, setup.stats
+    assert mission is not None and scenario is not None
+    n = len(mission.destinations)
+    legs = setup.legs if setup.legs is not None and setup.legs.slots >= n else LegTable(mission, max(N_MAX, n))
+    width, per_beam = default_search(scenario, n)
+    width = int(beam_width) if beam_width is not None else width
+    per_beam = min(width, int(expand) if expand is not None else per_beam)
+    stats.update(beam_width=width, expand=per_beam, safety_filter=bool(safety_filter))
+
+    def done(route: list[str], alts: list[float]) -> Plan:
+        stats["time_s"] = round(time.perf_counter() - t0, 4)
+        return make_plan(full, "attention", route, alts, msgs, stats)
+
+    if scenario == "single_flight":
+        return done(*_single_flight(legs, safety_filter, msgs))
+    for k in range(n):
+        reason = too_close(legs, k)
+        if reason is not None:
+            msgs.append(reason)
+    net = net if net is not None else load_policy_cached()
+    tok = mission_tokens(legs, scenario)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # a 21-token network: one thread is several times faster than a contended pool
+    try:
+        search = _Search(net, tok, legs, scenario, width, safety_filter, per_beam)
+        best, finished = search.run()
+    finally:
+        torch.set_num_threads(threads)
+    stats.update(legs_flown=search.legs_flown, routes_finished=len(finished))
+    names = [VERTIPORT if t == n else mission.destinations[t].name for t in best.tokens]
+    alts = [ALTITUDES_M[a] for a in best.levels]
+    if names and names[-1] != VERTIPORT:  # the step limit cut a route short: not expected
+        msgs.append("the search stopped before the route returned to the vertiport")
+    left = [mission.destinations[k].name for k in range(n) if not best.visited[k]
+            and np.isfinite(tok.charge[n, k]) and np.isfinite(tok.charge[k, n])]
+    if left and safety_filter:
+        msgs.append(f"not visited: {', '.join(left)} (no safe place found for them)")
+    return done(names, alts)
