@@ -3,6 +3,7 @@ reference (18-20 destinations), on held-out missions scored under physics (issue
 
     python benchmarks/bench_learned_planner.py --n 40 --n-large 20          # the tables
     python benchmarks/bench_learned_planner.py --n 40 --n-large 20 --progpy # + re-fly on progpy
+    python benchmarks/bench_learned_planner.py --n 0 --n-large 40 --latency-only  # latency alone
 
 Held-out: ``held_out_missions(n, SEED_SMALL / SEED_LARGE, ...)``, health in the default box, radii
 8-45 km; training used ``random_mission`` with seeds ``[0, k]`` and ``[0, 1, k]`` (8-60 km).
@@ -128,6 +129,8 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=40, help="missions of 6-8 destinations per scenario")
     ap.add_argument("--n-large", type=int, default=20, help="missions of 18-20 destinations per scenario")
     ap.add_argument("--progpy", action="store_true", help="re-fly the default plans on progpy")
+    ap.add_argument("--latency-only", action="store_true",
+                    help="only the plan_mission latency on the 18-20 destination missions (use with --n 0)")
     args = ap.parse_args()
     small_rows = {"default": _pm("attention"), "no search": _att(1, True), "raw": _att(1, False),
                   "dqn": _pm("dqn"), "greedy": _pm("greedy"), "oracle": _pm("oracle")}
@@ -135,18 +138,21 @@ def main() -> None:
                   "greedy": _pm("greedy"), "reference": _pm("oracle")}
     refly = []
     for scenario in SCENARIOS:
-        ms = held_out_missions(args.n, SEED_SMALL, n_dest=(6, 8), scenario=scenario)
-        res = run(ms, small_rows)
-        print(f"\n{scenario}, {args.n} held-out missions of 6-8 destinations (seed {SEED_SMALL}), against the exact oracle")
-        table(res, scenario, "oracle")
-        refly.append((ms, res["default"]["plan"]))
+        if args.n > 0:
+            ms = held_out_missions(args.n, SEED_SMALL, n_dest=(6, 8), scenario=scenario)
+            res = run(ms, small_rows)
+            print(f"\n{scenario}, {args.n} held-out missions of 6-8 destinations (seed {SEED_SMALL}), "
+                  "against the exact oracle")
+            table(res, scenario, "oracle")
+            refly.append((ms, res["default"]["plan"]))
         ml = held_out_missions(args.n_large, SEED_LARGE, n_dest=(18, 20), scenario=scenario)
-        res = run(ml, large_rows)
-        print(f"\n{scenario}, {args.n_large} held-out missions of 18-20 destinations (seed {SEED_LARGE}), "
-              "against greedy and against the reference")
-        table(res, scenario, "greedy")
-        table({"default": res["default"], "reference": res["reference"]}, scenario, "reference")
-        refly.append((ml, res["default"]["plan"]))
+        if not args.latency_only:
+            res = run(ml, large_rows)
+            print(f"\n{scenario}, {args.n_large} held-out missions of 18-20 destinations (seed {SEED_LARGE}), "
+                  "against greedy and against the reference")
+            table(res, scenario, "greedy")
+            table({"default": res["default"], "reference": res["reference"]}, scenario, "reference")
+            refly.append((ml, res["default"]["plan"]))
         lat, lat_pred = [], []
         for m in ml:
             t = time.perf_counter()

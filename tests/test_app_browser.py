@@ -121,6 +121,11 @@ def test_planner_map_table_slider_update_route_and_summary(page, app_url):
     for needle in ("Route: vertiport", "Reached:", "physics: safe by", "predicted: safe by", "(90%: "):
         assert needle in text0, needle
     assert page.get_by_text("q_max (C)").count() == 1 and page.get_by_text("R0 (ohm)").count() == 1
+    # the attention planner is the default: first in the policy select, selected, named in the summary
+    policy = page.locator(".bk-input-group", has=page.get_by_text("Policy", exact=True)).locator("select")
+    assert policy.evaluate("s => [s.options[0].text, s.options[s.selectedIndex].text]") == \
+        ["Attention (bundled, default)"] * 2
+    assert "Policy: Attention (bundled, default)" in text0, text0
 
     # 1. click the map: a new destination D1 appears in the table
     fr = page.evaluate(JS_FRAME, "Map")
@@ -309,10 +314,10 @@ def test_layout_fits_the_screen_with_the_plan_above_the_fold(browser, app_url, s
             assert box["x"] >= 0 and box["y"] >= 0, (name, box)
             assert box["x"] + box["width"] <= width and box["y"] + box["height"] <= height, (name, box, size)
         text = compare.inner_text()
-        for label in ("DQN (bundled)", "Greedy", "Oracle (exact)"):
+        for label in ("Attention (default)", "Greedy", "Oracle (exact)"):
             row = [line for line in text.splitlines() if line.startswith(label)]
             assert row and any(ch.isdigit() for ch in row[0]), (label, text)
-        assert "Gap to oracle" in text and "priority" in text
+        assert "Gap to oracle" in text and "matches" in text and "reference" in text
 
         for tab in ("Planner", "Battery lab", "Retrain"):
             page.locator(".bk-tab", has_text=tab).click()

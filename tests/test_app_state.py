@@ -49,7 +49,7 @@ def home(tmp_path, monkeypatch) -> Path:
 
 def _state(**kw) -> PlannerState:
     s = PlannerState(**kw)
-    if s.policy == "dqn" and kw.get("policy") is None:
+    if s.policy in ("attention", "dqn") and kw.get("policy") is None:
         s.apply(policy="greedy")
     return s
 
@@ -208,6 +208,69 @@ def test_missing_bundled_agent_is_a_visible_error(monkeypatch, tmp_path):
     assert s.apply(policy="dqn")
     assert s.plan_error.startswith("agent: bundled agent dqn_single_charge.zip is not installed")
     assert s.plan is None
+    assert s.apply(policy="attention")
+    assert s.plan_error.startswith("agent: bundled agent attention_planner.pt is not installed")
+    assert s.plan is None and "\n" not in s.plan_error
+
+
+def test_the_attention_planner_is_the_first_and_default_policy():
+    from uam_studio.app.planner import summary_html
+
+    s = PlannerState()
+    assert s.policy == "attention" and s.plan_error == ""
+    assert list(s.policy_objects.items())[:2] == [("Attention (bundled, default)", "attention"),
+                                                   ("DQN (paper, up to 8)", "dqn")]
+    assert s.plan["policy"] == "attention" and s.plan["safe"] and s.plan["reached_priority"] == 6
+    assert "<b>Policy:</b> Attention (bundled, default)" in summary_html(s)
+    s.close()
+
+
+def _spread_rows(n: int) -> list[dict]:
+    """``n`` destinations 15-40 km out, spread around the vertiport, priorities 1-3."""
+    return [{"name": f"P{k + 1}", "x_km": round((15 + 25 * (k % 5) / 4) * np.cos(2.4 * k), 1),
+             "y_km": round((15 + 25 * (k % 5) / 4) * np.sin(2.4 * k), 1), "priority": 1 + k % 3,
+             "wind_kts": float(5 * (k % 4) - 5), "dwell_s": 0.0} for k in range(n)]
+
+
+def test_twenty_destinations_plan_safely_with_the_default_policy():
+    from uam_studio.app.planner import summary_html
+
+    s = PlannerState()
+    assert s.set_destinations(_spread_rows(20)), s.error
+    assert s.policy == "attention" and len(s.plan_request.mission.destinations) == 20
+    assert s.plan_error == "" and s.plan["policy"] == "attention" and s.plan["exact"] is None
+    assert s.plan["safe"] and s.plan["reached"] and s.plan["route"][-1] == "vertiport"
+    v = s.verdict()
+    assert v["physics_margin_v"] >= 0 and v["level"] in ("safe", "uncertain", "disagree")
+    html = summary_html(s)
+    assert "<b>Policy:</b> Attention (bundled, default)" in html and "Planning error" not in html
+    assert f"of 20 (priority {s.plan['reached_priority']})" in html
+    s.close()
+
+
+def test_dqn_past_eight_destinations_is_a_one_line_error_naming_8():
+    from uam_studio.app.planner import summary_html
+
+    s = PlannerState(policy="dqn")
+    assert s.plan_error == "" and s.plan["policy"] == "dqn"
+    assert s.set_destinations(_spread_rows(9)), s.error  # the mission itself is fine (up to 20)
+    assert s.error == "" and s.plan is None
+    assert s.plan_error == "destinations: 9 destinations; the dqn policy plans at most 8 (allowed 1 to 8)"
+    assert "<b>Planning error:</b> destinations: 9 destinations; the dqn policy plans at most 8" in summary_html(s)
+    assert s.apply(policy="attention") and s.plan_error == "" and s.plan["safe"]  # the default plans it
+    s.close()
+
+
+def test_the_oracle_says_whether_its_plan_is_exact_or_the_reference_solvers():
+    from uam_studio.app.planner import summary_html
+
+    s = PlannerState(policy="oracle")
+    assert s.plan["exact"] is True and s.plan_label() == "Oracle (exact optimum)"
+    assert s.set_destinations(_spread_rows(9)), s.error
+    assert s.plan_error == "" and s.plan["exact"] is False and s.plan["safe"]
+    assert s.plan_label() == "Oracle: the reference solver's plan (OR-Tools), not proven optimal"
+    assert f"<b>Policy:</b> {s.plan_label()}" in summary_html(s).replace("&#x27;", "'")
+    s.close()
 
 
 def test_background_replanning_keeps_only_the_latest():
@@ -527,16 +590,30 @@ def test_failed_takeoff_has_its_voltage_trace_and_an_unsafe_verdict():
 def test_comparison_inline_names_three_planners_and_the_gap_to_the_oracle():
     from uam_studio.app.state import comparison_table
 
-    s = PlannerState(compare="inline")  # the bundled DQN, as the served app starts
+    s = PlannerState(compare="inline")  # the attention planner, as the served app starts
     rows = {r["key"]: r for r in comparison_table(s.comparison)}
-    assert [r["label"] for r in comparison_table(s.comparison)] == ["DQN (bundled)", "Greedy", "Oracle (exact)"]
+    assert [r["label"] for r in comparison_table(s.comparison)] == \
+        ["Attention (default)", "Greedy", "Oracle (exact)"]
     assert all(r["status"] == "done" for r in rows.values())
-    assert (rows["agent"]["priority"], rows["greedy"]["priority"], rows["oracle"]["priority"]) == (5, 6, 6)
-    assert rows["agent"]["gap"] == "-1 priority (-17%)" and rows["greedy"]["gap"] == "matches"
+    assert (rows["agent"]["priority"], rows["greedy"]["priority"], rows["oracle"]["priority"]) == (6, 6, 6)
+    assert rows["agent"]["gap"] == "matches" and rows["greedy"]["gap"] == "matches"
     assert rows["agent"]["route"] == s.plan["route"]  # the same library call as the shown plan
     assert not s.comparison_pending()
     before = s.comparison
     assert s.apply(policy="greedy") and s.comparison is before  # same mission and agent: same rows
+    assert s.apply(policy="dqn")  # the paper's DQN takes the agent row
+    rows = {r["key"]: r for r in comparison_table(s.comparison)}
+    assert rows["agent"]["label"] == "DQN (paper)" and rows["agent"]["priority"] == 5
+    assert rows["agent"]["gap"] == "-1 priority (-17%)" and rows["agent"]["route"] == s.plan["route"]
+    assert s.set_destinations(_spread_rows(9)), s.error  # past 8: the DQN's row is its error
+    rows = {r["key"]: r for r in comparison_table(s.comparison)}
+    assert rows["agent"]["status"] == "error" and "at most 8" in rows["agent"]["error"]
+    assert rows["oracle"]["label"] == "Oracle (reference)" and rows["oracle"]["exact"] is False
+    assert rows["oracle"]["gap"] == "reference"
+    from uam_studio.app.planner import comparison_html
+
+    assert "oracle: the reference solver's plan, not proven optimal" in comparison_html(s)
+    assert rows["greedy"]["status"] == "done" and rows["greedy"]["gap"]
     s.close()
 
 

@@ -137,10 +137,27 @@ def test_comparison_panel_names_the_three_planners_with_their_numbers():
     view.__panel__().get_root(Document())
     html = view.compare.object
     assert html == comparison_html(state) and html.startswith("<div class='uam-plan-compare' data-pending='false'")
-    for label, prio in (("DQN (bundled)", ">5<"), ("Greedy", ">6<"), ("Oracle (exact)", ">6<")):
+    for label, prio in (("Attention (default)", ">6<"), ("Greedy", ">6<"), ("Oracle (exact)", ">6<")):
         row = html.split(f">{label}<")[1].split("</tr>")[0]
         assert prio in row and "3." in row, (label, row)
-    assert "-1 priority (-17%)" in html and "matches" in html and "reference" in html
+    assert "matches" in html and "reference" in html
+    assert "<tr class='uam-compare-agent' style='font-weight:bold;'>" in html  # the shown plan's row
+    state.apply(policy="dqn")  # the paper's DQN: 1 priority short of the oracle on the example
+    html = view.compare.object
+    row = html.split(">DQN (paper)<")[1].split("</tr>")[0]
+    assert ">5<" in row and "-1 priority (-17%)" in row
+    state.close()
+
+
+def test_policy_select_starts_on_the_attention_planner():
+    state = PlannerState()
+    view = PlannerView(state)
+    assert view.policy.value == "attention"
+    assert list(view.policy.options)[:4] == ["Attention (bundled, default)", "DQN (paper, up to 8)",
+                                             "Oracle (exact up to 8)", "Greedy"]
+    assert "<b>Policy:</b> Attention (bundled, default)" in view.summary.object
+    view.policy.value = "oracle"
+    assert state.policy == "oracle" and "<b>Policy:</b> Oracle (exact optimum)" in view.summary.object
     state.close()
 
 

@@ -165,3 +165,36 @@ def test_features_of_a_twenty_destination_mission():
     ctx, cand, mask = step_features(tok, 20, np.zeros(20, dtype=bool), 0.0, 0)
     assert mask[20] and np.isfinite(cand).all() and np.isfinite(ctx).all()
     assert LegTable(_mission(3, 9)).slots == N_MAX
+
+
+# --------------------------------------------------------------------------- plan_mission's default
+
+
+def test_plan_mission_defaults_to_the_attention_planner_on_twenty_destinations():
+    from uam_studio.planning import MAX_DESTINATIONS, plan_mission
+
+    for scenario in ("single_charge", "multi_charge"):
+        m = _mission(MAX_DESTINATIONS, 21, scenario)
+        res = plan_mission(m, predictor=False)
+        assert res["policy"] == "attention" and res["exact"] is None
+        assert res["safe"] and res["route"] and res["route"][-1] == VERTIPORT
+        assert res["reached_priority"] == sum(d.priority for d in m.destinations if d.name in res["reached"])
+        check = check_plan(m, res["route"], res["altitudes_m"])
+        assert check.safe and res["charging_cycles"] == check.sim.charging_cycles
+
+
+def test_plan_mission_attention_takes_a_weights_file_and_refuses_foreign_options(tmp_path):
+    from uam_studio.planning import plan_mission
+
+    m = _mission(5, 22)
+    cfg = AttentionTrainConfig(oracle_missions=4, oracle_dest=(2, 3), search_missions=0, epochs=1, workers=1,
+                               network=AttentionConfig(d_model=16, heads=2, layers=1, ff=16))
+    path = train_attention(cfg, tmp_path / "run", log=lambda s: None)
+    res = plan_mission(m, "attention", agent_path=path, predictor=False)
+    assert res["policy"] == "attention" and res["safe"]
+    with pytest.raises(InputError, match="agent"):
+        plan_mission(m, "attention", agent_path=tmp_path / "missing.pt", predictor=False)
+    with pytest.raises(InputError, match="agent_path"):
+        plan_mission(m, "greedy", agent_path=path, predictor=False)
+    with pytest.raises(InputError, match="lookahead"):
+        plan_mission(m, "attention", lookahead=2, predictor=False)

@@ -38,6 +38,21 @@ def test_oracle_bounds_every_policy(tiny_agent):
     assert summ["dqn"]["missions"] == 3
 
 
+def test_compare_scores_the_attention_planner_as_plan_mission_plans_it():
+    from uam_studio.planning.planner import plan_mission
+
+    missions = held_out_missions(2, 4242, n_dest=(9, 10))  # past the DQN's 8: no agent needed
+    scores = compare_planners(missions, policies=("oracle", "attention", "attention_raw"))
+    by = {(s.mission, s.policy): s for s in scores}
+    for m in missions:
+        plan = plan_mission(m, "attention", predictor=False)
+        s = by[(m.name, "attention")]
+        assert s.safe and s.reached_priority == plan["reached_priority"]
+        assert s.charging_cycles == plan["charging_cycles"]
+        assert by[(m.name, "attention_raw")].mission == m.name
+    assert set(summarize(scores)) == {"oracle", "attention", "attention_raw"}
+
+
 def test_compare_rejects_bad_policy():
     with pytest.raises(InputError, match="policies"):
         compare_planners(held_out_missions(1, 1), policies=("random",))

@@ -115,6 +115,16 @@ def test_decisions_unchanged_when_the_true_cell_is_swapped(example, monkeypatch)
         assert swapped.route == base.route and swapped.altitudes_m == base.altitudes_m
 
 
+@pytest.mark.parametrize("policy", ["attention", "oracle"])
+def test_both_in_flight_planners_fly_safely_and_attention_is_the_default(example, policy):
+    rec = fly_mission(example, policy, seed=5, references=False)
+    assert not rec.breached and rec.route and rec.route[-1] == VERTIPORT
+    assert rec.reached_priority > 0
+    if policy == "attention":
+        default = fly_mission(example, seed=5, references=False)
+        assert default.route == rec.route and default.altitudes_m == rec.altitudes_m
+
+
 def test_operator_ignores_the_battery_it_is_handed(example):
     """Operators given missions with different cells decide alike on the same readings."""
     world = World(example, seed=11)

@@ -191,8 +191,9 @@ def _run_plan(args: argparse.Namespace) -> int:
 def _add_fly_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("mission", metavar="MISSION.json", help="mission file: its battery is the true cell, its "
                                                            "winds the forecast")
-    p.add_argument("--policy", choices=["oracle"], default="oracle",
-                   help="the operator's planner: oracle (exact search on what it believes; default)")
+    p.add_argument("--policy", choices=["attention", "oracle"], default="attention",
+                   help="the operator's planner, on what it believes: attention (the learned planner; default) "
+                        "or oracle (exact search, slower)")
     p.add_argument("--seed", type=int, default=0, help="seeds the forecast errors and the sensor noise")
     p.add_argument("--forecast-sigma", type=float, default=13.0, metavar="KT",
                    help="std of the forecast error of each node's wind (kt, 0-60; default 13)")

@@ -175,9 +175,9 @@ VERDICT_STYLE = {  # level -> (background, border)
 
 
 def summary_html(state: PlannerState) -> str:
-    """The summary pane (``<div class="uam-plan-summary">``): policy and cell, route with altitudes,
-    what it reaches, the safety verdict by source (``<div class="uam-verdict" data-level=...>``,
-    :meth:`PlannerState.verdict`) and the planner's notes.
+    """The summary pane (``<div class="uam-plan-summary">``): the planner (:meth:`PlannerState.plan_label`)
+    and cell, route with altitudes, what it reaches, the safety verdict by source (``<div
+    class="uam-verdict" data-level=...>``, :meth:`PlannerState.verdict`) and the planner's notes.
 
     Attributes: ``data-busy`` ("true" while a newer plan is being computed) and ``data-inputs``
     (:func:`request_digest` of the request the shown plan was computed for)."""
@@ -208,7 +208,7 @@ def _summary_body(state: PlannerState) -> str:
     if plan is None or req is None:
         return "<p>planning...</p>"
     m = req.mission
-    parts = [_p(f"<b>Policy:</b> {e(state.policy_label(req.policy))} &middot; <b>scenario:</b> {e(m.scenario)} "
+    parts = [_p(f"<b>Policy:</b> {e(state.plan_label())} &middot; <b>scenario:</b> {e(m.scenario)} "
                 f"&middot; q_max {m.battery.q_max:g} C, R0 {m.battery.r0:g} ohm, EOD {m.eod_v:g} V")]
     if plan["route"]:
         legs = []
@@ -238,7 +238,8 @@ def _summary_body(state: PlannerState) -> str:
 
 def comparison_html(state: PlannerState) -> str:
     """The planner comparison (``<div class="uam-plan-compare">``): for the shown plan's mission, the
-    agent, greedy and the exact oracle, each planned by ``plan_mission``: priority reached, places
+    learned planner, greedy and the oracle (exact up to 8 destinations, the reference solver's plan
+    beyond, which the heading then says), each planned by ``plan_mission``: priority reached, places
     reached, charging cycles, lowest physics voltage and the gap to the oracle
     (:func:`~uam_studio.app.state.comparison_table`). The row of the selected policy is bold.
 
@@ -258,7 +259,9 @@ def comparison_html(state: PlannerState) -> str:
     cols = [("Planner", "left"), ("Priority", "right"), ("Reached", "right"), ("Cycles", "right"),
             ("Min V", "right"), ("Gap to oracle", "left")]
     rows = ["<tr>" + "".join(f"<th {th.format(al)}>{name}</th>" for name, al in cols) + "</tr>"]
-    for r in comparison_table(c):
+    table = comparison_table(c)
+    reference = any(r["key"] == "oracle" and r.get("exact") is False for r in table)
+    for r in table:
         weight = "font-weight:bold;" if r["policy"] == shown else ""
         label = f"<td {td.format('left')}>{e(r['label'])}</td>"
         if r.get("status") == "pending":
@@ -275,8 +278,9 @@ def comparison_html(state: PlannerState) -> str:
                      (str(r["cycles"]), "right"), (vmin, "right"), (e(r["gap"]), "left")]
             rows.append(f"<tr class='uam-compare-{r['key']}' style='{weight}'>{label}"
                         + "".join(f"<td {td.format(al)}>{text}</td>" for text, al in cells) + "</tr>")
+    note = "; oracle: the reference solver's plan, not proven optimal" if reference else ""
     return (head + "<b>Planners on this mission</b> <span style='color:#555'>(<code>plan_mission</code>, as "
-            "the CLI; Min V: physics)</span>"
+            f"the CLI; Min V: physics{note})</span>"
             "<table style='border-collapse:collapse;margin-top:2px'>" + "".join(rows) + "</table></div>")
 
 

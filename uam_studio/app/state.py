@@ -72,6 +72,7 @@ __all__ = [
     "comparison_runner",
     "comparison_table",
     "compute_plan",
+    "default_policy",
     "mission_digest",
     "population",
     "prediction_band",
@@ -102,8 +103,10 @@ EXAMPLE_MISSION: dict[str, Any] = {
 }
 """The bundled example (``assets/example_mission.json``), the app's starting mission."""
 
-POLICY_LABELS = {"DQN (bundled)": "dqn", "Oracle (exact, slow)": "oracle", "Greedy": "greedy"}
+POLICY_LABELS = {"Attention (bundled, default)": "attention", "DQN (paper, up to 8)": "dqn",
+                 "Oracle (exact up to 8)": "oracle", "Greedy": "greedy"}
 AGENT_PREFIX = "agent:"
+ATTENTION_WEIGHTS = "attention_planner.pt"  # the bundled attention planner (uam_studio.bundled)
 
 # Planning runs here in the served app: a few workers shared by all sessions, one request per session.
 _POOL = ThreadPoolExecutor(max_workers=4, thread_name_prefix="uam-plan")
@@ -213,13 +216,14 @@ def warm_up(compare: str | None = None) -> None:
     compare the example's planners, so the first session's comparison is ready too."""
     population()
     mission = mission_from_dict(EXAMPLE_MISSION)
-    policy = "dqn" if _bundled_exists(mission.scenario) else "greedy"
+    policy = default_policy(mission.scenario)
     compute_plan(PlanRequest(mission, policy))
     mode = compare or compare_mode(True)
     if mode in ("process", "thread"):
         runner = comparison_runner(mode)
         runner.start()
-        todo = [PlanRequest(mission, p) for p in ("dqn", "greedy", "oracle")
+        agent = policy if policy in LEARNED_POLICIES else "attention"
+        todo = [PlanRequest(mission, p) for p in (agent, "greedy", "oracle")
                 if cached_row(PlanRequest(mission, p)) is None]
         runner.submit("warm-up", [(r, lambda _row: None) for r in todo])
 
@@ -261,7 +265,8 @@ def registry() -> AgentRegistry:
 
 
 def policy_options(agents: list[Any]) -> dict[str, str]:
-    """Select options (label -> value): the three planners and one ``agent:<path>`` per retrained agent."""
+    """Select options (label -> value): the four planners (the attention planner first) and one
+    ``agent:<path>`` per retrained DQN agent."""
     opts = dict(POLICY_LABELS)
     for a in agents:
         opts[f"Retrained: {a.label}"] = f"{AGENT_PREFIX}{a.path}"
@@ -276,7 +281,7 @@ class PlanRequest:
     """Everything a plan depends on (a snapshot, safe to hand to another thread)."""
 
     mission: Mission
-    policy: str  # dqn | oracle | greedy | agent:<path>
+    policy: str  # attention | dqn | oracle | greedy | agent:<path>
 
 
 def mission_digest(m: Mission) -> str:
@@ -288,12 +293,16 @@ def mission_digest(m: Mission) -> str:
 
 
 def _agent_stamp(req: PlanRequest) -> tuple[str, int, int] | None:
-    """(path, mtime ns, size) of the agent file a DQN plan uses (retrained, or the bundled one for the
-    mission's scenario), so a plan cached for another or an older file is never reused."""
+    """(path, mtime ns, size) of the agent file a learned plan uses (the bundled attention planner; a
+    retrained DQN agent, or the bundled one for the mission's scenario), so a plan cached for another
+    or an older file is never reused."""
+    from uam_studio.bundled import bundled_path
     from uam_studio.planning.agents.rollout import bundled_agent_path
 
     if req.policy.startswith(AGENT_PREFIX):
         path = Path(req.policy[len(AGENT_PREFIX):])
+    elif req.policy == "attention":
+        path = bundled_path(ATTENTION_WEIGHTS)
     elif req.policy == "dqn":
         path = bundled_agent_path(req.mission.scenario)
     else:
@@ -559,7 +568,8 @@ def _row_from_plan(plan: dict[str, Any], mission: Mission) -> dict[str, Any]:
     return {"status": "done", "error": None, "priority": int(plan["reached_priority"]),
             "reached": len(plan["reached"]), "of": len(mission.destinations),
             "cycles": int(plan["charging_cycles"]), "min_voltage_v": plan["min_voltage_v"],
-            "safe": bool(plan["safe"]), "route": list(plan["route"]), "altitudes_m": list(plan["altitudes_m"])}
+            "safe": bool(plan["safe"]), "route": list(plan["route"]), "altitudes_m": list(plan["altitudes_m"]),
+            "exact": plan.get("exact")}
 
 
 def _agent_reads_dynaformer(agent_path: str | None, scenario: str) -> bool:
@@ -574,12 +584,13 @@ def _agent_reads_dynaformer(agent_path: str | None, scenario: str) -> bool:
 
 def compare_row(mission: Mission, policy: str) -> dict[str, Any]:
     """One row of the plan comparison: :func:`~uam_studio.planning.planner.plan_mission` (the CLI's
-    call) for ``policy`` (``dqn``, ``oracle``, ``greedy`` or ``agent:<path>``) on ``mission``. The
-    Dynaformer is loaded only for an agent that reads its health features (the route does not depend
-    on it otherwise). Never raises.
+    call) for ``policy`` (``attention``, ``dqn``, ``oracle``, ``greedy`` or ``agent:<path>``) on
+    ``mission``. The Dynaformer is loaded only for a DQN agent that reads its health features (the
+    route does not depend on it otherwise). Never raises.
 
     :return: ``{"status": "done" | "error", "error", "priority", "reached", "of", "cycles",
-        "min_voltage_v", "safe", "route", "altitudes_m", "elapsed_s"}``.
+        "min_voltage_v", "safe", "route", "altitudes_m", "exact", "elapsed_s"}`` (``exact``: the
+        plan's, True or False for the oracle, None for the others).
     """
     from uam_studio.planning.planner import plan_mission
 
@@ -803,17 +814,25 @@ def comparison_runner(mode: str) -> ComparisonRunner:
 
 
 COMPARE_ROWS = ("agent", "greedy", "oracle")
+COMPARE_LABELS = {"attention": "Attention (default)", "dqn": "DQN (paper)"}
+"""Short labels of the learned planners in the comparison table (its rows do not wrap)."""
+ORACLE_REFERENCE_LABEL = "Oracle (reference)"
+"""The comparison's oracle row where the oracle returned the reference solver's plan (9-20
+destinations, not proven optimal)."""
 
 
 def comparison_table(comparison: dict[str, Any] | None) -> list[dict[str, Any]]:
     """The comparison's rows in display order, each with ``gap``: the difference to the oracle in
     the scenario's objective (priority reached; in multi charge also charging cycles), as text, ''
-    while either is missing."""
+    while either is missing. Where the oracle's plan is the reference solver's (``exact`` False), its
+    row is labelled :data:`ORACLE_REFERENCE_LABEL`."""
     if not comparison:
         return []
     rows = [dict(comparison["rows"][k], key=k) for k in COMPARE_ROWS if k in comparison["rows"]]
     oracle = comparison["rows"].get("oracle", {})
     for r in rows:
+        if r["key"] == "oracle" and r.get("exact") is False:
+            r["label"] = ORACLE_REFERENCE_LABEL
         r["gap"] = ""
         if r.get("status") != "done" or oracle.get("status") != "done":
             continue
@@ -926,8 +945,8 @@ class PlannerState(param.Parameterized):
         reg = registry()
         self._update_policy_options(reg.agents)
         self._agents_watcher = reg.param.watch(self._on_agents, "agents")
-        if "policy" not in params and _bundled_exists(self.scenario):
-            self.policy = "dqn"  # the bundled agent is the default planner where there is one
+        if "policy" not in params:
+            self.policy = default_policy(self.scenario)
         self.param.watch(self._on_inputs, list(self.INPUTS))
         if self.auto:
             self.request_plan()
@@ -1092,10 +1111,10 @@ class PlannerState(param.Parameterized):
         self.param["policy"].objects = list(opts.values())
         self.policy_objects = opts  # views refresh their options
         if self.policy not in self.param["policy"].objects:  # its agent file is gone
-            self.policy = "greedy"
+            self.policy = default_policy(self.scenario)
 
     def policy_label(self, value: str) -> str:
-        """The policy select's label of a policy value (``"dqn"`` -> ``"DQN (bundled)"``, an
+        """The policy select's label of a policy value (``"dqn"`` -> ``"DQN (paper, up to 8)"``, an
         ``agent:<path>`` -> ``"Retrained: <file> (<scenario>)"``)."""
         for label, v in self.policy_objects.items():
             if v == value:
@@ -1103,6 +1122,19 @@ class PlannerState(param.Parameterized):
         if value.startswith(AGENT_PREFIX):
             return f"Retrained: {Path(value[len(AGENT_PREFIX):]).stem}"
         return value
+
+    def plan_label(self) -> str:
+        """Which planner made the shown plan: its policy label, and for the oracle whether the plan is
+        proven optimal (``exact``: up to 8 destinations) or the reference solver's (9-20); '' before
+        the first plan."""
+        req, plan = self.plan_request, self.plan
+        if req is None:
+            return ""
+        label = self.policy_label(req.policy)
+        if plan is not None and req.policy == "oracle" and plan.get("exact") is not None:
+            label = ("Oracle (exact optimum)" if plan["exact"]
+                     else "Oracle: the reference solver's plan (OR-Tools), not proven optimal")
+        return label
 
     def verdict(self) -> dict[str, Any]:
         """:func:`safety_verdict` of the shown plan."""
@@ -1201,11 +1233,19 @@ class PlannerState(param.Parameterized):
     # ------------------------------------------------------------------ comparison
 
     def _compare_specs(self, req: PlanRequest) -> dict[str, tuple[str, str]]:
-        """Row name -> (policy value, label): the agent (the selected retrained agent, else the
-        bundled DQN), greedy and the oracle."""
-        agent = req.policy if req.policy.startswith(AGENT_PREFIX) else "dqn"
-        return {"agent": (agent, self.policy_label(agent)), "greedy": ("greedy", "Greedy"),
-                "oracle": ("oracle", "Oracle (exact)")}
+        """Row name -> (policy value, label): the agent (the selected learned planner: the attention
+        planner, the paper's DQN or a retrained agent; with greedy or the oracle selected, the
+        default learned planner), greedy and the oracle."""
+        from uam_studio.planning.solvers.oracle import EXACT_MAX
+
+        if req.policy in LEARNED_POLICIES or req.policy.startswith(AGENT_PREFIX):
+            agent = req.policy
+        else:
+            agent = default_policy(req.mission.scenario)
+            agent = agent if agent in LEARNED_POLICIES else "attention"
+        oracle = "Oracle (exact)" if len(req.mission.destinations) <= EXACT_MAX else ORACLE_REFERENCE_LABEL
+        label = COMPARE_LABELS.get(agent) or self.policy_label(agent)
+        return {"agent": (agent, label), "greedy": ("greedy", "Greedy"), "oracle": ("oracle", oracle)}
 
     def _update_comparison(self) -> None:
         """Compare the shown plan's mission across planners: rows known to this process at once, the
@@ -1279,10 +1319,27 @@ class PlannerState(param.Parameterized):
         return True
 
 
+LEARNED_POLICIES = ("attention", "dqn")
+
+
 def _bundled_exists(scenario: str) -> bool:
     from uam_studio.planning.agents.rollout import bundled_agent_path
 
     return bundled_agent_path(scenario).is_file()
+
+
+def _attention_exists() -> bool:
+    from uam_studio.bundled import bundled_path
+
+    return bundled_path(ATTENTION_WEIGHTS).is_file()
+
+
+def default_policy(scenario: str) -> str:
+    """The app's default planner: the bundled attention planner (1-20 destinations) where its weights
+    are installed, else the scenario's bundled DQN agent, else greedy."""
+    if _attention_exists():
+        return "attention"
+    return "dqn" if _bundled_exists(scenario) else "greedy"
 
 
 # ----------------------------------------------------------------------------- battery lab

@@ -4,9 +4,10 @@ Rooms (each imports only the ones below it; import-linter contract in pyproject.
 
     planner.py     plan_mission: the one entry point of the CLI and the app
     operations/    flying a mission in real time (world, operator, flight loop)
-    agents/        DQN networks, training, agent files, retraining, rollout (the only torch users)
+    agents/        the attention planner, DQN networks, training, agent files, retraining, rollout
+                   (the only torch users)
     env/           the Gymnasium environment and its battery backends
-    solvers/       the exact oracle, the greedy baseline and their shared setup
+    solvers/       the exact oracle, the OR-Tools reference, the greedy baseline and their shared setup
     missions/      mission format, generation, route simulation, plan checks
     legs.py        the discrete action space and the leg table of a mission
 
@@ -19,17 +20,20 @@ Planning: the action space (:mod:`~uam_studio.planning.legs`: ``N_MAX``, ``ALTIT
 ``N_ACTIONS``, :func:`encode_action`, :func:`decode_action`), the Gymnasium environment
 :class:`UAMPlanningEnv` (:func:`make_env`), random and held-out missions
 (:func:`random_mission`, :func:`held_out_missions`), planners returning a :class:`Plan`
-(:func:`oracle_plan`, exact; :func:`greedy_plan`, baseline) and the physics check
-:func:`check_plan` (-> :class:`PlanCheck`).
+(:func:`attention_plan`, the learned default, 1-20 destinations; :func:`oracle_plan`, exact up to 8,
+:func:`reference_plan` beyond; :func:`greedy_plan`, baseline), the physics check
+:func:`check_plan` (-> :class:`PlanCheck`) and the one entry point of the CLI and the app,
+:func:`plan_mission` (any of :data:`POLICIES`, checked on physics, with the Dynaformer's prediction).
 
-``env`` and ``solvers`` are imported lazily (attribute access), so ``import uam_studio.planning``
-stays light (no gymnasium).
+``env``, ``solvers``, ``agents`` and ``planner`` are imported lazily (attribute access), so
+``import uam_studio.planning`` stays light (no gymnasium, no torch).
 """
 
 import importlib
 
 from uam_studio.planning.legs import (
     ALTITUDES_M,
+    MAX_DESTINATIONS,
     N_ACTIONS,
     N_MAX,
     decode_action,
@@ -45,6 +49,7 @@ from uam_studio.planning.missions.mission import (
     Destination,
     Mission,
     Vertiport,
+    as_mission,
     load_mission,
     mission_from_dict,
     mission_from_json,
@@ -58,6 +63,10 @@ _LAZY = {
     "make_env": "env",
     "oracle_plan": "solvers.oracle",
     "greedy_plan": "solvers.greedy",
+    "reference_plan": "solvers.reference",
+    "plan_mission": "planner",
+    "POLICIES": "planner",
+    "attention_plan": "agents.attention.decode",
 }
 
 
@@ -78,6 +87,12 @@ __all__ = [
     "decode_action",
     "encode_action",
     "greedy_plan",
+    "reference_plan",
+    "plan_mission",
+    "POLICIES",
+    "attention_plan",
+    "MAX_DESTINATIONS",
+    "as_mission",
     "held_out_missions",
     "make_env",
     "make_plan",

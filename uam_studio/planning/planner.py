@@ -35,14 +35,8 @@ from uam_studio.bundled import require_bundled
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.rollout import dqn_route
 from uam_studio.planning.env import CONTEXT_S, observe_takeoff
-from uam_studio.planning.missions.check import PlanCheck, check_plan
-from uam_studio.planning.missions.mission import (
-    SCENARIOS,
-    VERTIPORT,
-    Mission,
-    load_mission,
-    mission_from_dict,
-)
+from uam_studio.planning.missions.check import Plan, PlanCheck, check_plan
+from uam_studio.planning.missions.mission import SCENARIOS, VERTIPORT, Mission, as_mission
 from uam_studio.planning.solvers.greedy import greedy_plan
 from uam_studio.planning.solvers.oracle import oracle_plan
 
@@ -54,14 +48,6 @@ __all__ = ["MAX_POINTS", "POLICIES", "plan_mission"]
 
 
 # ----------------------------------------------------------------------------- helpers
-
-
-def _as_mission(mission: Any) -> Mission:
-    if isinstance(mission, Mission):
-        return mission
-    if isinstance(mission, (str, os.PathLike)):
-        return load_mission(mission)
-    return mission_from_dict(mission)
 
 
 def _round_list(a: np.ndarray) -> list[float]:
@@ -174,7 +160,7 @@ def plan_mission(
         raise InputError("policy", f"{policy!r} is not a policy; allowed: {', '.join(POLICIES)}")
     if isinstance(lookahead, bool) or not isinstance(lookahead, (int, np.integer)) or not 0 <= lookahead <= 8:
         raise InputError("lookahead", f"{lookahead!r} is out of range; allowed integers in [0, 8]")
-    m = _as_mission(mission)
+    m = as_mission(mission)
     if q_max is not None or r0 is not None:
         m = m.with_battery(q_max, r0)
     if m.scenario not in SCENARIOS:  # pragma: no cover - Mission validates it
@@ -190,6 +176,7 @@ def plan_mission(
 
     pred_model = _load_predictor(predictor, messages)
     exact: bool | None = None
+    plan: Plan | None = None  # the planners' own answer, with its physics check (dqn: none)
     if policy == "oracle":
         plan = oracle_plan(m)
         route, alts = list(plan.route), list(plan.altitudes_m)
@@ -209,7 +196,7 @@ def plan_mission(
     else:
         route, alts = dqn_route(m, agent_path, pred_model, messages, int(lookahead))
 
-    check = check_plan(m, route, alts)
+    check = plan.check if plan is not None and plan.check is not None else check_plan(m, route, alts)
     reached = list(check.sim.reached) if check.sim is not None else []
     if not check.safe:
         messages.append(check.message)

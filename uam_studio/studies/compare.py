@@ -2,9 +2,9 @@
 
 Public API:
 
-- :func:`compare_planners`: plan each mission with the oracle, the greedy baseline and (optionally) a
-  DQN agent, check every plan with the physics model, and return one :class:`PlanScore` per
-  (mission, policy).
+- :func:`compare_planners`: plan each mission with the oracle, the greedy baseline, the attention
+  planner (the default of ``plan_mission``) and (optionally) a DQN agent, check every plan with the
+  physics model, and return one :class:`PlanScore` per (mission, policy).
 - :func:`summarize`: the figures the planning issue asks for, per policy: mean gap in reached
   priority to the oracle (single charge), share of missions with the oracle's number of charging
   cycles (multi charge), EOD-breach rate, and planning time.
@@ -42,7 +42,8 @@ class PlanScore:
     """One planner on one mission, checked with the physics model.
 
     :param mission: mission name
-    :param policy: ``"oracle"``, ``"greedy"`` or ``"dqn"``
+    :param policy: ``"oracle"``, ``"greedy"``, ``"attention"``, ``"dqn"`` or a variant (see
+        :func:`compare_planners`)
     :param reached_priority: priority reached safely (0 for an unsafe plan)
     :param reached: destinations reached safely (0 for an unsafe plan)
     :param charging_cycles: charging cycles of the checked route
@@ -82,9 +83,13 @@ def compare_planners(
     """Plan every mission with every policy and score the plans with the physics model.
 
     :param missions: the missions (their own scenario, battery and cut-off are used)
-    :param agent_path: DQN agent (zip path or trained model), needed for the ``dqn`` policies
-    :param policies: any of ``"oracle"``, ``"greedy"``, ``"dqn"`` (the agent with the safety filter of
-        :func:`~uam_studio.planning.agents.rollout.rollout_agent`, as ``uam-studio plan`` runs it) and
+    :param agent_path: DQN agent (zip path or trained model), needed for the ``dqn`` policies (the
+        ``attention`` policies use the bundled attention planner)
+    :param policies: any of ``"oracle"``, ``"greedy"``, ``"attention"`` (the bundled attention planner as
+        ``plan_mission(m, "attention")`` runs it: beam search behind the physics safety filter, 1-20
+        destinations), ``"attention_raw"`` (the network's own best choice at every step, no search, no
+        filter), ``"dqn"`` (the agent with the safety filter of
+        :func:`~uam_studio.planning.agents.rollout.rollout_agent`, as ``uam-studio plan --policy dqn`` runs it) and
         ``"dqn_raw"`` (the agent's own greedy choices, the paper's setting) and ``"dqn_rollout"``
         (the filtered agent improved by policy rollout over its ``ROLLOUT_K`` best safe actions and
         the greedy rule's action, each continued by the filtered agent and by the greedy rule), and
@@ -93,6 +98,7 @@ def compare_planners(
     :return: one :class:`PlanScore` per mission and policy, missions in order
     """
     from uam_studio.errors import InputError
+    from uam_studio.planning.agents.attention.decode import attention_plan, load_policy_cached
     from uam_studio.planning.agents.rollout import rollout_agent
     from uam_studio.planning.solvers.greedy import greedy_plan
     from uam_studio.planning.solvers.oracle import oracle_plan
@@ -102,6 +108,8 @@ def compare_planners(
     planners: dict[str, Callable[[Mission], Plan]] = {
         "oracle": oracle_plan,
         "greedy": greedy_plan,
+        "attention": lambda m: attention_plan(m, load_policy_cached()),
+        "attention_raw": lambda m: attention_plan(m, load_policy_cached(), beam_width=1, safety_filter=False),
         "dqn": lambda m: rollout_agent(m, agent_path, shield=True),
         "dqn_raw": lambda m: rollout_agent(m, agent_path, shield=False),
         "dqn_rollout": lambda m: rollout_agent(m, agent_path, shield=True, lookahead=ROLLOUT_K),

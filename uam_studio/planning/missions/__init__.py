@@ -16,6 +16,7 @@ from uam_studio.planning.missions.mission import (
     Destination,
     Mission,
     Vertiport,
+    as_mission,
     load_mission,
     mission_from_dict,
     mission_from_json,
@@ -26,7 +27,7 @@ from uam_studio.planning.missions.route import LegResult, RouteSimulation, simul
 
 __all__ = [
     "COORD_RANGE_KM", "SCENARIOS", "VERTIPORT", "Battery", "Destination", "LegResult", "Mission", "Plan",
-    "PlanCheck", "RouteSimulation", "Vertiport", "check_plan", "held_out_missions", "load_mission",
+    "PlanCheck", "RouteSimulation", "Vertiport", "as_mission", "check_plan", "held_out_missions", "load_mission",
     "make_plan", "mission_from_dict", "mission_from_json", "mission_to_dict", "random_mission",
     "save_mission", "simulate_route",
 ]

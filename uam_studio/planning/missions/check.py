@@ -32,6 +32,8 @@ class Plan:
     :param charging_cycles: landings at the vertiport (as :func:`simulate_route` counts them).
     :param messages: one line each: what could not be done and why, or notes.
     :param stats: planner-specific numbers (timings, label counts, voltages...).
+    :param check: the physics check of the route (:func:`make_plan` keeps it, so that a caller need
+        not fly the route again), or None.
     """
 
     policy: str
@@ -42,6 +44,7 @@ class Plan:
     charging_cycles: int = 0
     messages: tuple[str, ...] = ()
     stats: dict[str, Any] = field(default_factory=dict)
+    check: PlanCheck | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "route", tuple(self.route))
@@ -148,4 +151,4 @@ def make_plan(
         msgs.append(check.message)
     prio = {d.name: d.priority for d in mission.destinations}
     return Plan(policy, tuple(route), tuple(altitudes_m), reached, sum(prio[n] for n in reached),
-                cycles, tuple(msgs), stats)
+                cycles, tuple(msgs), stats, check)

@@ -387,6 +387,16 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         raise InputError("file", f"{str(p)!r} {rest}") from None
 
 
+def as_mission(mission: Mission | dict | str | os.PathLike[str]) -> Mission:
+    """``mission`` itself, a dict in the JSON format validated (:func:`mission_from_dict`) or a mission
+    file read (:func:`load_mission`). :raises InputError: as those do."""
+    if isinstance(mission, Mission):
+        return mission
+    if isinstance(mission, (str, os.PathLike)):
+        return load_mission(mission)
+    return mission_from_dict(mission)
+
+
 def save_mission(m: Mission, path: str | os.PathLike[str]) -> None:
     """Write ``m`` as JSON atomically (:func:`uam_studio.atomic_io.atomic_write_text`).
 

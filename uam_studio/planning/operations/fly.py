@@ -30,7 +30,14 @@ from uam_studio.errors import InputError
 from uam_studio.flight import leg_profile
 from uam_studio.planning.legs import DT_S, N_MAX, check_destination_count, takeoff_current
 from uam_studio.planning.missions.mission import VERTIPORT, Battery, Mission
-from uam_studio.planning.operations.operator import HEALTH_Z, PLAN_WIND_Z, WIND_Z, Decision, Operator
+from uam_studio.planning.operations.operator import (
+    HEALTH_Z,
+    IN_FLIGHT_PLANNERS,
+    PLAN_WIND_Z,
+    WIND_Z,
+    Decision,
+    Operator,
+)
 from uam_studio.planning.operations.world import (
     DEFAULT_FORECAST_SIGMA_KT,
     DEFAULT_SENSOR_NOISE_MA,
@@ -138,7 +145,7 @@ def _fly_fixed(world: World, route: Sequence[str], alts: Sequence[float], takeof
     return False, reached
 
 
-def fly_mission(mission: Mission, policy: str = "oracle", seed: int = 0,
+def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
                 forecast_sigma_kt: float = DEFAULT_FORECAST_SIGMA_KT,
                 sensor_noise_mv: float = DEFAULT_SENSOR_NOISE_MV,
                 sensor_noise_ma: float = DEFAULT_SENSOR_NOISE_MA,
@@ -148,7 +155,8 @@ def fly_mission(mission: Mission, policy: str = "oracle", seed: int = 0,
     """Fly ``mission`` once: the operator plans from the take-off check, re-plans at every arrival.
 
     :param mission: the mission; its ``battery`` is the world's true cell, its winds the forecast.
-    :param policy: the operator's planner: ``"oracle"`` (exact search on its cautious belief).
+    :param policy: the operator's planner: ``"attention"`` (the learned planner, default) or
+        ``"oracle"`` (exact search); either plans on the operator's belief, never on the world.
     :param seed: seeds the forecast errors and the sensor noise.
     :param forecast_sigma_kt: std (kt) of the forecast error per node, [0, 60]; the operator is told it.
     :param sensor_noise_mv: voltage sensor noise std (mV), [0, 100]; the operator is told it.
@@ -162,13 +170,14 @@ def fly_mission(mission: Mission, policy: str = "oracle", seed: int = 0,
         (and its references) ended is an error of field ``event``.
     """
     t_wall = time.perf_counter()
-    if policy != "oracle":
-        raise InputError("policy", f"{policy!r} is not an in-flight policy; allowed: oracle")
+    if policy not in IN_FLIGHT_PLANNERS:
+        raise InputError("policy", f"{policy!r} is not an in-flight policy; allowed: {', '.join(IN_FLIGHT_PLANNERS)}")
     check_destination_count(len(mission.destinations), N_MAX, "fly")  # the operator's exact search: 8 at most
     scenario = scenario or mission.scenario
     world = World(mission, forecast_sigma_kt, sensor_noise_mv, sensor_noise_ma, events, seed)
     known = dataclasses.replace(mission, battery=Battery(DEFAULT_Q_MAX, DEFAULT_R0))  # the operator's view
-    op = Operator(known, scenario, world.forecast_sigma_kt, world.sensor_noise_mv, health_z, wind_z, plan_wind_z)
+    op = Operator(known, scenario, world.forecast_sigma_kt, world.sensor_noise_mv, health_z, wind_z, plan_wind_z,
+                  policy)
     rec = FlightRecord(mission.name, scenario, int(seed), world.forecast_sigma_kt, world.sensor_noise_mv,
                        world.sensor_noise_ma, [e.text for e in world.events],
                        true_q_max=mission.battery.q_max, true_r0=mission.battery.r0)

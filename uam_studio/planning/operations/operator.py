@@ -11,11 +11,13 @@ take-off check and at every arrival) it
 2. estimates the wind: the actual wind of each flown leg follows from its measured duration
    (cruise time = distance / ground speed); the shift common to all legs is estimated from those
    residuals with a Gaussian prior, and every unflown leg is predicted as forecast + shift;
-3. plans the rest exactly (:func:`~uam_studio.planning.solvers.oracle.feasible_sorties` continued from its
-   present node and estimated battery state) on its *expected* belief (median health, predicted
-   winds), allowing only first legs after which the aircraft can still get home on its *cautious*
-   belief: the cell ``health_z`` std to the weak side, and the two legs' winds at a joint one-sided
-   ``wind_z`` bound (:meth:`Operator._safe_moves`);
+3. plans the rest from its present node and estimated battery state on its *expected* belief
+   (median health, predicted winds), with the attention planner (``planner="attention"``, the
+   default: :func:`~uam_studio.planning.agents.attention.decode.continue_route`) or exactly
+   (``planner="oracle"``: :func:`~uam_studio.planning.solvers.oracle.feasible_sorties`), allowing
+   only first legs after which the aircraft can still get home on its *cautious* belief: the cell
+   ``health_z`` std to the weak side, and the two legs' winds at a joint one-sided ``wind_z`` bound
+   (:meth:`Operator._safe_moves`);
 4. flies that first leg only, and re-plans on arrival.
 
 The margins come only from its own uncertainty.
@@ -200,6 +202,9 @@ class _Segment:
         return np.concatenate(self.current), np.concatenate(self.voltage)
 
 
+IN_FLIGHT_PLANNERS = ("attention", "oracle")  # the operator's planners (the first is the default)
+
+
 class Operator:
     """Decides the flight from the forecast and the readings (see the module docstring).
 
@@ -211,11 +216,16 @@ class Operator:
     :param sensor_noise_mv: the voltage sensor's stated noise std (mV), or None to estimate it.
     :param health_z: margin on the health estimate (std).
     :param wind_z: margin on each unflown leg's wind (std).
+    :param planner: ``"attention"`` (the learned planner, default) or ``"oracle"`` (exact search).
     """
 
     def __init__(self, mission: Mission, scenario: str | None = None, forecast_sigma_kt: float = 13.0,
                  sensor_noise_mv: float | None = None, health_z: float = HEALTH_Z, wind_z: float = WIND_Z,
-                 plan_wind_z: float = PLAN_WIND_Z) -> None:
+                 plan_wind_z: float = PLAN_WIND_Z, planner: str = "attention") -> None:
+        if planner not in IN_FLIGHT_PLANNERS:
+            raise InputError("policy", f"{planner!r} is not an in-flight policy; allowed: "
+                                       f"{', '.join(IN_FLIGHT_PLANNERS)}")
+        self.planner = planner
         scenario = scenario or mission.scenario
         if scenario not in SCENARIOS:
             raise InputError("scenario", f"{scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}")
@@ -400,7 +410,8 @@ class Operator:
         moves = self._safe_moves(LegTable(cautious), here, self._state(q_plan, r_plan).as_array()[0], visited,
                                  q_plan, r_plan)
         state = self._state(q_exp, r_exp).as_array()[0]
-        route, alts, why = self._plan(LegTable(expected), here, state, visited, moves)
+        plan = self._plan if self.planner == "oracle" else self._plan_learned
+        route, alts, why = plan(LegTable(expected), here, state, visited, moves)
         if route is None:
             route, alts, why = self._best_effort_home(LegTable(expected), here, state)
         shift, shift_sd = self.winds.shift()
@@ -509,6 +520,29 @@ class Operator:
             rest ^= later.mask
         return route, alts, f"expected {best_key[0]} more charges after this one"
 
+    def _plan_learned(self, legs: LegTable, here: int, state: np.ndarray, visited: int, moves: np.ndarray
+                      ) -> tuple[list[str] | None, list[float], str]:
+        """:meth:`_plan` with the attention planner continued from here (the same contract)."""
+        from uam_studio.planning.agents.attention.decode import continue_route  # torch, at first use
+
+        n = len(self.names)
+        if self.scenario == "single_flight" or (here == VERTIPORT_SLOT and self.scenario == "single_charge"
+                                                and self.sorties >= 1):
+            return self._plan(legs, here, state, visited, moves)
+        done = np.array([bool(visited >> k & 1) for k in range(n)])
+        res = continue_route(legs, self.scenario, here, state, done, self.sorties, moves)
+        if res is None:
+            if here == VERTIPORT_SLOT:
+                return [], [], "no unvisited destination can be reached safely"
+            return None, [], ""
+        nodes, levels = res
+        route = [VERTIPORT if k == legs.home else self.names[k] for k in nodes]
+        alts = [ALTITUDES_M[a] for a in levels]
+        if self.scenario == "single_charge":
+            prio = int(sum(legs.priority[k] for k in nodes if k != legs.home))
+            return route, alts, f"expected priority {prio} more this charge"
+        return route, alts, f"expected {max(0, route.count(VERTIPORT) - 1)} more charges after this one"
+
     def _best_effort_home(self, legs: LegTable, here: int, state: np.ndarray) -> tuple[list[str], list[float], str]:
         """Home when no way is safe on the cautious belief: the level that is safe on the expected belief
         with the highest minimum voltage, else the one that gets furthest before the cut-off."""
@@ -526,5 +560,5 @@ class Operator:
             f"({ALTITUDES_M[best]:g} m)")
 
 
-__all__ = ["HEALTH_Z", "WIND_Z", "Decision", "Operator", "WindBelief", "combine", "fleet_prior",
+__all__ = ["HEALTH_Z", "IN_FLIGHT_PLANNERS", "WIND_Z", "Decision", "Operator", "WindBelief", "combine", "fleet_prior",
            "wind_from_duration"]

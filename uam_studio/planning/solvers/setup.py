@@ -24,7 +24,7 @@ from uam_studio.planning.legs import (
     takeoff_current,
 )
 from uam_studio.planning.missions.check import Plan
-from uam_studio.planning.missions.mission import SCENARIOS, Mission, mission_from_dict
+from uam_studio.planning.missions.mission import SCENARIOS, Mission, as_mission
 
 _ROW_BATCH = 512  # trajectories integrated together (small blocks stay in cache: faster)
 _CHUNK_S = 128  # samples per integration pass
@@ -105,10 +105,8 @@ def fly_batch(
 
 
 def _as_mission(mission: Any) -> tuple[Mission | None, list[str]]:
-    if isinstance(mission, Mission):
-        return mission, []
     try:
-        return mission_from_dict(mission), []
+        return as_mission(mission), []
     except InputError as err:
         return None, [f"invalid mission: {err}"]
 

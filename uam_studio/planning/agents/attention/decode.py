@@ -64,7 +64,7 @@ def default_search(scenario: str, n_dest: int) -> tuple[int, int]:
         return 8, 2
     return 16, 4
 
-__all__ = ["FORMAT", "default_search", "WEIGHTS_NAME", "attention_plan", "bundled_weights_path", "load_policy",
+__all__ = ["FORMAT", "continue_route", "default_search", "WEIGHTS_NAME", "attention_plan", "bundled_weights_path", "load_policy",
            "load_policy_cached"]
 
 
@@ -213,14 +213,22 @@ class _Search:
                 todo = [(i, order[i][self.expand:]) for i in range(len(beams)) if not out[i] and len(order[i]) > self.expand]
         return out
 
-    def run(self) -> tuple[_Beam, list[_Beam]]:
+    def run(self, start: _Beam | None = None, first_allowed: np.ndarray | None = None
+            ) -> tuple[_Beam | None, list[_Beam]]:
+        """The best finished route and all finished routes. ``start``: a route under way (default: at
+        the vertiport on a full charge); ``first_allowed``: bool [n+1], the tokens the first move may
+        go to (the vertiport: token n). None for the best when no first move is allowed."""
         n = self.tok.n
-        start = _Beam(n, np.zeros(n, dtype=bool), self.fresh if self.filter else None, 0.0, 0)
+        if start is None:
+            start = _Beam(n, np.zeros(n, dtype=bool), self.fresh if self.filter else None, 0.0, 0)
         active, finished = [start], []
-        for _ in range(4 * n + 4):  # each step visits a destination or ends a sortie
+        for step in range(4 * n + 4):  # each step visits a destination or ends a sortie
             if not active:
                 break
             lp, mask = self.log_probs(active)
+            if step == 0 and first_allowed is not None:
+                mask &= np.asarray(first_allowed, dtype=bool)[None, :]
+                lp = np.where(mask, lp, -np.inf)
             safe = self.safe_children(active, lp, mask) if self.filter else None
             children: list[_Beam] = []
             for i, b in enumerate(active):
@@ -251,6 +259,8 @@ class _Search:
                 elif len(active) < self.width and rank < self.width:
                     active.append(c)
         finished += active  # the step limit: never reached in practice
+        if not finished:
+            return None, []
         if self.multi:
             best = max(finished, key=lambda c: (int(c.visited.sum()), -c.sorties, -c.time_s, c.logp))
         else:
@@ -358,6 +368,7 @@ def attention_plan(mission: Mission | dict, net: AttentionPolicy | None = None, 
     try:
         search = _Search(net, tok, legs, scenario, width, safety_filter, per_beam)
         best, finished = search.run()
+        assert best is not None  # from the vertiport on a full charge, stopping is always allowed
     finally:
         torch.set_num_threads(threads)
     stats.update(legs_flown=search.legs_flown, routes_finished=len(finished))
@@ -370,3 +381,46 @@ def attention_plan(mission: Mission | dict, net: AttentionPolicy | None = None, 
     if left and safety_filter:
         msgs.append(f"not visited: {', '.join(left)} (no safe place found for them)")
     return done(names, alts)
+
+
+def continue_route(legs: LegTable, scenario: str, here: int, state: np.ndarray, visited: np.ndarray,
+                   sorties: int, first_moves: np.ndarray | None = None, net: AttentionPolicy | None = None
+                   ) -> tuple[list[int], list[int]] | None:
+    """The rest of a route under way, planned as :func:`attention_plan` plans (default search, filter
+    on ``legs``' cell): from node ``here`` of ``legs`` (``legs.home`` for the vertiport) with battery
+    state ``state`` [8], the destinations ``visited`` (bool [legs.n]) done and ``sorties`` sorties
+    finished.
+
+    :param first_moves: bool [legs.slots + 1, N_ALTITUDES], the (node, level) pairs the first leg may
+        take (its lowest-charge level must be one); default all.
+    :return: ``(nodes, levels)``: the nodes flown to in order (``legs.home`` for the vertiport) and each
+        leg's level index; None if no first move is allowed and safe.
+    """
+    net = net if net is not None else load_policy_cached()
+    tok = mission_tokens(legs, scenario)
+    n = tok.n
+    token = n if here == legs.home else int(here)
+    width, per_beam = default_search(scenario, n)
+    q = float(legs.mission.battery.q_max)
+    full = full_charge(q).as_array()[0]
+    x = np.asarray(state, dtype=float).reshape(-1)
+    used = max(0.0, float((full[4] + full[5]) - (x[4] + x[5])))  # charge drawn from the negative electrode (C)
+    allowed = None
+    if first_moves is not None:
+        allowed = np.zeros(n + 1, dtype=bool)
+        for t in range(n + 1):
+            if t == token:
+                continue
+            lv = legs.cheapest_level(int(tok.leg_index[token]), int(tok.leg_index[t]))
+            allowed[t] = lv is not None and bool(first_moves[int(tok.leg_index[t]), lv])
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        search = _Search(net, tok, legs, scenario, width, True, per_beam)
+        start = _Beam(token, np.asarray(visited, dtype=bool)[:n].copy(), x, used, int(sorties))
+        best, _ = search.run(start, allowed)
+    finally:
+        torch.set_num_threads(threads)
+    if best is None or not best.tokens:
+        return None
+    return [int(tok.leg_index[t]) for t in best.tokens], list(best.levels)
