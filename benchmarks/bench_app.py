@@ -90,6 +90,7 @@ def bench_latency(n: int, n_oracle: int, compares: list[str]) -> list[str]:
     from uam_studio.app.planner import PlannerView
     from uam_studio.app.session import configure_server_threads
     from uam_studio.app.state import COMPARE_DELAY_S, PlannerState, comparison_runner, predictor
+    from uam_studio.bundled import bundled_path
     from uam_studio.planning import mission_from_dict
     from uam_studio.planning.agents.rollout import bundled_agent_path
     from uam_studio.planning.planner import plan_mission
@@ -99,7 +100,10 @@ def bench_latency(n: int, n_oracle: int, compares: list[str]) -> list[str]:
     pred = predictor()
     lines = [f"latency: 8-destination single-charge mission, torch threads {torch.get_num_threads()}, "
              f"load average before {_load()}"]
-    policies = ["dqn", "greedy", "oracle"]
+    policies = ["attention", "dqn", "greedy", "oracle"]
+    if not bundled_path("attention_planner.pt").is_file():
+        lines.append("  attention: no bundled pretrained/attention_planner.pt, not measured")
+        policies.remove("attention")
     if not bundled_agent_path("single_charge").is_file():
         lines.append("  dqn: no bundled agent pretrained/dqn_single_charge.zip, not measured")
         policies.remove("dqn")
