@@ -211,6 +211,7 @@ def test_missing_bundled_agent_is_a_visible_error(monkeypatch, tmp_path):
     assert s.apply(policy="attention")
     assert s.plan_error.startswith("agent: bundled agent attention_planner.pt is not installed")
     assert s.plan is None and "\n" not in s.plan_error
+    assert list(s.policy_objects.items())[0] == ("Attention (not installed)", "attention")  # no false promise
 
 
 def test_the_attention_planner_is_the_first_and_default_policy():

@@ -268,6 +268,8 @@ def policy_options(agents: list[Any]) -> dict[str, str]:
     """Select options (label -> value): the four planners (the attention planner first) and one
     ``agent:<path>`` per retrained DQN agent."""
     opts = dict(POLICY_LABELS)
+    if not _attention_exists():  # an install without the weights: the label must not promise them
+        opts = {("Attention (not installed)" if v == "attention" else k): v for k, v in opts.items()}
     for a in agents:
         opts[f"Retrained: {a.label}"] = f"{AGENT_PREFIX}{a.path}"
     return opts

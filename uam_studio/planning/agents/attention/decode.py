@@ -177,7 +177,8 @@ class _Search:
 
     def safe_children(self, beams: list[_Beam], lp: np.ndarray, mask: np.ndarray) -> list[list[tuple[int, np.ndarray, float]]]:
         """For each beam, its safe destination moves ``(token, state after the leg, leg charge)``, checked
-        in the network's order: the best ``width``, then the rest only if none of those is safe."""
+        in the network's order: the best ``expand``, then the rest only if none of those is safe (and
+        none was left to another beam's equivalent move)."""
         n = self.tok.n
         out: list[list[tuple[int, np.ndarray, float]]] = [[] for _ in beams]
         order = [[int(t) for t in np.argsort(-lp[i, :n], kind="stable") if mask[i, t]] for i in range(len(beams))]
