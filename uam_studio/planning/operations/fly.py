@@ -172,7 +172,7 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
     t_wall = time.perf_counter()
     if policy not in IN_FLIGHT_PLANNERS:
         raise InputError("policy", f"{policy!r} is not an in-flight policy; allowed: {', '.join(IN_FLIGHT_PLANNERS)}")
-    check_destination_count(len(mission.destinations), N_MAX, "fly")  # the operator's exact search: 8 at most
+    check_destination_count(len(mission.destinations), N_MAX, "fly")  # the hindsight oracle and policy "oracle": exact, 8 at most
     scenario = scenario or mission.scenario
     world = World(mission, forecast_sigma_kt, sensor_noise_mv, sensor_noise_ma, events, seed)
     known = dataclasses.replace(mission, battery=Battery(DEFAULT_Q_MAX, DEFAULT_R0))  # the operator's view

@@ -229,7 +229,7 @@ class Operator:
         scenario = scenario or mission.scenario
         if scenario not in SCENARIOS:
             raise InputError("scenario", f"{scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}")
-        check_destination_count(len(mission.destinations), N_MAX, "fly")  # its exact search: 8 at most
+        check_destination_count(len(mission.destinations), N_MAX, "fly")  # the exact search of planner "oracle": 8 at most
         self.forecast_mission = mission
         self.scenario = scenario
         self.eod_v = mission.eod_v
