@@ -66,7 +66,7 @@ def run(missions, rows) -> dict[str, dict[str, list]]:
 def _pm(policy):
     def fn(m):
         r = plan_mission(m, policy, predictor=False)
-        return r["route"], r["altitudes_m"]
+        return r.route, r.altitudes_m
     return fn
 
 

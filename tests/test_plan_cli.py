@@ -7,6 +7,7 @@ and roll out).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -67,7 +68,7 @@ def _check_result(res: dict, mission: dict) -> None:
         assert set(res["predicted"]) == {"time_s", "voltage_v"}
         assert res["predicted"]["time_s"] == phys["time_s"]
         assert len(res["predicted"]["voltage_v"]) == len(phys["time_s"])
-    json.dumps(res, allow_nan=False)
+    json.dumps(dict(res), allow_nan=False)
 
 
 @pytest.fixture(scope="module")
@@ -301,3 +302,19 @@ def test_bundled_agents_plan_any_map_safely(scenario):
         assert res["safe"], (m.name, res["messages"])
         if scenario != "single_flight":
             assert res["reached"], (m.name, res["messages"])
+
+
+def test_plan_mission_returns_a_typed_result_whose_dict_is_the_cli_json(capsys):
+    from uam_studio.planning import plan_mission
+    from uam_studio.planning.planner import PlanResult
+
+    res = plan_mission(_example(), "greedy", predictor=False)
+    assert isinstance(res, PlanResult)
+    assert res.route == res["route"] and res.reached_priority == res["reached_priority"] == 6
+    assert res.to_dict() == dict(res) and list(res) == list(res.to_dict())
+    with pytest.raises(KeyError):
+        res["nope"]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        res.safe = False
+    cli = _plan_json(capsys, str(EXAMPLE), "--policy", "greedy")  # with the Dynaformer, as plan_mission's default
+    assert cli == json.loads(json.dumps(plan_mission(_example(), "greedy").to_dict()))

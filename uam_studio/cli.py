@@ -158,29 +158,29 @@ def _run_plan(args: argparse.Namespace) -> int:
     res = plan_mission(mission, args.policy, q_max=args.q_max, r0=args.r0, agent_path=args.agent,
                        lookahead=args.lookahead)
     if args.json:
-        json.dump(res, sys.stdout, allow_nan=False)
+        json.dump(res.to_dict(), sys.stdout, allow_nan=False)
         sys.stdout.write("\n")
         return EXIT_OK
     battery = mission.with_battery(args.q_max, args.r0).battery
-    print(f"{mission.name} ({mission.scenario}), policy {res['policy']}: q_max {battery.q_max:g} C, "
+    print(f"{mission.name} ({mission.scenario}), policy {res.policy}: q_max {battery.q_max:g} C, "
           f"r0 {battery.r0:g} ohm, EOD {mission.eod_v:g} V")
-    if res["route"]:
-        legs = " -> ".join(f"{n} ({a:g} m)" for n, a in zip(res["route"], res["altitudes_m"]))
+    if res.route:
+        legs = " -> ".join(f"{n} ({a:g} m)" for n, a in zip(res.route, res.altitudes_m))
         print(f"route: vertiport -> {legs}")
     else:
         print("route: none (nothing is flown)")
-    reached = ", ".join(res["reached"]) or "none"
-    print(f"reached: {reached} (priority {res['reached_priority']})")
-    print(f"charging cycles: {res['charging_cycles']}")
-    if not res["route"]:
+    reached = ", ".join(res.reached) or "none"
+    print(f"reached: {reached} (priority {res.reached_priority})")
+    print(f"charging cycles: {res.charging_cycles}")
+    if not res.route:
         print("safe: yes (empty route)")
-    elif res["safe"]:
-        print(f"safe: yes, min {res['min_voltage_v']:.3f} V")
+    elif res.safe:
+        print(f"safe: yes, min {res.min_voltage_v:.3f} V")
     else:
-        print(f"safe: NO, end of discharge at {res['physics']['eod_s']:.0f} s (min {res['min_voltage_v']:.3f} V)")
-    if res["predicted"] is not None and res["predicted"]["voltage_v"]:
-        print(f"Dynaformer: predicted min {min(res['predicted']['voltage_v']):.3f} V")
-    for m in res["messages"]:
+        print(f"safe: NO, end of discharge at {res.physics['eod_s']:.0f} s (min {res.min_voltage_v:.3f} V)")
+    if res.predicted is not None and res.predicted["voltage_v"]:
+        print(f"Dynaformer: predicted min {min(res.predicted['voltage_v']):.3f} V")
+    for m in res.messages:
         print(f"note: {m}")
     return EXIT_OK
 

@@ -36,7 +36,7 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import param
@@ -55,6 +55,9 @@ from uam_studio.planning.missions.mission import (
     mission_from_json,
     mission_to_dict,
 )
+
+if TYPE_CHECKING:
+    from uam_studio.planning.planner import PlanResult
 
 __all__ = [
     "APP_EOD_RANGE",
@@ -328,7 +331,7 @@ def compute_plan(req: PlanRequest) -> dict[str, Any]:
     session, an undo or a slider dragged back re-shows a plan at once. Unexpected failures
     ("planning failed: ...") are not cached.
 
-    :return: ``{"plan": plan_mission's dict or None, "error": one line or None, "health": (pc1, pc2)
+    :return: ``{"plan": plan_mission's result as a dict (``PlanResult.to_dict()``) or None, "error": one line or None, "health": (pc1, pc2)
         or None, "elapsed_s": float, "request": req, "cached": bool}``.
     """
     t0 = time.perf_counter()
@@ -379,7 +382,7 @@ def _compute_plan(req: PlanRequest) -> dict[str, Any]:
         policy, agent_path = "dqn", policy[len(AGENT_PREFIX):]
     try:
         out["plan"] = plan_mission(req.mission, policy, agent_path=agent_path,
-                                   predictor=pred if pred is not None else False)
+                                   predictor=pred if pred is not None else False).to_dict()  # JSON state
         if pred is None:
             out["plan"]["messages"].append(_predictor_or_error()[1] or "no Dynaformer")
     except InputError as err:
@@ -566,12 +569,14 @@ def compare_mode(served: bool) -> str:
     return env if env in COMPARE_MODES else ("process" if served else "thread")
 
 
-def _row_from_plan(plan: dict[str, Any], mission: Mission) -> dict[str, Any]:
+def _row_from_plan(plan: PlanResult | dict[str, Any], mission: Mission) -> dict[str, Any]:
+    """A comparison row from a :class:`~uam_studio.planning.planner.PlanResult` or its ``to_dict()``
+    (the app's state keeps the dict)."""
     return {"status": "done", "error": None, "priority": int(plan["reached_priority"]),
             "reached": len(plan["reached"]), "of": len(mission.destinations),
             "cycles": int(plan["charging_cycles"]), "min_voltage_v": plan["min_voltage_v"],
             "safe": bool(plan["safe"]), "route": list(plan["route"]), "altitudes_m": list(plan["altitudes_m"]),
-            "exact": plan.get("exact")}
+            "exact": plan["exact"]}
 
 
 def _agent_reads_dynaformer(agent_path: str | None, scenario: str) -> bool:
@@ -877,7 +882,7 @@ class PlannerState(param.Parameterized):
     ``destinations``, ``vertiport_x_km``, ``vertiport_y_km``, ``return_wind``, ``scenario``,
     ``q_max``, ``r0``, ``eod_v``, ``policy``.
 
-    Outputs: ``plan`` (:func:`~uam_studio.planning.planner.plan_mission`'s dict), ``plan_request``
+    Outputs: ``plan`` (:func:`~uam_studio.planning.planner.plan_mission`'s result as a dict), ``plan_request``
     (what it was computed for), ``health`` (PC1, PC2), ``plan_error`` (a planner error, e.g. an
     unreadable agent), ``busy`` (a plan is being computed), ``plan_count``.
     """

@@ -23,7 +23,8 @@ Planning: the action space (:mod:`~uam_studio.planning.legs`: ``N_MAX``, ``ALTIT
 (:func:`attention_plan`, the learned default, 1-20 destinations; :func:`oracle_plan`, exact up to 8,
 :func:`reference_plan` beyond; :func:`greedy_plan`, baseline), the physics check
 :func:`check_plan` (-> :class:`PlanCheck`) and the one entry point of the CLI and the app,
-:func:`plan_mission` (any of :data:`POLICIES`, checked on physics, with the Dynaformer's prediction).
+:func:`plan_mission` (any of :data:`POLICIES`, checked on physics, with the Dynaformer's prediction;
+-> :class:`PlanResult`).
 
 ``env``, ``solvers``, ``agents`` and ``planner`` are imported lazily (attribute access), so
 ``import uam_studio.planning`` stays light (no gymnasium, no torch).
@@ -65,6 +66,7 @@ _LAZY = {
     "greedy_plan": "solvers.greedy",
     "reference_plan": "solvers.reference",
     "plan_mission": "planner",
+    "PlanResult": "planner",
     "POLICIES": "planner",
     "attention_plan": "agents.attention.decode",
 }
@@ -89,6 +91,7 @@ __all__ = [
     "greedy_plan",
     "reference_plan",
     "plan_mission",
+    "PlanResult",
     "POLICIES",
     "attention_plan",
     "MAX_DESTINATIONS",

@@ -16,7 +16,7 @@ The CLI (``uam-studio plan``) and the Panel app call only this function. It
    the take-off as the physics model flies it for this cell; profile: the route's current since the
    last recharge), and concatenates the sorties.
 
-The result is a plain-JSON dict (see :func:`plan_mission`). Hard missions (no destinations, more
+The result is a typed :class:`PlanResult` (``to_dict()`` is its plain-JSON form). Hard missions (no destinations, more
 than 20, unreachable destinations, a cell that cannot finish the take-off) and a missing Dynaformer
 give messages, never exceptions; bad input (an invalid mission, an unknown policy, out-of-range
 ``q_max``/``r0``, an explicit ``agent_path`` that cannot be loaded, more than 8 destinations for
@@ -27,6 +27,8 @@ give messages, never exceptions; bad input (an invalid mission, an unknown polic
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -44,7 +46,7 @@ POLICIES = ("attention", "dqn", "oracle", "greedy")
 MAX_POINTS = 2000  # samples per series in the result (JSON size)
 DECIMALS = 4
 
-__all__ = ["MAX_POINTS", "POLICIES", "plan_mission"]
+__all__ = ["MAX_POINTS", "POLICIES", "PlanResult", "plan_mission"]
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -119,6 +121,62 @@ def _predict(check: PlanCheck, predictor: Any, messages: list[str]) -> np.ndarra
     return np.concatenate(parts) if parts else np.zeros(0)
 
 
+# ----------------------------------------------------------------------------- result
+
+
+@dataclass(frozen=True)
+class PlanResult(Mapping[str, Any]):
+    """What :func:`plan_mission` returns: a plan checked on the physics model, with the Dynaformer's
+    prediction. Read its fields (``res.route``); it also reads as a read-only mapping of the same
+    names (``res["route"]``), and :meth:`to_dict` gives the plain-JSON dict the CLI prints.
+
+    :param policy: who planned it.
+    :param route: node names after the start at the vertiport (``"vertiport"`` = a landing that recharges).
+    :param altitudes_m: cruise altitude (m) of each leg.
+    :param charging_cycles: landings at the vertiport.
+    :param reached: destinations reached on the physics model, in order.
+    :param reached_priority: their total priority.
+    :param predicted: the Dynaformer's voltage, ``{"time_s", "voltage_v"}`` (s, V), or None.
+    :param physics: the physics model's voltage, ``{"time_s", "voltage_v", "eod_s"}`` (s, V, s or None).
+    :param safe: the route stays at or above the cut-off.
+    :param min_voltage_v: its lowest voltage (V), None for an empty route.
+    :param exact: oracle: True for a proven optimum, False for the reference solver's plan; None for
+        the other policies.
+    :param messages: one line each.
+    """
+
+    policy: str
+    route: list[str]
+    altitudes_m: list[float]
+    charging_cycles: int
+    reached: list[str]
+    reached_priority: int
+    predicted: dict[str, Any] | None
+    physics: dict[str, Any]
+    safe: bool
+    min_voltage_v: float | None
+    exact: bool | None
+    messages: list[str]
+
+    def __getitem__(self, key: str) -> Any:
+        if key not in _RESULT_FIELDS:
+            raise KeyError(key)
+        return getattr(self, key)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(_RESULT_FIELDS)
+
+    def __len__(self) -> int:
+        return len(_RESULT_FIELDS)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The plain-JSON dict of the fields (series as lists)."""
+        return {name: getattr(self, name) for name in _RESULT_FIELDS}
+
+
+_RESULT_FIELDS = tuple(f.name for f in fields(PlanResult))
+
+
 # ----------------------------------------------------------------------------- entry point
 
 
@@ -130,7 +188,7 @@ def plan_mission(
     agent_path: str | os.PathLike[str] | None = None,
     predictor: Any = None,
     lookahead: int = 0,
-) -> dict[str, Any]:
+) -> PlanResult:
     """Plan ``mission`` with ``policy``, check it with the physics model, predict it with the Dynaformer.
 
     :param mission: a :class:`Mission`, a dict in the mission JSON format, or a path to a mission file.
@@ -145,14 +203,9 @@ def plan_mission(
     :param lookahead: dqn only: policy rollout over the agent's K best safe actions (and the greedy
         rule's action) per step, continued by the filtered agent and by the greedy rule
         (:func:`~uam_studio.planning.agents.rollout.rollout_agent`); 0 (default) for the filtered agent alone; 0-8.
-    :return: plain-JSON dict with exactly the keys ``policy``, ``route`` (node names, ``"vertiport"``
-        = recharge), ``altitudes_m``, ``charging_cycles``, ``reached`` (names), ``reached_priority``,
-        ``predicted`` (``{"time_s", "voltage_v"}`` or None), ``physics`` (``{"time_s", "voltage_v",
-        "eod_s"}``), ``safe``, ``min_voltage_v`` (None for an empty route), ``exact`` (oracle: True for a
-        proven optimum, False for the reference solver's plan of 9-20 destinations; None for the other
-        policies) and ``messages``. Series
-        are rounded to 4 decimals and thinned to at most :data:`MAX_POINTS` samples (the lowest
-        physics and predicted voltages are always kept).
+    :return: a :class:`PlanResult` (``to_dict()``: the plain-JSON form). Series are rounded to 4
+        decimals and thinned to at most :data:`MAX_POINTS` samples (the lowest physics and predicted
+        voltages are always kept).
     :raises InputError: bad input or a missing bundled agent (see the module docstring); never for a
         hard mission.
     """
@@ -218,17 +271,17 @@ def plan_mission(
         if v_pred is not None:
             predicted = {"time_s": list(t), "voltage_v": _round_list(v_pred[idx])}
 
-    return {
-        "policy": policy,
-        "route": [str(r) for r in route],
-        "altitudes_m": [float(a) for a in alts],
-        "charging_cycles": int(check.sim.charging_cycles) if check.sim is not None else 0,
-        "reached": reached,
-        "reached_priority": int(sum(prio[n] for n in reached)),
-        "predicted": predicted,
-        "physics": physics,
-        "safe": bool(check.safe),
-        "min_voltage_v": _round_opt(check.min_voltage_v),
-        "exact": exact,
-        "messages": _dedupe(messages),
-    }
+    return PlanResult(
+        policy=policy,
+        route=[str(r) for r in route],
+        altitudes_m=[float(a) for a in alts],
+        charging_cycles=int(check.sim.charging_cycles) if check.sim is not None else 0,
+        reached=reached,
+        reached_priority=int(sum(prio[n] for n in reached)),
+        predicted=predicted,
+        physics=physics,
+        safe=bool(check.safe),
+        min_voltage_v=_round_opt(check.min_voltage_v),
+        exact=exact,
+        messages=_dedupe(messages),
+    )
