@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -40,15 +41,20 @@ def _run(planner, m) -> tuple[int, int, int, float, bool]:
     return sum(prio[n] for n in reached), cycles, len(reached), dt, check.safe
 
 
+def _scores(n: int, seed: int, n_dest: tuple[int, int], base) -> Iterator[tuple[str, np.ndarray, np.ndarray]]:
+    """Per scenario (missions of seeds ``seed``, ``seed + 1``): the scenario, ``base``'s and the reference's
+    :func:`_run` columns, each [5, n]."""
+    for scenario, s in (("single_charge", seed), ("multi_charge", seed + 1)):
+        rows = [(*_run(base, m), *_run(reference_plan, m))
+                for m in held_out_missions(n, s, n_dest=n_dest, scenario=scenario)]
+        a = np.array(rows, dtype=float)
+        yield scenario, a[:, :5].T, a[:, 5:].T
+
+
 def small(n: int, seed: int) -> None:
     print(f"== 6-8 destinations: reference vs exact oracle ({n} missions per scenario, seeds {seed}, {seed + 1})")
-    for scenario, s in (("single_charge", seed), ("multi_charge", seed + 1)):
-        rows = []
-        for m in held_out_missions(n, s, n_dest=(6, 8), scenario=scenario):
-            o, r = _run(oracle_plan, m), _run(reference_plan, m)
-            rows.append((*o, *r))
-        a = np.array(rows, dtype=float)
-        o_prio, o_cyc, o_n, o_t, _, r_prio, r_cyc, r_n, r_t, r_safe = a.T
+    for scenario, (o_prio, o_cyc, o_n, o_t, _), (r_prio, r_cyc, r_n, r_t, r_safe) in _scores(
+            n, seed, (6, 8), oracle_plan):
         print(f"{scenario}: reference safe on {int(r_safe.sum())}/{n}; time per plan: exact median "
               f"{np.median(o_t):.2f} s (max {o_t.max():.2f} s), reference median {np.median(r_t):.2f} s "
               f"(max {r_t.max():.2f} s)")
@@ -64,12 +70,8 @@ def small(n: int, seed: int) -> None:
 
 def large(n: int, seed: int) -> None:
     print(f"== 18-20 destinations: reference vs greedy ({n} missions per scenario, seeds {seed}, {seed + 1})")
-    for scenario, s in (("single_charge", seed), ("multi_charge", seed + 1)):
-        rows = []
-        for m in held_out_missions(n, s, n_dest=(18, 20), scenario=scenario):
-            rows.append((*_run(greedy_plan, m), *_run(reference_plan, m)))
-        a = np.array(rows, dtype=float)
-        g_prio, g_cyc, g_n, g_t, g_safe, r_prio, r_cyc, r_n, r_t, r_safe = a.T
+    for scenario, (g_prio, g_cyc, g_n, g_t, g_safe), (r_prio, r_cyc, r_n, r_t, r_safe) in _scores(
+            n, seed, (18, 20), greedy_plan):
         print(f"{scenario}: safe greedy {int(g_safe.sum())}/{n}, reference {int(r_safe.sum())}/{n}; time per plan: "
               f"greedy median {np.median(g_t):.2f} s, reference median {np.median(r_t):.2f} s "
               f"(max {r_t.max():.2f} s)")

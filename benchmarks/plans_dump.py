@@ -19,10 +19,14 @@ n = int(sys.argv[2]) if len(sys.argv) > 2 else 200
 n_oracle = int(sys.argv[3]) if len(sys.argv) > 3 else 20
 for scenario in ("single_charge", "multi_charge"):
     ms = held_out_missions(n, 20261121, scenario=scenario)
-    for pol in ("dqn", "greedy"):
-        out[f"{scenario}/{pol}"] = [(r.route, r.altitudes_m) for r in
+    for pol in ("attention", "dqn", "greedy"):
+        try:
+            plan_mission(ms[0], pol, predictor=False)
+        except Exception:  # a checkout without this policy
+            continue
+        out[f"{scenario}/{pol}"] = [(r["route"], r["altitudes_m"]) for r in
                                     (plan_mission(m, pol, predictor=False) for m in ms)]
-    out[f"{scenario}/oracle"] = [(r.route, r.altitudes_m) for r in
+    out[f"{scenario}/oracle"] = [(r["route"], r["altitudes_m"]) for r in
                                  (plan_mission(m, "oracle", predictor=False) for m in ms[:n_oracle])]
 json.dump(out, open(sys.argv[1], "w"))
 print({k: len(v) for k, v in out.items()})

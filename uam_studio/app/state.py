@@ -43,6 +43,7 @@ import param
 
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight.tables import ALTITUDE_RANGE_M, WIND_RANGE_KTS
+from uam_studio.planning.agents.attention import WEIGHTS_NAME
 from uam_studio.planning.legs import MAX_DESTINATIONS, check_destination_count
 from uam_studio.planning.missions.mission import (
     COORD_RANGE_KM,
@@ -109,7 +110,6 @@ EXAMPLE_MISSION: dict[str, Any] = {
 POLICY_LABELS = {"Attention (bundled, default)": "attention", "DQN (paper, up to 8)": "dqn",
                  "Oracle (exact up to 8)": "oracle", "Greedy": "greedy"}
 AGENT_PREFIX = "agent:"
-ATTENTION_WEIGHTS = "attention_planner.pt"  # the bundled attention planner (uam_studio.bundled)
 
 # Planning runs here in the served app: a few workers shared by all sessions, one request per session.
 _POOL = ThreadPoolExecutor(max_workers=4, thread_name_prefix="uam-plan")
@@ -307,7 +307,7 @@ def _agent_stamp(req: PlanRequest) -> tuple[str, int, int] | None:
     if req.policy.startswith(AGENT_PREFIX):
         path = Path(req.policy[len(AGENT_PREFIX):])
     elif req.policy == "attention":
-        path = bundled_path(ATTENTION_WEIGHTS)
+        path = bundled_path(WEIGHTS_NAME)
     elif req.policy == "dqn":
         path = bundled_agent_path(req.mission.scenario)
     else:
@@ -1338,7 +1338,7 @@ def _bundled_exists(scenario: str) -> bool:
 def _attention_exists() -> bool:
     from uam_studio.bundled import bundled_path
 
-    return bundled_path(ATTENTION_WEIGHTS).is_file()
+    return bundled_path(WEIGHTS_NAME).is_file()
 
 
 def default_policy(scenario: str) -> str:

@@ -164,6 +164,12 @@ class LegTable:
         a = int(np.argmin(row))
         return a if np.isfinite(row[a]) else None
 
+    @property
+    def cheapest_charges(self) -> np.ndarray:
+        """:meth:`cheapest_charge` of every leg at once, shape [slots + 1, slots + 1] (C; ``inf`` where no
+        level is feasible, the diagonal included). Do not modify."""
+        return self._cheapest
+
     def cheapest_charge(self, i: int, j: int) -> float:
         """Charge (C) of leg i -> j at its lowest feasible level (the cheapest one in the paper's
         tables: climbing costs more than the cruise saves), ``inf`` if no level is feasible."""

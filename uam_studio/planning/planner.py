@@ -35,6 +35,7 @@ import numpy as np
 
 from uam_studio.bundled import require_bundled
 from uam_studio.errors import InputError
+from uam_studio.planning.agents.attention import WEIGHTS_NAME
 from uam_studio.planning.agents.rollout import dqn_route
 from uam_studio.planning.env import CONTEXT_S, observe_takeoff
 from uam_studio.planning.missions.check import Plan, PlanCheck, check_plan
@@ -219,7 +220,7 @@ def plan_mission(
     if m.scenario not in SCENARIOS:  # pragma: no cover - Mission validates it
         raise InputError("scenario", f"{m.scenario!r} is not a scenario")
     if agent_path is None and policy in ("dqn", "attention"):  # an install without it: an error, not an empty plan
-        require_bundled("attention_planner.pt" if policy == "attention" else f"dqn_{m.scenario}.zip", "agent", "agent",
+        require_bundled(WEIGHTS_NAME if policy == "attention" else f"dqn_{m.scenario}.zip", "agent", "agent",
                         "plan with the oracle or greedy policy, or give an agent file")
     if agent_path is not None and policy not in ("dqn", "attention"):
         raise InputError("agent_path", f"only used with the attention and dqn policies (not {policy})")

@@ -49,7 +49,13 @@ from uam_studio.planning.legs import (
 )
 from uam_studio.planning.missions.generate import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.planning.missions.mission import SCENARIOS, VERTIPORT, Battery, Mission
-from uam_studio.planning.solvers.oracle import Sortie, feasible_sorties, sortie_cover_table
+from uam_studio.planning.solvers.oracle import (
+    Sortie,
+    best_single_sortie,
+    feasible_sorties,
+    mask_priority,
+    sortie_cover_table,
+)
 from uam_studio.planning.solvers.setup import fly_batch
 
 HEALTH_Z = 1.64  # std of the health estimate the belief cell is taken at (one-sided 95%)
@@ -453,14 +459,10 @@ class Operator:
         """The best plan on ``legs`` (expected belief) whose first leg is in ``moves``; None: only the
         way home is left and it is not safe on the cautious belief."""
         n = len(self.names)
-        prio = legs.priority[:N_MAX]
         q, r0 = legs.mission.battery.q_max, legs.mission.battery.r0
 
         def names(s: Sortie) -> tuple[list[str], list[float]]:
             return [self.names[k] for k in s.nodes] + [VERTIPORT], [ALTITUDES_M[a] for a in s.alts]
-
-        def priority(mask: int) -> int:
-            return int(sum(prio[k] for k in range(n) if mask >> k & 1))
 
         if self.scenario == "single_flight":
             if here != VERTIPORT_SLOT or visited:
@@ -489,9 +491,9 @@ class Operator:
         elif not cont:
             return None, [], ""
         if self.scenario == "single_charge":
-            best = max(cont.values(), key=lambda s: (priority(s.mask), -s.time_s, s.min_voltage_v))
+            best = best_single_sortie(cont, legs)
             route, alts = names(best)
-            return route, alts, f"expected priority {priority(best.mask)} this charge"
+            return route, alts, f"expected priority {mask_priority(legs, best.mask)} this charge"
         # multi charge: this sortie's rest, then the fewest fresh sorties for what is left
         fresh = feasible_sorties(legs, allowed=unvisited_ok)
         fresh = {m: s for m, s in fresh.items() if m}

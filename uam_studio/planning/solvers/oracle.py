@@ -58,8 +58,7 @@ Larger missions: :func:`oracle_plan` is exact up to :data:`EXACT_MAX` (``N_MAX =
 destinations (``stats["exact"] = True``). For 9-20 it returns the plan of the reference solver,
 OR-Tools routing re-checked on the physics model (:mod:`~uam_studio.planning.solvers.reference`),
 with ``stats["exact"] = False`` and a message saying so: the label search grows about tenfold a
-destination, and 9 destinations already take about 10 s for a fresh cell (r0 0.017-0.02 ohm,
-q_max 8000 C; 105-108 thousand legs flown). single_flight is one leg, exact at any size.
+destination (benchmarks/RESULTS.md has the times). single_flight is one leg, exact at any size.
 :func:`feasible_sorties` and the cover work on a :class:`LegTable` of any number of slots
 (``legs.slots`` bits in the masks).
 
@@ -276,6 +275,51 @@ def min_sortie_cover(found: dict[int, Sortie], universe: int) -> list[Sortie]:
     return out
 
 
+def coverable_mask(found: dict[int, Sortie]) -> int:
+    """The destinations (bitmask) that some sortie of ``found`` visits."""
+    mask = 0
+    for m in found:
+        mask |= m
+    return mask
+
+
+def mask_priority(legs: LegTable, mask: int) -> int:
+    """Total priority of the destinations in ``mask`` (bit k: slot k of ``legs``)."""
+    return int(sum(int(legs.priority[k]) for k in range(legs.slots) if mask >> k & 1))
+
+
+def best_single_sortie(found: dict[int, Sortie], legs: LegTable) -> Sortie:
+    """The single_charge choice among ``found`` (not empty): the most priority of its set, then less
+    flight time, then a higher minimum voltage."""
+    return max(found.values(), key=lambda s: (mask_priority(legs, s.mask), -s.time_s, s.min_voltage_v))
+
+
+def safest_single_flight(legs: LegTable, alt_indices: Iterable[int], msgs: list[str],
+                         stats: dict[str, Any]) -> tuple[list[str], list[float]]:
+    """single_flight: the level (among ``alt_indices``) that flies a full cell to
+    ``destinations[0]`` with the highest minimum voltage, as ``(route, altitudes_m)`` (empty if no
+    level is safe); messages for what cannot be done, ``stats["min_voltage_by_altitude_v"]``."""
+    m = legs.mission
+    dest = m.destinations[0]
+    q, r0, eod = m.battery.q_max, m.battery.r0, m.eod_v
+    if len(m.destinations) > 1:
+        msgs.append(f"single flight: planning the leg to {dest.name} only")
+    levels = [a for a in alt_indices if legs.feasible[legs.home, 0, a]]
+    if not levels:
+        msgs.append(too_close(legs, 0) or f"cannot reach {dest.name} at any altitude")
+        return [], []
+    currents = [legs.current(legs.home, 0, a) for a in levels]
+    x0 = np.repeat(full_charge(q).as_array(), len(levels), axis=0)
+    ok, _, vmin = fly_batch(currents, x0, q, r0, eod)
+    stats["min_voltage_by_altitude_v"] = {ALTITUDES_M[a]: round(float(v), 4) for a, v in zip(levels, vmin)}
+    if not ok.any():
+        msgs.append(f"cannot reach {dest.name} at any altitude: the voltage falls below "
+                    f"{eod:.2f} V at every level (best minimum {vmin.max():.3f} V)")
+        return [], []
+    best = levels[int(np.argmax(np.where(ok, vmin, -np.inf)))]
+    return [dest.name], [ALTITUDES_M[best]]
+
+
 # ----------------------------------------------------------------------------- planner
 
 
@@ -300,35 +344,17 @@ def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iter
     if scenario != "single_flight" and len(dests) > EXACT_MAX:
         return reference_from_setup(setup, "oracle", alt_indices, t0)
     stats["exact"] = True
-    q, r0, eod = mission.battery.q_max, mission.battery.r0, mission.eod_v
 
     def done(route: list[str], alts: list[float]) -> Plan:
         stats["time_s"] = round(time.perf_counter() - t0, 4)
         return make_plan(full_mission, "oracle", route, alts, msgs, stats)
 
     if scenario == "single_flight":
-        if len(dests) > 1:
-            msgs.append(f"single flight: planning the leg to {dests[0].name} only")
-        levels = [a for a in alt_indices if legs.feasible[legs.home, 0, a]]
-        if not levels:
-            msgs.append(too_close(legs, 0) or f"cannot reach {dests[0].name} at any altitude")
-            return done([], [])
-        currents = [legs.current(legs.home, 0, a) for a in levels]
-        x0 = np.repeat(full_charge(q).as_array(), len(levels), axis=0)
-        ok, _, vmin = fly_batch(currents, x0, q, r0, eod)
-        stats["min_voltage_by_altitude_v"] = {ALTITUDES_M[a]: round(float(v), 4) for a, v in zip(levels, vmin)}
-        if not ok.any():
-            msgs.append(f"cannot reach {dests[0].name} at any altitude: the voltage falls below "
-                        f"{eod:.2f} V at every level (best minimum {vmin.max():.3f} V)")
-            return done([], [])
-        best = levels[int(np.argmax(np.where(ok, vmin, -np.inf)))]
-        return done([dests[0].name], [ALTITUDES_M[best]])
+        return done(*safest_single_flight(legs, alt_indices, msgs, stats))
 
     found = feasible_sorties(legs, alt_indices, dominance, stats=stats)
     stats["feasible_sets"] = len(found)
-    coverable = 0
-    for s in found:
-        coverable |= s
+    coverable = coverable_mask(found)
     for k in range(len(dests)):
         if not coverable >> k & 1:
             msgs.append(too_close(legs, k) or
@@ -336,14 +362,12 @@ def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iter
                         "with this battery")
     if not found:
         return done([], [])
-    prio = legs.priority[:legs.slots]
 
     def names(s: Sortie) -> tuple[list[str], list[float]]:
         return ([legs.names[k] for k in s.nodes] + [VERTIPORT], [ALTITUDES_M[a] for a in s.alts])
 
     if scenario == "single_charge":
-        best = max(found.values(), key=lambda s: (int(prio[[k for k in range(legs.slots) if s.mask >> k & 1]].sum()),
-                                                  -s.time_s, s.min_voltage_v))
+        best = best_single_sortie(found, legs)
         left = [legs.names[k] for k in range(len(dests)) if coverable >> k & 1 and not best.mask >> k & 1]
         if left:
             msgs.append(f"not visited on this charge: {', '.join(left)} (no safe single-charge route adds them)")
@@ -362,6 +386,10 @@ def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iter
 
 __all__ = [
     "DOMINANCE_SIGN",
+    "best_single_sortie",
+    "coverable_mask",
+    "mask_priority",
+    "safest_single_flight",
     "Sortie",
     "feasible_sorties",
     "min_sortie_cover",

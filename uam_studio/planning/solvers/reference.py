@@ -36,14 +36,8 @@ flies the same legs; so the reference never plans worse than greedy). The best s
 budgets is kept (most priority, or fewest sorties, then least flight time), then polished on the physics model (single_charge: add a destination or
 swap one in for a lower priority; multi_charge: empty a sortie into the others) while the route
 stays safe. Every solve has a time limit (``REFERENCE_TIME_S`` over ``BISECTION_STEPS`` solves for
-20 destinations, proportionally less for fewer), so that a 20-destination mission plans in about
-3.5 s on 2 cores.
-
-Measured on 2 shared CPU cores (``benchmarks/bench_reference.py``, seeds 9191-9194, and
-``--n-small 30 --seed 9195``): on 42 held-out single-charge and 42 multi-charge missions of 6-8
-destinations, the exact oracle's priority (gap 0) and number of sorties on every one, about 1-1.5 s a
-plan; on 8 + 8 missions of 18-20 destinations, +19% priority over greedy (8 of 8 at least as good) and
-45 sorties to greedy's 53 (never more), 2.9-3.5 s a plan.
+20 destinations, proportionally less for fewer), so that a 20-destination mission plans in a few
+seconds.
 """
 
 from __future__ import annotations

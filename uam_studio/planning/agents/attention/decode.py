@@ -29,9 +29,11 @@ the highest minimum voltage on the physics model; raw, the lowest-charge level.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -42,15 +44,16 @@ import torch
 from uam_studio.battery import full_charge
 from uam_studio.bundled import bundled_path
 from uam_studio.errors import InputError
+from uam_studio.planning.agents.attention import WEIGHTS_NAME
 from uam_studio.planning.agents.attention.features import MissionTokens, mission_tokens, step_features
 from uam_studio.planning.agents.attention.model import AttentionConfig, AttentionPolicy
-from uam_studio.planning.legs import ALTITUDES_M, N_MAX, LegTable
+from uam_studio.planning.legs import ALTITUDES_M, LegTable
 from uam_studio.planning.missions.check import Plan, make_plan
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
+from uam_studio.planning.solvers.oracle import safest_single_flight
 from uam_studio.planning.solvers.setup import fly_batch, prepare_mission, too_close
 from uam_studio.tensor_files import TensorFileError, load_tensors
 
-WEIGHTS_NAME = "attention_planner.pt"
 FORMAT = "uam_studio.attention/1"
 MAX_BEAM = 64
 MULTI_WIDE_MAX_DEST = 10  # multi_charge maps up to this size get the wide search
@@ -60,8 +63,7 @@ def default_search(scenario: str, n_dest: int) -> tuple[int, int]:
     """``(beam width, moves proposed per beam)`` of the default planner: (16, 4), and (8, 2) for
     multi_charge maps of more than :data:`MULTI_WIDE_MAX_DEST` destinations (about n + sorties steps
     of physics checks against about n / 3 in single charge: the narrower search keeps a
-    20-destination plan within about 200 ms; (6, 2) was faster but left a destination unvisited
-    on a held-out mission)."""
+    20-destination plan fast; benchmarks/RESULTS.md has the measurements)."""
     if scenario == "multi_charge" and n_dest > MULTI_WIDE_MAX_DEST:
         return 8, 2
     return 16, 4
@@ -319,25 +321,31 @@ class _Search:
                      b.time_s + self.current(b.at, n).size)
 
 
-def _single_flight(legs: LegTable, safety_filter: bool, msgs: list[str]) -> tuple[list[str], list[float]]:
-    m = legs.mission
-    dest = m.destinations[0]
-    if len(m.destinations) > 1:
+def _single_flight(legs: LegTable, safety_filter: bool, msgs: list[str], stats: dict[str, Any]
+                   ) -> tuple[list[str], list[float]]:
+    """The one leg: with the filter, the exact safest level (the oracle's); raw, the lowest-charge level."""
+    if safety_filter:
+        return safest_single_flight(legs, range(len(ALTITUDES_M)), msgs, stats)
+    dest = legs.mission.destinations[0]
+    if len(legs.mission.destinations) > 1:
         msgs.append(f"single flight: planning the leg to {dest.name} only")
-    levels = [a for a in range(len(ALTITUDES_M)) if legs.feasible[legs.home, 0, a]]
-    if not levels:
+    a = legs.cheapest_level(legs.home, 0)
+    if a is None:
         msgs.append(too_close(legs, 0) or f"cannot reach {dest.name} at any altitude")
         return [], []
-    if not safety_filter:
-        a = legs.cheapest_level(legs.home, 0)
-        return [dest.name], [ALTITUDES_M[a]]
-    q, r0, eod = m.battery.q_max, m.battery.r0, m.eod_v
-    x0 = np.repeat(full_charge(q).as_array(), len(levels), axis=0)
-    ok, _, vmin = fly_batch([legs.current(legs.home, 0, a) for a in levels], x0, q, r0, eod)
-    if not ok.any():
-        msgs.append(f"cannot reach {dest.name} at any altitude: the voltage falls below {eod:.2f} V at every level")
-        return [], []
-    return [dest.name], [ALTITUDES_M[levels[int(np.argmax(np.where(ok, vmin, -np.inf)))]]]
+    return [dest.name], [ALTITUDES_M[a]]
+
+
+@contextlib.contextmanager
+def _one_thread() -> Iterator[None]:
+    """torch on one thread for the block (a 21-token network: one thread is several times faster than a
+    contended pool), the caller's setting restored after."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
 
 
 def attention_plan(mission: Mission | dict, net: AttentionPolicy | None = None, beam_width: int | None = None,
@@ -366,7 +374,7 @@ def attention_plan(mission: Mission | dict, net: AttentionPolicy | None = None, 
     mission, full, scenario, msgs, stats = setup.mission, setup.full_mission, setup.scenario, setup.messages, setup.stats
     assert mission is not None and scenario is not None
     n = len(mission.destinations)
-    legs = setup.legs if setup.legs is not None and setup.legs.slots >= n else LegTable(mission, max(N_MAX, n))
+    legs = setup.legs  # max(N_MAX, n) slots
     width, per_beam = default_search(scenario, n)
     width = int(beam_width) if beam_width is not None else width
     per_beam = min(width, int(expand) if expand is not None else per_beam)
@@ -377,21 +385,17 @@ def attention_plan(mission: Mission | dict, net: AttentionPolicy | None = None, 
         return make_plan(full, "attention", route, alts, msgs, stats)
 
     if scenario == "single_flight":
-        return done(*_single_flight(legs, safety_filter, msgs))
+        return done(*_single_flight(legs, safety_filter, msgs, stats))
     for k in range(n):
         reason = too_close(legs, k)
         if reason is not None:
             msgs.append(reason)
     net = net if net is not None else load_policy_cached()
     tok = mission_tokens(legs, scenario)
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # a 21-token network: one thread is several times faster than a contended pool
-    try:
+    with _one_thread():
         search = _Search(net, tok, legs, scenario, width, safety_filter, per_beam)
         best, finished = search.run()
-        assert best is not None  # from the vertiport on a full charge, stopping is always allowed
-    finally:
-        torch.set_num_threads(threads)
+    assert best is not None  # from the vertiport on a full charge, stopping is always allowed
     stats.update(legs_flown=search.legs_flown, routes_finished=len(finished))
     names = [VERTIPORT if t == n else mission.destinations[t].name for t in best.tokens]
     alts = [ALTITUDES_M[a] for a in best.levels]
@@ -434,14 +438,10 @@ def continue_route(legs: LegTable, scenario: str, here: int, state: np.ndarray, 
                 continue
             lv = legs.cheapest_level(int(tok.leg_index[token]), int(tok.leg_index[t]))
             allowed[t] = lv is not None and bool(first_moves[int(tok.leg_index[t]), lv])
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
+    with _one_thread():
         search = _Search(net, tok, legs, scenario, width, True, per_beam)
         start = _Beam(token, np.asarray(visited, dtype=bool)[:n].copy(), x, used, int(sorties))
         best, _ = search.run(start, allowed)
-    finally:
-        torch.set_num_threads(threads)
     if best is None or not best.tokens:
         return None
     return [int(tok.leg_index[t]) for t in best.tokens], list(best.levels)

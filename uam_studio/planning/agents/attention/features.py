@@ -94,7 +94,7 @@ def mission_tokens(legs: LegTable, scenario: str) -> MissionTokens:
     n = legs.n
     idx = np.array(list(range(n)) + [legs.home])
     q = float(m.battery.q_max)
-    charge = np.array([[legs.cheapest_charge(int(i), int(j)) if i != j else np.inf for j in idx] for i in idx])
+    charge = legs.cheapest_charges[np.ix_(idx, idx)]  # a copy; inf on the diagonal (no leg i -> i)
     dist = legs.dist[np.ix_(idx, idx)]
     pos = legs.pos[idx] - legs.pos[legs.home]
     prio = legs.priority[idx].astype(float)

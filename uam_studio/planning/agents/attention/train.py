@@ -37,13 +37,19 @@ from torch import nn
 from uam_studio.atomic_io import atomic_save, atomic_write_text
 from uam_studio.bundled import is_bundled
 from uam_studio.errors import InputError
+from uam_studio.planning.agents.attention import WEIGHTS_NAME
 from uam_studio.planning.agents.attention.decode import FORMAT, _Search
 from uam_studio.planning.agents.attention.features import mission_tokens, step_features
 from uam_studio.planning.agents.attention.model import AttentionConfig, AttentionPolicy
 from uam_studio.planning.legs import N_MAX, LegTable
 from uam_studio.planning.missions.generate import random_mission
 from uam_studio.planning.missions.mission import Mission
-from uam_studio.planning.solvers.oracle import Sortie, feasible_sorties, min_sortie_cover
+from uam_studio.planning.solvers.oracle import (
+    best_single_sortie,
+    coverable_mask,
+    feasible_sorties,
+    min_sortie_cover,
+)
 
 __all__ = ["AttentionTrainConfig", "oracle_examples", "train_attention"]
 
@@ -120,16 +126,8 @@ def oracle_examples(mission: Mission) -> dict[str, list[list[int]]]:
     multi_charge, as destination indices per sortie: ``{scenario: sorties}``."""
     legs = LegTable(mission)
     found = feasible_sorties(legs)
-    prio = legs.priority[:N_MAX]
-
-    def key(s: Sortie) -> tuple:
-        return int(sum(prio[k] for k in s.nodes)), -s.time_s, s.min_voltage_v
-
-    single = [list(max(found.values(), key=key).nodes)] if found else []
-    coverable = 0
-    for mask in found:
-        coverable |= mask
-    cover = sorted(min_sortie_cover(found, coverable), key=lambda s: (-len(s.nodes), s.time_s))
+    single = [list(best_single_sortie(found, legs).nodes)] if found else []
+    cover = sorted(min_sortie_cover(found, coverable_mask(found)), key=lambda s: (-len(s.nodes), s.time_s))
     return {"single_charge": single, "multi_charge": [list(s.nodes) for s in cover]}
 
 
@@ -139,13 +137,16 @@ def _oracle_job(args: tuple[int, int, tuple[int, int]]) -> tuple[Mission, dict]:
     return m, oracle_examples(m)
 
 
-def _search_job(args: tuple[bytes, int, int, tuple[int, int], str, int]) -> tuple[Mission, list[list[int]]]:
-    state, seed, k, dest, scenario, beam = args
-    net = _net_from_bytes(state)
+_SEARCH_NET: AttentionPolicy | None = None  # phase 2's network: set before the workers fork, inherited by them
+
+
+def _search_job(args: tuple[int, int, tuple[int, int], str, int]) -> tuple[Mission, list[list[int]]]:
+    seed, k, dest, scenario, beam = args
+    assert _SEARCH_NET is not None
     m = random_mission(np.random.default_rng([seed, 1, k]), dest, scenario, name=f"search {seed}/{k}")
     legs = LegTable(m, max(N_MAX, len(m.destinations)))
     tok = mission_tokens(legs, scenario)
-    best, _ = _Search(net, tok, legs, scenario, beam, True, min(beam, 4)).run()
+    best, _ = _Search(_SEARCH_NET, tok, legs, scenario, beam, True, min(beam, 4)).run()
     sorties: list[list[int]] = [[]]
     for t in best.tokens:
         if t == tok.n:
@@ -153,25 +154,6 @@ def _search_job(args: tuple[bytes, int, int, tuple[int, int], str, int]) -> tupl
         else:
             sorties[-1].append(t)
     return m, [s for s in sorties if s]
-
-
-def _net_from_bytes(blob: bytes) -> AttentionPolicy:
-    import io
-
-    data = torch.load(io.BytesIO(blob), weights_only=True)
-    net = AttentionPolicy(AttentionConfig(**data["config"]))
-    net.load_state_dict(data["state_dict"])
-    net.eval()
-    torch.set_num_threads(1)
-    return net
-
-
-def _net_bytes(net: AttentionPolicy) -> bytes:
-    import io
-
-    buf = io.BytesIO()
-    torch.save({"config": net.config.to_dict(), "state_dict": net.state_dict()}, buf)
-    return buf.getvalue()
 
 
 def _map(fn: Callable, jobs: list, workers: int) -> list:
@@ -247,7 +229,7 @@ def _check_out(out: Path) -> Path:
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InputError("--out", f"{out} exists and is not a folder")
-    if is_bundled(out / "attention_planner.pt"):
+    if is_bundled(out / WEIGHTS_NAME):
         raise InputError("--out", f"{out} holds the bundled planner; training never overwrites it")
     return out
 
@@ -280,14 +262,18 @@ def train_attention(cfg: AttentionTrainConfig, out: str | os.PathLike[str],
                              "phase1_loss": round(losses[-1], 4)}
     if cfg.search_missions > 0:
         t1 = time.perf_counter()
-        blob = _net_bytes(net)
+        global _SEARCH_NET
+        _SEARCH_NET = net  # in eval mode after _fit
         log(f"phase 2: own beam search (width {cfg.search_beam}) on {cfg.search_missions} missions per scenario "
             f"of {cfg.search_dest[0]}-{cfg.search_dest[1]} destinations")
-        jobs2 = [(blob, cfg.seed, k + i * cfg.search_missions, tuple(cfg.search_dest), sc, cfg.search_beam)
+        jobs2 = [(cfg.seed, k + i * cfg.search_missions, tuple(cfg.search_dest), sc, cfg.search_beam)
                  for i, sc in enumerate(SCENARIOS_TRAINED) for k in range(cfg.search_missions)]
-        searched = _map(_search_job, jobs2, cfg.workers)
+        try:
+            searched = _map(_search_job, jobs2, cfg.workers)
+        finally:
+            _SEARCH_NET = None
         n2 = 0
-        for (m, sorties), (_, _, _, _, sc, _) in zip(searched, jobs2):
+        for (m, sorties), (_, _, _, sc, _) in zip(searched, jobs2):
             legs = LegTable(m, max(N_MAX, len(m.destinations)))
             tok = mission_tokens(legs, sc)
             new = _decisions(tok, sc, sorties, len(tokens))
@@ -302,7 +288,7 @@ def train_attention(cfg: AttentionTrainConfig, out: str | os.PathLike[str],
     card = {"format": FORMAT, "config": cfg.to_dict(), "stats": stats,
             "torch": torch.__version__, "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     out.mkdir(parents=True, exist_ok=True)
-    path = out / "attention_planner.pt"
+    path = out / WEIGHTS_NAME
     payload = {"format": FORMAT, "config": cfg.network.to_dict(), "state_dict": net.state_dict(),
                "card": json.loads(json.dumps(card))}
     atomic_save(path, lambda f: torch.save(payload, f))
