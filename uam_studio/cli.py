@@ -143,20 +143,26 @@ def _add_plan_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the plan as JSON")
 
 
+_PLAN_FLAGS = {"agent_path": "--agent", "lookahead": "--lookahead", "policy": "--policy"}
+"""``plan_mission``'s field names -> the ``plan`` command's flags, for its one-line errors."""
+
+
 def _run_plan(args: argparse.Namespace) -> int:
     from uam_studio.planning import load_mission
     from uam_studio.planning.legs import MAX_DESTINATIONS, check_destination_count
     from uam_studio.planning.planner import plan_mission
 
-    if args.agent is not None and args.policy not in ("attention", "dqn"):
-        raise _CliExit(f"--agent: only used with --policy attention or dqn (not {args.policy})", EXIT_INPUT)
-    if args.lookahead and args.policy != "dqn":
-        raise _CliExit(f"--lookahead: only used with --policy dqn (not {args.policy})", EXIT_INPUT)
     mission = load_mission(args.mission)
     if len(mission.destinations) > MAX_DESTINATIONS:  # load_mission refuses them first; the limit, explicit
         check_destination_count(len(mission.destinations))
-    res = plan_mission(mission, args.policy, q_max=args.q_max, r0=args.r0, agent_path=args.agent,
-                       lookahead=args.lookahead)
+    try:
+        res = plan_mission(mission, args.policy, q_max=args.q_max, r0=args.r0, agent_path=args.agent,
+                           lookahead=args.lookahead)
+    except InputError as err:  # plan_mission's checks, in the words of the flags
+        flag = _PLAN_FLAGS.get(err.field)
+        if flag is None:
+            raise
+        raise _CliExit(f"{flag}{str(err)[len(err.field):]}", EXIT_INPUT) from None
     if args.json:
         json.dump(res.to_dict(), sys.stdout, allow_nan=False)
         sys.stdout.write("\n")

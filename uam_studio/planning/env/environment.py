@@ -277,16 +277,19 @@ class UAMPlanningEnv(gym.Env):
 
     # ------------------------------------------------------------------ mission checks
 
-    def _check_mission(self, mission: Mission) -> None:
+    def _check_mission(self, mission: Mission) -> LegTable:
+        """Refuse a mission the env cannot fly (one-line error naming the field); return its leg table."""
         n = len(mission.destinations)
         if n == 0:
             raise InputError("mission.destinations", "is empty; the environment needs 1 to 8 destinations")
         if n > N_MAX:
             raise InputError("mission.destinations", f"has {n} destinations; the environment has {N_MAX} slots")
-        if not self._servable(LegTable(mission)).any():
+        legs = LegTable(mission)
+        if not self._servable(legs).any():
             what = "destinations[0]" if self.scenario == "single_flight" else "every destination"
             raise InputError("mission.destinations", f"{what} is too close to the vertiport to fly to "
                                                      f"(a leg needs >= {MIN_LEG_KM[0]:.1f} km)")
+        return legs
 
     def _servable(self, legs: LegTable) -> np.ndarray:
         """Slots the aircraft may ever fly to: from the vertiport (and back) at 500 m at least."""
@@ -301,10 +304,11 @@ class UAMPlanningEnv(gym.Env):
         super().reset(seed=seed)
         rng = self.np_random
         mission = (options or {}).get("mission")
+        legs = None
         if mission is not None:
             if not isinstance(mission, Mission):
                 raise InputError("options.mission", f"expected a Mission, got {type(mission).__name__}")
-            self._check_mission(mission)
+            legs = self._check_mission(mission)
         elif self._fixed is not None:
             mission = self._fixed
             if self.randomize_battery:
@@ -319,7 +323,7 @@ class UAMPlanningEnv(gym.Env):
         else:
             mission = random_mission(rng, self.n_dest, self.scenario, self.r0_range, self.q_range, self.radius_km)
         self.mission = mission
-        legs = self._legs = LegTable(mission)
+        legs = self._legs = legs if legs is not None else LegTable(mission)
         self._servable_slots = self._servable(legs)
         q, r0, eod = mission.battery.q_max, mission.battery.r0, mission.eod_v
         ci, cv = observe_takeoff(q, r0)
