@@ -87,9 +87,11 @@ def bench_latency(n: int, n_oracle: int, compares: list[str]) -> list[str]:
     import torch
     from bokeh.document import Document
 
+    from uam_studio.app.comparison import COMPARE_DELAY_S, comparison_runner
     from uam_studio.app.planner import PlannerView
+    from uam_studio.app.planner_state import PlannerState
+    from uam_studio.app.services import predictor
     from uam_studio.app.session import configure_server_threads
-    from uam_studio.app.state import COMPARE_DELAY_S, PlannerState, comparison_runner, predictor
     from uam_studio.bundled import bundled_path
     from uam_studio.planning import mission_from_dict
     from uam_studio.planning.agents.rollout import bundled_agent_path

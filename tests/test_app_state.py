@@ -16,14 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from uam_studio.app.state import (
-    EXAMPLE_MISSION,
-    BatteryLabState,
-    PlannerState,
-    RetrainState,
-    population,
-    registry,
-)
+from uam_studio.app.battery_lab_state import BatteryLabState
+from uam_studio.app.planner_state import EXAMPLE_MISSION, PlannerState
+from uam_studio.app.retrain_state import RetrainState
+from uam_studio.app.services import population, registry
 from uam_studio.planning import load_mission, mission_from_dict
 from uam_studio.planning.agents.retrain import (
     agents_dir,
@@ -474,7 +470,7 @@ def test_health_population_is_cached_and_pc1_tracks_r0():
 
 
 def test_plans_are_cached_across_sessions_and_copies_are_independent():
-    from uam_studio.app.state import PlanRequest, compute_plan
+    from uam_studio.app.plans import PlanRequest, compute_plan
 
     req = PlanRequest(mission_from_dict({**EXAMPLE_MISSION, "name": "Cache check"}), "greedy")
     first = compute_plan(req)
@@ -489,7 +485,7 @@ def test_plans_are_cached_across_sessions_and_copies_are_independent():
 
 def test_cached_dqn_plan_is_not_reused_for_another_agent_file(monkeypatch, tmp_path):
     import uam_studio.bundled as bundled
-    from uam_studio.app.state import PlanRequest, compute_plan
+    from uam_studio.app.plans import PlanRequest, compute_plan
 
     req = PlanRequest(mission_from_dict({**EXAMPLE_MISSION, "name": "Agent stamp"}), "dqn")
     assert compute_plan(req)["plan"]["route"]
@@ -500,7 +496,7 @@ def test_cached_dqn_plan_is_not_reused_for_another_agent_file(monkeypatch, tmp_p
 
 
 def test_planning_activity_keeps_training_paused_for_a_grace_period():
-    from uam_studio.app.state import PlanningActivity
+    from uam_studio.app.services import PlanningActivity
 
     act = PlanningActivity(grace_s=0.3)
     ev = act.event
@@ -524,7 +520,8 @@ def test_planning_activity_keeps_training_paused_for_a_grace_period():
 
 
 def test_warm_up_plans_what_a_new_session_shows_first():
-    from uam_studio.app.state import compute_plan, warm_up
+    from uam_studio.app.plans import compute_plan
+    from uam_studio.app.serve import warm_up
 
     warm_up(compare="off")
     s = PlannerState(auto=False)
@@ -589,7 +586,7 @@ def test_failed_takeoff_has_its_voltage_trace_and_an_unsafe_verdict():
 
 
 def test_comparison_inline_names_three_planners_and_the_gap_to_the_oracle():
-    from uam_studio.app.state import comparison_table
+    from uam_studio.app.comparison import comparison_table
 
     s = PlannerState(compare="inline")  # the attention planner, as the served app starts
     rows = {r["key"]: r for r in comparison_table(s.comparison)}
@@ -619,7 +616,7 @@ def test_comparison_inline_names_three_planners_and_the_gap_to_the_oracle():
 
 
 def test_comparison_in_a_thread_waits_for_the_plan_to_settle_and_keeps_the_newest():
-    from uam_studio.app.state import comparison_runner
+    from uam_studio.app.comparison import comparison_runner
 
     s = PlannerState(compare="thread", policy="greedy")
     for r0 in (0.15, 0.16, 0.17):
@@ -635,7 +632,8 @@ def test_comparison_in_a_thread_waits_for_the_plan_to_settle_and_keeps_the_newes
 
 
 def test_comparison_in_a_child_process():
-    from uam_studio.app.state import ComparisonRunner, PlanRequest, compare_row
+    from uam_studio.app.comparison import ComparisonRunner, compare_row
+    from uam_studio.app.plans import PlanRequest
 
     runner = ComparisonRunner("process")
     mission = mission_from_dict({**EXAMPLE_MISSION, "name": "Child"})

@@ -12,7 +12,8 @@ from bokeh.document import Document
 
 from uam_studio.app import create_app
 from uam_studio.app.planner import PlannerView, request_digest, route_legs, summary_html
-from uam_studio.app.state import PlannerState, registry
+from uam_studio.app.planner_state import PlannerState
+from uam_studio.app.services import registry
 from uam_studio.cli import main
 
 
@@ -76,7 +77,7 @@ def test_serve_argument_errors(capsys, argv, needle):
 
 def test_retrain_view_start_from_widget_drives_the_state():
     from uam_studio.app.retrain import RetrainView
-    from uam_studio.app.state import RetrainState
+    from uam_studio.app.retrain_state import RetrainState
 
     planner = PlannerState(policy="greedy")
     state = RetrainState(runner="thread")
@@ -186,7 +187,7 @@ def test_map_route_has_a_cycle_legend_and_out_and_back_labels_do_not_overlap():
 
 def test_battery_lab_plots_share_time_and_sort_the_legend_by_value():
     from uam_studio.app.battery_lab import BatteryLabView, eod_text
-    from uam_studio.app.state import BatteryLabState
+    from uam_studio.app.battery_lab_state import BatteryLabState
 
     view = BatteryLabView(BatteryLabState())
     view.__panel__().get_root(Document())
@@ -206,7 +207,7 @@ def test_battery_lab_plots_share_time_and_sort_the_legend_by_value():
 
 def test_retrain_view_shows_progress_numbers_and_the_oracle_line():
     from uam_studio.app.retrain import RetrainView
-    from uam_studio.app.state import RetrainState
+    from uam_studio.app.retrain_state import RetrainState
 
     planner = PlannerState(policy="greedy")
     view = RetrainView(RetrainState(runner="thread", compare="inline"), planner)

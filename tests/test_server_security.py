@@ -211,11 +211,9 @@ def test_port_in_use_starts_no_warm_up(monkeypatch):
     process exits on the bind error aborted it (exit 134, "terminate called without an active exception")."""
     import uam_studio.app.serve as serve_mod
     import uam_studio.app.session as session_mod
-    import uam_studio.app.state as state_mod
 
     started: list[str] = []
-    monkeypatch.setattr(state_mod, "warm_up", lambda: started.append("warm_up"))
-    monkeypatch.setattr(serve_mod, "warm_up", state_mod.warm_up, raising=False)
+    monkeypatch.setattr(serve_mod, "warm_up", lambda: started.append("warm_up"))  # what serve() starts
     monkeypatch.setattr(session_mod, "configure_server_threads", lambda: None)  # keep this process's torch threads
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))

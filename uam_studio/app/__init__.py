@@ -1,11 +1,15 @@
-"""The Panel app: planner, battery lab and retraining tabs (views only; it imports the library).
+"""The Panel app: Planner, Fly, Battery lab and Retrain tabs (views and state; it imports the library).
 
     uam-studio serve                 # or: panel serve uam_studio/app/main.py
     from uam_studio.app import create_app; create_app()    # in Jupyter (after pn.extension("tabulator"))
 
-State models (:mod:`uam_studio.app.state`) are plain ``param.Parameterized`` classes, separate from
-the views (:mod:`~uam_studio.app.planner`, :mod:`~uam_studio.app.battery_lab`,
-:mod:`~uam_studio.app.retrain`), which are ``pn.viewable.Viewer`` components.
+Each tab has a state model, a plain ``param.Parameterized`` class (:mod:`~uam_studio.app.planner_state`,
+:mod:`~uam_studio.app.fly_state`, :mod:`~uam_studio.app.battery_lab_state`,
+:mod:`~uam_studio.app.retrain_state`), separate from its view (:mod:`~uam_studio.app.planner`,
+:mod:`~uam_studio.app.fly`, :mod:`~uam_studio.app.battery_lab`, :mod:`~uam_studio.app.retrain`), a
+``pn.viewable.Viewer`` component. What the sessions of a process share: :mod:`~uam_studio.app.services`
+(thread pool, Dynaformer, agent registry), :mod:`~uam_studio.app.plans` (the plan cache) and
+:mod:`~uam_studio.app.comparison` (the plan comparison and its runner).
 """
 
 __all__ = ["create_app"]

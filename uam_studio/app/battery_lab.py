@@ -3,7 +3,7 @@
 One leg (distance, altitude, wind) flown by one cell (q_max, R0), ``legs`` times back to back, and a
 family of curves varying one factor (altitude, wind, R0 or q_max): per-cell current and voltage
 (physics model) with the EOD line, on one time axis. The numbers come from
-:class:`~uam_studio.app.state.BatteryLabState`; this view only draws its ``result``. The plots are
+:class:`~uam_studio.app.battery_lab_state.BatteryLabState`; this view only draws its ``result``. The plots are
 built once per factor (their legend names the factor's values in ascending order) and a slider move
 only sends new data to them.
 """
@@ -19,8 +19,9 @@ import numpy as np
 import panel as pn
 import param
 
+from uam_studio.app.battery_lab_state import VARY, BatteryLabState
+from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE
 from uam_studio.app.session import ensure_bokeh_backend, session_dispatcher
-from uam_studio.app.state import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE, VARY, BatteryLabState
 from uam_studio.app.style import heading
 from uam_studio.flight.tables import ALTITUDE_RANGE_M, WIND_RANGE_KTS
 

@@ -5,27 +5,49 @@ events), the :class:`~uam_studio.planning.operations.FlightRecord` of the last f
 :func:`~uam_studio.planning.operations.fly_mission`, the call ``uam-studio fly`` makes) and the
 playback clock. Injecting a wind change re-flies the mission with one more event starting at the
 playback time: everything before it is the same flight (same seeds), so the playback goes on from
-where it was.
+where it was. Flights run in the shared thread pool, the newest request winning
+(:class:`~uam_studio.app.services.LatestWorker`).
 """
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import param
 
+from uam_studio.app.services import LatestWorker, one_line
 from uam_studio.errors import InputError
 from uam_studio.planning import Mission
 from uam_studio.planning.operations import FlightRecord, WindEvent, fly_mission, position_at
 from uam_studio.planning.operations.world import MAX_NOISE_MV, MAX_SIGMA_KT
 
 SPEEDS = (10, 30, 100, 300, 1000)  # playback speed-ups (simulated s per wall s)
+ERROR_CHARS = 300  # an error line is cut here
 
 
-def _one_line(err: BaseException) -> str:
-    return " ".join(str(err).split())[:300]
+@dataclass(frozen=True)
+class _Flight:
+    """One flight to compute: the mission, :func:`fly_mission`'s settings, and whether the playback
+    keeps its time."""
+
+    mission: Mission
+    kwargs: dict[str, Any]
+    keep_time: bool
+
+
+def _fly(flight: _Flight) -> tuple[_Flight, FlightRecord | None, str]:
+    """``(flight, its record, '')``, or ``(flight, None, one line)`` for bad input."""
+    try:
+        return flight, fly_mission(flight.mission, **flight.kwargs), ""
+    except InputError as exc:
+        return flight, None, one_line(exc, ERROR_CHARS)
+
+
+def _flight_failed(flight: _Flight, exc: BaseException) -> tuple[_Flight, FlightRecord | None, str]:
+    """A flight that raised: never a traceback in the app (the server log has it)."""
+    return flight, None, f"flight failed: {type(exc).__name__}: {one_line(exc, ERROR_CHARS)}"
 
 
 class FlyState(param.Parameterized):
@@ -54,13 +76,14 @@ class FlyState(param.Parameterized):
     def __init__(self, mission: Callable[[], Mission], background: bool = False,
                  dispatch: Callable[[Callable[[], None]], None] | None = None, **params: Any) -> None:
         """:param mission: returns the mission to fly (the Planner's current one).
-        :param background: fly in a thread (served app) instead of in place.
-        :param dispatch: hands a thread's result back to the session's thread."""
+        :param background: fly in the shared thread pool (served app) instead of in place.
+        :param dispatch: hands a flight computed in the pool back to the session's thread."""
         super().__init__(**params)
         self._mission = mission
         self.background = background
         self.dispatch = dispatch
-        self._generation = 0
+        self._worker: LatestWorker[_Flight, tuple[_Flight, FlightRecord | None, str]] = LatestWorker(
+            _fly, self._flown, _flight_failed, dispatch=dispatch)
 
     # ------------------------------------------------------------------ flying
     def fly(self, keep_time: bool = False) -> None:
@@ -68,47 +91,38 @@ class FlyState(param.Parameterized):
         try:
             mission = self._mission()
         except InputError as err:
-            self.error = _one_line(err)
+            self.error = one_line(err, ERROR_CHARS)
             return
-        self._generation += 1
-        gen = self._generation
-        kwargs = dict(seed=self.seed, forecast_sigma_kt=self.forecast_sigma_kt, sensor_noise_mv=self.sensor_noise_mv,
-                      events=list(self.events))
+        flight = _Flight(mission, dict(seed=self.seed, forecast_sigma_kt=self.forecast_sigma_kt,
+                                       sensor_noise_mv=self.sensor_noise_mv, events=list(self.events)), keep_time)
         self.running = True
         self.status = "flying..."
         if not keep_time:
             self.param.update(t_s=0.0, playing=False)
-
-        def work() -> None:
-            try:
-                rec, err = fly_mission(mission, **kwargs), ""
-            except InputError as exc:
-                rec, err = None, _one_line(exc)
-            except Exception as exc:  # never a traceback in the app
-                rec, err = None, f"flight failed: {type(exc).__name__}: {_one_line(exc)}"
-
-            def done() -> None:
-                if gen != self._generation:
-                    return
-                self.running = False
-                if err:
-                    self.error, self.status = err, ""
-                    return
-                self.error = ""
-                self.param.update(record=rec, mission_flown=mission)
-                self.status = self.summary()
-                if not keep_time:
-                    self.playing = True
-
-            if self.dispatch is not None:
-                self.dispatch(done)
-            else:
-                done()
-
         if self.background:
-            threading.Thread(target=work, daemon=True, name="uam-fly").start()
+            self._worker.submit(flight)
         else:
-            work()
+            self._worker.run(flight)
+
+    def _flown(self, res: tuple[_Flight, FlightRecord | None, str], latest: bool) -> None:
+        """Show a computed flight, unless a newer one was asked for meanwhile."""
+        if not latest:
+            return
+        flight, rec, err = res
+        self.running = False
+        if err:
+            self.error, self.status = err, ""
+            return
+        self.error = ""
+        self.param.update(record=rec, mission_flown=flight.mission)
+        self.status = self.summary()
+        if not flight.keep_time:
+            self.playing = True
+
+    def wait_idle(self, timeout: float = 60.0) -> bool:
+        """Block until the newest flight asked for is shown, at most ``timeout`` s (tests; not from the
+        session's own thread when a dispatcher schedules on it)."""
+        return self._worker.wait_idle(timeout)
 
     def inject(self) -> None:
         """Add a wind change of ``inject_kts`` from the playback time on, and re-fly from there."""

@@ -1,4 +1,4 @@
-"""The app: tabs (Planner, Battery lab, Retrain) on one set of state models.
+"""The app: tabs (Planner, Fly, Battery lab, Retrain) on one set of state models.
 
     panel serve uam_studio/app/main.py        # or: uam-studio serve [--port P]
 
@@ -18,8 +18,9 @@ from typing import Any
 
 import panel as pn
 
+from uam_studio.app.comparison import compare_mode
+from uam_studio.app.planner_state import PlannerState
 from uam_studio.app.session import configure_server_threads, in_server_session, session_dispatcher
-from uam_studio.app.state import PlannerState, compare_mode
 
 TITLE = "uam_studio: health-aware eVTOL mission planning"
 EXTENSIONS = ("tabulator",)
@@ -32,7 +33,7 @@ class AppSession:
     :param planner: the Planner's state (the mission every tab works on).
     :param served: built for a server session (not Jupyter).
     :param dispatch: hands a worker thread's result to the session's thread (None outside a server).
-    :param compare: where plan comparisons run (:func:`~uam_studio.app.state.compare_mode`).
+    :param compare: where plan comparisons run (:func:`~uam_studio.app.comparison.compare_mode`).
     :param cleanups: called when the session ends (tabs add their own).
     """
 
@@ -51,14 +52,14 @@ def _planner_tab(session: AppSession) -> Any:
 
 def _battery_lab_tab(session: AppSession) -> Any:
     from uam_studio.app.battery_lab import BatteryLabView
-    from uam_studio.app.state import BatteryLabState
+    from uam_studio.app.battery_lab_state import BatteryLabState
 
     return BatteryLabView(BatteryLabState(background=session.served, dispatch=session.dispatch))
 
 
 def _retrain_tab(session: AppSession) -> Any:
     from uam_studio.app.retrain import RetrainView
-    from uam_studio.app.state import RetrainState
+    from uam_studio.app.retrain_state import RetrainState
 
     view = RetrainView(RetrainState(dispatch=session.dispatch, compare=session.compare), session.planner)
     session.cleanups.append(view.close)

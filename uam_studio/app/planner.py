@@ -1,6 +1,6 @@
 """The Planner tab: edit a mission on a map and in a table, and see the plan update live.
 
-View only: everything it shows comes from a :class:`~uam_studio.app.state.PlannerState`. The map's
+View only: everything it shows comes from a :class:`~uam_studio.app.planner_state.PlannerState`. The map's
 destinations are a :class:`holoviews.streams.PointDraw` on a DynamicMap fed by a
 :class:`~holoviews.streams.Pipe`; map and table are linked both ways through the state (an edit in
 either goes to :meth:`PlannerState.set_destinations`; an accepted or rejected edit re-sends the
@@ -19,16 +19,10 @@ import pandas as pd
 import panel as pn
 import param
 
+from uam_studio.app.comparison import comparison_table
+from uam_studio.app.planner_state import PlannerState, mission_digest
+from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE, population
 from uam_studio.app.session import ensure_bokeh_backend, in_server_session, session_dispatcher
-from uam_studio.app.state import (
-    APP_EOD_RANGE,
-    APP_Q_RANGE,
-    APP_R0_RANGE,
-    PlannerState,
-    comparison_table,
-    mission_digest,
-    population,
-)
 from uam_studio.app.style import NOTE_STYLE, heading
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.missions.mission import COORD_RANGE_KM, SCENARIOS, VERTIPORT
@@ -241,7 +235,7 @@ def comparison_html(state: PlannerState) -> str:
     learned planner, greedy and the oracle (exact up to 8 destinations, the reference solver's plan
     beyond, which the heading then says), each planned by ``plan_mission``: priority reached, places
     reached, charging cycles, lowest physics voltage and the gap to the oracle
-    (:func:`~uam_studio.app.state.comparison_table`). The row of the selected policy is bold.
+    (:func:`~uam_studio.app.comparison.comparison_table`). The row of the selected policy is bold.
 
     Attributes: ``data-pending`` ("true" while a row is being computed) and ``data-inputs`` (the
     mission it compares, as in the summary's ``data-inputs`` without the policy)."""

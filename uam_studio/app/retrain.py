@@ -1,6 +1,6 @@
 """The Retrain tab: retrain a DQN agent on the current map or on random missions, live.
 
-Training runs in a child process or a thread (:class:`~uam_studio.app.state.RetrainState`). This
+Training runs in a child process or a thread (:class:`~uam_studio.app.retrain_state.RetrainState`). This
 view drains its episode queue on a periodic callback of the session (so every widget and plot update
 happens on the session's own thread) and streams the rows into a :class:`holoviews.streams.Buffer`
 behind the learning curves, which show the exact oracle's plan of the map as a reference line
@@ -20,8 +20,10 @@ import pandas as pd
 import panel as pn
 import param
 
+from uam_studio.app.planner_state import PlannerState
+from uam_studio.app.retrain_state import RetrainState
+from uam_studio.app.services import registry
 from uam_studio.app.session import ensure_bokeh_backend
-from uam_studio.app.state import PlannerState, RetrainState, registry
 from uam_studio.app.style import NOTE_STYLE, heading
 from uam_studio.planning.agents.retrain import agents_dir
 from uam_studio.planning.missions.mission import SCENARIOS

@@ -1,5 +1,6 @@
-"""Serve the app from Python: :func:`serve` (used by ``uam-studio serve``) and :class:`ServedApp`
-(the same server in a subprocess, for the browser tests and benchmarks).
+"""Serve the app from Python: :func:`serve` (used by ``uam-studio serve``; :func:`warm_up` prepares
+the process for the first session) and :class:`ServedApp` (the same server in a subprocess, for the
+browser tests and benchmarks).
 
 The server answers only requests addressed to it by a name in its allow-list (:func:`allowed_hosts`):
 every request (page, static files, ``/ws`` websocket, ``/liveness``) whose ``Host`` header, or whose
@@ -138,7 +139,6 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
 
     from uam_studio.app.main import EXTENSIONS, TITLE, create_app
     from uam_studio.app.session import configure_server_threads
-    from uam_studio.app.state import warm_up
 
     address = address or DEFAULT_ADDRESS
     allowed_hosts(port, address, allow_origin)  # ValueError for a bad allow_origin, before binding
@@ -154,6 +154,32 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
         server.io_loop.start()  # until Ctrl-C (panel's SIGINT handler stops the loop)
     finally:
         warm.join()  # a daemon thread still inside torch at interpreter exit aborts the process
+
+
+def warm_up(compare: str | None = None) -> None:
+    """Load the Dynaformer and the health population, and plan the example mission with the default
+    policy, now (server start), so the first session shows its first plan at once. With a
+    comparison runner (``compare``: default :func:`~uam_studio.app.comparison.compare_mode` of a
+    server), also start it and compare the example's planners, so the first session's comparison is
+    ready too."""
+    from uam_studio.app.comparison import cached_row, compare_mode, comparison_runner
+    from uam_studio.app.planner_state import EXAMPLE_MISSION
+    from uam_studio.app.plans import PlanRequest, compute_plan
+    from uam_studio.app.services import LEARNED_POLICIES, default_policy, population
+    from uam_studio.planning.missions.mission import mission_from_dict
+
+    population()
+    mission = mission_from_dict(EXAMPLE_MISSION)
+    policy = default_policy(mission.scenario)
+    compute_plan(PlanRequest(mission, policy))
+    mode = compare or compare_mode(True)
+    if mode in ("process", "thread"):
+        runner = comparison_runner(mode)
+        runner.start()
+        agent = policy if policy in LEARNED_POLICIES else "attention"
+        todo = [PlanRequest(mission, p) for p in (agent, "greedy", "oracle")
+                if cached_row(PlanRequest(mission, p)) is None]
+        runner.submit("warm-up", [(r, lambda _row: None) for r in todo])
 
 
 class ServedApp:

@@ -3,6 +3,7 @@
 Rooms (each imports only the ones below it; import-linter contract in pyproject.toml)::
 
     planner.py     plan_mission: the one entry point of the CLI and the app
+    safety.py      a plan's safety verdict by source, the Dynaformer's voltage band, a failed take-off
     operations/    flying a mission in real time (world, operator, flight loop)
     agents/        the attention planner, DQN networks, training, agent files, retraining, rollout
                    (the only torch users)

@@ -39,7 +39,7 @@ from uam_studio.planning.agents.attention import WEIGHTS_NAME
 from uam_studio.planning.agents.rollout import dqn_route
 from uam_studio.planning.env import CONTEXT_S, observe_takeoff
 from uam_studio.planning.missions.check import Plan, PlanCheck, check_plan
-from uam_studio.planning.missions.mission import SCENARIOS, VERTIPORT, Mission, as_mission
+from uam_studio.planning.missions.mission import SCENARIOS, Mission, as_mission
 from uam_studio.planning.solvers.greedy import greedy_plan
 from uam_studio.planning.solvers.oracle import oracle_plan
 
@@ -104,12 +104,7 @@ def _predict(check: PlanCheck, predictor: Any, messages: list[str]) -> np.ndarra
     assert sim is not None
     ci, cv = observe_takeoff(sim.q_max, sim.r0)
     ci, cv = ci[:CONTEXT_S], cv[:CONTEXT_S]
-    cuts = [0]
-    for leg in sim.legs:
-        if leg.reached and leg.to == VERTIPORT and leg.end_s is not None:
-            cuts.append(int(round(leg.end_s / sim.dt_s)))
-    n = sim.current_a.size
-    cuts = sorted({c for c in cuts if c < n} | {n})
+    cuts = sim.sortie_cuts()
     parts = []
     try:
         for a, b in zip(cuts[:-1], cuts[1:]):

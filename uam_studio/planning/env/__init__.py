@@ -12,6 +12,7 @@ from uam_studio.planning.env.backends import (
     fallback_health,
     observe_takeoff,
     takeoff_context_current,
+    takeoff_health,
 )
 from uam_studio.planning.env.environment import (
     FEATURE_NAMES,
@@ -25,5 +26,5 @@ from uam_studio.planning.env.environment import (
 __all__ = [
     "CONTEXT_S", "FEATURE_NAMES", "HEALTH_CLIP", "MAX_EPISODE_STEPS", "N_FEATURES", "OBS_DIM", "BatteryBackend",
     "DynaformerBattery", "LegOutcome", "PhysicsBattery", "UAMPlanningEnv", "fallback_health", "make_env",
-    "observe_takeoff", "takeoff_context_current",
+    "observe_takeoff", "takeoff_context_current", "takeoff_health",
 ]

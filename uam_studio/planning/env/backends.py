@@ -3,7 +3,8 @@
 :class:`BatteryBackend` (reset, fly a leg, recharge) with :class:`PhysicsBattery` (the
 electrochemistry model, ground truth) and :class:`DynaformerBattery` (the learned model is the
 battery, the paper's setting); :func:`observe_takeoff` / :func:`takeoff_context_current` (the 20 s
-take-off observation) and :func:`fallback_health` (health features without the Dynaformer).
+take-off observation), :func:`takeoff_health` (a predictor's health PCs from it) and
+:func:`fallback_health` (health features without the Dynaformer).
 """
 
 from __future__ import annotations
@@ -42,6 +43,15 @@ def takeoff_context_current() -> np.ndarray:
 def observe_takeoff(q_max: float, r0: float) -> tuple[np.ndarray, np.ndarray]:
     """The 20 s observation of a take-off by a fresh cell (physics model): (current A, voltage V)."""
     return np.array(takeoff_context_current()), np.array(_takeoff_voltage(float(q_max), float(r0)))
+
+
+def takeoff_health(predictor: Any, q_max: float, r0: float) -> tuple[float, float]:
+    """A predictor's health (PC1, PC2) of a fresh cell (q_max C, r0 ohm) from its 20 s take-off
+    observation (:func:`observe_takeoff`); ``predictor`` has ``health(context_current_a,
+    context_voltage_v)`` (a :class:`~uam_studio.dynaformer.DynaformerPredictor`)."""
+    ci, cv = observe_takeoff(q_max, r0)
+    pc = np.asarray(predictor.health(ci[:CONTEXT_S], cv[:CONTEXT_S]), dtype=float).reshape(-1)
+    return float(pc[0]), float(pc[1])
 
 
 @functools.lru_cache(maxsize=4096)
@@ -211,4 +221,5 @@ __all__ = [
     "fallback_health",
     "observe_takeoff",
     "takeoff_context_current",
+    "takeoff_health",
 ]

@@ -102,6 +102,21 @@ class RouteSimulation:
                 out.append(leg.to)
         return tuple(out)
 
+    def sortie_cuts(self) -> list[int]:
+        """Sample indices where the sorties start, then the number of samples: ``[0, ..., n]``.
+
+        A sortie ends with each landing at the vertiport (a landing recharges); sortie ``k`` is
+        samples ``cuts[k]:cuts[k + 1]``. The Dynaformer predicts a route sortie by sortie on these
+        cuts (:func:`~uam_studio.planning.planner.plan_mission`,
+        :func:`~uam_studio.planning.safety.prediction_band`).
+        """
+        cuts = [0]
+        for leg in self.legs:
+            if leg.reached and leg.to == VERTIPORT and leg.end_s is not None:
+                cuts.append(int(round(leg.end_s / self.dt_s)))
+        n = self.current_a.size
+        return sorted({c for c in cuts if c < n} | {n})
+
     def to_dict(self) -> dict[str, Any]:
         """Plain-JSON dict: arrays as lists rounded to 6 decimals, ``None`` for missing values."""
         return {

@@ -1,0 +1,148 @@
+"""State of the Battery lab tab: one leg flown by one cell, and a family of curves varying one factor.
+
+:class:`BatteryLabState` holds the leg (length, altitude, wind, legs flown back to back), the cell
+(q_max, R0, cut-off) and the factor the family varies (:data:`VARY`), and its :attr:`~BatteryLabState.result`:
+current and voltage curves from the library's flight and battery models
+(:func:`uam_studio.flight.leg_profile`, :func:`uam_studio.battery.simulate`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import param
+
+from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE, LatestWorker, one_line
+from uam_studio.errors import InputError
+from uam_studio.flight.tables import ALTITUDE_RANGE_M, WIND_RANGE_KTS
+
+__all__ = ["VARY", "BatteryLabState"]
+
+VARY = {
+    "altitude": ("altitude_m", (500.0, 1000.0, 2000.0, 3000.0), "m"),
+    "wind": ("wind_kts", (-39.0, -13.0, 0.0, 13.0, 39.0), "kt"),
+    "R0": ("r0", (0.017, 0.1, 0.2, 0.3, 0.45), "ohm"),
+    "q_max": ("q_max", (5000.0, 6000.0, 7000.0, 8000.0), "C"),
+}
+
+
+class BatteryLabState(param.Parameterized):
+    """One leg flown by one cell, plus a family of curves that vary one factor (the paper's figures).
+
+    :meth:`curves` returns, for the chosen setting and each family member, the per-cell current and
+    the voltage (physics model) of the leg, flown ``legs`` times back to back without recharging.
+    Every input change recomputes :attr:`result` (:meth:`refresh`): at once, or (``background``) in
+    the shared thread pool with :attr:`busy` set meanwhile and only the newest request kept.
+    """
+
+    q_max = param.Number(default=7600.0, bounds=APP_Q_RANGE, doc="q_max (C)")
+    r0 = param.Number(default=0.117215, bounds=APP_R0_RANGE, doc="R0 (ohm)")
+    altitude_m = param.Number(default=1000.0, bounds=ALTITUDE_RANGE_M)
+    wind_kts = param.Number(default=0.0, bounds=WIND_RANGE_KTS)
+    distance_km = param.Number(default=55.6, bounds=(10.0, 150.0), doc="leg length (km); 30 nm = 55.6 km")
+    legs = param.Integer(default=3, bounds=(1, 10), doc="legs flown back to back (no recharge)")
+    eod_v = param.Number(default=3.0, bounds=APP_EOD_RANGE)
+    vary = param.Selector(default="altitude", objects=list(VARY))
+
+    result = param.Dict(default=None, allow_None=True, doc=":meth:`curves` of the current inputs")
+    busy = param.Boolean(default=False, doc="a newer result is being computed")
+
+    INPUTS = ("q_max", "r0", "altitude_m", "wind_kts", "distance_km", "legs", "eod_v", "vary")
+    MAX_POINTS = 1500  # samples per drawn series (every EOD time and minimum is computed at 1 s)
+
+    def __init__(self, background: bool = False, dispatch: Callable[[Callable[[], None]], None] | None = None,
+                 **params: Any) -> None:
+        """
+        :param background: compute in the shared thread pool (served app) instead of in place.
+        :param dispatch: how a result computed in the pool is handed back to the session's thread.
+        """
+        super().__init__(**params)
+        self.background = background
+        self.dispatch = dispatch or (lambda cb: cb())
+        self._worker: LatestWorker[None, dict[str, Any]] = LatestWorker(
+            lambda _: self.curves(), self._apply, _lab_failed, dispatch=self.dispatch)
+        self.param.watch(lambda *_: self.refresh(), list(self.INPUTS))
+        self.refresh()
+
+    def refresh(self) -> None:
+        """Recompute :attr:`result` for the current inputs."""
+        if not self.background:
+            self.result = self.curves()
+            return
+        if not self.busy:
+            self.busy = True
+        self._worker.submit(None)  # curves() reads the inputs as they are when it runs
+
+    def _apply(self, res: dict[str, Any], latest: bool) -> None:
+        self.param.update(result=res, **({"busy": False} if latest else {}))
+
+    def wait_idle(self, timeout: float = 60.0) -> bool:
+        """Block until the result of the newest inputs is shown, at most ``timeout`` s (tests; in the
+        background only, and not from the session's own thread when a dispatcher schedules on it)."""
+        return self._worker.wait_idle(timeout)
+
+    def _setting(self, **override: float) -> dict[str, float]:
+        s = {k: float(getattr(self, k)) for k in ("q_max", "r0", "altitude_m", "wind_kts")}
+        s.update(override)
+        return s
+
+    def curves(self) -> dict[str, Any]:
+        """``{"setting": [curve], "family": [curve...], "factor", "unit", "error", "skipped", "t_end_s",
+        "eod_v"}``.
+
+        The family is in the factor's order (ascending); ``t_end_s`` is the end of the longest
+        current profile, one time range for every plot. Each curve is ``{"label", "value", "time_s",
+        "current_a", "voltage_time_s", "voltage_v", "eod_s", "min_voltage_v"}``: the current over
+        the whole flight, the voltage up to and including the first sample below the cut-off, both
+        thinned to at most :data:`MAX_POINTS` samples; ``eod_s`` is None where the cut-off is never
+        reached and ``min_voltage_v`` the lowest voltage (every sample).
+        """
+        key, values, unit = VARY[self.vary]
+        out: dict[str, Any] = {"factor": self.vary, "unit": unit, "setting": [], "family": [], "error": "",
+                               "skipped": [], "t_end_s": 0.0, "eod_v": float(self.eod_v)}
+        try:
+            out["setting"] = [self._curve(self._setting(), "this setting")]
+        except InputError as err:
+            out["error"] = one_line(err)
+            return out
+        for v in values:
+            label = f"{self.vary} {v:g} {unit}"
+            try:
+                out["family"].append(self._curve(self._setting(**{key: v}), label))
+            except InputError as err:  # e.g. a leg too short for 3000 m
+                out["skipped"].append(f"{label}: {one_line(err)}")
+        out["t_end_s"] = max(float(c["time_s"][-1]) for c in out["setting"] + out["family"])
+        return out
+
+    def _curve(self, s: dict[str, float], label: str) -> dict[str, Any]:
+        from uam_studio.battery import simulate
+        from uam_studio.flight import leg_profile
+
+        prof = leg_profile(float(self.distance_km), s["altitude_m"], s["wind_kts"])
+        cur = np.tile(np.asarray(prof.current_a), int(self.legs))
+        sim = simulate(cur, prof.dt_s, s["q_max"], s["r0"], eod_v=float(self.eod_v))
+        t = np.asarray(sim.time_s, dtype=float)
+        v = np.asarray(sim.voltage_v, dtype=float)
+        n = min(int(np.count_nonzero(sim.valid)) + 1, v.size)  # the first sample below the cut-off too
+        eod = float(sim.eod_s)
+        it = _thin_index(t.size, self.MAX_POINTS)
+        iv = _thin_index(n, self.MAX_POINTS, keep=int(np.argmin(v[:n])))
+        return {"label": label, "value": s, "time_s": t[it], "current_a": cur[it],
+                "voltage_time_s": t[iv], "voltage_v": v[iv], "eod_s": eod if math.isfinite(eod) else None,
+                "min_voltage_v": float(v[:n].min())}
+
+
+def _thin_index(n: int, limit: int, keep: int | None = None) -> np.ndarray:
+    """At most about ``limit`` indices of ``n`` samples, evenly spread, with the first, the last and ``keep``."""
+    if n <= limit:
+        return np.arange(n)
+    idx = np.linspace(0, n - 1, limit).round().astype(int)
+    return np.unique(np.append(idx, np.asarray([] if keep is None else [keep], dtype=int)))
+
+
+def _lab_failed(_request: None, err: BaseException) -> dict[str, Any]:
+    """The result of curves that raised (:meth:`BatteryLabState.curves` reports input errors itself)."""
+    return {"error": f"battery lab failed: {one_line(err)}"}

@@ -1,0 +1,283 @@
+"""State of the Retrain tab: a DQN retraining run in the background, and its learning curves' reference.
+
+:class:`RetrainState` validates the settings and trains with the library
+(:mod:`uam_studio.planning.agents.retrain`) in a child process or a thread with a stop flag; episode
+stats go through a queue that the view drains on its own (periodic) callback; progress comes with
+elapsed time and time left; the exact oracle's plan of the map (a comparison row,
+:mod:`uam_studio.app.comparison`) is the curves' reference.
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import os
+import threading
+import time
+import traceback
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import param
+
+from uam_studio.app.comparison import COMPARE_MODES, cached_row, compare_row, comparison_runner, store_row
+from uam_studio.app.plans import PlanRequest
+from uam_studio.app.services import ACTIVITY, one_line
+from uam_studio.errors import InputError
+from uam_studio.planning.missions.mission import SCENARIOS, Mission
+
+__all__ = ["RUNNER_ENV", "RetrainState"]
+
+RUNNER_ENV = "UAM_STUDIO_RETRAIN_RUNNER"  # "process" (default) or "thread"
+
+
+def _clock(seconds: float) -> str:
+    """``m:ss`` (``h:mm:ss`` from an hour)."""
+    t = int(round(seconds))
+    h, rest = divmod(t, 3600)
+    return f"{h}:{rest // 60:02d}:{rest % 60:02d}" if h else f"{rest // 60}:{rest % 60:02d}"
+
+
+class RetrainState(param.Parameterized):
+    """A DQN retraining run in the background (one per session at a time).
+
+    :meth:`start` validates the settings (:func:`uam_studio.planning.agents.retrain.training_setup`) and
+    starts the run: in a child process (``runner="process"``, the served app's default:
+    :class:`~uam_studio.planning.agents.retrain.RetrainProcess`, lower CPU priority, no GIL shared with
+    the sessions) or in a thread of this process (``runner="thread"``). :meth:`stop` sets the stop
+    flag (the agent trained so far is still saved). Neither touches the param values: :meth:`poll`,
+    called on the session's own thread (a periodic callback in the app), drains the episodes into
+    the values that views watch and returns the new ones.
+    """
+
+    source = param.Selector(default="map", objects=["map", "random"], doc="current map or random missions")
+    scenario = param.Selector(default="single_charge", objects=list(SCENARIOS))
+    alpha = param.Number(default=1.0, bounds=(0.0, 100.0), doc="reward per destination x priority")
+    beta = param.Number(default=1.0, bounds=(0.0, 100.0), doc="penalty per charging stop")
+    gamma = param.Number(default=5.0, bounds=(0.0, 100.0), doc="penalty for an end of discharge")
+    steps = param.Integer(default=5000, bounds=(100, 1_000_000), doc="environment transitions")
+    seed = param.Integer(default=0, bounds=(0, 2**31 - 1))
+    start_from = param.Selector(default="scratch", objects=["scratch", "bundled"],
+                                doc="random weights, or fine-tune the scenario's bundled agent "
+                                    "(pretrained/dqn_<scenario>.zip; exploration from epsilon 0.2)")
+
+    running = param.Boolean(default=False)
+    timesteps = param.Integer(default=0)
+    episodes = param.Integer(default=0)
+    status = param.String(default="")
+    error = param.String(default="")
+    agent_path = param.String(default="", doc="the last saved agent")
+    reference = param.Dict(default=None, allow_None=True,
+                           doc="the exact oracle's plan of the map (compare_row, plus 'label' and 'cell'), the "
+                               "learning curves' reference; None for random missions or until computed")
+    runner = param.Selector(default="process", objects=["process", "thread"],
+                            doc="train in a child process (default; $UAM_STUDIO_RETRAIN_RUNNER overrides) "
+                                "or in a thread of this process")
+
+    MA_WINDOW = 50
+
+    def __init__(self, dispatch: Callable[[Callable[[], None]], None] | None = None, compare: str = "off",
+                 **params: Any) -> None:
+        """
+        :param dispatch: how a result computed elsewhere (the oracle reference) is handed back to the
+            session's thread (default: applied in the computing thread).
+        :param compare: where the oracle reference is computed (see :class:`PlannerState`'s ``compare``).
+        """
+        env = os.environ.get(RUNNER_ENV, "").strip()
+        if "runner" not in params and env in ("process", "thread"):
+            params["runner"] = env
+        super().__init__(**params)
+        if compare not in COMPARE_MODES:
+            raise InputError("compare", f"{compare!r}: allowed {', '.join(COMPARE_MODES)}")
+        self.dispatch = dispatch or (lambda cb: cb())
+        self.compare = compare
+        self._reference_req: PlanRequest | None = None
+        self._t_start: float | None = None
+        self._t_end: float | None = None
+        self._proc: Any = None
+        self._queue: collections.deque = collections.deque()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._result: Any = None
+        self._failure: str | None = None
+        self._finished = False
+        self._target_steps = 0
+        self._reached: list[float] = []
+        self._cycles: list[float] = []
+
+    def start(self, mission: Mission | None = None) -> bool:
+        """Start training on ``mission`` (``source == "map"``) or on random missions. Returns False
+        (with :attr:`error` set) for bad settings or while a run is going."""
+        from uam_studio.planning.agents.retrain import new_agent_path, training_setup
+
+        if self.running:
+            self.error = "training: a run is already going; stop it first"
+            return False
+        m = mission if self.source == "map" else None
+        if self.source == "map" and mission is None:
+            self.error = "training: no map to train on"
+            return False
+        init_agent = None
+        if self.start_from == "bundled":
+            from uam_studio.planning.agents.rollout import bundled_agent_path
+
+            init_agent = str(bundled_agent_path(self.scenario))
+        try:
+            cfg, env_fn = training_setup(self.scenario, m, self.alpha, self.beta, self.gamma, self.steps, self.seed,
+                                         init_agent=init_agent)
+        except InputError as err:
+            what = "current map" if m is not None else "settings"
+            self.error = f"training ({what}): {one_line(err)}"
+            return False
+        path = new_agent_path(self.scenario, "map" if m is not None else "random")
+        self.error = ""
+        self._queue.clear()
+        self._stop.clear()
+        self._result, self._failure, self._finished = None, None, False
+        self._reached, self._cycles = [], []
+        self._target_steps = cfg.steps
+        self._t_start, self._t_end = time.monotonic(), None
+        self.request_reference(mission)
+        verb = "fine-tuning the bundled agent" if init_agent else "training"
+        self.param.update(running=True, timesteps=0, episodes=0, agent_path="",
+                          status=f"{verb} {cfg.steps} steps on {'the current map' if m else 'random missions'}")
+        if self.runner == "process":
+            from uam_studio.planning.agents.retrain import RetrainProcess
+
+            self._proc = RetrainProcess(path, mission=m, source="app", pause_event=ACTIVITY.event,
+                                        scenario=self.scenario, alpha=self.alpha, beta=self.beta,
+                                        gamma=self.gamma, steps=self.steps, seed=self.seed, init_agent=init_agent)
+            self._proc.start()
+            return True
+        self._proc = None
+        self._thread = threading.Thread(target=self._run, args=(cfg, env_fn, path, m), daemon=True,
+                                        name="uam-retrain")
+        self._thread.start()
+        return True
+
+    def _run(self, cfg: Any, env_fn: Callable[[], Any], path: Path, mission: Mission | None) -> None:
+        import torch
+
+        from uam_studio.planning.agents.retrain import retrain_dqn
+
+        torch.set_num_threads(1)  # leave the other core to the sessions
+        try:
+            self._result = retrain_dqn(cfg, env_fn, path, mission=mission, on_episode=self._queue.append,
+                                       stop_event=self._stop, source="app")
+        except Exception as err:
+            traceback.print_exc()
+            self._failure = f"training failed: {type(err).__name__}: {one_line(err)}"
+        finally:
+            self._finished = True
+
+    def stop(self) -> None:
+        """Ask the run to stop at the next environment step (the agent so far is saved)."""
+        if self.running:
+            self._stop.set()
+            if self._proc is not None:
+                self._proc.stop()
+            self.status = "stopping..."
+
+    @property
+    def progress(self) -> float:
+        """Fraction of the steps done, 0-1."""
+        return min(1.0, self.timesteps / self._target_steps) if self._target_steps else 0.0
+
+    @property
+    def elapsed_s(self) -> float:
+        """Seconds since the run started (until it ended), 0 before any run."""
+        if self._t_start is None:
+            return 0.0
+        return (self._t_end if self._t_end is not None else time.monotonic()) - self._t_start
+
+    def progress_text(self) -> str:
+        """Steps done of the total, percent, elapsed time and (while running) the time left at the
+        pace so far, e.g. ``"1200 of 5000 steps (24%) · 0:12 elapsed · about 0:38 left"``."""
+        if not self._target_steps:
+            return "not started"
+        p = self.progress
+        text = f"{self.timesteps} of {self._target_steps} steps ({100 * p:.0f}%) \u00b7 {_clock(self.elapsed_s)} elapsed"
+        if self.running:
+            eta = self.elapsed_s * (1 - p) / p if p > 0 else None
+            text += f" \u00b7 about {_clock(eta)} left" if eta is not None else " \u00b7 time left: after the first episodes"
+        return text
+
+    def request_reference(self, mission: Mission | None) -> None:
+        """Compute the learning curves' reference for ``mission`` with this run's scenario: the exact
+        oracle's plan (:func:`compare_row`; at once if this process has it), or none (``mission``
+        None: random missions)."""
+        if mission is None or self.source != "map" or self.compare == "off":
+            self._reference_req = None
+            self.reference = None
+            return
+        m = mission if mission.scenario == self.scenario else dataclasses.replace(mission, scenario=self.scenario)
+        req = PlanRequest(m, "oracle")
+        if req == self._reference_req:
+            return
+        self._reference_req = req
+        extra = {"label": "exact oracle (this map)", "cell": f"q_max {m.battery.q_max:g} C, R0 {m.battery.r0:.3g} ohm"}
+        row = cached_row(req)
+        if row is None and self.compare == "inline":
+            row = compare_row(m, "oracle")
+            store_row(req, row)
+        if row is not None:
+            self.reference = {**row, **extra}
+            return
+        self.reference = None
+
+        def done(row: dict[str, Any]) -> None:
+            self.dispatch(lambda: self._reference_result(req, {**row, **extra}))
+
+        comparison_runner(self.compare).submit(("retrain", id(self)), [(req, done)])
+
+    def _reference_result(self, req: PlanRequest, row: dict[str, Any]) -> None:
+        if req == self._reference_req:
+            self.reference = row
+
+    def poll(self) -> list[dict[str, float]]:
+        """Drain the episode queue (call on the session's thread). Returns the new episodes as rows
+        ``{"episode", "reached", "cycles", "reached_ma", "cycles_ma"}`` (moving averages over
+        :attr:`MA_WINDOW` episodes); updates the progress and, at the end, the status."""
+        if self._proc is not None and not self._finished:
+            self._queue.extend(self._proc.poll())
+            if self._proc.finished:
+                self._result = self._proc.result
+                self._failure = f"training failed: {self._proc.error}" if self._proc.error else None
+                self._finished = True
+        rows = []
+        while self._queue:
+            e = self._queue.popleft()
+            self._reached.append(float(e.reached))
+            self._cycles.append(float(e.charging_cycles))
+            w = self.MA_WINDOW
+            rows.append({"episode": float(e.episode), "reached": float(e.reached),
+                         "cycles": float(e.charging_cycles),
+                         "reached_ma": float(np.mean(self._reached[-w:])),
+                         "cycles_ma": float(np.mean(self._cycles[-w:]))})
+            last_t = e.timestep
+        changes: dict[str, Any] = {}
+        if rows:
+            changes.update(timesteps=int(last_t), episodes=self.episodes + len(rows))
+        if self.running and self._finished:
+            changes["running"] = False
+            self._t_end = time.monotonic()
+            if self._failure:
+                changes.update(error=self._failure, status="training failed")
+            elif self._result is not None:
+                r = self._result
+                changes.update(timesteps=r.timesteps, agent_path=str(r.path), error="",
+                               status=f"{'stopped' if r.stopped else 'done'}: {r.episodes} episodes, "
+                                      f"{r.timesteps} steps; saved {r.path.name} (now in the Planner's "
+                                      "policy list)")
+        if changes:
+            self.param.update(**changes)
+        return rows
+
+    def join(self, timeout: float | None = None) -> None:
+        """Wait for the training thread or process (tests)."""
+        if self._proc is not None:
+            self._proc.join(timeout)
+        elif self._thread is not None:
+            self._thread.join(timeout)
