@@ -18,11 +18,10 @@ from typing import Any
 
 import numpy as np
 
-from uam_studio.battery import simulate
 from uam_studio.planning.env import CONTEXT_S, observe_takeoff
-from uam_studio.planning.legs import DT_S, takeoff_current
 from uam_studio.planning.missions.check import check_plan
 from uam_studio.planning.missions.mission import Mission
+from uam_studio.planning.solvers.setup import fly_takeoff
 
 __all__ = ["BAND_LEVEL", "BAND_METHOD", "prediction_band", "safety_verdict", "takeoff_attempt"]
 
@@ -78,7 +77,7 @@ def takeoff_attempt(mission: Mission) -> dict[str, Any] | None:
         the cut-off.
     """
     b = mission.battery
-    sim = simulate(takeoff_current(), DT_S, float(b.q_max), float(b.r0), eod_v=float(mission.eod_v))
+    sim = fly_takeoff(float(b.q_max), float(b.r0), float(mission.eod_v))
     if not bool(sim.eod_reached):
         return None
     n = min(int(np.count_nonzero(sim.valid)) + 1, sim.voltage_v.size)

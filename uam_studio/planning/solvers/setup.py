@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from uam_studio.battery import DEFAULT_CELL, BatteryState, simulate
+from uam_studio.battery import DEFAULT_CELL, BatteryState, SimulationResult, simulate
 from uam_studio.battery.solver import integrate_current
 from uam_studio.errors import InputError
 from uam_studio.planning.legs import (
@@ -111,15 +111,20 @@ def _as_mission(mission: Any) -> tuple[Mission | None, list[str]]:
         return None, [f"invalid mission: {err}"]
 
 
+def fly_takeoff(q_max: float, r0: float, eod_v: float) -> SimulationResult:
+    """A fresh cell (q_max C, r0 ohm) on the take-off and climb to 500 m (the least demanding start
+    of any leg), with the cut-off ``eod_v`` (V): the physics model's run."""
+    return simulate(takeoff_current(), DT_S, q_max, r0, eod_v)
+
+
 def takeoff_failure(q_max: float, r0: float, eod_v: float) -> str | None:
-    """A message if a fresh cell cannot finish the take-off and climb to 500 m (the least demanding
-    start of any leg) above the cut-off, else None."""
-    legs_start = takeoff_current()
-    res = simulate(legs_start, DT_S, q_max, r0, eod_v)
+    """A message if a fresh cell cannot finish the take-off and climb to 500 m above the cut-off
+    (:func:`fly_takeoff`), else None."""
+    res = fly_takeoff(q_max, r0, eod_v)
     if not res.eod_reached:
         return None
     return (f"the battery cannot finish takeoff: the voltage falls below {eod_v:.2f} V after "
-            f"{res.eod_s:.0f} s of the {legs_start.size} s take-off and climb to 500 m "
+            f"{res.eod_s:.0f} s of the {res.time_s.size} s take-off and climb to 500 m "
             f"(q_max {q_max:.0f} C, r0 {r0:.3f} ohm)")
 
 
