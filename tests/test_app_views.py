@@ -219,3 +219,17 @@ def test_retrain_view_shows_progress_numbers_and_the_oracle_line():
     assert el.opts.get().kwargs["xlim"] == (0.0, 50.0)  # before any episode: 50 episodes, not 0-1
     assert view.progress_text.object == "<span class='uam-train-progress-text'>not started</span>"
     planner.close()
+
+
+def test_inputs_are_handled_without_panel_s_50_ms_wait_and_the_page_has_no_global_spinner():
+    from uam_studio.app.battery_lab import BatteryLabView
+    from uam_studio.app.battery_lab_state import BatteryLabState
+
+    view = PlannerView(PlannerState(policy="greedy"))
+    lab = BatteryLabView(BatteryLabState())
+    for wd in [*view._inputs.values(), *lab.widgets.values()]:
+        assert "value" in wd._priority_changes, wd.name  # handled on the next tick, not after 50 ms
+    assert "value" not in pn.widgets.FloatSlider._priority_changes  # other sliders keep Panel's default
+    assert "value" not in pn.widgets.FloatSlider(name="x")._priority_changes
+    page = create_app(template=True)
+    assert isinstance(page, pn.template.BaseTemplate) and page.busy_indicator is None

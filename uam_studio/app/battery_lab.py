@@ -21,7 +21,7 @@ import param
 
 from uam_studio.app.battery_lab_state import VARY, BatteryLabState
 from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE
-from uam_studio.app.session import ensure_bokeh_backend, session_dispatcher
+from uam_studio.app.session import ensure_bokeh_backend, respond_at_once, session_dispatcher
 from uam_studio.app.style import heading
 from uam_studio.flight.tables import ALTITUDE_RANGE_M, WIND_RANGE_KTS
 
@@ -72,6 +72,7 @@ class BatteryLabView(pn.viewable.Viewer):
         }
         for key, wd in self.widgets.items():
             wd.link(s, value=key)
+        respond_at_once(self.widgets.values())
         self.message = pn.pane.Alert("", alert_type="warning", visible=False, css_classes=["uam-lab-error"],
                                      sizing_mode="stretch_width")
         self.busy = pn.indicators.LoadingSpinner(value=s.busy, size=18, css_classes=["uam-lab-busy"],

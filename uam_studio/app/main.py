@@ -125,7 +125,10 @@ def create_app(template: bool | None = None) -> pn.viewable.Viewable:
 
         pn.state.on_session_destroyed(_cleanup)
     if template if template is not None else served:
-        return pn.template.BootstrapTemplate(title=TITLE, main=[app], header_background="#1f4e79")
+        # No template-wide busy indicator: it would send the browser two extra changes (each a page
+        # layout) on every callback; each tab shows its own busy state once work takes longer.
+        return pn.template.BootstrapTemplate(title=TITLE, main=[app], header_background="#1f4e79",
+                                             busy_indicator=None)
     return app
 
 

@@ -22,7 +22,12 @@ import param
 from uam_studio.app.comparison import comparison_table
 from uam_studio.app.planner_state import PlannerState, mission_digest
 from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE, population
-from uam_studio.app.session import ensure_bokeh_backend, in_server_session, session_dispatcher
+from uam_studio.app.session import (
+    ensure_bokeh_backend,
+    in_server_session,
+    respond_at_once,
+    session_dispatcher,
+)
 from uam_studio.app.style import NOTE_STYLE, heading
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.missions.mission import COORD_RANGE_KM, SCENARIOS, VERTIPORT
@@ -344,6 +349,7 @@ class PlannerView(pn.viewable.Viewer):
                         "eod_v": self.eod, "return_wind": self.return_wind}
         for key, wd in self._inputs.items():
             wd.param.watch(lambda ev, key=key: self._on_widget(key, ev), "value")
+        respond_at_once(self._inputs.values())
         s.param.watch(self._on_state_input, list(self._inputs))
         s.param.watch(self._on_policy_objects, "policy_objects")
 
