@@ -16,6 +16,7 @@ import numpy as np
 import param
 
 from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE, LatestWorker, one_line
+from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0
 from uam_studio.errors import InputError
 from uam_studio.flight.tables import ALTITUDE_RANGE_M, WIND_RANGE_KTS
 
@@ -38,8 +39,8 @@ class BatteryLabState(param.Parameterized):
     the shared thread pool with :attr:`busy` set meanwhile and only the newest request kept.
     """
 
-    q_max = param.Number(default=7600.0, bounds=APP_Q_RANGE, doc="q_max (C)")
-    r0 = param.Number(default=0.117215, bounds=APP_R0_RANGE, doc="R0 (ohm)")
+    q_max = param.Number(default=DEFAULT_Q_MAX, bounds=APP_Q_RANGE, doc="q_max (C)")
+    r0 = param.Number(default=DEFAULT_R0, bounds=APP_R0_RANGE, doc="R0 (ohm)")
     altitude_m = param.Number(default=1000.0, bounds=ALTITUDE_RANGE_M)
     wind_kts = param.Number(default=0.0, bounds=WIND_RANGE_KTS)
     distance_km = param.Number(default=55.6, bounds=(10.0, 150.0), doc="leg length (km); 30 nm = 55.6 km")

@@ -53,6 +53,7 @@ from uam_studio.app.services import (
     policy_options,
     registry,
 )
+from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.legs import MAX_DESTINATIONS, check_destination_count
@@ -131,8 +132,8 @@ class PlannerState(param.Parameterized):
     vertiport_y_km = param.Number(default=0.0, bounds=COORD_RANGE_KM)
     return_wind = param.Number(default=0.0, bounds=WIND_RANGE_KTS, doc="wind (kt) on legs back to the vertiport")
     scenario = param.Selector(default="single_charge", objects=list(SCENARIOS))
-    q_max = param.Number(default=7600.0, bounds=APP_Q_RANGE, doc="mobile lithium charge q_max (C)")
-    r0 = param.Number(default=0.117215, bounds=APP_R0_RANGE, doc="ohmic resistance R0 (ohm)")
+    q_max = param.Number(default=DEFAULT_Q_MAX, bounds=APP_Q_RANGE, doc="mobile lithium charge q_max (C)")
+    r0 = param.Number(default=DEFAULT_R0, bounds=APP_R0_RANGE, doc="ohmic resistance R0 (ohm)")
     eod_v = param.Number(default=3.0, bounds=APP_EOD_RANGE, doc="end-of-discharge cut-off (V)")
     policy = param.Selector(default="greedy", objects=list(POLICY_LABELS.values()), check_on_set=False)
     policy_objects = param.Dict(default=dict(POLICY_LABELS), doc="policy select options: label -> value")

@@ -25,6 +25,7 @@ from typing import Any, Generic, TypeVar
 
 import param
 
+from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.planning.agents.attention import WEIGHTS_NAME
 
 __all__ = [
@@ -48,8 +49,8 @@ __all__ = [
     "registry",
 ]
 
-APP_Q_RANGE = (5000.0, 8000.0)  # C, the paper's range of q_max
-APP_R0_RANGE = (0.017, 0.45)  # ohm, the paper's range of R0
+APP_Q_RANGE = PAPER_Q_RANGE  # C: the tabs' q_max inputs span the paper's range
+APP_R0_RANGE = PAPER_R0_RANGE  # ohm
 APP_EOD_RANGE = (2.5, 3.5)  # V; the Dynaformer is trained down to 2.5 V
 POPULATION_N = 300
 

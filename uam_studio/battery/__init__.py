@@ -15,7 +15,15 @@ from .fit import (
     fit_health_batch,
     voltage_band,
 )
-from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0, CellParameters
+from .parameters import (
+    DEFAULT_CELL,
+    DEFAULT_EOD_V,
+    DEFAULT_Q_MAX,
+    DEFAULT_R0,
+    PAPER_Q_RANGE,
+    PAPER_R0_RANGE,
+    CellParameters,
+)
 from .simulate import (
     EOD_RANGE,
     Q_MAX_RANGE,
@@ -29,7 +37,7 @@ from .state import STATE_NAMES, BatteryState, full_charge
 
 __all__ = [
     "BatteryState", "CellParameters", "DEFAULT_CELL", "DEFAULT_EOD_V", "DEFAULT_Q_MAX", "DEFAULT_R0",
-    "EOD_RANGE", "HealthEstimate", "Q_MAX_RANGE", "R0_RANGE", "STATE_NAMES", "SimulationResult",
+    "EOD_RANGE", "HealthEstimate", "PAPER_Q_RANGE", "PAPER_R0_RANGE", "Q_MAX_RANGE", "R0_RANGE", "STATE_NAMES", "SimulationResult",
     "eod_interval_s", "eod_intervals", "fit_health", "fit_health_batch", "full_charge", "rest_voltage",
     "simulate", "simulate_constant_power", "voltage_band",
 ]

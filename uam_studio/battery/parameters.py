@@ -23,6 +23,8 @@ THERMAL_TAU_S = 100.0  # cooling time constant towards ambient (s)
 DEFAULT_Q_MAX = 7600.0  # C
 DEFAULT_R0 = 0.117215  # ohm
 DEFAULT_EOD_V = 3.0  # V
+PAPER_Q_RANGE = (5000.0, 8000.0)  # C, the paper's range of q_max (its health box; the one home)
+PAPER_R0_RANGE = (0.017, 0.45)  # ohm, the paper's range of R0
 
 # Redlich-Kister coefficients (J/mol) of the positive and negative electrode potentials.
 AP = (

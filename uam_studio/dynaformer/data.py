@@ -20,13 +20,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..atomic_io import atomic_save
-from ..battery import simulate
+from ..battery import PAPER_Q_RANGE, PAPER_R0_RANGE, simulate
 from ..flight import leg_profile, min_leg_distance_km
 
 GRID_DT_S = 1.0
 TARGET_CUTOFF_V = 2.5  # V: targets are simulated down to here
-TRAIN_Q_RANGE = (5000.0, 8000.0)  # C
-TRAIN_R_RANGE = (0.017, 0.45)  # ohm
+TRAIN_Q_RANGE = PAPER_Q_RANGE  # C: the training cells fill the paper's health box
+TRAIN_R_RANGE = PAPER_R0_RANGE  # ohm
 EXTRA_Q_BANDS = ((4000.0, 5000.0), (8000.0, 9000.0))  # C
 EXTRA_R_BAND = (0.45, 0.5)  # ohm
 

@@ -17,10 +17,10 @@ from typing import Any
 import numpy as np
 
 from uam_studio.battery import DEFAULT_CELL, EOD_RANGE, STATE_NAMES, BatteryState, full_charge, simulate
+from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.battery.solver import integrate_current
 from uam_studio.errors import InputError
 from uam_studio.planning.legs import DT_S, takeoff_current
-from uam_studio.planning.missions.generate import PAPER_Q_RANGE, PAPER_R0_RANGE
 
 CONTEXT_S = 20  # s of take-off observed to infer the health (the paper's 20 s)
 HEALTH_CLIP = 5.0

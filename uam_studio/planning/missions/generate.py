@@ -25,13 +25,12 @@ import math
 
 import numpy as np
 
+from uam_studio.battery.parameters import PAPER_Q_RANGE
 from uam_studio.errors import InputError
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.legs import MAX_DESTINATIONS, N_MAX
 from uam_studio.planning.missions.mission import SCENARIOS, Battery, Destination, Mission, Vertiport
 
-PAPER_Q_RANGE = (5000.0, 8000.0)  # C, the paper's range of q_max (the one home of both ranges)
-PAPER_R0_RANGE = (0.017, 0.45)  # ohm, the paper's range of R0
 DEFAULT_Q_RANGE = PAPER_Q_RANGE
 DEFAULT_R0_RANGE = (0.017, 0.35)  # ohm; the paper's is 0.017-0.45, see the module docstring
 DEFAULT_RADIUS_KM = (8.0, 60.0)

@@ -35,6 +35,7 @@ import numpy as np
 
 from uam_studio.battery import BatteryState, full_charge, simulate
 from uam_studio.battery.fit import Q_REF_C, HealthEstimate, fit_health
+from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight import leg_profile
 from uam_studio.flight.tables import WIND_RANGE_KTS
@@ -47,7 +48,6 @@ from uam_studio.planning.legs import (
     LegTable,
     check_destination_count,
 )
-from uam_studio.planning.missions.generate import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.planning.missions.mission import SCENARIOS, VERTIPORT, Battery, Mission
 from uam_studio.planning.solvers.oracle import (
     Sortie,
