@@ -25,9 +25,10 @@ Planning: the action space (:mod:`~uam_studio.planning.legs`: ``N_MAX``, ``ALTIT
 :func:`reference_plan` beyond; :func:`greedy_plan`, baseline), the physics check
 :func:`check_plan` (-> :class:`PlanCheck`) and the one entry point of the CLI and the app,
 :func:`plan_mission` (any of :data:`POLICIES`, checked on physics, with the Dynaformer's prediction;
--> :class:`PlanResult`).
+-> :class:`PlanResult`), its :func:`safety_verdict` by source and the Dynaformer's :func:`prediction_band`,
+and flying a mission with surprises, :func:`fly_mission`.
 
-``env``, ``solvers``, ``agents`` and ``planner`` are imported lazily (attribute access), so
+``env``, ``solvers``, ``agents``, ``planner``, ``safety`` and ``operations`` are imported lazily (attribute access), so
 ``import uam_studio.planning`` stays light (no gymnasium, no torch).
 """
 
@@ -70,6 +71,9 @@ _LAZY = {
     "PlanResult": "planner",
     "POLICIES": "planner",
     "attention_plan": "agents.attention.decode",
+    "safety_verdict": "safety",
+    "prediction_band": "safety",
+    "fly_mission": "operations",
 }
 
 
