@@ -5,7 +5,7 @@ events), the :class:`~uam_studio.planning.operations.FlightRecord` of the last f
 :func:`~uam_studio.planning.operations.fly_mission`, the call ``uam-studio fly`` makes) and the
 playback clock. Injecting a wind change re-flies the mission with one more event starting at the
 playback time: everything before it is the same flight (same seeds), so the playback goes on from
-where it was. Flights run in the shared thread pool, the newest request winning
+where it was. Flights run in the flights' own thread pool, the newest request winning
 (:class:`~uam_studio.app.services.LatestWorker`).
 """
 
@@ -17,7 +17,7 @@ from typing import Any
 
 import param
 
-from uam_studio.app.services import LatestWorker, one_line
+from uam_studio.app.services import FLIGHT_POOL, LatestWorker, one_line
 from uam_studio.errors import InputError
 from uam_studio.planning import Mission
 from uam_studio.planning.operations import FlightRecord, WindEvent, fly_mission, position_at
@@ -76,14 +76,14 @@ class FlyState(param.Parameterized):
     def __init__(self, mission: Callable[[], Mission], background: bool = False,
                  dispatch: Callable[[Callable[[], None]], None] | None = None, **params: Any) -> None:
         """:param mission: returns the mission to fly (the Planner's current one).
-        :param background: fly in the shared thread pool (served app) instead of in place.
+        :param background: fly in the flights' thread pool (:data:`~uam_studio.app.services.FLIGHT_POOL`; served app) instead of in place.
         :param dispatch: hands a flight computed in the pool back to the session's thread."""
         super().__init__(**params)
         self._mission = mission
         self.background = background
         self.dispatch = dispatch
         self._worker: LatestWorker[_Flight, tuple[_Flight, FlightRecord | None, str]] = LatestWorker(
-            _fly, self._flown, _flight_failed, dispatch=dispatch)
+            _fly, self._flown, _flight_failed, dispatch=dispatch, pool=FLIGHT_POOL)
 
     # ------------------------------------------------------------------ flying
     def fly(self, keep_time: bool = False) -> None:

@@ -30,6 +30,7 @@ from uam_studio.planning.agents.attention import WEIGHTS_NAME
 
 __all__ = [
     "ACTIVITY",
+    "FLIGHT_POOL",
     "AGENT_PREFIX",
     "APP_EOD_RANGE",
     "APP_Q_RANGE",
@@ -70,6 +71,10 @@ def one_line(err: BaseException, limit: int | None = None) -> str:
 POOL = ThreadPoolExecutor(max_workers=4, thread_name_prefix="uam-plan")
 """Background work of the served app: a few threads shared by all sessions, one job per
 :class:`LatestWorker` (per session and tab) at a time."""
+
+FLIGHT_POOL = ThreadPoolExecutor(max_workers=2, thread_name_prefix="uam-fly")
+"""The Fly tab's flights (seconds each): their own threads, so flights in some sessions never hold
+the threads that plan for the others."""
 
 Req = TypeVar("Req")
 Res = TypeVar("Res")
