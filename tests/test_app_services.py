@@ -85,6 +85,33 @@ def test_a_computation_that_raises_becomes_on_errors_result():
     assert worker.wait_idle(30) and applied[-1] == (50, True)
 
 
+def test_a_failing_error_handler_or_view_update_does_not_stop_the_worker(capsys):
+    applied = []
+
+    def compute(x):
+        if x == "boom":
+            raise ValueError("bad")
+        return x
+
+    def on_error(req, err):
+        raise RuntimeError("the handler failed too")
+
+    def apply(res, latest):
+        if res == "bad view":
+            raise RuntimeError("view update failed")
+        applied.append(res)
+
+    worker = LatestWorker(compute, apply, on_error)
+    worker.submit("boom")  # compute and on_error both raise: printed, nothing applied, not stuck
+    assert worker.wait_idle(30)
+    worker.submit("bad view")  # apply raises in the background: printed, the worker goes on
+    assert worker.wait_idle(30)
+    worker.submit(7)
+    assert worker.wait_idle(30) and applied == [7]
+    err = capsys.readouterr().err
+    assert "the handler failed too" in err and "view update failed" in err
+
+
 def test_one_line():
     assert one_line(InputError("q_max", "out of\n range")) == "q_max: out of range"
     assert one_line(RuntimeError()) == "RuntimeError"

@@ -224,11 +224,15 @@ def test_retrain_view_shows_progress_numbers_and_the_oracle_line():
 def test_inputs_are_handled_without_panel_s_50_ms_wait_and_the_page_has_no_global_spinner():
     from uam_studio.app.battery_lab import BatteryLabView
     from uam_studio.app.battery_lab_state import BatteryLabState
+    from uam_studio.app.session import value_property
 
     view = PlannerView(PlannerState(policy="greedy"))
     lab = BatteryLabView(BatteryLabState())
+    props = {}
     for wd in [*view._inputs.values(), *lab.widgets.values()]:
-        assert "value" in wd._priority_changes, wd.name  # handled on the next tick, not after 50 ms
+        props[wd.name] = value_property(wd)
+        assert props[wd.name] in wd._priority_changes, wd.name  # handled on the next tick, not after 50 ms
+    assert props["Vary"] == "active"  # a radio-button group's value travels as `active`
     assert "value" not in pn.widgets.FloatSlider._priority_changes  # other sliders keep Panel's default
     assert "value" not in pn.widgets.FloatSlider(name="x")._priority_changes
     page = create_app(template=True)

@@ -115,6 +115,7 @@ class LatestWorker(Generic[Req, Res]):
         self._applied = 0  # the newest request whose result was applied
         self._latest: tuple[int, Req] | None = None
         self._running = False
+        self._apply_lock = threading.RLock()
 
     @property
     def seq(self) -> int:
@@ -134,12 +135,17 @@ class LatestWorker(Generic[Req, Res]):
         return seq
 
     def run(self, request: Req) -> Res:
-        """Compute ``request`` in this thread, apply the result here and return it."""
+        """Compute ``request`` in this thread, apply the result here and return it (an exception of
+        ``on_error`` or ``apply`` reaches the caller)."""
         with self._cv:
             self._seq += 1
             seq = self._seq
-        res = self._call(request)
-        self._deliver(seq, res)
+        try:
+            res = self._compute(request)
+        except Exception as err:
+            traceback.print_exc()
+            res = self._on_error(request, err)
+        self._deliver(seq, res, background=False)
         return res
 
     def wait_idle(self, timeout: float = 60.0) -> bool:
@@ -154,40 +160,64 @@ class LatestWorker(Generic[Req, Res]):
                 self._cv.wait(left)
         return True
 
-    def _call(self, request: Req) -> Res:
+    def _call(self, request: Req) -> Res | None:
+        """``compute(request)``, or on an exception ``on_error(request, err)``; None (printed) if
+        that raises too."""
         try:
             return self._compute(request)
-        except Exception as err:
+        except BaseException as err:  # noqa: BLE001 - the loop must end with _running cleared
             traceback.print_exc()
-            return self._on_error(request, err)
+            try:
+                return self._on_error(request, err)
+            except BaseException:  # noqa: BLE001
+                traceback.print_exc()
+                return None
 
     def _loop(self) -> None:
-        while True:
-            with self._cv:
-                assert self._latest is not None
-                seq, request = self._latest
-            try:
-                res = self._call(request)
-            except BaseException as err:  # the loop always ends with _running cleared
-                res = self._on_error(request, err)
-            with self._cv:
-                if self._latest is not None and self._latest[0] != seq:
-                    continue  # a newer request came in meanwhile: compute that one instead
-                self._running = False
-            self.dispatch(functools.partial(self._deliver, seq, res))
-            return
-
-    def _deliver(self, seq: int, res: Res) -> None:
-        with self._cv:
-            if seq < self._applied:
-                return
-            self._applied = seq
-            latest = seq >= self._seq
+        handed_over = False  # _running cleared under the lock: a new loop may run from then on
         try:
-            self._apply(res, latest)
+            while True:
+                with self._cv:
+                    assert self._latest is not None
+                    seq, request = self._latest
+                res = self._call(request)
+                with self._cv:
+                    if self._latest is not None and self._latest[0] != seq:
+                        continue  # a newer request came in meanwhile: compute that one instead
+                    self._running = False
+                    handed_over = True
+                    if res is None:  # nothing to apply (on_error failed, printed): do not wait on it
+                        self._applied = max(self._applied, seq)
+                        self._cv.notify_all()
+                if res is not None:
+                    self.dispatch(functools.partial(self._deliver, seq, res))
+                return
+        except BaseException:  # noqa: BLE001 - printed: a pool future's exception is never read
+            traceback.print_exc()
         finally:
+            if not handed_over:
+                with self._cv:
+                    self._running = False
+                    self._cv.notify_all()
+
+    def _deliver(self, seq: int, res: Res, background: bool = True) -> None:
+        # One result applied at a time, in order: where ``dispatch`` calls back in the worker thread
+        # (no session), two loops may finish close together.
+        with self._apply_lock:
             with self._cv:
-                self._cv.notify_all()
+                if seq < self._applied:
+                    return
+                latest = seq >= self._seq
+            try:
+                self._apply(res, latest)
+            except BaseException:  # noqa: BLE001 - in the background a failed update is printed
+                if not background:
+                    raise
+                traceback.print_exc()
+            finally:
+                with self._cv:
+                    self._applied = max(self._applied, seq)
+                    self._cv.notify_all()
 
 
 class PlanningActivity:

@@ -79,5 +79,12 @@ def respond_at_once(widgets: Iterable[pn.widgets.Widget]) -> None:
     latency: a fifth of a slider step's time to the new plan on a 2-core laptop.
     """
     for wd in widgets:
-        if "value" not in wd._priority_changes:
-            wd._priority_changes = [*wd._priority_changes, "value"]  # this widget only (a class list)
+        prop = value_property(wd)
+        if prop is not None and prop not in wd._priority_changes:
+            wd._priority_changes = [*wd._priority_changes, prop]  # this widget only (a class list)
+
+
+def value_property(widget: pn.widgets.Widget) -> str | None:
+    """The Bokeh property that carries ``widget.value`` to and from the browser (``active`` for a
+    radio-button group), or None if it has none."""
+    return widget._rename.get("value", "value")
