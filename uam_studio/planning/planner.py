@@ -37,7 +37,7 @@ from uam_studio.bundled import require_bundled
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.attention import WEIGHTS_NAME
 from uam_studio.planning.agents.rollout import dqn_route
-from uam_studio.planning.env import CONTEXT_S, observe_takeoff
+from uam_studio.planning.env import observe_takeoff
 from uam_studio.planning.missions.check import Plan, PlanCheck, check_plan
 from uam_studio.planning.missions.mission import SCENARIOS, Mission, as_mission
 from uam_studio.planning.solvers.greedy import greedy_plan
@@ -102,8 +102,7 @@ def _predict(check: PlanCheck, predictor: Any, messages: list[str]) -> np.ndarra
     """Dynaformer voltage on the physics route's time grid, sortie by sortie, or None."""
     sim = check.sim
     assert sim is not None
-    ci, cv = observe_takeoff(sim.q_max, sim.r0)
-    ci, cv = ci[:CONTEXT_S], cv[:CONTEXT_S]
+    ci, cv = observe_takeoff(sim.q_max, sim.r0)  # the 20 s context
     cuts = sim.sortie_cuts()
     parts = []
     try:

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from uam_studio.planning.env import CONTEXT_S, observe_takeoff
+from uam_studio.planning.env import observe_takeoff
 from uam_studio.planning.missions.check import check_plan
 from uam_studio.planning.missions.mission import Mission
 from uam_studio.planning.solvers.setup import fly_takeoff
@@ -52,8 +52,7 @@ def prediction_band(mission: Mission, plan: Mapping[str, Any], pred: Any, level:
     sim = check_plan(mission, plan["route"], plan["altitudes_m"]).sim
     if sim is None:
         return None
-    ci, cv = observe_takeoff(sim.q_max, sim.r0)
-    ci, cv = ci[:CONTEXT_S], cv[:CONTEXT_S]
+    ci, cv = observe_takeoff(sim.q_max, sim.r0)  # the 20 s context
     cuts = sim.sortie_cuts()
     lows, highs = [], []
     for a, b in zip(cuts[:-1], cuts[1:]):

@@ -49,8 +49,7 @@ def takeoff_health(predictor: Any, q_max: float, r0: float) -> tuple[float, floa
     """A predictor's health (PC1, PC2) of a fresh cell (q_max C, r0 ohm) from its 20 s take-off
     observation (:func:`observe_takeoff`); ``predictor`` has ``health(context_current_a,
     context_voltage_v)`` (a :class:`~uam_studio.dynaformer.DynaformerPredictor`)."""
-    ci, cv = observe_takeoff(q_max, r0)
-    pc = np.asarray(predictor.health(ci[:CONTEXT_S], cv[:CONTEXT_S]), dtype=float).reshape(-1)
+    pc = np.asarray(predictor.health(*observe_takeoff(q_max, r0)), dtype=float).reshape(-1)
     return float(pc[0]), float(pc[1])
 
 
