@@ -47,13 +47,19 @@ def speed(n: int) -> None:
 
 
 def quality(n: int) -> None:
+    everything = []
     for scenario, seed in (("single_charge", 31337), ("multi_charge", 31338)):
         recs = fly_many(study_missions(n, seed, scenario), first_seed=7000)
-        s = summarize(recs)
-        print(f"{scenario}: {s.n} flights, operator/hindsight {s.ratio:.3f}, blind/hindsight {s.blind_ratio:.3f}, "
-              f"operator breaches {s.breaches}, blind breaches {s.blind_breaches}, operator >= blind on "
-              f"{s.not_worse_than_blind}/{s.n}, extra recharges {s.extra_cycles}, re-plan p95 "
-              f"{1000 * s.replan_s_p95:.0f} ms")
+        everything += recs
+        _report(scenario, summarize(recs))
+    _report("both scenarios", summarize(everything))
+
+
+def _report(label: str, s) -> None:
+    print(f"{label}: {s.n} flights, operator/hindsight {s.ratio:.3f} (priority {s.priority} of {s.hindsight_priority}), "
+          f"blind/hindsight {s.blind_ratio:.3f}, operator breaches {s.breaches}, blind breaches {s.blind_breaches}, "
+          f"operator >= blind on {s.not_worse_than_blind}/{s.n}, extra recharges {s.extra_cycles}, re-plan p95 "
+          f"{1000 * s.replan_s_p95:.0f} ms")
 
 
 def main(argv: list[str] | None = None) -> int:

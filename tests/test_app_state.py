@@ -563,13 +563,13 @@ def test_band_is_the_predictions_band_and_the_verdict_names_both_sources():
 
 
 def test_verdict_disagrees_where_physics_is_safe_and_the_dynaformer_is_not():
-    """The issue's case: R0 0.286 ohm, +0.017 V on physics, below EOD on the Dynaformer (bundled agent)."""
+    """R0 0.246 ohm with the bundled DQN agent: +0.006 V on physics, below EOD on the Dynaformer."""
     s = PlannerState(policy="dqn")
-    assert s.apply(r0=0.286)
+    assert s.apply(r0=0.246)
     v = s.verdict()
     assert s.plan["safe"] and v["physics_margin_v"] > 0 > v["predicted_margin_v"]
     assert v["level"] == "disagree" and "physics safe, Dynaformer below EOD" in v["headline"]
-    assert "physics: safe by 0.017 V" in v["text"] and "predicted: below EOD by" in v["text"]
+    assert "physics: safe by 0.006 V" in v["text"] and "predicted: below EOD by" in v["text"]
     s.close()
 
 

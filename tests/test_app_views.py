@@ -124,7 +124,7 @@ def test_failed_takeoff_draws_the_takeoff_not_an_empty_plot():
 
 def test_verdict_is_amber_where_the_models_disagree():
     state = PlannerState(policy="dqn")
-    state.apply(r0=0.286)
+    state.apply(r0=0.246)
     html = summary_html(state)
     assert "data-level='disagree'" in html and "#fff4e5" in html and "Models disagree" in html
     state.close()

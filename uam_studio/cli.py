@@ -269,7 +269,7 @@ def _add_train_arguments(p: argparse.ArgumentParser) -> None:
                    help="run folder; default runs/dynaformer (dynaformer), runs/dqn_<scenario> (dqn: writes "
                         "agent.zip and card.json; a path ending in .zip names the agent file itself)")
     p.add_argument("--steps", type=int, default=None,
-                   help="optimiser steps (dynaformer, default 12000) or env transitions (dqn, default 50000)")
+                   help="optimiser steps (dynaformer, default 60000) or env transitions (dqn, default 50000)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default=None,
                    help="dynaformer and attention: auto (CUDA when available, default), cpu or cuda")

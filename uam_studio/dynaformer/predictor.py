@@ -91,8 +91,8 @@ CAL_PROBS = (0.5, 0.6, 0.7, 0.75, 0.8, 0.85, 0.9, 0.925, 0.95, 0.975, 0.99, 0.99
 # (``decoder_error_scores(load_pretrained())``: 400 flights, seed 424242). Other weights are
 # calibrated on first use (200 flights, a few seconds).
 BUNDLED_DECODER_LAMBDA: dict[str, tuple[float, ...]] = {
-    "ee9b4431cd2cfc3d30a57b697b2f8017eadcdf385e08a0c57c6298551e7b4e52":  # pretrained/dynaformer.pt (717,637 bytes)
-        (0.7153, 0.8919, 1.4137, 1.751, 1.9916, 2.4693, 2.8463, 3.575, 3.9269, 4.7143, 7.3204, 7.3645),
+    "cfcb738ced4eb4fcae574d9e2a5d41f345dd4c83402510e9024a8197286c382b":  # pretrained/dynaformer.pt (715,909 bytes)
+        (0.2195, 0.3189, 0.4386, 0.5187, 0.6423, 0.7908, 0.9728, 1.0764, 1.3455, 1.6256, 2.4252, 4.9844),
 }
 
 

@@ -56,7 +56,7 @@ class TrainConfig:
     n_context: int = 96000  # extra short-context cells (stage 1)
     context_batch: int = 256
     encoder_steps: int = 10000  # stage 1: encoder + health head only
-    steps: int = 12000  # decoder steps (the second stage, see the module docstring)
+    steps: int = 60000  # decoder steps (the second stage, see the module docstring)
     batch: int = 32
     lr: float = 1e-3
     seed: int = 0
