@@ -18,3 +18,9 @@ os.environ.setdefault("UAM_FAST", "1")
 _paths = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
 if not _paths or _paths[0] != ROOT:
     os.environ["PYTHONPATH"] = os.pathsep.join([ROOT, *(p for p in _paths if p != ROOT)])
+
+# The CMU eVTOL dataset, read from beside the checkout (CI has ../shared), never copied into it:
+# the real-cell tests and notebook 10 find it through $UAM_STUDIO_CMU_DATA.
+_CMU = Path(ROOT).parent / "shared" / "data" / "cmu_evtol"
+if _CMU.is_dir():
+    os.environ.setdefault("UAM_STUDIO_CMU_DATA", str(_CMU))

@@ -25,6 +25,7 @@ EXPECTED = [
     "07_reward_shaping.ipynb",
     "08_dqn_vs_oracle.ipynb",
     "09_flying_with_surprises.ipynb",
+    "10_real_cells.ipynb",
 ]
 
 

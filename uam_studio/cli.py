@@ -8,7 +8,8 @@ argparse rejects) prints one line ``error: ...`` to stderr and exits with code 2
 Commands: ``serve`` (start the Panel app), ``simulate`` (fly a route of a mission file and report voltage and EOD), ``plan`` (plan
 a mission with the DQN agent, the oracle or the greedy baseline; physics-checked), ``fly`` (fly it in
 a world the operator cannot see, re-planning from its sensors), ``train``
-(``dynaformer`` or ``dqn``; never into ``pretrained/``) and ``evaluate``.
+(``dynaformer`` or ``dqn``; never into ``pretrained/``), ``evaluate`` (a model on held-out data, or ``real``: the models on
+the CMU eVTOL dataset's real cells) and ``identify`` (a real cell's parameter set).
 """
 
 from __future__ import annotations
@@ -422,7 +423,13 @@ def _run_train_dqn(args: argparse.Namespace) -> int:
 
 
 def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", choices=["dynaformer"], help="what to evaluate")
+    p.add_argument("model", choices=["dynaformer", "real"],
+                   help="dynaformer: held-out synthetic data; real: the battery, health and safety models on the "
+                        "CMU eVTOL dataset's real VTC6 cells (needs --data)")
+    p.add_argument("--data", default=None, metavar="PATH",
+                   help="real: the CMU eVTOL dataset's folder (default: $UAM_STUDIO_CMU_DATA; DOI 10.1184/R1/14226830)")
+    p.add_argument("--quick", action="store_true",
+                   help="real: skip the two held-out refits of the VTC6 set (about a minute each)")
     p.add_argument("--weights", default=None, help="weights file (default: the bundled model)")
     p.add_argument("--table", choices=["default", "noise"], default="default",
                    help="default: the held-out sets, beside the physics fit; noise: EOD timing over sensor noise "
@@ -443,6 +450,15 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     from .dynaformer.evaluate import evaluate, format_noise_table, format_report, noise_table
     from .dynaformer.predictor import load_predictor
 
+    if args.model == "real":
+        from .studies.real_cells import format_report as format_real
+        from .studies.real_cells import real_cell_report
+
+        report = real_cell_report(args.data, refit=not args.quick)
+        print(json.dumps(report.as_dict(), indent=2) if args.json else format_real(report))
+        return EXIT_OK
+    if args.data is not None or args.quick:
+        raise _CliExit("--data, --quick: only with 'evaluate real'", EXIT_INPUT)
     n = args.n if args.n is not None else (200 if args.table == "noise" else 400)
     if n < 10:
         raise _CliExit("--n: must be >= 10", EXIT_INPUT)
@@ -457,6 +473,25 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         return EXIT_OK
     metrics = evaluate(pred, n=n, seed=args.seed)
     print(json.dumps(metrics, indent=2) if args.json else format_report(metrics))
+    return EXIT_OK
+
+
+# --------------------------------------------------------------------------- identify
+
+
+def _add_identify_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("cell", choices=["vtc6"], help="the cell to identify (the CMU eVTOL dataset's Sony-Murata VTC6)")
+    p.add_argument("--data", default=None, metavar="PATH",
+                   help="the CMU eVTOL dataset's folder (default: $UAM_STUDIO_CMU_DATA; DOI 10.1184/R1/14226830)")
+    p.add_argument("--hold-out", choices=["none", "landing", "cell"], default="none",
+                   help="none: the bundled set; landing: without VAH01's landing and rest; cell: without VAH01")
+
+
+def _run_identify(args: argparse.Namespace) -> int:
+    from .battery.cmu_data import data_folder
+    from .battery.real_cells import cell_literal, identify_vtc6
+
+    print(cell_literal(identify_vtc6(data_folder(args.data), hold_out=args.hold_out)))
     return EXIT_OK
 
 
@@ -522,7 +557,10 @@ COMMANDS: dict[str, Command] = {
         _run_fly,
     ),
     "train": Command("train a model (writes to a run folder, never over pretrained/)", _add_train_arguments, _run_train),
-    "evaluate": Command("evaluate a model on held-out synthetic data", _add_evaluate_arguments, _run_evaluate),
+    "evaluate": Command("evaluate a model on held-out synthetic data, or the models on real cells",
+                        _add_evaluate_arguments, _run_evaluate),
+    "identify": Command("identify a real cell's parameter set from measured data (prints it as Python)",
+                        _add_identify_arguments, _run_identify),
     "serve": Command("start the app (planner, battery lab, retraining) in a browser", _add_serve_arguments,
                      _run_serve),
 }

@@ -66,14 +66,15 @@ def equilibrium_voltage(xns, xps, tb, cell: CellParameters) -> np.ndarray:
     return vep - ven
 
 
-def overpotential_gains(current_a, xns, xps, cell: CellParameters):
+def overpotential_gains(current_a, xns, xps, cell: CellParameters, rate_factor=1.0):
     """Steady-state surface overpotentials per kelvin, (R/(F alpha)) asinh(J / 2 J0) (V/K).
 
-    Multiply by the temperature (K) to get the nominal Vsn and Vsp.
+    Multiply by the temperature (K) to get the nominal Vsn and Vsp. ``rate_factor`` scales both rate
+    constants (:meth:`CellParameters.rate_factor` of the cell's temperature).
     """
     c = GAS_CONSTANT / FARADAY / cell.alpha
-    jn0 = cell.kn * ((1.0 - xns) * xns) ** cell.alpha
-    jp0 = cell.kp * ((1.0 - xps) * xps) ** cell.alpha
+    jn0 = cell.kn * rate_factor * ((1.0 - xns) * xns) ** cell.alpha
+    jp0 = cell.kp * rate_factor * ((1.0 - xps) * xps) ** cell.alpha
     gn = c * np.arcsinh((current_a / cell.sn) / (2.0 * jn0))
     gp = c * np.arcsinh((current_a / cell.sp) / (2.0 * jp0))
     return gn, gp

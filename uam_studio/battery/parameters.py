@@ -13,7 +13,9 @@ charges) are properties so they can never go stale.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+
+import numpy as np
 
 GAS_CONSTANT = 8.3144621  # J/(mol K)
 FARADAY = 96487.0  # C/mol
@@ -56,6 +58,13 @@ class CellParameters:
     ap: tuple[float, ...] = field(default=AP)
     an: tuple[float, ...] = field(default=AN)
     t_ambient_k: float = 292.1  # ambient and initial cell temperature (K)
+    thermal_mass: float = THERMAL_MASS  # lumped m*C of the cell (J/K)
+    thermal_tau_s: float = THERMAL_TAU_S  # cooling time constant towards ambient (s)
+    # Arrhenius temperature dependence (activation energy / R, K) of R0 and of the Butler-Volmer rate
+    # constants, about t_reference_k. 0 (the published model) leaves them constant.
+    r0_activation_k: float = 0.0
+    k_activation_k: float = 0.0
+    t_reference_k: float = 298.15
 
     @property
     def xn_min(self) -> float:
@@ -75,9 +84,64 @@ class CellParameters:
         """Bulk volume (m^3)."""
         return self.vol * (1.0 - self.vol_s_fraction)
 
+    @property
+    def temperature_dependent(self) -> bool:
+        """True when R0 or the rate constants change with temperature."""
+        return self.r0_activation_k != 0.0 or self.k_activation_k != 0.0
+
+    def r0_factor(self, tb):
+        """R0(T) / R0 at cell temperature ``tb`` (K)."""
+        if self.r0_activation_k == 0.0:
+            return 1.0
+        return np.exp(self.r0_activation_k * (1.0 / tb - 1.0 / self.t_reference_k))
+
+    def rate_factor(self, tb):
+        """k(T) / k of both Butler-Volmer rate constants at cell temperature ``tb`` (K)."""
+        if self.k_activation_k == 0.0:
+            return 1.0
+        return np.exp(-self.k_activation_k * (1.0 / tb - 1.0 / self.t_reference_k))
+
     def q_total(self, q_max):
         """Total lithium charge qMax = q_max / (xn_max - xn_min) (C)."""
         return q_max / (self.xn_max - self.xn_min)
 
 
 DEFAULT_CELL = CellParameters()
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One cell as the library simulates it: its parameter set, its health (q_max C, R0 ohm) and the
+    cut-off it is flown to (V)."""
+
+    name: str
+    params: CellParameters
+    q_max: float
+    r0: float
+    eod_v: float = DEFAULT_EOD_V
+
+
+NASA_18650 = Cell("NASA 18650 (Daigle & Kulkarni 2013)", DEFAULT_CELL, DEFAULT_Q_MAX, DEFAULT_R0)
+
+# The Sony-Murata US18650VTC6 (3.0 Ah NMC/graphite) of the CMU eVTOL dataset, identified by
+# ``uam-studio identify vtc6 --data PATH`` (its output, pasted): the card is pretrained/vtc6_cell.md.
+# Identified from cell VAH07's first C/5 discharge and first four missions (30 s samples) and cell
+# VAH01's 1 Hz mission; the open-circuit-voltage curve is the positive electrode's (u0p, ap).
+VTC6_PARAMS = replace(
+    DEFAULT_CELL,
+    kn=10624.2467,
+    kp=10138.5834,
+    vol_s_fraction=0.499977197,
+    t_diffusion_s=106966.794,
+    t_ohmic_s=1.5,
+    t_sn_s=100.597441,
+    t_sp_s=20.1615018,
+    u0p=2.96267987,
+    ap=(139535.419, -216474.773, 197028.285, -53681.9514, -401504.967, -459901.53, 6096250.1, -10294017.9, -583916.67, 11362340.5, 377455.309, -11734033.8, 5570206.51),
+    t_ambient_k=298.15,
+    thermal_mass=47.7699712,
+    thermal_tau_s=443.002592,
+    r0_activation_k=7.60596667,
+    k_activation_k=19.0768806,
+)
+VTC6 = Cell("Sony-Murata VTC6 18650 (identified on the CMU eVTOL dataset)", VTC6_PARAMS, 10942.7645, 0.0208178643)

@@ -89,7 +89,17 @@ def _check_profile(name: str, profile, limit: float, unit: str) -> np.ndarray:
     return arr
 
 
-def _prepare(profile: np.ndarray, q_max, r0, initial_state: BatteryState | None):
+def check_step(dt_s: float, cell: CellParameters) -> float:
+    """``dt_s`` (s) if it is in :data:`DT_RANGE` and below the cell's fastest time constant (explicit Euler
+    is unstable beyond it), else :class:`InputError`."""
+    dt = check_range("dt_s", dt_s, *DT_RANGE, " s")
+    fastest = min(cell.t_ohmic_s, cell.t_sn_s, cell.t_sp_s)
+    if dt >= fastest:
+        raise InputError("dt_s", f"{dt:g} s must be below the cell's fastest time constant, {fastest:.3g} s")
+    return dt
+
+
+def _prepare(profile: np.ndarray, q_max, r0, initial_state: BatteryState | None, cell: CellParameters):
     batch_hint = profile.shape[0] if profile.ndim == 2 else None
     q = _as_batch("q_max", q_max, batch_hint, *Q_MAX_RANGE, " C")
     r = _as_batch("r0", r0, batch_hint, *R0_RANGE, " ohm")
@@ -106,7 +116,7 @@ def _prepare(profile: np.ndarray, q_max, r0, initial_state: BatteryState | None)
     q = np.broadcast_to(q, (b,)).astype(float)
     r = np.broadcast_to(r, (b,)).astype(float)
     if initial_state is None:
-        x0 = full_charge(q)
+        x0 = full_charge(q, cell)
     else:
         if initial_state.batch_size not in (1, b):
             raise InputError("initial_state", f"batch {initial_state.batch_size} does not match {b}")
@@ -193,10 +203,10 @@ def simulate(
     :return: :class:`SimulationResult`.
     :raises InputError: on bad input, naming the field and its allowed range.
     """
-    dt = check_range("dt_s", dt_s, *DT_RANGE, " s")
+    dt = check_step(dt_s, cell)
     eod = check_range("eod_v", eod_v, *EOD_RANGE, " V")
     profile = _check_profile("current_a", current_a, CURRENT_LIMIT_A, " A")
-    current, q, r, x0, squeeze = _prepare(profile, q_max, r0, initial_state)
+    current, q, r, x0, squeeze = _prepare(profile, q_max, r0, initial_state, cell)
     current = np.ascontiguousarray(current)
     q_total = cell.q_total(q)
     with np.errstate(all="ignore"):
@@ -220,10 +230,10 @@ def simulate_constant_power(
     the step, so the cell draws more current as its voltage sags (a realistic
     constant-power load; the paper's setting is the constant-current scaling).
     """
-    dt = check_range("dt_s", dt_s, *DT_RANGE, " s")
+    dt = check_step(dt_s, cell)
     eod = check_range("eod_v", eod_v, *EOD_RANGE, " V")
     profile = _check_profile("power_w", power_w, CURRENT_LIMIT_A * 4.2, " W")
-    power, q, r, x0, squeeze = _prepare(profile, q_max, r0, initial_state)
+    power, q, r, x0, squeeze = _prepare(profile, q_max, r0, initial_state, cell)
     q_total = cell.q_total(q)
     b, t = power.shape
     volts = np.empty((b, t))

@@ -21,7 +21,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from .electrochem import equilibrium_voltage, overpotential_gains, surface_fractions
-from .parameters import THERMAL_MASS, THERMAL_TAU_S, CellParameters
+from .parameters import CellParameters
 from .state import BatteryState
 
 # K. The temperature iterates contract by about 1e-3 a pass, so the accepted pass is far closer to
@@ -97,12 +97,16 @@ def integrate_current(current: np.ndarray, x0: BatteryState, q_total: np.ndarray
     vo_k = _shift(vo, x0.vo)
 
     tb_k = np.broadcast_to(x0.tb[:, None], current.shape).copy()
-    heat_scale = THERMAL_TAU_S / THERMAL_MASS
+    heat_scale = cell.thermal_tau_s / cell.thermal_mass
     for _ in range(_PICARD_MAX_ITER):
+        if cell.temperature_dependent:  # R0 and the rate constants follow the temperature iterate
+            vo = _lag(current * r0[:, None] * cell.r0_factor(tb_k), x0.vo, cell.t_ohmic_s, dt)
+            vo_k = _shift(vo, x0.vo)
+            gn, gp = overpotential_gains(current, xns_k, xps_k, cell, cell.rate_factor(tb_k))
         vsn = _lag(gn * tb_k, x0.vsn, cell.t_sn_s, dt)
         vsp = _lag(gp * tb_k, x0.vsp, cell.t_sp_s, dt)
         eta_k = vo_k + _shift(vsn, x0.vsn) + _shift(vsp, x0.vsp)
-        tb = _lag(heat_scale * eta_k * current + cell.t_ambient_k, x0.tb, THERMAL_TAU_S, dt)
+        tb = _lag(heat_scale * eta_k * current + cell.t_ambient_k, x0.tb, cell.thermal_tau_s, dt)
         tb_next = _shift(tb, x0.tb)
         converged = not np.any(np.abs(tb_next - tb_k) > _PICARD_TOL_K)  # NaN-safe
         tb_k = tb_next
@@ -123,12 +127,12 @@ def step(x: BatteryState, current: np.ndarray, q_total: np.ndarray, r0: np.ndarr
     diff_n = (x.qnb * inv_vb - x.qns * inv_vs) / cell.t_diffusion_s
     diff_p = (x.qpb * inv_vb - x.qps * inv_vs) / cell.t_diffusion_s
     xns, xps = surface_fractions(x.qns, x.qps, q_total * cell.vol_s_fraction)
-    gn, gp = overpotential_gains(current, xns, xps, cell)
+    gn, gp = overpotential_gains(current, xns, xps, cell, cell.rate_factor(x.tb))
     eta = x.vo + x.vsn + x.vsp
     dt = dt_s
     return BatteryState(
-        tb=x.tb + dt * (eta * current / THERMAL_MASS + (cell.t_ambient_k - x.tb) / THERMAL_TAU_S),
-        vo=x.vo + dt * (current * r0 - x.vo) / cell.t_ohmic_s,
+        tb=x.tb + dt * (eta * current / cell.thermal_mass + (cell.t_ambient_k - x.tb) / cell.thermal_tau_s),
+        vo=x.vo + dt * (current * r0 * cell.r0_factor(x.tb) - x.vo) / cell.t_ohmic_s,
         vsn=x.vsn + dt * (gn * x.tb - x.vsn) / cell.t_sn_s,
         vsp=x.vsp + dt * (gp * x.tb - x.vsp) / cell.t_sp_s,
         qnb=x.qnb - dt * diff_n,

@@ -67,3 +67,16 @@ def full_charge(q_max, cell: CellParameters = DEFAULT_CELL) -> BatteryState:
         qpb=q_total * cell.xp_min * (1.0 - f_s),
         qps=q_total * cell.xp_min * f_s,
     )
+
+
+def rested_state(q_max, removed_c, cell: CellParameters = DEFAULT_CELL) -> BatteryState:
+    """A rested cell (no overpotentials, ambient temperature) with ``removed_c`` (C, [B] or scalar)
+    taken out of a full charge, spread over surface and bulk by volume."""
+    full = full_charge(q_max, cell)
+    removed = np.broadcast_to(np.asarray(removed_c, dtype=float), full.tb.shape)
+    f_s = cell.vol_s_fraction
+    return BatteryState(
+        tb=full.tb, vo=full.vo, vsn=full.vsn, vsp=full.vsp,
+        qnb=full.qnb - removed * (1.0 - f_s), qns=full.qns - removed * f_s,
+        qpb=full.qpb + removed * (1.0 - f_s), qps=full.qps + removed * f_s,
+    )

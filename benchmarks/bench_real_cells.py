@@ -1,0 +1,56 @@
+"""The battery, health and safety models on real VTC6 cells (the CMU eVTOL dataset, issue "Real cells").
+
+    OMP_NUM_THREADS=1 python benchmarks/bench_real_cells.py --data ../shared/data/cmu_evtol
+
+Prints the validation table of ``uam-studio evaluate real`` (held-out refits included), then the goals
+against it. The reference rows are measured in the same run: the NASA default cell on the same real
+mission (the size of the mismatch), and the dataset's own integrated capacities.
+
+Goals: physics model on the real mission (identified cell, held out) RMSE <= 15 mV and landing-voltage
+error <= 20 mV; health fit from 120 s within 30 mV with the measurement inside its 90% interval; the
+Dynaformer within 1.5x of the physics fit's error; capacity within 3% over each cell's life.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from uam_studio.studies.real_cells import format_report, real_cell_report
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--data", default=None, help="the dataset's folder (default $UAM_STUDIO_CMU_DATA)")
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    report = real_cell_report(args.data, refit=True)
+    wall = time.perf_counter() - t0
+    print(format_report(report))
+    print(f"\n(whole report {wall:.0f} s)\n\ngoals:")
+    held = [r for r in report.physics if r["model"] == "VTC6 refit"]
+    for r in held:
+        ok = r["rmse_mv_power"] <= 15 and abs(r["landing_min_err_mv_power"]) <= 20
+        print(f"  physics, held out {r['held out']}: RMSE {r['rmse_mv_power']:.1f} mV (goal 15), landing "
+              f"{r['landing_min_err_mv_power']:+.1f} mV (goal 20): {'met' if ok else 'NOT met'}")
+    nasa = next(r for r in report.physics if r["model"].startswith("NASA 18650"))
+    vtc6 = report.physics[0]
+    print(f"  reference: the NASA default cell's RMSE {nasa['rmse_mv_power']:.0f} mV before its cut-off at "
+          f"{nasa['cutoff_s_power']:.0f} s; ratio to the bundled VTC6 set {nasa['rmse_mv_power'] / vtc6['rmse_mv_power']:.0f}x")
+    h120 = next(r for r in report.health if r["context_s"] == 120)
+    print(f"  health fit 120 s: {h120['error_mv']:+.1f} mV (goal 30), inside its 90% interval: {h120['inside']}: "
+          f"{'met' if abs(h120['error_mv']) <= 30 and h120['inside'] else 'NOT met'}")
+    d120 = next(r for r in report.dynaformer if r["context_s"] == 120)
+    if "error_mv" in d120:
+        ratio = abs(d120["error_mv"]) / max(abs(h120["error_mv"]), 1e-9)
+        print(f"  Dynaformer 120 s: {d120['error_mv']:+.1f} mV, {ratio:.1f}x the physics fit's (goal 1.5x): "
+              f"{'met' if ratio <= 1.5 else 'NOT met'}")
+    errs = np.array([r["error_pct"] for r in report.capacity])
+    print(f"  capacity: worst {np.nanmax(np.abs(errs)):.2f}% over {len(errs)} reference discharges (goal 3%): "
+          f"{'met' if np.nanmax(np.abs(errs)) <= 3 else 'NOT met'}")
+
+
+if __name__ == "__main__":
+    main()

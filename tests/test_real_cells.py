@@ -1,0 +1,239 @@
+"""The CMU eVTOL loader, the VTC6 cell and the real-cell validation.
+
+Synthetic files of the dataset's two formats always; the real files when the dataset is beside the
+checkout (``$UAM_STUDIO_CMU_DATA``, set by conftest.py from ``../shared/data/cmu_evtol``).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.io import savemat
+
+from uam_studio.battery import DEFAULT_CELL, simulate, simulate_constant_power
+from uam_studio.battery.cmu_data import (
+    CRUISE,
+    LANDING,
+    TAKEOFF,
+    CellDataError,
+    data_folder,
+    load_cell_log,
+    mission_cycle,
+    reference_discharges,
+    resampled_missions,
+)
+from uam_studio.battery.parameters import NASA_18650, VTC6
+from uam_studio.battery.real_cells import replay_mission
+from uam_studio.cli import main
+
+DATA = os.environ.get("UAM_STUDIO_CMU_DATA", "")
+real = pytest.mark.skipif(not (DATA and (Path(DATA) / "VAH01_20.csv").is_file()),
+                          reason="the CMU eVTOL dataset is not beside the checkout")
+HEADER = "times,EcellV,ImA,EnergyChargeWh,QChargemAh,EnergyDischargeWh,QDischargemAh,TemperatureC,cycleNumber,Ns"
+
+
+def _mission_rows(seconds=(75, 800, 105, 60)):
+    """A synthetic mission of the 1 Hz file's format, voltages from the VTC6 model flown by power."""
+    power = np.concatenate([np.full(seconds[0], 54.0), np.full(seconds[1], 16.0), np.full(seconds[2], 54.0),
+                            np.zeros(seconds[3])])
+    seg = np.concatenate([np.full(n, code) for n, code in zip(seconds, (TAKEOFF, CRUISE, LANDING, 7))])
+    res = simulate_constant_power(power, 1.0, VTC6.q_max, VTC6.r0, eod_v=2.5, cell=VTC6.params)
+    rows = []
+    for k in range(len(power)):
+        rows.append(f"{1000.0 + k},{res.voltage_v[k]:.6f},{-1000 * res.current_a[k]:.3f},0,0,0,0,25.0,18,{seg[k]}")
+    return rows, res
+
+
+def _write(path: Path, rows, header=HEADER) -> Path:
+    path.write_text("\n".join([header, *rows]) + "\n")
+    return path
+
+
+def test_synthetic_csv_round_trip(tmp_path):
+    rows, res = _mission_rows()
+    log = load_cell_log(_write(tmp_path / "VAH99_1.csv", rows))
+    assert log.name == "VAH99" and len(log) == len(rows)
+    assert log.time_s[0] == 0.0 and log.dt_s == pytest.approx(1.0)
+    np.testing.assert_allclose(log.current_a, res.current_a, atol=1e-6)  # mA, - = discharge -> A, + = discharge
+    mission = mission_cycle(log)
+    assert mission.segment_start_s(CRUISE) == 75.0 and mission.segment_start_s(LANDING) == 875.0
+    assert set(np.unique(mission.power_w)) == {0.0, 16.0, 54.0}
+    # Replaying the mission by power on the cell that made it gives the file's voltage back.
+    replay = replay_mission(mission, VTC6.__class__(VTC6.name, VTC6.params.__class__(**{
+        **VTC6.params.__dict__, "t_ambient_k": VTC6.params.t_ambient_k}), VTC6.q_max, VTC6.r0))
+    assert np.max(np.abs(replay.voltage_v - log.voltage_v)) < 0.05
+
+
+def test_dataset_column_names_are_read(tmp_path):
+    rows, _ = _mission_rows((30, 60, 30, 10))
+    header = "time_s,Ecell_V,I_mA,EnergyCharge_W_h,QCharge_mA_h,EnergyDischarge_W_h,QDischarge_mA_h,Temperature__C,cycleNumber,Ns"
+    log = load_cell_log(_write(tmp_path / "VAH98.csv", rows, header))
+    assert len(log) == 130 and log.current_a.max() > 10
+
+
+@pytest.mark.parametrize("case, field", [
+    ("truncated", "rows"), ("columns", "columns"), ("nan", "voltage_v"), ("other_cell", "voltage_v"),
+    ("unit", "current_a"), ("text", "voltage_v"), ("empty", "header"), ("time", "time_s"),
+])
+def test_bad_csv_names_the_file_and_the_field(tmp_path, case, field):
+    rows, _ = _mission_rows((30, 60, 30, 10))
+    header = HEADER
+    if case == "truncated":
+        rows = rows[:-1] + [rows[-1].rsplit(",", 4)[0]]
+    elif case == "columns":
+        header = "type,start_time,ambient_temperature,battery_id,test_id,uid,filename,Capacity,Re,Rct"
+    elif case == "nan":
+        parts = rows[5].split(",")
+        parts[1] = "nan"
+        rows[5] = ",".join(parts)
+    elif case == "other_cell":  # a 4.35 V LiCoO2-HV cell, or a pack voltage
+        rows = [",".join([r.split(",")[0], "4.35", *r.split(",")[2:]]) for r in rows]
+    elif case == "unit":  # current in A where mA is expected... then scaled up again: 14 kA
+        rows = [",".join([*r.split(",")[:2], str(float(r.split(",")[2]) * 1000), *r.split(",")[3:]]) for r in rows]
+    elif case == "text":
+        parts = rows[3].split(",")
+        parts[1] = "3.9V"
+        rows[3] = ",".join(parts)
+    elif case == "empty":
+        (tmp_path / "VAH97.csv").write_text("")
+    elif case == "time":
+        rows[4], rows[5] = rows[5], rows[4]
+    path = tmp_path / "VAH97.csv"
+    if case != "empty":
+        _write(path, rows, header)
+    with pytest.raises(CellDataError) as err:
+        load_cell_log(path)
+    text = str(err.value)
+    assert "\n" not in text and text.startswith("VAH97.csv: ") and f": {field}: " in f": {text.split(': ', 1)[1]}"
+
+
+def _life(n_missions=3, dt=30.0):
+    """A synthetic resampled life: a C/5 reference discharge, then missions charged to full between."""
+    profile = np.concatenate([np.zeros(20), np.full(int(5.2 * 3600 / dt), 0.6)])
+    k = int(dt)  # 1 s steps: below the VTC6's fastest time constant
+    res = simulate(np.repeat(profile, k), 1.0, VTC6.q_max, VTC6.r0, eod_v=2.5, cell=VTC6.params)
+    ok = res.valid[k - 1::k]
+    volt = list(res.voltage_v[k - 1::k][ok]) + [3.2] * 20  # to the cut-off, then a rest
+    cur = list(profile[ok]) + [0.0] * 20
+    for _ in range(n_missions):
+        power = np.concatenate([np.zeros(60), np.full(75, 54.0), np.full(800, 16.0), np.full(105, 54.0),
+                                np.zeros(600)])
+        m = simulate_constant_power(power, 1.0, VTC6.q_max, VTC6.r0, eod_v=2.5, cell=VTC6.params)
+        pick = np.arange(17, len(power), int(dt))
+        volt += list(m.voltage_v[pick])
+        cur += list(m.current_a[pick])
+    t = dt * np.arange(len(volt))
+    return {"Time_s": t, "Current": np.array(cur), "Voltage_V": np.array(volt),
+            "Temperature_C": np.full(len(t), 25.0)}
+
+
+def test_synthetic_mat_life(tmp_path):
+    path = tmp_path / "VAH96.csv.mat"
+    savemat(path, {"batteryData": _life()})
+    log = load_cell_log(path)
+    assert log.name == "VAH96" and log.dt_s == pytest.approx(30.0)
+    refs = reference_discharges(log)
+    assert len(refs) == 1 and 2.7 < refs[0].capacity_ah < 3.3
+    missions = resampled_missions(log)
+    assert len(missions) == 3
+    for m in missions:
+        assert set(m.segment[m.segment >= 0]) >= {TAKEOFF, CRUISE, LANDING}
+
+
+@pytest.mark.parametrize("case, field", [("no_struct", "batteryData"), ("no_field", "Voltage_V"),
+                                          ("lengths", "rows"), ("nan", "current_a"), ("not_mat", "path")])
+def test_bad_mat_names_the_file_and_the_field(tmp_path, case, field):
+    life = _life(1)
+    path = tmp_path / "VAH95.csv.mat"
+    if case == "no_struct":
+        savemat(path, {"other": life})
+    elif case == "no_field":
+        del life["Voltage_V"]
+        savemat(path, {"batteryData": life})
+    elif case == "lengths":
+        life["Voltage_V"] = life["Voltage_V"][:-5]
+        savemat(path, {"batteryData": life})
+    elif case == "nan":
+        life["Current"][7] = np.nan
+        savemat(path, {"batteryData": life})
+    else:
+        path.write_bytes(b"MATLAB 5.0 MAT-file, truncated")
+    with pytest.raises(CellDataError) as err:
+        load_cell_log(path)
+    text = str(err.value)
+    assert "\n" not in text and text.startswith("VAH95.csv.mat: ") and f" {field}: " in f" {text.split(': ', 1)[1]}"
+
+
+def test_unknown_suffix_and_missing_folder(tmp_path, monkeypatch):
+    with pytest.raises(CellDataError, match="x.txt: path: expected a .csv or .mat"):
+        load_cell_log(tmp_path / "x.txt")
+    monkeypatch.delenv("UAM_STUDIO_CMU_DATA", raising=False)
+    with pytest.raises(ValueError, match="data: no dataset folder"):
+        data_folder(None)
+
+
+def test_cli_evaluate_real_bad_folder_is_one_line(tmp_path, capsys):
+    assert main(["evaluate", "real", "--data", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith("error: data: ") and "VAH01_20.csv" in err
+
+
+def test_step_above_the_fastest_time_constant_is_refused():
+    with pytest.raises(ValueError, match="dt_s: 2 s must be below the cell's fastest time constant, 1.5 s"):
+        simulate(np.ones(10), 2.0, VTC6.q_max, VTC6.r0, cell=VTC6.params)
+    simulate(np.ones(10), 2.0)  # the NASA cell's fastest is 6.1 s
+
+
+def test_nasa_default_cell_unchanged_by_the_new_fields():
+    """The temperature terms are off for the published cell: its defaults are what progpy uses."""
+    assert not DEFAULT_CELL.temperature_dependent and NASA_18650.params is DEFAULT_CELL
+    assert VTC6.params.temperature_dependent
+
+
+# --------------------------------------------------------------------------- the real files
+
+
+@real
+def test_real_files_load():
+    folder = Path(DATA)
+    mission = mission_cycle(load_cell_log(folder / "VAH01_20.csv"))
+    assert len(mission.log) == 1619 and mission.segment_start_s(LANDING) == pytest.approx(874.9, abs=0.2)
+    assert mission.log.voltage_v[mission.phase_mask(LANDING)].min() == pytest.approx(3.0514, abs=1e-3)
+    counts = {}
+    for name in ("VAH07.csv.mat", "VAH09.csv.mat", "VAH27.csv.mat", "VAH30.csv.mat"):
+        log = load_cell_log(folder / name)
+        counts[log.name] = len(reference_discharges(log))
+        caps = [r.capacity_ah for r in reference_discharges(log)]
+        assert 2.9 < caps[0] < 3.2 and caps[-1] < caps[0]  # fades over life
+    assert counts == {"VAH07": 7, "VAH09": 23, "VAH27": 13, "VAH30": 19}
+    assert len(resampled_missions(load_cell_log(folder / "VAH07.csv.mat"))) >= 90
+
+
+@real
+def test_vtc6_flies_the_real_mission():
+    """The bundled VTC6 set against the measured 1 Hz mission (its fit read this mission: a bound on
+    what the set reproduces, not a held-out score; the held-out rows are in the benchmark)."""
+    mission = mission_cycle(load_cell_log(Path(DATA) / "VAH01_20.csv"))
+    res = replay_mission(mission, VTC6)
+    err = res.voltage_v - mission.log.voltage_v
+    assert np.sqrt(np.mean(err ** 2)) < 0.015
+    landing = mission.phase_mask(LANDING)
+    assert abs(res.voltage_v[landing].min() - mission.log.voltage_v[landing].min()) < 0.040
+    nasa = replay_mission(mission, NASA_18650)
+    assert not nasa.valid.all()  # the NASA cell cannot take 54 W: it reaches the cut-off in seconds
+
+
+@real
+def test_real_cell_report_quick():
+    from uam_studio.studies.real_cells import format_report, real_cell_report
+
+    report = real_cell_report(DATA, refit=False, capacity=False)
+    text = format_report(report)
+    assert "VTC6 (bundled)" in text and "NASA 18650 (default)" in text
+    assert [r["context_s"] for r in report.health] == [20, 60, 120]
+    for r in report.health:
+        assert np.isfinite([r["predicted_v"], r["low_v"], r["high_v"]]).all() and r["low_v"] <= r["high_v"]
+    assert len(report.safety) == 7 * 3

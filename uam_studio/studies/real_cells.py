@@ -1,0 +1,250 @@
+"""Validation on real cells (the CMU eVTOL dataset): how wrong are the battery, health and safety
+models on a real VTC6? Every row is scored on measurements; the held-out status of each is named.
+
+:func:`real_cell_report` computes the table that ``uam-studio evaluate real --data PATH`` prints and
+``benchmarks/bench_real_cells.py`` times. Sections:
+
+- physics: the mission flown on the model by its protocol's power (W per segment, from a full cell),
+  against the measured voltage of cell VAH01's 1 Hz mission: RMSE (mV) and the error of the lowest
+  (landing) voltage (mV), for the bundled VTC6 set (its fit read this mission), refits that held out the
+  landing or the whole cell, and the NASA cell (as bundled, and with q_max/R0 fitted to the mission);
+- health: q_max/R0 fitted to the first 20/60/120 s of the mission (the VTC6 set), the landing's lowest
+  voltage predicted by power with its 90% interval (draws of the fit's uncertainty);
+- Dynaformer: the bundled model (trained on the NASA cell, 0.05-3 A) on the same contexts;
+- capacity: q_max fitted to each C/5 reference discharge above 3.4 V of the four resampled lives, the
+  capacity to 2.5 V it predicts against the dataset's integrated capacity;
+- safety: for cut-offs from 3.0 to 3.3 V, would the health fit's 90% lower bound have called the
+  landing safe where the measured voltage went below the cut-off?
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from uam_studio.battery import fit_health, simulate, simulate_constant_power
+from uam_studio.battery.cmu_data import (
+    LANDING,
+    LIFE_FILES,
+    MISSION_FILE,
+    Mission,
+    data_folder,
+    load_cell_log,
+    mission_cycle,
+    reference_discharges,
+)
+from uam_studio.battery.parameters import NASA_18650, VTC6, Cell
+from uam_studio.battery.real_cells import ZERO_C, identify_vtc6, replay_mission
+from uam_studio.errors import InputError
+
+CONTEXTS_S = (20, 60, 120)
+SAFETY_CUTOFFS_V = (3.0, 3.05, 3.1, 3.15, 3.2, 3.25, 3.3)
+CAPACITY_FIT_ABOVE_V = 3.4  # V: the part of each C/5 discharge the capacity fit reads
+CAPACITY_DT_S = 1.0  # s: simulation step of the C/5 discharges (below the VTC6's fastest time constant)
+N_DRAWS = 200
+LEVEL = 0.9
+
+
+@dataclass
+class RealCellReport:
+    """The validation table's sections (see the module docstring); voltages in V, errors in mV."""
+
+    physics: list[dict] = field(default_factory=list)
+    health: list[dict] = field(default_factory=list)
+    dynaformer: list[dict] = field(default_factory=list)
+    capacity: list[dict] = field(default_factory=list)
+    safety: list[dict] = field(default_factory=list)
+    measured_landing_min_v: float = math.nan
+
+    def as_dict(self) -> dict:
+        return {"measured_landing_min_v": self.measured_landing_min_v, "physics": self.physics,
+                "health": self.health, "dynaformer": self.dynaformer, "capacity": self.capacity,
+                "safety": self.safety}
+
+
+def _landing_min(voltage: np.ndarray, mission: Mission) -> np.ndarray:
+    """Lowest voltage (V) of the landing segment, per row of ``voltage`` [..., T]."""
+    return np.min(voltage[..., mission.phase_mask(LANDING)], axis=-1)
+
+
+def physics_row(label: str, held_out: str, cell: Cell, mission: Mission) -> dict:
+    """The mission flown on ``cell`` by power (and by the measured current), scored on the measurement."""
+    measured = mission.log.voltage_v
+    row = {"model": label, "held out": held_out}
+    for how, by_power in (("power", True), ("current", False)):
+        res = replay_mission(mission, cell, by_power=by_power)
+        n = int(np.sum(res.valid))
+        err = res.voltage_v[:n] - measured[:n]
+        row[f"rmse_mv_{how}"] = float(1000 * np.sqrt(np.mean(err ** 2))) if n else math.nan
+        row[f"landing_min_err_mv_{how}"] = float(1000 * (_landing_min(res.voltage_v, mission)
+                                                         - _landing_min(measured, mission)))
+        row[f"cutoff_s_{how}"] = float(res.time_s[n - 1]) if n < len(measured) else None
+    return row
+
+
+def _mission_fitted_nasa(mission: Mission) -> Cell:
+    """The NASA parameter set with only q_max and R0 fitted to the whole mission (current-driven)."""
+    params = replace(NASA_18650.params, t_ambient_k=ZERO_C + float(mission.log.temperature_c[0]))
+    est = fit_health(mission.log.current_a, mission.log.voltage_v, 1.0, cell=params, start="full")
+    return Cell("NASA set, q_max and R0 fitted to this mission", NASA_18650.params, est.q_max, est.r0)
+
+
+def health_rows(cell: Cell, mission: Mission, rng: np.random.Generator) -> list[dict]:
+    """q_max/R0 from the mission's first seconds; the landing's lowest voltage predicted by power."""
+    params = replace(cell.params, t_ambient_k=ZERO_C + float(mission.log.temperature_c[0]))
+    log = mission.log
+    truth = float(_landing_min(log.voltage_v, mission))
+    rows = []
+    for ctx in CONTEXTS_S:
+        est = fit_health(log.current_a[:ctx], log.voltage_v[:ctx], 1.0, cell=params, start="full")
+        draws = np.vstack([[est.q_max, est.r0], est.sample(N_DRAWS, rng)])
+        res = simulate_constant_power(np.broadcast_to(mission.power_w, (len(draws), len(mission.power_w))), 1.0,
+                                      draws[:, 0], draws[:, 1], eod_v=2.5, cell=params)
+        mins = _landing_min(res.voltage_v, mission)
+        lo, hi = np.quantile(mins[1:], [(1 - LEVEL) / 2, (1 + LEVEL) / 2])
+        rows.append({"context_s": ctx, "q_max_c": est.q_max, "r0_ohm": est.r0, "predicted_v": float(mins[0]),
+                     "low_v": float(lo), "high_v": float(hi), "error_mv": float(1000 * (mins[0] - truth)),
+                     "inside": bool(lo <= truth <= hi)})
+    return rows
+
+
+def dynaformer_rows(mission: Mission) -> list[dict]:
+    """The bundled Dynaformer (NASA cell) on the mission's contexts; its refusal where it refuses."""
+    from uam_studio.dynaformer import load_pretrained
+
+    log = mission.log
+    truth = float(_landing_min(log.voltage_v, mission))
+    rows = []
+    try:
+        pred = load_pretrained()
+    except Exception as exc:  # a missing or broken weights file is reported in the table, not raised
+        return [{"context_s": c, "error": str(exc).splitlines()[0]} for c in CONTEXTS_S]
+    for ctx in CONTEXTS_S:
+        try:
+            lo, med, hi = pred.voltage_band(log.current_a[:ctx], log.voltage_v[:ctx], log.current_a)
+            med_min, lo_min, hi_min = (float(_landing_min(np.asarray(x), mission)) for x in (med, lo, hi))
+            rows.append({"context_s": ctx, "predicted_v": med_min, "low_v": lo_min, "high_v": hi_min,
+                         "error_mv": 1000 * (med_min - truth), "inside": bool(lo_min <= truth <= hi_min)})
+        except InputError as exc:
+            rows.append({"context_s": ctx, "error": str(exc)})
+    return rows
+
+
+def capacity_rows(folder: Path, cell: Cell) -> list[dict]:
+    """q_max fitted to each C/5 reference discharge above 3.4 V, its capacity to 2.5 V against the data's."""
+    rows = []
+    for name in LIFE_FILES:
+        log = load_cell_log(folder / name)
+        params = cell.params
+        for k, ref in enumerate(reference_discharges(log)):
+            t = log.time_s[ref.start - 1:ref.stop] - log.time_s[ref.start - 1]
+            grid = np.arange(CAPACITY_DT_S, t[-1] + 1e-9, CAPACITY_DT_S)
+            cur = np.interp(grid - CAPACITY_DT_S / 2, t, log.current_a[ref.start - 1:ref.stop])
+            cur = np.where(grid <= t[1], log.current_a[ref.start], cur)
+            volt = np.interp(grid, t, log.voltage_v[ref.start - 1:ref.stop])
+            n = int(np.argmax(volt < CAPACITY_FIT_ABOVE_V)) or len(volt)
+            p = replace(params, t_ambient_k=ZERO_C + float(log.temperature_c[ref.start - 1]))
+            est = fit_health(cur[:n], volt[:n], CAPACITY_DT_S, cell=p, start="full")
+            steps = int(2 * ref.capacity_ah * 3600 / ref.current_a / CAPACITY_DT_S)
+            res = simulate(np.full(steps, ref.current_a), CAPACITY_DT_S, est.q_max, est.r0, eod_v=2.5, cell=p)
+            cap = float(res.eod_s * ref.current_a / 3600) if res.eod_reached else math.nan
+            rows.append({"cell": log.name, "test": k, "time_h": ref.time_h, "measured_ah": ref.capacity_ah,
+                         "q_max_c": est.q_max, "predicted_ah": cap,
+                         "error_pct": 100 * (cap - ref.capacity_ah) / ref.capacity_ah})
+    return rows
+
+
+def safety_rows(health: list[dict], measured_min: float) -> list[dict]:
+    """Per cut-off: the health fit (each context) judged the landing safe (90% lower bound above the
+    cut-off) where the measured lowest voltage fell below it: a missed breach."""
+    rows = []
+    for cut in SAFETY_CUTOFFS_V:
+        for h in health:
+            judged_safe = h["low_v"] >= cut
+            breached = measured_min < cut
+            rows.append({"cutoff_v": cut, "context_s": h["context_s"], "judged_safe": judged_safe,
+                         "measured_breach": breached, "missed_breach": judged_safe and breached})
+    return rows
+
+
+def real_cell_report(data: str | Path | None = None, refit: bool = True, capacity: bool = True,
+                     seed: int = 20260) -> RealCellReport:
+    """The validation table (module docstring) from the dataset's folder (``data`` or
+    ``$UAM_STUDIO_CMU_DATA``). ``refit=False`` skips the two held-out refits (a minute each);
+    ``capacity=False`` skips the 46 reference discharges."""
+    folder = data_folder(data)
+    mission = mission_cycle(load_cell_log(folder / MISSION_FILE))
+    report = RealCellReport(measured_landing_min_v=float(_landing_min(mission.log.voltage_v, mission)))
+    report.physics.append(physics_row("VTC6 (bundled)", "none: its fit read this mission", VTC6, mission))
+    if refit:
+        report.physics.append(physics_row("VTC6 refit", "this mission's landing and rest",
+                                          identify_vtc6(folder, hold_out="landing"), mission))
+        report.physics.append(physics_row("VTC6 refit", "cell VAH01 (fit on VAH07 only)",
+                                          identify_vtc6(folder, hold_out="cell"), mission))
+    report.physics.append(physics_row("NASA 18650 (default)", "all (not fitted)", NASA_18650, mission))
+    report.physics.append(physics_row("NASA set, q_max/R0 fitted", "none", _mission_fitted_nasa(mission), mission))
+    report.health = health_rows(VTC6, mission, np.random.default_rng(seed))
+    report.dynaformer = dynaformer_rows(mission)
+    if capacity:
+        report.capacity = capacity_rows(folder, VTC6)
+    report.safety = safety_rows(report.health, report.measured_landing_min_v)
+    return report
+
+
+def _fmt(x, spec: str) -> str:
+    if x is None:
+        return "-"
+    if isinstance(x, float) and not math.isfinite(x):
+        return "n/a"
+    return format(x, spec)
+
+
+def format_report(report: RealCellReport) -> str:
+    """The report as plain-text tables."""
+    out = [f"Real mission VAH01 cycle 20 (1 Hz): measured lowest landing voltage {report.measured_landing_min_v:.3f} V",
+           "", "physics model on the real mission (flown by power; by measured current in brackets)",
+           f"{'model':28s} {'held out':36s} {'RMSE mV':>16s} {'landing min err mV':>22s}  cut-off"]
+    for r in report.physics:
+        cut = r["cutoff_s_power"]
+        out.append(f"{r['model']:28s} {r['held out']:36s} {_fmt(r['rmse_mv_power'], '7.1f'):>7s} "
+                   f"({_fmt(r['rmse_mv_current'], '6.1f')}) {_fmt(r['landing_min_err_mv_power'], '+9.1f'):>11s} "
+                   f"({_fmt(r['landing_min_err_mv_current'], '+8.1f')})  "
+                   + (f"reached at {cut:.0f} s" if cut is not None else "never"))
+    out += ["", "health fit (VTC6 set) from the mission's first seconds: landing's lowest voltage, 90% interval",
+            f"{'context':>8s} {'q_max C':>8s} {'R0 ohm':>8s} {'predicted V':>11s} {'90% interval V':>17s} "
+            f"{'error mV':>9s} inside"]
+    for r in report.health:
+        out.append(f"{r['context_s']:>6d} s {r['q_max_c']:8.0f} {r['r0_ohm']:8.4f} {r['predicted_v']:11.3f} "
+                   f"{r['low_v']:8.3f}-{r['high_v']:.3f} {r['error_mv']:+9.1f} {'yes' if r['inside'] else 'NO'}")
+    out += ["", "Dynaformer as bundled (trained on the NASA cell), same contexts"]
+    for r in report.dynaformer:
+        if "error" in r:
+            out.append(f"{r['context_s']:>6d} s  refused: {r['error']}")
+        else:
+            out.append(f"{r['context_s']:>6d} s  predicted {r['predicted_v']:.3f} V, 90% {r['low_v']:.3f}-"
+                       f"{r['high_v']:.3f} V, error {r['error_mv']:+.1f} mV, inside: {'yes' if r['inside'] else 'NO'}")
+    if report.capacity:
+        errs = np.array([r["error_pct"] for r in report.capacity])
+        out += ["", f"capacity: q_max fitted to each C/5 discharge above {CAPACITY_FIT_ABOVE_V} V, capacity to "
+                f"2.5 V against the integrated one ({len(errs)} discharges)",
+                f"{'cell':6s} {'tests':>5s} {'life h':>11s} {'measured Ah':>13s} {'worst error %':>14s} "
+                f"{'median |error| %':>17s}"]
+        for name in dict.fromkeys(r["cell"] for r in report.capacity):
+            rs = [r for r in report.capacity if r["cell"] == name]
+            e = np.array([r["error_pct"] for r in rs])
+            worst = e[np.nanargmax(np.abs(e))] if np.isfinite(e).any() else math.nan
+            out.append(f"{name:6s} {len(rs):5d} {rs[0]['time_h']:5.0f}-{rs[-1]['time_h']:<5.0f} "
+                       f"{rs[0]['measured_ah']:6.3f}-{rs[-1]['measured_ah']:.3f} {worst:+14.2f} "
+                       f"{np.nanmedian(np.abs(e)):17.2f}")
+        out.append(f"all: worst |error| {np.nanmax(np.abs(errs)):.2f}%, within 3%: "
+                   f"{int(np.sum(np.abs(errs) <= 3))} of {len(errs)}")
+    missed = [r for r in report.safety if r["missed_breach"]]
+    breaches = {r["cutoff_v"] for r in report.safety if r["measured_breach"]}
+    out += ["", "safety: cut-offs 3.00-3.30 V; the landing breached at "
+            + (", ".join(f"{c:.2f}" for c in sorted(breaches)) or "none") + " V",
+            "missed breaches (judged safe by the 90% lower bound, breached in the measurement): "
+            + (", ".join(f"{r['cutoff_v']:.2f} V from {r['context_s']} s" for r in missed) or "none")]
+    return "\n".join(out)
