@@ -24,3 +24,5 @@ if not _paths or _paths[0] != ROOT:
 _CMU = Path(ROOT).parent / "shared" / "data" / "cmu_evtol"
 if _CMU.is_dir():
     os.environ.setdefault("UAM_STUDIO_CMU_DATA", str(_CMU))
+if not os.environ.get("UAM_STUDIO_CMU_DATA"):  # notebook 10 reads the dataset: without it, not collected
+    collect_ignore = ["notebooks/10_real_cells.ipynb"]
