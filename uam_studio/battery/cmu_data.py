@@ -249,7 +249,7 @@ def data_folder(path: str | os.PathLike | None = None) -> Path:
 
 
 @dataclass(frozen=True)
-class Mission:
+class MissionLog:
     """The take-off, cruise, landing and rest of one real mission cycle, from a :class:`CellLog`.
 
     ``log`` holds those samples only, time from 0 at the first take-off sample (s); ``power_w`` is the
@@ -267,7 +267,7 @@ class Mission:
         return np.isin(self.log.segment, codes)
 
 
-def mission_cycle(log: CellLog) -> Mission:
+def mission_cycle(log: CellLog) -> MissionLog:
     """The first mission cycle (segments 4-7) of a 1 Hz log.
 
     :raises CellDataError: the log has no take-off, cruise and landing segments in that order.
@@ -286,7 +286,7 @@ def mission_cycle(log: CellLog) -> Mission:
     part = CellLog(part.source, part.time_s - part.time_s[0], part.current_a, part.voltage_v, part.temperature_c,
                    part.segment, part.cycle)
     power = np.array([MISSION_POWER_W[int(s)] for s in part.segment])
-    return Mission(part, power)
+    return MissionLog(part, power)
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ from .cmu_data import (
     REST_AFTER,
     TAKEOFF,
     CellLog,
-    Mission,
+    MissionLog,
     ResampledMission,
     load_cell_log,
     mission_cycle,
@@ -113,7 +113,7 @@ def identify_vtc6(folder: str | Path, n_missions: int = 4, hold_out: str = "none
     return Cell(f"Sony-Murata VTC6 (identified, held out: {hold_out})", fit.cell, fit.q_max, fit.r0)
 
 
-def replay_mission(mission: Mission, cell: Cell, by_power: bool = True) -> SimulationResult:
+def replay_mission(mission: MissionLog, cell: Cell, by_power: bool = True) -> SimulationResult:
     """Fly a real 1 Hz mission on the model from a full, rested cell at the log's first temperature:
     by its protocol's power per segment (W; the default, as a planner knows a flight), or by its
     measured current (A)."""

@@ -30,7 +30,7 @@ from uam_studio.battery.cmu_data import (
     LANDING,
     LIFE_FILES,
     MISSION_FILE,
-    Mission,
+    MissionLog,
     data_folder,
     load_cell_log,
     mission_cycle,
@@ -65,12 +65,12 @@ class RealCellReport:
                 "safety": self.safety}
 
 
-def _landing_min(voltage: np.ndarray, mission: Mission) -> np.ndarray:
+def _landing_min(voltage: np.ndarray, mission: MissionLog) -> np.ndarray:
     """Lowest voltage (V) of the landing segment, per row of ``voltage`` [..., T]."""
     return np.min(voltage[..., mission.phase_mask(LANDING)], axis=-1)
 
 
-def physics_row(label: str, held_out: str, cell: Cell, mission: Mission) -> dict:
+def physics_row(label: str, held_out: str, cell: Cell, mission: MissionLog) -> dict:
     """The mission flown on ``cell`` by power (and by the measured current), scored on the measurement."""
     measured = mission.log.voltage_v
     row = {"model": label, "held out": held_out}
@@ -85,14 +85,14 @@ def physics_row(label: str, held_out: str, cell: Cell, mission: Mission) -> dict
     return row
 
 
-def _mission_fitted_nasa(mission: Mission) -> Cell:
+def _mission_fitted_nasa(mission: MissionLog) -> Cell:
     """The NASA parameter set with only q_max and R0 fitted to the whole mission (current-driven)."""
     params = replace(NASA_18650.params, t_ambient_k=ZERO_C + float(mission.log.temperature_c[0]))
     est = fit_health(mission.log.current_a, mission.log.voltage_v, 1.0, cell=params, start="full")
     return Cell("NASA set, q_max and R0 fitted to this mission", NASA_18650.params, est.q_max, est.r0)
 
 
-def health_rows(cell: Cell, mission: Mission, rng: np.random.Generator) -> list[dict]:
+def health_rows(cell: Cell, mission: MissionLog, rng: np.random.Generator) -> list[dict]:
     """q_max/R0 from the mission's first seconds; the landing's lowest voltage predicted by power."""
     params = replace(cell.params, t_ambient_k=ZERO_C + float(mission.log.temperature_c[0]))
     log = mission.log
@@ -111,7 +111,7 @@ def health_rows(cell: Cell, mission: Mission, rng: np.random.Generator) -> list[
     return rows
 
 
-def dynaformer_rows(mission: Mission) -> list[dict]:
+def dynaformer_rows(mission: MissionLog) -> list[dict]:
     """The bundled Dynaformer (NASA cell) on the mission's contexts; its refusal where it refuses."""
     from uam_studio.dynaformer import load_pretrained
 
