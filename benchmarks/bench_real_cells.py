@@ -47,9 +47,10 @@ def main() -> None:
         ratio = abs(d120["error_mv"]) / max(abs(h120["error_mv"]), 1e-9)
         print(f"  Dynaformer 120 s: {d120['error_mv']:+.1f} mV, {ratio:.1f}x the physics fit's (goal 1.5x): "
               f"{'met' if ratio <= 1.5 else 'NOT met'}")
-    errs = np.array([r["error_pct"] for r in report.capacity])
-    print(f"  capacity: worst {np.nanmax(np.abs(errs)):.2f}% over {len(errs)} reference discharges (goal 3%): "
-          f"{'met' if np.nanmax(np.abs(errs)) <= 3 else 'NOT met'}")
+    for key, what in (("_whole", "whole discharge"), ("", "part above 3.4 V")):
+        errs = np.array([r[f"error_pct{key}"] for r in report.capacity])
+        print(f"  capacity from the {what}: worst {np.nanmax(np.abs(errs)):.2f}% over {len(errs)} reference "
+              f"discharges (goal 3%): {'met' if np.nanmax(np.abs(errs)) <= 3 else 'NOT met'}")
 
 
 if __name__ == "__main__":

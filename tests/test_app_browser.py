@@ -363,3 +363,16 @@ def test_battery_lab_table_legend_and_time_axis_follow_a_change(page, app_url):
     assert "nan" not in table.inner_text()
     lab = page.evaluate(JS_LAB)
     assert lab["ranges"][0] == lab["ranges"][1]
+
+
+def test_battery_lab_loads_the_vtc6_cell(page, app_url):
+    """A student picks the real cell: the q_max slider shows its nominal value, the curves are redrawn."""
+    _open(page, app_url)
+    page.locator(".bk-tab", has_text="Battery lab").click()
+    table = page.locator(".uam-lab-summary")
+    table.get_by_text("altitude 500 m").wait_for()
+    page.locator("select").filter(has_text="Sony VTC6").select_option(label="Sony VTC6 (identified on real cells)")
+    slider = page.locator(".bk-input-group", has=page.get_by_text("q_max (C)"))
+    slider.get_by_text("10,942.21").or_(slider.get_by_text("10942.21")).first.wait_for()
+    table.locator("tr", has_text="this setting").get_by_text("not reached").wait_for()
+    assert "nan" not in table.inner_text()

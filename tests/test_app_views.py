@@ -202,7 +202,29 @@ def test_battery_lab_plots_share_time_and_sort_the_legend_by_value():
     texts = [eod_text(cv) for cv in c["family"]]
     assert texts[0].startswith("not reached (lowest 3.") and "nan" not in " ".join(texts)
     view.state.vary = "wind"  # new factor: new legend
-    assert view._factor == "wind" and "wind -39 kt" in view.eod_table.object
+    assert view._factor[0] == "wind" and "wind -39 kt" in view.eod_table.object
+
+
+def test_battery_lab_loads_the_vtc6_cell():
+    """The identified real cell: its nominal health and ranges reach the sliders, its own health family
+    the legend, and it flies the same per-cell current further than the paper's cell."""
+    from uam_studio.app.battery_lab import BatteryLabView
+    from uam_studio.app.battery_lab_state import VTC6_NAME, BatteryLabState
+    from uam_studio.battery.parameters import VTC6
+
+    view = BatteryLabView(BatteryLabState())
+    view.__panel__().get_root(Document())
+    nasa = view.state.result["setting"][0]
+    view.widgets["cell"].value = VTC6_NAME
+    q, r = view.widgets["q_max"], view.widgets["r0"]
+    assert (q.start, q.end, q.value) == (7000.0, 11500.0, VTC6.q_max) and (r.start, r.end) == (0.01, 0.1)
+    assert view.state.r0 == VTC6.r0
+    vtc6 = view.state.result["setting"][0]
+    assert vtc6["eod_s"] is None and nasa["eod_s"] is not None  # 3 legs: the NASA cell is empty, the VTC6 is not
+    np.testing.assert_allclose(vtc6["current_a"], nasa["current_a"])  # the same load
+    view.state.vary = "q_max"
+    assert view._factor == ("q_max", "q_max 8000 C", "q_max 9000 C", "q_max 10000 C", "q_max 11000 C")
+    assert "q_max 8000 C" in view.eod_table.object
 
 
 def test_retrain_view_shows_progress_numbers_and_the_oracle_line():

@@ -204,3 +204,21 @@ def test_leg_table_charges_match_the_flight_model_exactly():
                 else:
                     assert legs.cheapest_level(i, j) is None and legs.cheapest_charge(i, j) == float("inf")
     assert n > 100
+
+
+def test_multi_charge_cover_when_not_every_reachable_destination_fits_one_partition():
+    """Regression (hypothesis, tests/test_properties.py): D1 and D2 sit on the vertiport, each reachable
+    only in a sortie D3 -> Dk -> D4. No set of disjoint sorties covers all four, and the exact oracle
+    returned an empty plan while the other policies flew two destinations. It now keeps the partition
+    with the most priority and names the destination it leaves."""
+    from uam_studio.planning import plan_mission
+    from uam_studio.planning.missions.mission import Battery, Destination, Mission, Vertiport
+
+    dests = tuple(Destination(n, x, y, 1, 0.0) for n, x, y in (("D1", 0, 0), ("D2", 0, 0), ("D3", 0, 7),
+                                                               ("D4", 7, 0)))
+    mission = Mission("on the vertiport", Vertiport(0.0, 0.0, 0.0), dests, "multi_charge", Battery(5000.0, 0.25), 3.0)
+    res = plan_mission(mission, policy="oracle")
+    assert res.exact and res.safe and res.reached_priority == 3
+    assert any(m.startswith("not visited: D") for m in res.messages)
+    for policy in ("attention", "greedy"):
+        assert plan_mission(mission, policy=policy).reached_priority <= res.reached_priority

@@ -97,3 +97,21 @@ def test_plan_mission_says_whether_the_plan_is_exact():
     small = _mission(4, "single_charge")
     assert plan_mission(small, "oracle", predictor=False)["exact"] is True
     assert plan_mission(m, "greedy", predictor=False)["exact"] is None
+
+
+@pytest.mark.parametrize("scenario", ["single_charge", "multi_charge"])
+def test_destinations_closer_than_any_leg_never_end_a_plan(scenario):
+    """Regression (found by drawing 18-20 destinations in a 70 km square): two destinations 3 km apart,
+    closer than the climb and descent of any altitude. The reference's repair and local search tried
+    sorties with that leg and stopped with 'distance_km: ... too short for cruise at 3000 m'; such a
+    sortie is now simply not flyable."""
+    from uam_studio.planning.missions.mission import Battery, Destination, Mission, Vertiport
+
+    spots = [(20.0, 0.0), (23.0, 0.0), (0.0, 25.0), (-22.0, 5.0), (5.0, -24.0), (-15.0, -15.0), (15.0, 18.0),
+             (-18.0, 17.0), (28.0, -12.0)]
+    dests = tuple(Destination(f"D{k + 1}", x, y, 1 + k % 3, 0.0) for k, (x, y) in enumerate(spots))
+    mission = Mission("close pair", Vertiport(0.0, 0.0, 0.0), dests, scenario, Battery(7600.0, 0.117215), 3.0)
+    res = plan_mission(mission, policy="oracle")
+    assert res.safe and res.route
+    flown = check_plan(mission, res.route, res.altitudes_m)
+    assert flown.safe

@@ -19,7 +19,7 @@ import numpy as np
 import panel as pn
 import param
 
-from uam_studio.app.battery_lab_state import VARY, BatteryLabState
+from uam_studio.app.battery_lab_state import CELLS, NASA_NAME, VARY, BatteryLabState, family_values
 from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE
 from uam_studio.app.session import ensure_bokeh_backend, respond_at_once, session_dispatcher
 from uam_studio.app.style import heading
@@ -31,9 +31,9 @@ SETTING = "this setting"
 BUSY_AFTER_MS = 150  # served: a change taking longer than this shows the busy indicator
 
 
-def family_labels(vary: str) -> list[str]:
-    """Legend labels of the family varying ``vary``, in the factor's (ascending) order."""
-    _, values, unit = VARY[vary]
+def family_labels(vary: str, cell: str = NASA_NAME) -> list[str]:
+    """Legend labels of the family varying ``vary`` for ``cell``, in the factor's (ascending) order."""
+    _, values, unit = family_values(vary, cell)
     return [f"{vary} {v:g} {unit}" for v in values]
 
 
@@ -55,6 +55,7 @@ class BatteryLabView(pn.viewable.Viewer):
         s = self.state
         w = 250
         self.widgets = {
+            "cell": pn.widgets.Select(name="Cell", options=list(CELLS), value=s.cell, width=w),
             "vary": pn.widgets.RadioButtonGroup(name="Vary", options=list(VARY), value=s.vary, width=w),
             "q_max": pn.widgets.FloatSlider(name="q_max (C)", start=APP_Q_RANGE[0], end=APP_Q_RANGE[1], step=50,
                                             value=s.q_max, width=w),
@@ -84,16 +85,18 @@ class BatteryLabView(pn.viewable.Viewer):
         # The class sits on the content (inside the pane's shadow root), as the Planner's summary.
         self.eod_table = pn.pane.HTML(sizing_mode="stretch_width")
         self._busy_later = session_dispatcher(delay_ms=BUSY_AFTER_MS) or (lambda cb: cb())
-        self._factor: str | None = None
+        self._factor: tuple[str, ...] | None = None  # the plots' factor and legend labels
         self._current_pipe: hv.streams.Pipe | None = None
         self._voltage_pipe: hv.streams.Pipe | None = None
+        s.param.watch(self._on_cell, "cell")
         s.param.watch(self._on_result, "result")
         s.param.watch(self._on_busy, "busy")
         self._on_result()
 
     def __panel__(self) -> pn.viewable.Viewable:
         intro = pn.pane.Markdown(
-            "One leg flown by one 18650 cell (the pack scaled to a cell), repeated without recharging. "
+            "One leg flown by one 18650 cell (the pack scaled to a cell), repeated without recharging: the "
+            "paper's NASA cell, or a Sony VTC6 identified on the CMU eVTOL dataset's real cells (same current). "
             "Pick the factor to vary: the thin curves sweep it over its range, the black curve is the "
             "setting of the sliders.", sizing_mode="stretch_width", styles={"font-size": "13px"})
         controls = pn.Column(heading("Leg and cell"), *self.widgets.values(), width=270)
@@ -103,6 +106,14 @@ class BatteryLabView(pn.viewable.Viewer):
         table = pn.Column(heading("End of discharge"), self.eod_table, width=300)
         body = pn.FlexBox(controls, plots, table, flex_wrap="wrap", gap="10px", sizing_mode="stretch_width")
         return pn.Column(intro, self.message, body, sizing_mode="stretch_width")
+
+    def _on_cell(self, *events: Any) -> None:
+        """The state's new cell set its health and ranges: the sliders follow."""
+        s = self.state
+        with pn.io.hold():
+            for key in ("q_max", "r0"):
+                lo, hi = s.param[key].bounds
+                self.widgets[key].param.update(start=lo, end=hi, value=getattr(s, key))
 
     def _on_busy(self, event: param.parameterized.Event) -> None:
         """Served, the busy indicator appears only once a change has taken :data:`BUSY_AFTER_MS`
@@ -122,11 +133,11 @@ class BatteryLabView(pn.viewable.Viewer):
             return
         data = self._plot_data(c)
         with pn.io.hold():
-            if c["factor"] != self._factor:  # new legend: new plots
-                self._factor = c["factor"]
+            if (c["factor"], *c["labels"]) != self._factor:  # new legend: new plots
+                self._factor = (c["factor"], *c["labels"])
                 self._current_pipe = hv.streams.Pipe(data=data)
                 self._voltage_pipe = hv.streams.Pipe(data=data)
-                labels = [*family_labels(c["factor"]), SETTING]
+                labels = [*c["labels"], SETTING]
                 self.current_plot.object = hv.DynamicMap(
                     functools.partial(self._current_element, labels=labels, factor=c["factor"]),
                     streams=[self._current_pipe])
@@ -151,7 +162,7 @@ class BatteryLabView(pn.viewable.Viewer):
         by_label = {cv["label"]: cv for cv in c["family"]}
         by_label[SETTING] = c["setting"][0]
         empty = (np.zeros(0), np.zeros(0))
-        labels = [*family_labels(c["factor"]), SETTING]
+        labels = [*c["labels"], SETTING]
         cur = {k: (by_label[k]["time_s"] / 60.0, by_label[k]["current_a"]) if k in by_label else empty
                for k in labels}
         volt = {k: (by_label[k]["voltage_time_s"] / 60.0, by_label[k]["voltage_v"]) if k in by_label else empty

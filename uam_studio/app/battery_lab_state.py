@@ -17,10 +17,11 @@ import param
 
 from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE, LatestWorker, one_line
 from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0
+from uam_studio.battery.parameters import NASA_18650, VTC6, Cell
 from uam_studio.errors import InputError
 from uam_studio.flight.tables import ALTITUDE_RANGE_M, WIND_RANGE_KTS
 
-__all__ = ["VARY", "BatteryLabState"]
+__all__ = ["CELLS", "HEALTH_BOX", "VARY", "BatteryLabState", "family_values"]
 
 VARY = {
     "altitude": ("altitude_m", (500.0, 1000.0, 2000.0, 3000.0), "m"),
@@ -28,10 +29,27 @@ VARY = {
     "R0": ("r0", (0.017, 0.1, 0.2, 0.3, 0.45), "ohm"),
     "q_max": ("q_max", (5000.0, 6000.0, 7000.0, 8000.0), "C"),
 }
+NASA_NAME, VTC6_NAME = "NASA 18650 (the paper's cell)", "Sony VTC6 (identified on real cells)"
+CELLS: dict[str, Cell] = {NASA_NAME: NASA_18650, VTC6_NAME: VTC6}
+# Per cell: the sliders' (q_max C, R0 ohm) ranges and the health family's values. The VTC6's box spans
+# the CMU cells' fade (3.16 to 2.43 Ah at C/5, about 77%) and resistances from new to well aged.
+HEALTH_BOX = {NASA_NAME: (APP_Q_RANGE, APP_R0_RANGE),
+              VTC6_NAME: ((7000.0, 11500.0), (0.01, 0.1))}
+_HEALTH_FAMILY = {VTC6_NAME: {"q_max": (8000.0, 9000.0, 10000.0, 11000.0), "R0": (0.015, 0.02, 0.04, 0.08)}}
+
+
+def family_values(vary: str, cell: str = NASA_NAME) -> tuple[str, tuple[float, ...], str]:
+    """(state field, values, unit) of the family that varies ``vary`` for ``cell`` (a :data:`CELLS` name)."""
+    key, values, unit = VARY[vary]
+    return key, _HEALTH_FAMILY.get(cell, {}).get(vary, values), unit
 
 
 class BatteryLabState(param.Parameterized):
     """One leg flown by one cell, plus a family of curves that vary one factor (the paper's figures).
+
+    The cell is the paper's NASA 18650 or the VTC6 identified on the CMU eVTOL cells; both draw the same
+    per-cell current (the pack's current shared by its cells). A new cell sets q_max and R0 to its
+    nominal health and their ranges to its :data:`HEALTH_BOX`.
 
     :meth:`curves` returns, for the chosen setting and each family member, the per-cell current and
     the voltage (physics model) of the leg, flown ``legs`` times back to back without recharging.
@@ -39,6 +57,7 @@ class BatteryLabState(param.Parameterized):
     the shared thread pool with :attr:`busy` set meanwhile and only the newest request kept.
     """
 
+    cell = param.Selector(default=NASA_NAME, objects=list(CELLS), doc="the cell's parameter set (:data:`CELLS`)")
     q_max = param.Number(default=DEFAULT_Q_MAX, bounds=APP_Q_RANGE, doc="q_max (C)")
     r0 = param.Number(default=DEFAULT_R0, bounds=APP_R0_RANGE, doc="R0 (ohm)")
     altitude_m = param.Number(default=1000.0, bounds=ALTITUDE_RANGE_M)
@@ -51,7 +70,7 @@ class BatteryLabState(param.Parameterized):
     result = param.Dict(default=None, allow_None=True, doc=":meth:`curves` of the current inputs")
     busy = param.Boolean(default=False, doc="a newer result is being computed")
 
-    INPUTS = ("q_max", "r0", "altitude_m", "wind_kts", "distance_km", "legs", "eod_v", "vary")
+    INPUTS = ("cell", "q_max", "r0", "altitude_m", "wind_kts", "distance_km", "legs", "eod_v", "vary")
     MAX_POINTS = 1500  # samples per drawn series (every EOD time and minimum is computed at 1 s)
 
     def __init__(self, background: bool = False, dispatch: Callable[[Callable[[], None]], None] | None = None,
@@ -65,8 +84,17 @@ class BatteryLabState(param.Parameterized):
         self.dispatch = dispatch or (lambda cb: cb())
         self._worker: LatestWorker[None, dict[str, Any]] = LatestWorker(
             lambda _: self.curves(), self._apply, _lab_failed, dispatch=self.dispatch)
-        self.param.watch(lambda *_: self.refresh(), list(self.INPUTS))
+        self.param.watch(self._on_cell, "cell")  # precedence 0: before refresh, the cell's bounds and health
+        self.param.watch(lambda *_: self.refresh(), list(self.INPUTS), precedence=1)
         self.refresh()
+
+    def _on_cell(self, event: param.parameterized.Event) -> None:
+        """A new cell: its health box, and its nominal health (q_max C, R0 ohm)."""
+        (q_lo, q_hi), (r_lo, r_hi) = HEALTH_BOX[event.new]
+        self.param.q_max.bounds, self.param.r0.bounds = (q_lo, q_hi), (r_lo, r_hi)
+        cell = CELLS[event.new]
+        with param.parameterized.discard_events(self):
+            self.q_max, self.r0 = cell.q_max, cell.r0
 
     def refresh(self) -> None:
         """Recompute :attr:`result` for the current inputs."""
@@ -92,7 +120,7 @@ class BatteryLabState(param.Parameterized):
 
     def curves(self) -> dict[str, Any]:
         """``{"setting": [curve], "family": [curve...], "factor", "unit", "error", "skipped", "t_end_s",
-        "eod_v"}``.
+        "eod_v", "labels", "cell"}``.
 
         The family is in the factor's order (ascending); ``t_end_s`` is the end of the longest
         current profile, one time range for every plot. Each curve is ``{"label", "value", "time_s",
@@ -101,16 +129,17 @@ class BatteryLabState(param.Parameterized):
         thinned to at most :data:`MAX_POINTS` samples; ``eod_s`` is None where the cut-off is never
         reached and ``min_voltage_v`` the lowest voltage (every sample).
         """
-        key, values, unit = VARY[self.vary]
+        key, values, unit = family_values(self.vary, self.cell)
+        labels = [f"{self.vary} {v:g} {unit}" for v in values]
         out: dict[str, Any] = {"factor": self.vary, "unit": unit, "setting": [], "family": [], "error": "",
-                               "skipped": [], "t_end_s": 0.0, "eod_v": float(self.eod_v)}
+                               "skipped": [], "t_end_s": 0.0, "eod_v": float(self.eod_v), "labels": labels,
+                               "cell": self.cell}
         try:
             out["setting"] = [self._curve(self._setting(), "this setting")]
         except InputError as err:
             out["error"] = one_line(err)
             return out
-        for v in values:
-            label = f"{self.vary} {v:g} {unit}"
+        for v, label in zip(values, labels):
             try:
                 out["family"].append(self._curve(self._setting(**{key: v}), label))
             except InputError as err:  # e.g. a leg too short for 3000 m
@@ -124,7 +153,7 @@ class BatteryLabState(param.Parameterized):
 
         prof = leg_profile(float(self.distance_km), s["altitude_m"], s["wind_kts"])
         cur = np.tile(np.asarray(prof.current_a), int(self.legs))
-        sim = simulate(cur, prof.dt_s, s["q_max"], s["r0"], eod_v=float(self.eod_v))
+        sim = simulate(cur, prof.dt_s, s["q_max"], s["r0"], eod_v=float(self.eod_v), cell=CELLS[self.cell].params)
         t = np.asarray(sim.time_s, dtype=float)
         v = np.asarray(sim.voltage_v, dtype=float)
         n = min(int(np.count_nonzero(sim.valid)) + 1, v.size)  # the first sample below the cut-off too

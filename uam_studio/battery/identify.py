@@ -30,13 +30,14 @@ from .state import rested_state
 
 # The nonlinear parameters, in the order of the fit's vector (log space).
 NONLINEAR = ("q_max", "r0", "t_ohmic_s", "kn", "kp", "t_sn_s", "t_sp_s", "r0_activation_k", "k_activation_k",
-             "thermal_mass", "thermal_tau_s", "t_diffusion_s", "vol_s_fraction")
+             "thermal_mass", "thermal_tau_s", "diffusion_tau_s", "vol_s_fraction")
 # Bounds of the nonlinear parameters (same units as the fields; a search box, not a prior). The time
 # constants stay above 1.5 s: the fit's logs are simulated at 1 s steps (explicit Euler needs dt < tau).
+# The surface-bulk diffusion is fitted by its time constant (CellParameters.diffusion_tau_s).
 BOUNDS = {"q_max": (2000.0, 20000.0), "r0": (1e-3, 1.0), "t_ohmic_s": (1.5, 100.0), "kn": (1.0, 1e7),
           "kp": (1.0, 1e7), "t_sn_s": (1.5, 1e4), "t_sp_s": (1.5, 1e4), "r0_activation_k": (1.0, 1e4),
           "k_activation_k": (1.0, 1e4), "thermal_mass": (5.0, 500.0), "thermal_tau_s": (10.0, 1e4),
-          "t_diffusion_s": (1e3, 1e10), "vol_s_fraction": (1e-3, 0.5)}
+          "diffusion_tau_s": (1.5, 1e6), "vol_s_fraction": (1e-3, 0.5)}
 REMOVED_BOUNDS_KC = (0.0, 10.0)  # kC: a fitted start's charge out of full
 TEMPERATURE_WEIGHT_V_PER_K = 2e-3  # V: a 1 K miss of the measured temperature counts as 2 mV
 _RIDGE = 1e-8  # relative ridge of the OCV least squares (keeps the 14 columns well posed)
@@ -90,7 +91,11 @@ def _ocv_columns(states: dict, q_total: float, cell: CellParameters) -> tuple[np
 def _with(cell: CellParameters, theta: np.ndarray) -> tuple[CellParameters, float, float]:
     vals = dict(zip(NONLINEAR, np.exp(theta[:len(NONLINEAR)])))
     q_max, r0 = vals.pop("q_max"), vals.pop("r0")
-    return replace(cell, **vals), q_max, r0
+    tau = vals.pop("diffusion_tau_s", None)
+    cell = replace(cell, **vals)
+    if tau is not None:
+        cell = replace(cell, t_diffusion_s=tau * (1.0 / cell.vol_b + 1.0 / cell.vol_s))
+    return cell, q_max, r0
 
 
 def _design(theta: np.ndarray, segments: list[FitSegment], base: CellParameters):

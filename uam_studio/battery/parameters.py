@@ -85,6 +85,16 @@ class CellParameters:
         return self.vol * (1.0 - self.vol_s_fraction)
 
     @property
+    def diffusion_tau_s(self) -> float:
+        """Time constant (s) of the bulk-to-surface concentration gap: t_diffusion / (1/VolB + 1/VolS)."""
+        return self.t_diffusion_s / (1.0 / self.vol_b + 1.0 / self.vol_s)
+
+    @property
+    def fastest_time_constant_s(self) -> float:
+        """The shortest time constant (s) of the model's states: explicit Euler needs steps below it."""
+        return min(self.t_ohmic_s, self.t_sn_s, self.t_sp_s, self.diffusion_tau_s, self.thermal_tau_s)
+
+    @property
     def temperature_dependent(self) -> bool:
         """True when R0 or the rate constants change with temperature."""
         return self.r0_activation_k != 0.0 or self.k_activation_k != 0.0
@@ -129,19 +139,19 @@ NASA_18650 = Cell("NASA 18650 (Daigle & Kulkarni 2013)", DEFAULT_CELL, DEFAULT_Q
 # VAH01's 1 Hz mission; the open-circuit-voltage curve is the positive electrode's (u0p, ap).
 VTC6_PARAMS = replace(
     DEFAULT_CELL,
-    kn=10624.2467,
-    kp=10138.5834,
-    vol_s_fraction=0.499977197,
-    t_diffusion_s=106966.794,
+    kn=11227.5491,
+    kp=9679.1938,
+    vol_s_fraction=0.5,
+    t_diffusion_s=300000,
     t_ohmic_s=1.5,
-    t_sn_s=100.597441,
-    t_sp_s=20.1615018,
-    u0p=2.96267987,
-    ap=(139535.419, -216474.773, 197028.285, -53681.9514, -401504.967, -459901.53, 6096250.1, -10294017.9, -583916.67, 11362340.5, 377455.309, -11734033.8, 5570206.51),
+    t_sn_s=105.71899,
+    t_sp_s=20.6396252,
+    u0p=3.03923187,
+    ap=(124834.756, -201780.339, 181459.991, -31136.8846, -421946.064, -582104.247, 6613954.9, -11016866.5, -377994.302, 11697291.9, 273574.043, -11953016.3, 5685686.28),
     t_ambient_k=298.15,
-    thermal_mass=47.7699712,
-    thermal_tau_s=443.002592,
-    r0_activation_k=7.60596667,
-    k_activation_k=19.0768806,
+    thermal_mass=47.7077894,
+    thermal_tau_s=442.95203,
+    r0_activation_k=9.06508125,
+    k_activation_k=1.04678599,
 )
-VTC6 = Cell("Sony-Murata VTC6 18650 (identified on the CMU eVTOL dataset)", VTC6_PARAMS, 10942.7645, 0.0208178643)
+VTC6 = Cell("Sony-Murata VTC6 18650 (identified on the CMU eVTOL dataset)", VTC6_PARAMS, 10942.8444, 0.0208113676)

@@ -26,6 +26,7 @@ from .cmu_data import (
     MISSION_FILE,
     MISSION_POWER_W,
     REST_AFTER,
+    REST_CURRENT_A,
     TAKEOFF,
     CellLog,
     MissionLog,
@@ -45,15 +46,23 @@ ZERO_C = 273.15
 HOLD_OUTS = ("none", "landing", "cell")
 
 
-def reference_segment(log: CellLog, number: int = 0, name: str = "c5") -> FitSegment:
-    """The ``number``-th C/5 reference discharge of a resampled life as a fit segment (full start)."""
+REST_STEPS = 10  # steps at 0 A before a reference discharge: the full cell's rest voltage is observed too
+
+
+def reference_segment(log: CellLog, number: int = 0, name: str = "c5", weight: float = 1.0) -> FitSegment:
+    """The ``number``-th C/5 reference discharge of a resampled life as a fit segment: the full cell at
+    rest (the sample before the discharge), then the discharge."""
     ref = reference_discharges(log)[number]
     k = int(np.ceil(log.dt_s / FINE_DT_S))
-    sel = slice(ref.start, ref.stop)
+    rest = ref.start - 1  # the last sample at rest before it (the one before may be half loaded)
+    while rest > 0 and abs(log.current_a[rest]) >= REST_CURRENT_A:
+        rest -= 1
     n = ref.stop - ref.start
-    return FitSegment(name, np.repeat(log.current_a[sel], k), log.dt_s / k, np.arange(1, n + 1) * k - 1,
-                      log.voltage_v[sel], ZERO_C + log.temperature_c[ref.start - 1],
-                      temperature_c=log.temperature_c[sel])
+    current = np.concatenate([np.zeros(REST_STEPS), np.repeat(log.current_a[ref.start:ref.stop], k)])
+    observed = np.concatenate([[REST_STEPS - 1], REST_STEPS + np.arange(1, n + 1) * k - 1])
+    pick = np.r_[rest, ref.start:ref.stop]
+    return FitSegment(name, current, log.dt_s / k, observed, log.voltage_v[pick], ZERO_C + log.temperature_c[rest],
+                      weight=weight, temperature_c=log.temperature_c[pick])
 
 
 def mission_current(log: CellLog, mission: ResampledMission, dt_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:

@@ -93,7 +93,7 @@ def check_step(dt_s: float, cell: CellParameters) -> float:
     """``dt_s`` (s) if it is in :data:`DT_RANGE` and below the cell's fastest time constant (explicit Euler
     is unstable beyond it), else :class:`InputError`."""
     dt = check_range("dt_s", dt_s, *DT_RANGE, " s")
-    fastest = min(cell.t_ohmic_s, cell.t_sn_s, cell.t_sp_s)
+    fastest = cell.fastest_time_constant_s
     if dt >= fastest:
         raise InputError("dt_s", f"{dt:g} s must be below the cell's fastest time constant, {fastest:.3g} s")
     return dt

@@ -71,7 +71,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -258,16 +258,21 @@ def sortie_cover_table(found: dict[int, Sortie], universe: int) -> dict[int, tup
     return best
 
 
-def min_sortie_cover(found: dict[int, Sortie], universe: int) -> list[Sortie]:
+def min_sortie_cover(found: dict[int, Sortie], universe: int,
+                     value: Callable[[int], int] | None = None) -> list[Sortie]:
     """Fewest sorties from ``found`` whose sets partition ``universe`` (a bitmask); ties: less time.
 
-    Exact dynamic programme over the subsets of ``universe`` (3^n). Returns [] if impossible.
+    Exact dynamic programme over the subsets of ``universe`` (3^n). Where no partition covers all of
+    ``universe`` (two destinations each reachable only in a sortie through the same others), the
+    partitionable subset of the largest ``value`` (default: the number of destinations), then the
+    fewest sorties and less time. [] only if no sortie is in ``found``.
     """
     best = sortie_cover_table(found, universe)
-    if universe not in best:
-        return []
-    out = []
     mset = universe
+    if universe not in best:
+        score = value or (lambda m: m.bit_count())
+        mset = max(best, key=lambda m: (score(m), -best[m][0], -best[m][1]))
+    out = []
     while mset:
         s = best[mset][2]
         out.append(found[s])
@@ -374,7 +379,14 @@ def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iter
         route, alts = names(best)
         return done(route, alts)
 
-    cover = min_sortie_cover(found, coverable)
+    cover = min_sortie_cover(found, coverable, lambda m: mask_priority(legs, m))
+    covered = 0
+    for s in cover:
+        covered |= s.mask
+    left = [legs.names[k] for k in range(len(dests)) if coverable >> k & 1 and not covered >> k & 1]
+    if left:
+        msgs.append(f"not visited: {', '.join(left)} (each reachable only in a sortie through destinations "
+                    "that another sortie needs; the cover keeps the most priority)")
     stats["sorties"] = len(cover)
     route, alts = [], []
     for s in cover:

@@ -102,14 +102,20 @@ def _sortie_current(legs: LegTable, level: np.ndarray, nodes: list[int]) -> np.n
 
 
 def _fly_sorties(legs: LegTable, level: np.ndarray, sorties: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:
-    """``(ok, time_s)`` of each sortie flown from a fresh cell on the physics model."""
+    """``(ok, time_s)`` of each sortie flown from a fresh cell on the physics model. A sortie with a leg
+    that no allowed level can fly (two destinations closer than any climb and descent) is not flown:
+    not ok, time inf."""
     m = legs.mission
-    currents = [_sortie_current(legs, level, s) for s in sorties]
-    if not currents:
-        return np.zeros(0, dtype=bool), np.zeros(0)
-    x0 = np.repeat(full_charge(m.battery.q_max).as_array(), len(currents), axis=0)
-    ok, _, _ = fly_batch(currents, x0, m.battery.q_max, m.battery.r0, m.eod_v)
-    return ok, np.array([c.size * DT_S for c in currents])
+    paths = [[legs.home, *s, legs.home] for s in sorties]
+    flyable = np.array([all(level[i, j] >= 0 for i, j in zip(p[:-1], p[1:])) for p in paths], dtype=bool)
+    ok = np.zeros(len(sorties), dtype=bool)
+    times = np.full(len(sorties), np.inf)
+    currents = [_sortie_current(legs, level, s) for s, f in zip(sorties, flyable) if f]
+    if currents:
+        x0 = np.repeat(full_charge(m.battery.q_max).as_array(), len(currents), axis=0)
+        ok[flyable], _, _ = fly_batch(currents, x0, m.battery.q_max, m.battery.r0, m.eod_v)
+        times[flyable] = [c.size * DT_S for c in currents]
+    return ok, times
 
 
 def _first_budgets(legs: LegTable, level: np.ndarray, nodes: list[int]) -> tuple[float, float]:
