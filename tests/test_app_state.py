@@ -585,22 +585,24 @@ def test_failed_takeoff_has_its_voltage_trace_and_an_unsafe_verdict():
     s.close()
 
 
-def test_comparison_inline_names_three_planners_and_the_gap_to_the_oracle():
+def test_comparison_inline_names_the_planners_and_the_gap_to_the_oracle():
     from uam_studio.app.comparison import comparison_table
 
     s = PlannerState(compare="inline")  # the attention planner, as the served app starts
     rows = {r["key"]: r for r in comparison_table(s.comparison)}
     assert [r["label"] for r in comparison_table(s.comparison)] == \
-        ["Attention (default)", "Greedy", "Oracle (exact)"]
+        ["Attention (default)", "DQN (paper)", "Greedy", "Oracle (exact)"]
     assert all(r["status"] == "done" for r in rows.values())
     assert (rows["agent"]["priority"], rows["greedy"]["priority"], rows["oracle"]["priority"]) == (6, 6, 6)
     assert rows["agent"]["gap"] == "matches" and rows["greedy"]["gap"] == "matches"
+    assert rows["paper"]["priority"] == 5 and rows["paper"]["gap"] == "-1 priority (-17%)"  # the paper's beside ours
     assert rows["agent"]["route"] == s.plan["route"]  # the same library call as the shown plan
     assert not s.comparison_pending()
     before = s.comparison
     assert s.apply(policy="greedy") and s.comparison is before  # same mission and agent: same rows
     assert s.apply(policy="dqn")  # the paper's DQN takes the agent row
     rows = {r["key"]: r for r in comparison_table(s.comparison)}
+    assert "paper" not in rows  # the agent row is the paper's DQN already
     assert rows["agent"]["label"] == "DQN (paper)" and rows["agent"]["priority"] == 5
     assert rows["agent"]["gap"] == "-1 priority (-17%)" and rows["agent"]["route"] == s.plan["route"]
     assert s.set_destinations(_spread_rows(9)), s.error  # past 8: the DQN's row is its error
@@ -612,6 +614,21 @@ def test_comparison_inline_names_three_planners_and_the_gap_to_the_oracle():
 
     assert "oracle: the reference solver's plan, not proven optimal" in comparison_html(s)
     assert rows["greedy"]["status"] == "done" and rows["greedy"]["gap"]
+    s.close()
+
+
+def test_comparison_marks_where_the_papers_dqn_cannot_run():
+    from uam_studio.app.comparison import comparison_table
+    from uam_studio.app.planner import comparison_html
+
+    s = PlannerState(compare="inline")
+    assert s.set_destinations(_spread_rows(9)), s.error
+    rows = {r["key"]: r for r in comparison_table(s.comparison)}
+    assert rows["paper"]["status"] == "unavailable" and rows["paper"]["gap"] == ""
+    assert rows["paper"]["error"] == "the paper's DQN holds at most 8 destinations"
+    assert not s.comparison_pending() and rows["agent"]["status"] == "done"
+    html = comparison_html(s)
+    assert "the paper&#x27;s DQN holds at most 8 destinations" in html and "color:#b71c1c" not in html
     s.close()
 
 

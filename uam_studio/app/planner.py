@@ -237,7 +237,8 @@ def _summary_body(state: PlannerState) -> str:
 
 def comparison_html(state: PlannerState) -> str:
     """The planner comparison (``<div class="uam-plan-compare">``): for the shown plan's mission, the
-    learned planner, greedy and the oracle (exact up to 8 destinations, the reference solver's plan
+    learned planner, the paper's DQN beside it (marked where it cannot run: more than 8 destinations),
+    greedy and the oracle (exact up to 8 destinations, the reference solver's plan
     beyond, which the heading then says), each planned by ``plan_mission``: priority reached, places
     reached, charging cycles, lowest physics voltage and the gap to the oracle
     (:func:`~uam_studio.app.comparison.comparison_table`). The row of the selected policy is bold.
@@ -266,6 +267,9 @@ def comparison_html(state: PlannerState) -> str:
         if r.get("status") == "pending":
             rows.append(f"<tr class='uam-compare-{r['key']}' style='{weight}'>{label}"
                         f"<td colspan='5' style='color:#666'>computing...</td></tr>")
+        elif r.get("status") == "unavailable":  # cannot run on this mission: a note, not a failure
+            rows.append(f"<tr class='uam-compare-{r['key']}' style='{weight}'>{label}"
+                        f"<td colspan='5' style='color:#666'>{e(r['error'])}</td></tr>")
         elif r.get("status") == "error":
             rows.append(f"<tr class='uam-compare-{r['key']}' style='{weight}'>{label}"
                         f"<td colspan='5' style='color:#b71c1c'>{e(r['error'] or 'failed')}</td></tr>")

@@ -32,6 +32,7 @@ from uam_studio.app.comparison import (
     COMPARE_LABELS,
     COMPARE_MODES,
     ORACLE_REFERENCE_LABEL,
+    PAPER_POLICY,
     cached_row,
     cancel_comparisons,
     compare_row,
@@ -56,7 +57,7 @@ from uam_studio.app.services import (
 from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight.tables import WIND_RANGE_KTS
-from uam_studio.planning.legs import MAX_DESTINATIONS, check_destination_count
+from uam_studio.planning.legs import MAX_DESTINATIONS, N_MAX, check_destination_count
 from uam_studio.planning.missions.mission import (
     COORD_RANGE_KM,
     SCENARIOS,
@@ -440,7 +441,7 @@ class PlannerState(param.Parameterized):
     def _compare_specs(self, req: PlanRequest) -> dict[str, tuple[str, str]]:
         """Row name -> (policy value, label): the agent (the selected learned planner: the attention
         planner, the paper's DQN or a retrained agent; with greedy or the oracle selected, the
-        default learned planner), greedy and the oracle."""
+        default learned planner), the paper's DQN beside an attention agent, greedy and the oracle."""
         from uam_studio.planning.solvers.oracle import EXACT_MAX
 
         if req.policy in LEARNED_POLICIES or req.policy.startswith(AGENT_PREFIX):
@@ -450,7 +451,10 @@ class PlannerState(param.Parameterized):
             agent = agent if agent in LEARNED_POLICIES else "attention"
         oracle = "Oracle (exact)" if len(req.mission.destinations) <= EXACT_MAX else ORACLE_REFERENCE_LABEL
         label = COMPARE_LABELS.get(agent) or self.policy_label(agent)
-        return {"agent": (agent, label), "greedy": ("greedy", "Greedy"), "oracle": ("oracle", oracle)}
+        specs = {"agent": (agent, label)}
+        if agent != PAPER_POLICY and not agent.startswith(AGENT_PREFIX):  # a (retrained) DQN is the paper's method
+            specs["paper"] = (PAPER_POLICY, COMPARE_LABELS[PAPER_POLICY])
+        return {**specs, "greedy": ("greedy", "Greedy"), "oracle": ("oracle", oracle)}
 
     def _update_comparison(self) -> None:
         """Compare the shown plan's mission across planners: rows known to this process at once, the
@@ -468,6 +472,10 @@ class PlannerState(param.Parameterized):
         missing = []
         for name, (value, label) in specs.items():
             preq = PlanRequest(req.mission, value)
+            if name == "paper" and len(req.mission.destinations) > N_MAX:
+                rows[name] = {"label": label, "policy": value, "status": "unavailable",
+                              "error": f"the paper's DQN holds at most {N_MAX} destinations"}
+                continue
             row = cached_row(preq)
             rows[name] = {"label": label, "policy": value, **(row or {"status": "pending", "error": None})}
             if row is None:
