@@ -235,3 +235,19 @@ def test_cli_fly_bad_input_is_one_line(args, field):
     out = _cli(str(EXAMPLE), *args)
     assert out.returncode == 2 and out.stdout == ""
     assert out.stderr.startswith(f"error: {field}") and len(out.stderr.strip().splitlines()) == 1
+
+
+def test_a_cell_too_weak_for_the_take_off_is_reported_not_silent():
+    """Regression (hypothesis, tests/test_properties.py): R0 0.44 ohm falls below the cut-off 14 s into the
+    take-off check. The record said 'breached' with no decision; it now holds one abort decision that
+    says why, with the belief the operator had (its fleet prior: too few readings to fit)."""
+    from uam_studio.planning.missions.mission import Battery, Destination, Mission, Vertiport
+    from uam_studio.planning.operations import fly_mission
+
+    mission = Mission("weak", Vertiport(0.0, 0.0, 0.0), (Destination("D1", 20.0, 0.0, 1, 0.0),), "single_charge",
+                      Battery(5000.0, 0.4375), 3.0)
+    rec = fly_mission(mission, seed=0, references=False)
+    assert rec.breached and rec.route == [] and rec.reached_priority == 0
+    assert [e.kind for e in rec.events] == ["abort"]
+    assert "take-off check: the cell fell below the 3 V cut-off after" in rec.events[0].reason
+    assert json.dumps(rec.to_dict(), allow_nan=False)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import os
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -109,3 +110,24 @@ def test_exact_oracle_is_never_beaten(mission):
         other = _plan_or_one_line(mission, policy)
         if other is not None:
             assert oracle.reached_priority >= other.reached_priority, (policy, other.route, oracle.route)
+
+
+@settings(max_examples=6 * SCALE, **_SETTINGS)
+@given(missions(max_dest=N_MAX, scenarios=("single_charge", "multi_charge")), st.integers(0, 10_000))
+def test_fly_any_valid_mission(mission, seed):
+    """The operator flies any valid mission in a world it cannot see (forecast error, sensor noise):
+    a record or a one-line error; never below the cut-off; no NaN in the flown series."""
+    from uam_studio.planning.operations import fly_mission
+
+    try:
+        rec = fly_mission(mission, seed=seed, references=False)
+    except InputError as err:
+        assert "\n" not in str(err) and ": " in str(err)
+        return
+    if rec.breached:  # only a cell too weak for the take-off, and the record says so
+        assert rec.route == [] and rec.events[0].kind == "abort" and "take-off check" in rec.events[0].reason
+    else:
+        assert not rec.route or rec.min_voltage_v >= mission.eod_v
+    for series in (rec.time_s, rec.measured_voltage_v, rec.true_voltage_v, rec.true_current_a):
+        assert np.all(np.isfinite(series))
+    assert json.dumps(rec.to_dict(), allow_nan=False)  # the CLI's JSON

@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from uam_studio.battery.parameters import PAPER_Q_RANGE
+from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.errors import InputError
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.legs import MAX_DESTINATIONS, N_MAX
@@ -122,3 +122,38 @@ def held_out_missions(
         random_mission(rng, n_dest, scenario, r0_range, q_range, radius_km, name=f"held-out {seed}/{k}")
         for k in range(int(n))
     ]
+
+
+ANY_SQUARE_KM = 35.0  # half side (km) of the square around the vertiport that any_valid_mission draws in
+_PLACEMENTS = ("anywhere", "anywhere", "near another", "near the vertiport")
+_DWELLS_S = (0.0, 0.0, 60.0, 600.0)
+
+
+def any_valid_mission(rng: np.random.Generator, max_dest: int = MAX_DESTINATIONS,
+                      scenarios: tuple[str, ...] = SCENARIOS) -> Mission:
+    """A mission anywhere in the documented ranges, not where training and tuning drew theirs:
+    1-``max_dest`` destinations in a 70 km square around the vertiport, placed anywhere, within 2 km of
+    another (near-duplicates) or within 3 km of the vertiport; winds uniform in [-39, 39] kt; priorities
+    1-3; dwell 0, 60 or 600 s; q_max and R0 uniform over the paper's health box; any of ``scenarios``.
+    For robustness checks (benchmarks/bench_properties.py; tests/test_properties.py draws the same way
+    with hypothesis)."""
+    scenario = str(rng.choice(scenarios))
+    n = 1 if scenario == "single_flight" else int(rng.integers(1, max_dest + 1))
+    pts: list[tuple[float, float]] = []
+    half = ANY_SQUARE_KM
+    for _ in range(n):
+        kind = str(rng.choice(_PLACEMENTS))
+        if kind == "near another" and pts:
+            x0, y0 = pts[int(rng.integers(len(pts)))]
+            x, y = x0 + rng.uniform(-2, 2), y0 + rng.uniform(-2, 2)
+        elif kind == "near the vertiport":
+            x, y = rng.uniform(-3, 3), rng.uniform(-3, 3)
+        else:
+            x, y = rng.uniform(-half, half), rng.uniform(-half, half)
+        pts.append((round(float(np.clip(x, -half, half)), 1), round(float(np.clip(y, -half, half)), 1)))
+    w_lo, w_hi = WIND_RANGE_KTS
+    dests = tuple(Destination(f"D{k + 1}", x, y, int(rng.integers(1, 4)), round(float(rng.uniform(w_lo, w_hi)), 1),
+                              float(rng.choice(_DWELLS_S))) for k, (x, y) in enumerate(pts))
+    battery = Battery(round(float(rng.uniform(*PAPER_Q_RANGE)), 1), round(float(rng.uniform(*PAPER_R0_RANGE)), 5))
+    return Mission("any valid mission", Vertiport(0.0, 0.0, round(float(rng.uniform(w_lo, w_hi)), 1)), dests,
+                   scenario, battery, 3.0)

@@ -195,6 +195,9 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
 
     r = world.takeoff_check(takeoff)
     take(r, r.voltage_v)
+    if world.breached:  # a cell too weak for the take-off: it fails within the check, before any plan
+        rec.events.append(op.abort(f"take-off check: the cell fell below the {mission.eod_v:g} V cut-off after "
+                                   f"{r.time_s.size * DT_S:.0f} s of vertical take-off; nothing is flown"))
     first = True
     while not world.breached:
         d = op.decide()

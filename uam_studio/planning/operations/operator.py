@@ -393,6 +393,21 @@ class Operator:
             safe[j, a] = ok[k] and (j == VERTIPORT_SLOT or home_ok[k])
         return safe
 
+    def abort(self, reason: str) -> Decision:
+        """The flight ends before any plan (the take-off check fell below the cut-off): a decision of kind
+        ``"abort"`` with the belief so far (the fleet prior where the readings are too short to fit)."""
+        try:
+            w, w_sd, r, r_sd = self.health()
+        except InputError:
+            mean, cov = self.prior
+            w, w_sd, r, r_sd = float(mean[0]), math.sqrt(cov[0, 0]), float(mean[1]), math.sqrt(cov[1, 1])
+        q, q_sd = Q_REF_C / w, Q_REF_C * w_sd / w ** 2
+        shift, shift_sd = self.winds.shift()
+        d = Decision(self.time_s, self.node, "abort", reason, q, q_sd, r, r_sd, q, r, shift, shift_sd, (), (),
+                     None, None)
+        self.decisions.append(d)
+        return d
+
     def decide(self) -> Decision:
         """Re-plan from here; the returned decision's ``next_to`` / ``next_altitude_m`` is the next leg.
 
