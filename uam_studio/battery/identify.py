@@ -3,9 +3,12 @@
 The model's structure stays Daigle & Kulkarni's (2013); what a different chemistry changes is
 identified from data: the mobile charge q_max (C), the ohmic resistance R0 (ohm), the positive
 electrode's reference potential and its 13 Redlich-Kister coefficients (the open-circuit-voltage
-curve), the Butler-Volmer rate constants and the time constants of the ohmic and surface
-overpotentials. The negative electrode's potential and the mole-fraction ranges keep the published
-values (the positive electrode's curve absorbs the difference).
+curve, kept smooth by a small curvature penalty), the Butler-Volmer rate constants, the time constants
+of the ohmic and surface overpotentials and of the surface-bulk diffusion, the surface volume share,
+the lumped thermal mass and cooling time, and Arrhenius activations of R0 and the rate constants
+(:data:`NONLINEAR`). The negative electrode's potential and the mole-fraction ranges keep the published
+values (the positive electrode's curve absorbs the difference). A log may start partly charged, its
+charge out of full fitted too; measured temperatures are fitted beside the voltage.
 
 The fit (variable projection). With the current as the input, the states (charges, overpotentials,
 temperature) do not depend on the open-circuit-voltage parameters, and the voltage is linear in them.
@@ -22,8 +25,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .electrochem import _redlich_kister
-from .parameters import FARADAY, GAS_CONSTANT, CellParameters
+from .electrochem import _redlich_kister, equilibrium_voltage, surface_fractions
+from .parameters import CellParameters
 from .simulate import simulate
 from .solver import integrate_current
 from .state import rested_state
@@ -72,20 +75,22 @@ class IdentifiedCell:
     removed_c: dict  # segment name -> fitted charge out of full at its start (C), where fitted
 
 
-def _ocv_columns(states: dict, q_total: float, cell: CellParameters) -> tuple[np.ndarray, np.ndarray]:
-    """Columns of the voltage that are linear in (u0p, AP_0..12), and the rest of the voltage (V)."""
-    q_surf = q_total * cell.vol_s_fraction
-    xns = np.clip(states["qns"] / q_surf, 1e-12, 1 - 1e-12)
-    xps = np.clip(states["qps"] / q_surf, 1e-12, 1 - 1e-12)
-    tb = states["tb"]
-    rt_f = GAS_CONSTANT * tb / FARADAY
-    ven = cell.u0n + rt_f * np.log((1.0 - xns) / xns) + _redlich_kister(xns, cell.an)
-    fixed = rt_f * np.log((1.0 - xps) / xps) - ven - states["vo"] - states["vsn"] - states["vsp"]
+def _ocv_basis(xps: np.ndarray, n_ap: int) -> np.ndarray:
+    """The positive electrode's potential terms that are linear in (u0p, AP_0..n_ap-1) at mole fractions
+    ``xps``: columns [1, RK_0(x), ..., RK_{n_ap-1}(x)] (V per unit coefficient), shape [N, 1 + n_ap]."""
     cols = [np.ones_like(xps)]
-    for k in range(len(cell.ap)):
-        unit = tuple(1.0 if j == k else 0.0 for j in range(k + 1))
-        cols.append(_redlich_kister(xps, unit))
-    return np.stack([c.ravel() for c in cols], axis=1), fixed.ravel()
+    for k in range(n_ap):
+        cols.append(_redlich_kister(xps, tuple(1.0 if j == k else 0.0 for j in range(k + 1))))
+    return np.stack([c.ravel() for c in cols], axis=1)
+
+
+def _ocv_columns(states: dict, q_total: float, cell: CellParameters) -> tuple[np.ndarray, np.ndarray]:
+    """Columns of the voltage that are linear in (u0p, AP_0..12), and the rest of the voltage (V): the
+    equilibrium voltage without those terms, less the overpotentials."""
+    xns, xps = surface_fractions(states["qns"], states["qps"], q_total * cell.vol_s_fraction)
+    bare = replace(cell, u0p=0.0, ap=(0.0,) * len(cell.ap))
+    fixed = equilibrium_voltage(xns, xps, states["tb"], bare) - states["vo"] - states["vsn"] - states["vsp"]
+    return _ocv_basis(xps, len(cell.ap)), fixed.ravel()
 
 
 def _with(cell: CellParameters, theta: np.ndarray) -> tuple[CellParameters, float, float]:
@@ -125,10 +130,7 @@ CURVATURE_WEIGHT = 3e-4  # weight of the OCV curve's second differences (V) agai
 
 def _curvature_rows(n_coef: int) -> np.ndarray:
     """Second differences over :data:`_CURVE_X` of each OCV column (rows of the smoothness penalty)."""
-    cols = [np.ones_like(_CURVE_X)]
-    for k in range(n_coef - 1):
-        cols.append(_redlich_kister(_CURVE_X, tuple(1.0 if j == k else 0.0 for j in range(k + 1))))
-    a = np.stack(cols, axis=1)
+    a = _ocv_basis(_CURVE_X, n_coef - 1)
     return (a[2:] - 2 * a[1:-1] + a[:-2]) / np.sqrt(len(_CURVE_X))
 
 

@@ -176,7 +176,7 @@ def real_cell_report(data: str | Path | None = None, refit: bool = True, capacit
                      seed: int = 20260) -> RealCellReport:
     """The validation table (module docstring) from the dataset's folder (``data`` or
     ``$UAM_STUDIO_CMU_DATA``). ``refit=False`` skips the two held-out refits (a minute each);
-    ``capacity=False`` skips the 46 reference discharges."""
+    ``capacity=False`` skips the reference discharges (62 in the four resampled lives)."""
     folder = data_folder(data)
     mission = mission_cycle(load_cell_log(folder / MISSION_FILE))
     report = RealCellReport(measured_landing_min_v=float(_landing_min(mission.log.voltage_v, mission)))
