@@ -373,6 +373,9 @@ def resampled_missions(log: CellLog, rest_s: float = 300.0) -> list[ResampledMis
     rest = np.abs(cur) < REST_CURRENT_A
     starts = np.flatnonzero((cur[1:] > 1.0) & rest[:-1]) + 1
     total = sum(MISSION_DURATIONS_S.values())
+    edges = np.cumsum([0.0] + [MISSION_DURATIONS_S[c] for c in (TAKEOFF, CRUISE, LANDING)])
+    span = {TAKEOFF: (edges[0], edges[1]), CRUISE: (edges[1], edges[2]), LANDING: (edges[2], edges[3]),
+            REST_AFTER: (edges[3], np.inf)}  # s from the mission's start
     found = []
     for s in starts:
         stop = int(np.searchsorted(t, t[s] + total + rest_s))
@@ -381,7 +384,6 @@ def resampled_missions(log: CellLog, rest_s: float = 300.0) -> list[ResampledMis
             continue
         # Bounds on t0 from each sample whose segment is certain.
         lo, hi = t[s - 1], t[s]
-        edges = np.cumsum([0.0] + [MISSION_DURATIONS_S[c] for c in (TAKEOFF, CRUISE, LANDING)])
         seen_cruise = False
         labels = np.full(idx.shape, -1)
         for j, k in enumerate(idx):
@@ -394,8 +396,7 @@ def resampled_missions(log: CellLog, rest_s: float = 300.0) -> list[ResampledMis
             else:
                 continue
             labels[j] = code
-            a = {TAKEOFF: edges[0], CRUISE: edges[1], LANDING: edges[2], REST_AFTER: edges[3]}[code]
-            b = {TAKEOFF: edges[1], CRUISE: edges[2], LANDING: edges[3], REST_AFTER: np.inf}[code]
+            a, b = span[code]
             lo, hi = max(lo, t[k] - b), min(hi, t[k] - a)
         if not (lo <= hi) or not np.any(labels == LANDING):
             continue
