@@ -19,7 +19,7 @@ import numpy as np
 import panel as pn
 import param
 
-from uam_studio.app.battery_lab_state import CELLS, NASA_NAME, VARY, BatteryLabState, family_values
+from uam_studio.app.battery_lab_state import CELLS, VARY, BatteryLabState
 from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE
 from uam_studio.app.session import ensure_bokeh_backend, respond_at_once, session_dispatcher
 from uam_studio.app.style import heading
@@ -29,12 +29,6 @@ FAMILY_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2
 EOD_COLOR = "#d62728"
 SETTING = "this setting"
 BUSY_AFTER_MS = 150  # served: a change taking longer than this shows the busy indicator
-
-
-def family_labels(vary: str, cell: str = NASA_NAME) -> list[str]:
-    """Legend labels of the family varying ``vary`` for ``cell``, in the factor's (ascending) order."""
-    _, values, unit = family_values(vary, cell)
-    return [f"{vary} {v:g} {unit}" for v in values]
 
 
 def eod_text(curve: dict[str, Any]) -> str:
