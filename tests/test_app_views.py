@@ -259,3 +259,56 @@ def test_inputs_are_handled_without_panel_s_50_ms_wait_and_the_page_has_no_globa
     assert "value" not in pn.widgets.FloatSlider(name="x")._priority_changes
     page = create_app(template=True)
     assert isinstance(page, pn.template.BaseTemplate) and page.busy_indicator is None
+
+
+def test_a_server_build_without_a_session_runs_nothing_beside_the_event_loop():
+    """``/liveness?endpoint=/`` builds a document with no session: no comparison thread may update
+    its panes later (Panel would resolve a live session's stylesheets against it: CDN addresses)."""
+    from bokeh.document import Document
+    from panel.io.state import set_curdoc
+
+    from uam_studio.app.main import new_session
+
+    doc = Document()
+    with set_curdoc(doc):
+        session = new_session()
+    assert (session.served, session.compare, session.dispatch) == (False, "off", None)
+    assert session.planner.compare == "off"
+    closed = []
+    session.cleanups.append(lambda: closed.append(True))
+    for callback in list(doc.session_destroyed_callbacks):  # what the server does as it drops the document
+        callback(None)
+    assert closed == [True]
+
+
+def test_a_notebook_session_compares_in_a_thread_and_is_closed_by_its_owner(monkeypatch):
+    from uam_studio.app.main import new_session
+
+    monkeypatch.delenv("UAM_STUDIO_COMPARE", raising=False)
+
+    session = new_session()
+    assert (session.served, session.compare, session.dispatch) == (False, "thread", None)
+    session.planner.close()
+
+
+def test_a_hidden_tab_changing_keeps_the_page_stylesheets_on_this_server():
+    """A pane of a tab that is not shown (dynamic Tabs: its models are detached) changes during a
+    session. Panel 1.9 alone rewrites the session's shared stylesheets to its CDN address, and the
+    browser fetches them from there."""
+    from panel.io.state import set_curdoc, state
+
+    from uam_studio.app.panel_compat import keep_stylesheets_local
+
+    keep_stylesheets_local()  # what create_app does
+    doc = Document()
+    doc._template_variables["dist_url"] = "static/extensions/panel/"  # what a Panel server sets on its page
+    with set_curdoc(doc):
+        hidden = pn.pane.Markdown("before")
+        tabs = pn.Tabs(("Planner", pn.Column(hidden)), ("Fly", pn.pane.Markdown("fly")), dynamic=True)
+        doc.add_root(tabs.get_root(doc))
+        tabs.active = 1
+        assert all(model.document is None for model, _ in hidden._models.values())  # detached
+        hidden.object = "a comparison arrived"
+    urls = [s.url for s in state._stylesheets[doc].values()]  # the session's shared stylesheet objects
+    assert any("loading.css" in u for u in urls)
+    assert not [u for u in urls if u.startswith("http")], urls

@@ -19,6 +19,7 @@ from typing import Any
 import panel as pn
 
 from uam_studio.app.comparison import compare_mode
+from uam_studio.app.panel_compat import keep_stylesheets_local
 from uam_studio.app.planner_state import PlannerState
 from uam_studio.app.session import configure_server_threads, in_server_session, session_dispatcher
 
@@ -95,6 +96,38 @@ def _lazy(build: Callable[[AppSession], Any], session: AppSession) -> pn.viewabl
     return pn.param.ParamFunction(view, lazy=True, sizing_mode="stretch_width")
 
 
+def new_session() -> AppSession:
+    """The shared state of one new session, set up for where it is built.
+
+    - A server session (``panel serve``, ``uam-studio serve``): plans, flights and lab runs in the
+      background, results handed back through the session's dispatcher, comparisons in the
+      server's comparison process, and everything closed when the session is destroyed.
+    - A document a server builds without a session (``/liveness?endpoint=/`` checks that the app
+      builds, then drops it): everything inline and no comparisons. A worker thread updating the
+      panes of such a document would run beside the server's event loop, and Panel would resolve
+      the shared stylesheets of whichever session that loop was serving against this document
+      (Panel's CDN address): pages would then ask the CDN for ``loading.css``.
+    - Jupyter or plain Python (no document being built): everything inline but the comparisons,
+      which run in a thread.
+    """
+    served = in_server_session()
+    server_built = pn.state.curdoc is not None  # a server is building a document, session or not
+    if served:
+        configure_server_threads()
+    dispatch = session_dispatcher()
+    compare = "off" if server_built and not served else compare_mode(served)
+    session = AppSession(PlannerState(background=served, dispatch=dispatch, compare=compare), served, dispatch,
+                         compare)
+    session.cleanups.append(session.planner.close)
+    if server_built:
+        def _cleanup(_ctx: Any) -> None:
+            for fn in session.cleanups:
+                fn()
+
+        pn.state.on_session_destroyed(_cleanup)  # a session's end; at once for a build without one
+    return session
+
+
 def create_app(template: bool | None = None) -> pn.viewable.Viewable:
     """Build one session of the app.
 
@@ -103,14 +136,8 @@ def create_app(template: bool | None = None) -> pn.viewable.Viewable:
     :return: the template, or a ``pn.Tabs`` with one tab per entry of :data:`TABS`.
     """
     pn.extension(*EXTENSIONS, notifications=False)
-    served = in_server_session()
-    if served:
-        configure_server_threads()
-    dispatch = session_dispatcher()
-    compare = compare_mode(served)
-    session = AppSession(PlannerState(background=served, dispatch=dispatch, compare=compare), served, dispatch,
-                         compare)
-    session.cleanups.append(session.planner.close)
+    keep_stylesheets_local()
+    session = new_session()
     tabs = []
     for i, (title, build) in enumerate(TABS):
         if i == 0:
@@ -118,13 +145,7 @@ def create_app(template: bool | None = None) -> pn.viewable.Viewable:
         else:  # built when first shown: a new page loads only what it shows
             tabs.append((title, _lazy(build, session)))
     app = pn.Tabs(*tabs, dynamic=True, sizing_mode="stretch_width")
-    if served:
-        def _cleanup(_ctx: Any) -> None:
-            for fn in session.cleanups:
-                fn()
-
-        pn.state.on_session_destroyed(_cleanup)
-    if template if template is not None else served:
+    if template if template is not None else session.served:
         # No template-wide busy indicator: it would send the browser two extra changes (each a page
         # layout) on every callback; each tab shows its own busy state once work takes longer.
         return pn.template.BootstrapTemplate(title=TITLE, main=[app], header_background="#1f4e79",
