@@ -90,6 +90,20 @@ JS_OVERFLOW = """() => {
 }"""
 
 
+# Every slider's title on the page (shadow roots included): its text, and whether its value is inside
+# the title's visible box (a long name wraps and pushes the value out of sight).
+JS_SLIDER_VALUES = """() => { const out = [];
+  const walk = (root) => { for (const el of root.querySelectorAll('*')) {
+      if (el.classList.contains('bk-slider-title')) {
+        const t = el.getBoundingClientRect(), v = el.querySelector('.bk-slider-value');
+        const r = v ? v.getBoundingClientRect() : null;
+        if (t.width > 0) out.push({text: el.textContent, visible: !!r && r.width > 0 && r.left >= t.left - 0.5 &&
+          r.right <= t.right + 0.5 && r.top >= t.top - 0.5 && r.bottom <= t.bottom + 0.5 && el.scrollHeight <= el.clientHeight + 1});
+      }
+      if (el.shadowRoot) walk(el.shadowRoot); } };
+  walk(document); return out; }"""
+
+
 def _open(page, url):
     page.set_default_timeout(TIMEOUT_MS)
     page.goto(url)
@@ -318,6 +332,9 @@ def test_layout_fits_the_screen_with_the_plan_above_the_fold(browser, app_url, s
             row = [line for line in text.splitlines() if line.startswith(label)]
             assert row and any(ch.isdigit() for ch in row[0]), (label, text)
         assert "Gap to oracle" in text and "matches" in text and "reference" in text
+        sliders = page.evaluate(JS_SLIDER_VALUES)
+        assert any(s["text"].startswith("Wind home") for s in sliders), sliders
+        assert all(s["visible"] and re.search(r":\s*-?\d", s["text"]) for s in sliders), sliders
 
         for tab in ("Planner", "Battery lab", "Retrain"):
             page.locator(".bk-tab", has_text=tab).click()

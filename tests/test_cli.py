@@ -153,3 +153,22 @@ def test_unsafe_route_is_reported(capsys):
 
 def test_commands_registry():
     assert "simulate" in COMMANDS and callable(COMMANDS["simulate"].run)
+
+
+def test_serve_help_names_every_tab():
+    from uam_studio.app.main import TABS
+
+    summary = COMMANDS["serve"].help
+    assert all(title in summary for title, _ in TABS), summary
+
+
+def test_the_readme_simulate_examples_run_on_the_bundled_missions(capsys):
+    import shlex
+
+    lines = [line.strip() for line in (ROOT / "README.md").read_text().splitlines()]
+    examples = [shlex.split(line)[1:] for line in lines if line.startswith("uam-studio simulate assets/")]
+    assert examples
+    for args in examples:
+        args[1] = str(ROOT / args[1])  # the README's paths are from the repository root
+        assert main(args) == 0, args
+        assert "EOD" in capsys.readouterr().out

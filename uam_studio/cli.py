@@ -247,7 +247,8 @@ def _run_fly(args: argparse.Namespace) -> int:
     print(f"flown: reached {reached}; {verdict}; {rec.charging_cycles} recharges; min {rec.min_voltage_v:.3f} V")
     print(f"blind pre-flight plan: {' -> '.join(rec.static_route) or 'nothing'}: "
           f"{'BREACHED, priority 0' if rec.static_breached else f'priority {rec.static_priority}'}")
-    exact = "" if rec.hindsight_exact else " (winds after the events on every leg)"
+    exact = "" if rec.hindsight_exact else (" at each leg's time; the best of the exact plans for each period of "
+                                            "constant winds and the route flown")
     print(f"hindsight oracle (true cell, actual winds{exact}): priority {rec.hindsight_priority}")
     return EXIT_OK
 
@@ -561,7 +562,7 @@ COMMANDS: dict[str, Command] = {
                         _add_evaluate_arguments, _run_evaluate),
     "identify": Command("identify a real cell's parameter set from measured data (prints it as Python)",
                         _add_identify_arguments, _run_identify),
-    "serve": Command("start the app (planner, battery lab, retraining) in a browser", _add_serve_arguments,
+    "serve": Command("start the app in a browser: Planner, Fly, Battery lab and Retrain tabs", _add_serve_arguments,
                      _run_serve),
 }
 

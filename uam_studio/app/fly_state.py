@@ -175,7 +175,8 @@ class FlyState(param.Parameterized):
         own = "BREACHED the cut-off (priority 0)" if r.breached else f"priority {r.reached_priority}"
         blind = "breached" if r.static_breached else f"priority {r.static_priority}"
         return (f"flown: {own}, {r.charging_cycles} recharges, min {r.min_voltage_v:.3f} V · blind pre-flight "
-                f"plan: {blind} · hindsight oracle: priority {r.hindsight_priority}")
+                f"plan: {blind} · hindsight oracle{'' if r.hindsight_exact else ' (best known plan)'}: "
+                f"priority {r.hindsight_priority}")
 
 
 __all__ = ["SPEEDS", "FlyState"]

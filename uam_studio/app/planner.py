@@ -346,7 +346,7 @@ class PlannerView(pn.viewable.Viewer):
                                          value=s.r0, format="0.000", width=w)
         self.eod = pn.widgets.FloatSlider(name="EOD cut-off (V)", start=APP_EOD_RANGE[0], end=APP_EOD_RANGE[1],
                                           step=0.05, value=s.eod_v, format="0.00", width=w)
-        self.return_wind = pn.widgets.FloatSlider(name="Wind back to the vertiport (kt, - = tailwind)",
+        self.return_wind = pn.widgets.FloatSlider(name="Wind home (kt, - = tail)",
                                                   start=WIND_RANGE_KTS[0], end=WIND_RANGE_KTS[1], step=1,
                                                   value=s.return_wind, width=w)
         self._inputs = {"scenario": self.scenario, "policy": self.policy, "q_max": self.q_max, "r0": self.r0,
