@@ -104,6 +104,20 @@ JS_SLIDER_VALUES = """() => { const out = [];
   walk(document); return out; }"""
 
 
+# The voltage figure's leg names (its text labels) and the map's scroll tool (null: the wheel scrolls the page).
+JS_PLOT_FACTS = """() => { const out = {legs: null, map_scroll: 'no map', voltage_legend_inside: null};
+  for (const v of window.Bokeh.index.all_views()) { const m = v.model;
+    if (m.type !== 'Figure' || !m.title || !m.title.text) continue;
+    if (m.title.text.startsWith('Voltage')) {
+      out.legs = m.renderers.filter(r => r.glyph && r.glyph.type === 'Text')
+        .flatMap(r => [...r.data_source.data.text]);
+      out.voltage_legend_inside = m.center.some(c => c.type === 'Legend');
+    }
+    if (m.title.text.startsWith('Map')) out.map_scroll = m.toolbar.active_scroll;
+  }
+  return out; }"""
+
+
 def _open(page, url):
     page.set_default_timeout(TIMEOUT_MS)
     page.goto(url)
@@ -332,6 +346,15 @@ def test_layout_fits_the_screen_with_the_plan_above_the_fold(browser, app_url, s
             row = [line for line in text.splitlines() if line.startswith(label)]
             assert row and any(ch.isdigit() for ch in row[0]), (label, text)
         assert "Gap to oracle" in text and "matches" in text and "reference" in text
+        tabs_bottom = page.locator(".bk-tab").first.bounding_box()
+        voltage_box = page.locator(".uam-voltage").first.bounding_box()
+        assert voltage_box["height"] >= (height - tabs_bottom["y"] - tabs_bottom["height"]) / 3, (voltage_box, size)
+        facts = page.evaluate(JS_PLOT_FACTS)
+        route = re.search(r"Route:\s*(.*?)\n", summary.inner_text() + "\n").group(1)
+        n_legs = route.count("\u2192")
+        assert n_legs >= 2 and len(facts["legs"]) == n_legs, (facts, route)  # a name at each leg's take-off
+        assert all(re.match(r"#\d+ ", t) for t in facts["legs"]), facts
+        assert facts["voltage_legend_inside"] is False and facts["map_scroll"] is None, facts
         sliders = page.evaluate(JS_SLIDER_VALUES)
         assert any(s["text"].startswith("Wind home") for s in sliders), sliders
         assert all(s["visible"] and re.search(r":\s*-?\d", s["text"]) for s in sliders), sliders

@@ -63,7 +63,7 @@ def test_route_legs_colours_cycles_and_marks_failed_legs():
     legs = route_legs(plan, rows, (0.0, 0.0))
     assert legs["cycle"] == [1, 1, 2, 2]
     assert legs["completed"] == [True, True, False, False]
-    assert legs["leg"][2] == "3: V\u2192B" and legs["label"][2] == "1000 m"
+    assert legs["leg"][2] == "3: V\u2192B" and legs["label"][2] == "#3 1000 m"
     assert route_legs(None, rows, (0.0, 0.0))["leg"] == []
 
 
@@ -163,7 +163,7 @@ def test_policy_select_starts_on_the_attention_planner():
 
 
 def test_map_route_has_a_cycle_legend_and_out_and_back_labels_do_not_overlap():
-    from uam_studio.app.planner import altitude_labels
+    from uam_studio.app.planner import NAME_CHAR_KM, altitude_labels, leg_arrows
 
     state = PlannerState(policy="greedy")
     view = PlannerView(state)
@@ -176,11 +176,17 @@ def test_map_route_has_a_cycle_legend_and_out_and_back_labels_do_not_overlap():
     plan = {"route": ["A", "vertiport", "B", "vertiport"], "altitudes_m": [1000, 500, 500, 500],
             "reached": ["A", "B"], "safe": True}
     legs = route_legs(plan, rows, (0.0, 0.0))
-    labels = altitude_labels(legs, [(0.0, 0.0), (30.0, 0.0), (0.0, 30.0)])
-    assert sorted(labels["text"]) == ["1000/500 m", "500 m"]  # one label per out-and-back pair
+    labels = altitude_labels(legs, [(0.0, 0.0), (30.0, 0.0), (0.0, 30.0)], ["", "A ***", "B *"])
+    assert sorted(labels["text"]) == ["#1/#2 1000/500 m", "#3/#4 500 m"]  # one per out-and-back pair, in order
     for x, y in zip(labels["x"], labels["y"]):
         for nx, ny in [(0.0, 0.0), (30.0, 0.0), (0.0, 30.0)]:
             assert np.hypot(x - nx, y - ny) > 10.0  # away from the places and their names
+    # a long name is an obstacle over its whole width: a label clears its right end too
+    wide = altitude_labels(legs, [(0.0, 0.0), (30.0, 0.0), (0.0, 30.0)], ["", "A very long destination name", "B"])
+    right_end = (30.0 + 0.5 * NAME_CHAR_KM * len("A very long destination name"), 5.5)
+    assert all(np.hypot(x - right_end[0], y - right_end[1]) > 3.0 for x, y in zip(wide["x"], wide["y"]))
+    arrows = leg_arrows(legs)  # one arrowhead per leg, pointing the way it is flown
+    assert len(arrows["x"]) == 4 and np.allclose(arrows["angle"][0], -np.pi / 2)  # V -> A: east
     assert legs["legend"] == ["cycle 1", "cycle 1", "cycle 2", "cycle 2"]
     state.close()
 

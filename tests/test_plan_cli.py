@@ -56,7 +56,12 @@ def _check_result(res: dict, mission: dict) -> None:
     assert type(res["exact"]) is bool if res["policy"] == "oracle" else res["exact"] is None
     assert all(isinstance(m, str) for m in res["messages"])
     phys = res["physics"]
-    assert set(phys) == {"time_s", "voltage_v", "eod_s"}
+    assert set(phys) == {"time_s", "voltage_v", "eod_s", "leg_start_s"}
+    starts = phys["leg_start_s"]  # one take-off time per leg flown, in order, inside the series
+    assert len(starts) <= len(res["route"]) and starts == sorted(starts)
+    assert all(type(x) is float and 0.0 <= x <= (phys["time_s"][-1] if phys["time_s"] else 0.0) for x in starts)
+    if res["safe"]:
+        assert len(starts) == len(res["route"])
     assert len(phys["time_s"]) == len(phys["voltage_v"]) <= MAX_POINTS
     assert all(type(x) is float for x in phys["voltage_v"])
     assert res["safe"] == (phys["eod_s"] is None)

@@ -74,7 +74,7 @@ def route_legs(plan: dict[str, Any] | None, state_rows: list[dict[str, Any]], ve
         row = {"leg": f"{i}: {'V' if prev == VERTIPORT else prev}\u2192{'V' if to == VERTIPORT else to}",
                "from": prev, "to": to, "x0": x0, "y0": y0, "x1": x1, "y1": y1, "altitude_m": float(alt),
                "cycle": cycle, "color": FAILED_COLOR if failed else cycle_color(cycle),
-               "completed": not failed, "label": f"{alt:g} m",
+               "completed": not failed, "label": f"#{i} {alt:g} m",
                "legend": FAILED_LABEL if failed else f"cycle {cycle}"}
         for c in LEG_COLUMNS:
             out[c].append(row[c])
@@ -88,18 +88,27 @@ ALT_LABEL_OFFSET_KM = 4.0  # altitude labels sit this far beside their leg
 ALT_LABEL_SPOTS = ((0.5, 1), (0.5, -1), (0.35, 1), (0.35, -1), (0.65, 1), (0.65, -1))  # (along, side)
 
 
-def altitude_labels(legs: dict[str, list], nodes: list[tuple[float, float]] = ()) -> dict[str, list]:
-    """One map label per pair of places the route flies between: the altitudes of its legs in flying
-    order (``"500 m"``, or ``"1000/500 m"`` out and back), so out-and-back legs share one label.
+NAME_CHAR_KM = 2.6  # width of one character of a map name (9 pt bold) in km, at the map's default zoom
+
+
+def altitude_labels(legs: dict[str, list], nodes: list[tuple[float, float]] = (),
+                    names: list[str] = ()) -> dict[str, list]:
+    """One map label per pair of places the route flies between: the legs' numbers and altitudes in
+    flying order (``"#1 500 m"``, or ``"#1/#2 1000/500 m"`` out and back), so out-and-back legs
+    share one label.
 
     Each label goes beside its leg, at the first of :data:`ALT_LABEL_SPOTS` (midpoint or a third of
-    the way, either side) that lies farthest from every place of ``nodes`` (x, y km; their markers
-    and the names drawn above them) and from the labels placed before it. Columns ``x``, ``y``, ``text``.
+    the way, either side) that lies farthest from every place of ``nodes`` (x, y km; their markers),
+    from the names drawn above them (``names``, aligned with ``nodes``; their whole width) and from
+    the labels placed before it. Columns ``x``, ``y``, ``text``.
     """
     groups: dict[tuple[str, str], list[int]] = {}
     for i, (a, b) in enumerate(zip(legs["from"], legs["to"])):
         groups.setdefault(tuple(sorted((a, b))), []).append(i)
     obstacles = [p for x, y in nodes for p in ((x, y), (x, y + 5.5))]
+    for (x, y), name in zip(nodes, names):
+        half = 0.5 * NAME_CHAR_KM * len(name)
+        obstacles += [(x + dx, y + 5.5) for dx in np.linspace(-half, half, max(2, int(2 * half / 3.0) + 1))]
     out: dict[str, list] = {"x": [], "y": [], "text": []}
     for idx in groups.values():
         i = idx[0]
@@ -115,11 +124,42 @@ def altitude_labels(legs: dict[str, list], nodes: list[tuple[float, float]] = ()
         else:
             best = spots[0]
         alts = [legs["altitude_m"][k] for k in idx]
+        numbers = "/".join(f"#{k + 1}" for k in idx)
         out["x"].append(best[0])
         out["y"].append(best[1])
-        out["text"].append(f"{alts[0]:g} m" if len(set(alts)) == 1 else "/".join(f"{a:g}" for a in alts) + " m")
+        out["text"].append(f"{numbers} " + (f"{alts[0]:g} m" if len(set(alts)) == 1
+                                            else "/".join(f"{a:g}" for a in alts) + " m"))
         obstacles.append(best)
     return out
+
+
+ARROW_AT = 0.6  # arrowheads sit this far along their leg
+
+
+def leg_arrows(legs: dict[str, list]) -> dict[str, list]:
+    """An arrowhead per leg, :data:`ARROW_AT` of the way along it and pointing the way it is flown:
+    columns ``x``, ``y`` (km), ``angle`` (rad, counter-clockwise from pointing up, Bokeh's
+    triangle marker) and ``color``."""
+    out: dict[str, list] = {"x": [], "y": [], "angle": [], "color": []}
+    for x0, y0, x1, y1, color in zip(legs["x0"], legs["y0"], legs["x1"], legs["y1"], legs["color"]):
+        if x0 == x1 and y0 == y1:
+            continue
+        out["x"].append(x0 + ARROW_AT * (x1 - x0))
+        out["y"].append(y0 + ARROW_AT * (y1 - y0))
+        out["angle"].append(float(np.arctan2(y1 - y0, x1 - x0) - np.pi / 2))
+        out["color"].append(color)
+    return out
+
+
+def label_background(plot: Any, element: Any) -> None:
+    """Bokeh hook: labels on a white box, so that route lines do not run through their text."""
+    glyph = plot.handles["glyph"]
+    glyph.background_fill_color, glyph.background_fill_alpha = "white", 0.85
+
+
+def no_scroll_zoom(plot: Any, element: Any) -> None:
+    """Bokeh hook: the mouse wheel scrolls the page, not the plot (the zoom stays in the toolbar)."""
+    plot.state.toolbar.active_scroll = None
 
 
 def _equal(a: Any, b: Any) -> bool:
@@ -295,6 +335,7 @@ VOLTAGE_POINTS = 800  # samples per series drawn in the voltage plot (its lowest
 CONTROLS_WIDTH = 260
 MAP_FRAME_PX = 440  # the map's square frame (data area)
 WIDE_MIN_PX = 440  # narrowest width of the plan column and of the extra plots' column
+VOLTAGE_HEIGHT_PX = 340  # the voltage plot: over a third of the tab's height at 1366x768 and 1920x1080
 
 
 def _route_legend(plot: Any, element: Any) -> None:
@@ -452,7 +493,7 @@ class PlannerView(pn.viewable.Viewer):
         if in_server_session():
             extras = tuple(pn.panel(lambda p=p: p, defer_load=True) for p in extras)
         results = pn.Column(pn.Row(heading("Plan"), self.busy), self.summary,
-                            self.compare, self.voltage_plot, min_width=WIDE_MIN_PX, sizing_mode="stretch_width",
+                            self.voltage_plot, self.compare, min_width=WIDE_MIN_PX, sizing_mode="stretch_width",
                             styles={"flex": f"1 1 {WIDE_MIN_PX}px"}, css_classes=["uam-results"])
         more = pn.FlexBox(*extras, flex_wrap="wrap", gap="10px", min_width=WIDE_MIN_PX,
                           sizing_mode="stretch_width", styles={"flex": f"1 1 {WIDE_MIN_PX}px"},
@@ -617,13 +658,14 @@ class PlannerView(pn.viewable.Viewer):
         data = route_legs(s.plan, rows, (s.vertiport_x_km, s.vertiport_y_km))
         data["nodes"] = [(float(s.vertiport_x_km), float(s.vertiport_y_km))] + \
             [(float(r["x_km"]), float(r["y_km"])) for r in rows]
+        data["names"] = [""] + [f"{r['name']} {'*' * int(r['priority'])}" for r in rows]  # as drawn on the map
         return data
 
     @staticmethod
     def _points_element(data: pd.DataFrame) -> hv.Points:
         return hv.Points(data, kdims=["x_km", "y_km"], vdims=["name", "priority", "wind_kts", "dwell_s"]).opts(
             size=14, color="#444444", line_color="white", line_width=2, tools=["hover"],
-            active_tools=["point_draw", "wheel_zoom"],
+            active_tools=["point_draw"], hooks=[no_scroll_zoom],
         )
 
     def _names_element(self, data: pd.DataFrame) -> hv.Overlay:
@@ -651,7 +693,10 @@ class PlannerView(pn.viewable.Viewer):
             "lost": hv.Segments({**empty, "failed": []}, kd, ["color", "leg", "altitude_m", "failed"]).opts(
                 color=FAILED_COLOR, line_width=3, line_dash="dashed", tools=["hover"], hooks=[_route_legend]),
             "labels": hv.Labels({"x": [], "y": [], "text": []}, ["x", "y"], "text").opts(
-                text_font_size="8pt", text_color="#333333", text_align="center", text_baseline="middle"),
+                text_font_size="8pt", text_color="#333333", text_align="center", text_baseline="middle",
+                hooks=[label_background]),
+            "arrows": hv.Points({"x": [], "y": [], "angle": [], "color": []}, ["x", "y"], ["angle", "color"]).opts(
+                marker="triangle", angle="angle", color="color", size=13, line_color="white", line_width=1),
         }
 
     def _route_element(self, data: dict[str, list]) -> hv.Overlay:
@@ -664,8 +709,8 @@ class PlannerView(pn.viewable.Viewer):
         failed = pick(~done)
         failed["failed"] = failed.pop("legend")
         tpl = self._route_tpl
-        return (tpl["legs"].clone(pick(done)) * tpl["lost"].clone(failed)
-                * tpl["labels"].clone(altitude_labels(data, data.get("nodes", []))))
+        return (tpl["legs"].clone(pick(done)) * tpl["lost"].clone(failed) * tpl["arrows"].clone(leg_arrows(data))
+                * tpl["labels"].clone(altitude_labels(data, data.get("nodes", []), data.get("names", []))))
 
     @staticmethod
     def _altitude_element(data: dict[str, list]) -> hv.Overlay:
@@ -688,7 +733,8 @@ class PlannerView(pn.viewable.Viewer):
 
     def _voltage_data(self) -> dict[str, Any]:
         """The voltage plot's series (minutes, V): physics (the plan's, or the failed take-off's),
-        Dynaformer, its band, and the EOD line; with the axis ranges, which always include EOD.
+        Dynaformer, its band, and the EOD line; each leg's take-off (min) and name (``legs``); with
+        the axis ranges, which always include EOD.
         Each series is drawn with at most :data:`VOLTAGE_POINTS` samples, its lowest ones kept."""
         s = self.state
         plan = s.plan or {}
@@ -704,9 +750,14 @@ class PlannerView(pn.viewable.Viewer):
         values = np.concatenate([v, vp, lo, hi, [eod]])
         t_end = float(t[-1]) if t.size and t[-1] > 0 else 1.0
         i, ip, ib = (_display_index(x, VOLTAGE_POINTS) for x in (v, vp, lo))
+        starts = [] if s.takeoff else list(plan.get("physics", {}).get("leg_start_s", []))
+        route = list(plan.get("route", []))
+        legs = ([round(float(t0) / 60.0, 3) for t0 in starts],
+                [f"#{k} {to}" for k, to in enumerate(route[:len(starts)], 1)])
+        y0, y1 = float(values.min()) - 0.05, float(values.max()) + 0.05
         return {"physics": (t[i], v[i]), "predicted": (tp[ip], vp[ip]), "band": (tb[ib], lo[ib], hi[ib]),
-                "level": float(band["level"]), "eod": float(eod), "xlim": (0.0, t_end),
-                "ylim": (float(values.min()) - 0.05, float(values.max()) + 0.05)}
+                "level": float(band["level"]), "eod": float(eod), "xlim": (0.0, t_end), "legs": legs,
+                "ylim": (y0, y1 + 0.08 * (y1 - y0))}  # headroom for the legs' names
 
     @staticmethod
     def _voltage_templates() -> dict[str, Any]:
@@ -715,25 +766,35 @@ class PlannerView(pn.viewable.Viewer):
         kd, vd = "time (min)", "voltage (V)"
         empty = ([0.0], [0.0])
         band = hv.Area(([0.0], [0.0], [0.0]), kd, [vd, "high"], label="Dynaformer 90%").opts(
-            color="#ff7f0e", alpha=0.25, line_alpha=0, framewise=True)
+            color="#ff7f0e", alpha=0.35, line_color="#ff7f0e", line_alpha=0.8, line_width=1, framewise=True)
+        leg_lines = hv.VLines([], kd).opts(color="#777777", line_dash="dotted", line_width=1)
+        leg_names = hv.Labels({"x": [], "y": [], "text": []}, ["x", "y"], "text").opts(
+            text_font_size="8pt", text_color="#444444", text_align="left", text_baseline="top", xoffset=0.0)
         phys = hv.Curve(empty, kd, vd, label="physics").opts(color="#1f77b4", line_width=2, framewise=True)
         pred = hv.Curve(empty, kd, vd, label="Dynaformer").opts(color="#ff7f0e", line_width=2, line_dash="dashed",
                                                                framewise=True)
         eod = hv.Curve(empty, kd, vd, label="EOD").opts(color=FAILED_COLOR, line_width=1.5, line_dash="dotted",
                                                         framewise=True)
-        overlay = (band * phys * pred * eod).opts(responsive=True, height=240, legend_position="top", legend_cols=4,
-                                                  show_grid=True, fontsize={"legend": "8pt"})
-        return {"overlay": overlay, "band": band, "physics": phys, "predicted": pred, "eod": eod}
+        overlay = (band * phys * pred * eod * leg_lines * leg_names).opts(
+            responsive=True, height=VOLTAGE_HEIGHT_PX, legend_position="top", legend_cols=4, show_grid=True,
+            fontsize={"legend": "8pt", "title": "10pt"},
+            title="Voltage: physics (what happens) vs Dynaformer (predicted)")
+        return {"overlay": overlay, "band": band, "physics": phys, "predicted": pred, "eod": eod,
+                "leg_lines": leg_lines, "leg_names": leg_names}
 
     def _voltage_element(self, data: dict[str, Any]) -> hv.Overlay:
         tpl = self._voltage_tpl
         x0, x1 = data["xlim"]
+        starts, names = data["legs"]
         tb, lo, hi = data["band"]
         return tpl["overlay"].clone([
             tpl["band"].clone((tb, lo, hi), label=f"Dynaformer {100 * data['level']:.0f}%"),
             tpl["physics"].clone(data["physics"]),
             tpl["predicted"].clone(data["predicted"]),
             tpl["eod"].clone(([x0, x1], [data["eod"]] * 2), label=f"EOD {data['eod']:g} V"),
+            tpl["leg_lines"].clone(list(starts)),
+            tpl["leg_names"].clone({"x": [x + 0.004 * (x1 - x0) for x in starts], "y": [data["ylim"][1]] * len(starts),
+                                    "text": list(names)}),
         ])
 
     def _health_data(self) -> tuple[float, float] | None:

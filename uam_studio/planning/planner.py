@@ -132,7 +132,8 @@ class PlanResult(Mapping[str, Any]):
     :param reached: destinations reached on the physics model, in order.
     :param reached_priority: their total priority.
     :param predicted: the Dynaformer's voltage, ``{"time_s", "voltage_v"}`` (s, V), or None.
-    :param physics: the physics model's voltage, ``{"time_s", "voltage_v", "eod_s"}`` (s, V, s or None).
+    :param physics: the physics model's voltage, ``{"time_s", "voltage_v", "eod_s", "leg_start_s"}``
+        (s, V, s or None, and the take-off time (s) of each leg that took off, in flying order).
     :param safe: the route stays at or above the cut-off.
     :param min_voltage_v: its lowest voltage (V), None for an empty route.
     :param exact: oracle: True for a proven optimum, False for the reference solver's plan; None for
@@ -250,7 +251,7 @@ def plan_mission(
         messages.append(check.message)
     prio = {d.name: d.priority for d in m.destinations}
 
-    physics: dict[str, Any] = {"time_s": [], "voltage_v": [], "eod_s": None}
+    physics: dict[str, Any] = {"time_s": [], "voltage_v": [], "eod_s": None, "leg_start_s": []}
     predicted: dict[str, Any] | None = None
     if check.sim is not None:
         sim = check.sim
@@ -262,7 +263,8 @@ def plan_mission(
         keep = [int(np.argmin(sim.voltage_v))] + ([int(np.argmin(v_pred))] if v_pred is not None else [])
         idx = _sample_index(sim.time_s.size, keep)
         t = _round_list(sim.time_s[idx])
-        physics = {"time_s": t, "voltage_v": _round_list(sim.voltage_v[idx]), "eod_s": _round_opt(sim.eod_s)}
+        physics = {"time_s": t, "voltage_v": _round_list(sim.voltage_v[idx]), "eod_s": _round_opt(sim.eod_s),
+                   "leg_start_s": [round(float(leg.start_s), 1) for leg in sim.legs if leg.start_s is not None]}
         if v_pred is not None:
             predicted = {"time_s": list(t), "voltage_v": _round_list(v_pred[idx])}
 
