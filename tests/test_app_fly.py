@@ -24,15 +24,20 @@ def test_fly_plays_back_and_moves_the_aircraft(state):
     view = FlyView(state)
     state.fly()
     assert state.error == "" and state.record is not None and state.playing
-    assert "hindsight oracle" in state.status
+    assert state.status.startswith("flying:") and "hindsight" not in state.status and "priority" not in state.status
     x0, y0, leg0 = state.position()
     state.tick(5.0)  # 5 s of wall time at x100
     assert state.t_s == pytest.approx(500.0)
+    seen = state.series_until()  # nothing after the playback time
+    for key in ("measured", "true", "predicted"):
+        assert len(seen[key][0]) == int((state.record.time_s <= 500.0).sum()) and max(seen[key][0]) <= 500.0 / 60
+    assert [round(t * 60) for t, _ in seen["decisions"]] == [20]
     x1, y1, leg1 = state.position()
     assert (x1, y1) != (x0, y0) and leg1 == 0
     assert [r["at"] for r in state.decisions_until()] == ["vertiport"]
     state.t_s = state.end_s
     assert len(state.decisions_until()) == len(state.record.events)
+    assert "hindsight oracle" in state.status and "flown: priority" in state.status  # the result, at the landing
     state.tick(1.0)
     assert not state.playing  # the end stops the playback
     assert view.__panel__() is not None
@@ -47,6 +52,7 @@ def test_injected_wind_change_reflies_from_the_playback_time(state):
     assert state.t_s == 1000.0 and state.events[-1].start_s == 1000
     after = state.record
     assert after is not before and after.wind_events == ["wind+30@1000"]
+    assert state.series_until()["changes"] == [(1000 / 60, "wind +30 kt")]  # the change is marked where it began
     # the flight up to the change is the same flight
     k = int((after.time_s <= 1000.0).sum())
     assert (after.measured_voltage_v[:k] == before.measured_voltage_v[:k]).all()
@@ -63,3 +69,21 @@ def test_bad_mission_is_a_line_not_a_traceback():
     assert s.error.startswith("destinations:") and s.record is None
     s.inject()
     assert "fly first" in s.error
+
+
+def test_the_record_and_the_plan_save_as_csv(state):
+    from uam_studio.planning import plan_csv, plan_mission
+    from uam_studio.planning.operations import record_csv
+
+    state.fly()
+    rows = record_csv(state.record).splitlines()
+    assert rows[0].split(",")[:2] == ["time_s", "measured_voltage_v"] and "true_voltage_v" in rows[0]
+    assert len(rows) == state.record.time_s.size + 1
+    assert all(len(r.split(",")) == len(rows[0].split(",")) for r in rows)
+    plan = plan_mission(load_mission(EXAMPLE), policy="greedy")
+    lines = plan_csv(plan).splitlines()
+    assert plan_csv(plan.to_dict()).splitlines() == lines
+    legs = [r.split(",") for r in lines[1:]]
+    assert [int(r[1]) for r in legs] == sorted(int(r[1]) for r in legs)  # legs in flying order
+    assert {r[2] for r in legs} == set(plan.route) and len(legs) == len(plan.physics["time_s"])
+    assert all(float(r[4]) >= 3.0 for r in legs)  # the safe plan's physics voltage

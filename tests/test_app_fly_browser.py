@@ -22,6 +22,26 @@ TIMEOUT_MS = 120_000
 pytestmark = pytest.mark.skipif(not Path(CHROMIUM).exists(), reason="chromium is not installed")
 
 
+# The Fly voltage figure: the playback time (min), the latest time any curve reaches, the latest decision
+# marker, and the wind-change labels.
+JS_VOLTAGE = """() => { const out = {now_min: null, curve_max_min: 0, last_decision_min: 0, changes: []};
+  for (const v of window.Bokeh.index.all_views()) { const m = v.model;
+    if (m.type !== 'Figure' || !m.title || !m.title.text.startsWith('voltage: measured')) continue;
+    for (const r of m.renderers) { if (!r.glyph || !r.data_source) continue; const d = r.data_source.data;
+      const t = d.time_min ? [...d.time_min] : [];
+      if (r.glyph.type === 'Line' && t.length) out.curve_max_min = Math.max(out.curve_max_min, ...t);
+      if (r.glyph.type === 'Scatter' && t.length) out.last_decision_min = Math.max(...t);
+      if (r.glyph.type === 'Text' && d.text) out.changes = [...d.text];
+    }
+    for (const c of [...m.renderers, ...m.center]) if (c.type === 'Span' && c.dimension === 'height') out.now_min = c.location;
+  }
+  return out; }"""
+
+
+def _speed(page, value: str) -> None:
+    page.locator(".bk-input-group", has_text="Playback speed").locator("select").select_option(value)
+
+
 def test_fly_tab_flies_plays_and_takes_a_wind_change(browser, app_url):
     page = browser.new_page(viewport={"width": 1366, "height": 768})
     outside = []
@@ -30,16 +50,26 @@ def test_fly_tab_flies_plays_and_takes_a_wind_change(browser, app_url):
         else None)
     page.goto(app_url, timeout=TIMEOUT_MS)
     page.locator(".bk-tab", has_text="Fly").click(timeout=TIMEOUT_MS)
+    _speed(page, "10")
     page.locator("button", has_text="Fly the mission").click(timeout=TIMEOUT_MS)
     status = page.locator(".uam-fly-status")
-    status.get_by_text("hindsight oracle").wait_for(timeout=TIMEOUT_MS)
-    status.get_by_text("flown:").wait_for(timeout=TIMEOUT_MS)
+    status.get_by_text("flying:").wait_for(timeout=TIMEOUT_MS)
     # playback moves the clock and fills the decision log
     log = page.locator(".uam-fly-log")
     log.get_by_text("vertiport").first.wait_for(timeout=TIMEOUT_MS)
+    # while it plays, nothing from its future: no result, no curve or decision after the playback time
+    text = status.inner_text()
+    assert "hindsight" not in text and "flown:" not in text, text
+    facts = page.evaluate(JS_VOLTAGE)
+    assert facts["now_min"] is not None and facts["curve_max_min"] <= facts["now_min"] + 0.1, facts
+    assert facts["last_decision_min"] <= facts["now_min"] + 0.1, facts
     page.locator("button", has_text="Inject wind change now").click(timeout=TIMEOUT_MS)
-    status.get_by_text("hindsight oracle").wait_for(timeout=TIMEOUT_MS)
-    # the playback goes on from the injection: the next arrival's re-plan appears in the log
+    page.wait_for_function(f"() => ({JS_VOLTAGE})().changes.length === 1", timeout=TIMEOUT_MS)
+    assert page.evaluate(JS_VOLTAGE)["changes"][0] == "wind +25 kt"  # the change, marked where it began
+    _speed(page, "1000")  # on to the landing: then the result and the references show
+    status.get_by_text("hindsight oracle (best known plan)").wait_for(timeout=TIMEOUT_MS)
+    status.get_by_text("flown:").wait_for(timeout=TIMEOUT_MS)
+    # the playback went on from the injection: the next arrival's re-plan is in the log
     log.get_by_text(re.compile(r"plan (changed|unchanged)")).first.wait_for(timeout=TIMEOUT_MS)
     if os.environ.get("UAM_SCREENSHOTS") == "1":
         page.screenshot(path=str(ROOT / "assets" / "screenshots" / "fly_tab.png"))

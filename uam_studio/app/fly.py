@@ -9,6 +9,7 @@ time. Everything comes from :class:`~uam_studio.app.fly_state.FlyState`; this vi
 
 from __future__ import annotations
 
+import io
 from typing import Any
 
 import holoviews as hv
@@ -20,10 +21,13 @@ import param
 from uam_studio.app.fly_state import SPEEDS, FlyState
 from uam_studio.app.session import ensure_bokeh_backend
 from uam_studio.planning import VERTIPORT
+from uam_studio.planning.operations import record_csv
 
 TICK_MS = 250
 MAP_PX = 340
 EOD_COLOR = "#d62728"
+EVENT_COLOR = "#e377c2"  # injected wind changes
+TIME_DIM, VOLT_DIM = hv.Dimension("time_min", label="time (min)"), hv.Dimension("voltage_v", label="voltage (V)")
 ROUTE_COLORS = ("#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b")
 
 
@@ -49,18 +53,21 @@ class FlyView(pn.viewable.Viewer):
                                                  value=s.inject_kts, width=w)
         self.inject_button = pn.widgets.Button(name="Inject wind change now", button_type="warning", width=w)
         self.clear_button = pn.widgets.Button(name="Clear wind changes", width=w)
+        self.download = pn.widgets.FileDownload(callback=self._record_csv, filename="flight_record.csv",
+                                                label="Save the flight record (CSV)", width=w, disabled=True,
+                                                css_classes=["uam-fly-csv"])
         self.clock = pn.widgets.FloatSlider(name="Playback time (s)", start=0, end=1, value=0, width=w)
         self.status = pn.pane.Markdown("", css_classes=["uam-fly-status"], sizing_mode="stretch_width")
         self.error = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width")
         self.progress = pn.indicators.LoadingSpinner(value=False, size=24, name="flying...", visible=False)
         self.log = pn.widgets.Tabulator(pd.DataFrame(columns=["t (s)", "at", "q_max (C)", "R0 (ohm)",
                                                               "wind shift (kt)", "next", "reason"]),
-                                        disabled=True, show_index=False, height=220, sizing_mode="stretch_width",
-                                        css_classes=["uam-fly-log"], layout="fit_data_stretch")
+                                        disabled=True, show_index=False, height=300, sizing_mode="stretch_width",
+                                        css_classes=["uam-fly-log"], layout="fit_data_stretch",
+                                        formatters={"reason": {"type": "textarea"}}, widths={"reason": 520})
         self.pos = hv.streams.Pipe(data=[])
         self.seen = hv.streams.Pipe(data=[])
-        self.measured = hv.streams.Pipe(data=([], []))
-        self.true = hv.streams.Pipe(data=([], []))
+        self.series = hv.streams.Pipe(data=s.series_until())
         self.now = hv.streams.Pipe(data=0.0)
         self.map_pane = pn.pane.HoloViews(self._map(), width=MAP_PX + 10, height=MAP_PX + 10)
         self.volt_pane = pn.pane.HoloViews(self._voltage(), sizing_mode="stretch_width", height=MAP_PX)
@@ -83,7 +90,7 @@ class FlyView(pn.viewable.Viewer):
         self._layout = pn.Row(
             pn.Column(self.fly_button, self.progress, self.play, self.speed, self.clock, pn.Spacer(height=10),
                       self.inject_kts, self.inject_button, self.clear_button, pn.Spacer(height=10),
-                      self.seed, self.sigma, self.noise, width=230),
+                      self.seed, self.sigma, self.noise, pn.Spacer(height=10), self.download, width=230),
             pn.Column(self.error, self.status, pn.Row(self.map_pane, self.volt_pane, sizing_mode="stretch_width"),
                       self.log, sizing_mode="stretch_width"),
             sizing_mode="stretch_width", css_classes=["uam-fly"])
@@ -113,40 +120,49 @@ class FlyView(pn.viewable.Viewer):
         cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
         return (vp * dests * labels * flown * craft).opts(
             title="flight", width=MAP_PX, height=MAP_PX, legend_position="bottom_right", show_legend=False,
+            xlabel="x (km)", ylabel="y (km)",
             xlim=(cx - span / 2, cx + span / 2), ylim=(cy - span / 2, cy + span / 2))
 
     def _voltage(self) -> hv.Overlay:
-        """The voltage figure of the current record: its static layers (prediction, cut-off, decisions) and
-        the measured and true voltage up to the playback time, which :meth:`_on_time` streams in."""
+        """The voltage figure of the current record (time in min): the cut-off, and up to the playback
+        time the operator's prediction, the world's true voltage, the sensor's readings on top, the
+        decisions made and the wind changes that have started (:meth:`_on_time` streams them in)."""
         s = self.state
         r = s.record
         eod = (s.mission_flown or s._mission()).eod_v
+        cutoff = hv.HLine(eod, label="EOD cut-off").opts(color=EOD_COLOR, line_dash="dashed", line_width=2)
         if r is None or r.time_s.size == 0:
-            empty = hv.Curve([], "time_s", "voltage_v").opts(responsive=True, height=MAP_PX)
-            return (empty * hv.HLine(eod, label="EOD").opts(color=EOD_COLOR, line_dash="dashed")).opts(
-                title="voltage: fly the mission to see it", ylim=(eod - 0.1, 4.25))
-        t = r.time_s
-        measured = hv.DynamicMap(lambda data: hv.Curve(data, "time_s", "voltage_v", label="measured").opts(
-            color="#7f7f7f", line_width=1), streams=[self.measured])
-        true = hv.DynamicMap(lambda data: hv.Curve(data, "time_s", "voltage_v", label="true (hidden)").opts(
-            color="#2ca02c", line_width=1.5), streams=[self.true])
-        now = hv.DynamicMap(lambda data: hv.VLine(float(data) if np.ndim(data) == 0 else 0.0).opts(
-            color="black", line_width=1), streams=[self.now])
-        marks = hv.Points([(d.time_s, eod + 0.02, d.reason) for d in r.events], ["time_s", "voltage_v"],
-                          ["decision"], label="decisions").opts(marker="triangle", size=10, color="black",
-                                                                tools=["hover"])
+            empty = hv.Curve([], TIME_DIM, VOLT_DIM).opts(responsive=True, height=MAP_PX)
+            return (empty * cutoff).opts(title="voltage: fly the mission to see it", ylim=(eod - 0.1, 4.25))
         lo = min(eod, float(r.true_voltage_v.min())) - 0.08
-        return (hv.Curve((t, r.predicted_voltage_v), "time_s", "voltage_v", label="predicted by the operator").opts(
-            color="#1f77b4", line_dash="dashed", line_width=2)
-            * measured * true
-            * hv.HLine(eod, label="EOD cut-off").opts(color=EOD_COLOR, line_dash="dashed", line_width=2)
-            * marks * now).opts(title="voltage: measured vs predicted, and the cut-off", responsive=True,
-                                height=MAP_PX, legend_position="right", ylim=(lo, 4.25),
-                                xlim=(0, float(t[-1]) * 1.02))
+
+        def curve(key: str, label: str, **style: Any) -> hv.DynamicMap:
+            return hv.DynamicMap(lambda data: hv.Curve(data[key], TIME_DIM, VOLT_DIM, label=label).opts(**style),
+                                 streams=[self.series])
+
+        predicted = curve("predicted", "predicted by the operator", color="#1f77b4", line_dash="dashed", line_width=2)
+        true = curve("true", "true (hidden from the operator)", color="#2ca02c", line_width=1, alpha=0.8)
+        measured = curve("measured", "measured (sensor)", color="#333333", line_width=1.5)
+        marks = hv.DynamicMap(lambda data: hv.Points(
+            [(t, eod + 0.02, reason) for t, reason in data["decisions"]], [TIME_DIM, VOLT_DIM], ["decision"],
+            label="decisions").opts(marker="triangle", size=10, color="black", tools=["hover"]),
+            streams=[self.series])
+        changes = hv.DynamicMap(lambda data: hv.VLines([t for t, _ in data["changes"]], TIME_DIM).opts(
+            color=EVENT_COLOR, line_width=2, line_dash="dashdot") * hv.Labels(
+            {"x": [t for t, _ in data["changes"]], "y": [4.22] * len(data["changes"]),
+             "text": [text for _, text in data["changes"]]}, ["x", "y"], "text").opts(
+            text_color=EVENT_COLOR, text_font_size="9pt", text_align="left", text_baseline="top", xoffset=0.5),
+            streams=[self.series])
+        now = hv.DynamicMap(lambda data: hv.VLine(float(data) / 60.0 if np.ndim(data) == 0 else 0.0).opts(
+            color="black", line_width=1), streams=[self.now])
+        return (predicted * true * measured * cutoff * marks * changes * now).opts(
+            title="voltage: measured vs predicted, and the cut-off", responsive=True, height=MAP_PX,
+            legend_position="right", ylim=(lo, 4.25), xlim=(0, float(r.time_s[-1]) / 60.0 * 1.02))
 
     # ------------------------------------------------------------------ updates
     def _on_record(self, *_: Any) -> None:
         s = self.state
+        self.download.disabled = s.record is None
         self.clock.end = max(1.0, s.end_s)
         self.map_pane.object = self._map()
         self.volt_pane.object = self._voltage()
@@ -164,13 +180,15 @@ class FlyView(pn.viewable.Viewer):
         path = [(m.node(n).x_km, m.node(n).y_km) for n in nodes[: max(leg, 0) + 1]] + [(x, y)]
         self.seen.send([path])
         self.pos.send([(x, y)])
-        r = s.record
-        k = int(np.searchsorted(r.time_s, s.t_s, side="right"))
-        self.measured.send((r.time_s[:k], r.measured_voltage_v[:k]))
-        self.true.send((r.time_s[:k], r.true_voltage_v[:k]))
+        self.series.send(s.series_until())
         self.now.send(float(s.t_s))
         rows = s.decisions_until()
         self.log.value = pd.DataFrame(rows) if rows else self.log.value.iloc[0:0]
+
+    def _record_csv(self) -> io.StringIO:
+        """The shown flight's record as CSV (:func:`~uam_studio.planning.operations.record_csv`)."""
+        r = self.state.record
+        return io.StringIO(record_csv(r) if r is not None else "")
 
     def _on_clock(self, event: param.parameterized.Event) -> None:
         self.state.t_s = float(event.new)

@@ -15,12 +15,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import param
 
 from uam_studio.app.services import FLIGHT_POOL, LatestWorker, one_line
 from uam_studio.errors import InputError
-from uam_studio.planning import Mission
-from uam_studio.planning.operations import FlightRecord, WindEvent, fly_mission, position_at
+from uam_studio.planning import VERTIPORT, Mission
+from uam_studio.planning.operations import FlightRecord, WindEvent, fly_mission, parse_event, position_at
 from uam_studio.planning.operations.world import MAX_NOISE_MV, MAX_SIGMA_KT
 
 SPEEDS = (10, 30, 100, 300, 1000)  # playback speed-ups (simulated s per wall s)
@@ -115,7 +116,7 @@ class FlyState(param.Parameterized):
             return
         self.error = ""
         self.param.update(record=rec, mission_flown=flight.mission)
-        self.status = self.summary()
+        self._show_status()
         if not flight.keep_time:
             self.playing = True
 
@@ -167,11 +168,42 @@ class FlyState(param.Parameterized):
                  "next": d.next_to or "-", "reason": d.reason}
                 for d in reversed(self.record.events) if d.time_s <= self.t_s]
 
+    @param.depends("t_s", watch=True)
+    def _show_status(self) -> None:
+        if self.record is not None and not self.running:
+            self.status = self.summary()
+
+    @property
+    def landed(self) -> bool:
+        """The playback has reached the flight's end: its result may be shown."""
+        return self.record is not None and self.t_s >= self.end_s
+
+    def series_until(self) -> dict[str, Any]:
+        """The record's series up to the playback time (time in min): ``measured``, ``true`` and
+        ``predicted`` voltages (V), the ``decisions`` made so far (time min, reason) and the wind
+        ``changes`` that have started (time min, text)."""
+        r = self.record
+        if r is None:
+            return {"measured": ([], []), "true": ([], []), "predicted": ([], []), "decisions": [], "changes": []}
+        k = int(np.searchsorted(r.time_s, self.t_s, side="right"))
+        t = r.time_s[:k] / 60.0
+        return {"measured": (t, r.measured_voltage_v[:k]), "true": (t, r.true_voltage_v[:k]),
+                "predicted": (t, r.predicted_voltage_v[:k]),
+                "decisions": [(d.time_s / 60.0, d.reason) for d in r.events if d.time_s <= self.t_s],
+                "changes": [(e.start_s / 60.0, f"wind {e.delta_kts:+g} kt")
+                            for e in map(parse_event, r.wind_events) if e.start_s <= self.t_s]}
+
     def summary(self) -> str:
-        """One line on the flight and its references."""
+        """One line on the flight as far as the playback has gone: the time and the destinations reached
+        so far while it plays; the result and its references (the blind plan, hindsight) once it has
+        landed. Nothing from the future of the playback."""
         r = self.record
         if r is None:
             return ""
+        if not self.landed:
+            reached = [to for to, end in zip(r.route, r.leg_end_s) if end <= self.t_s and to != VERTIPORT]
+            return (f"flying: {self.t_s / 60:.1f} of {self.end_s / 60:.1f} min · reached so far: "
+                    f"{', '.join(reached) or 'none'} · the results show at the landing")
         own = "BREACHED the cut-off (priority 0)" if r.breached else f"priority {r.reached_priority}"
         blind = "breached" if r.static_breached else f"priority {r.static_priority}"
         return (f"flown: {own}, {r.charging_cycles} recharges, min {r.min_voltage_v:.3f} V · blind pre-flight "

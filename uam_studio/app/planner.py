@@ -30,6 +30,7 @@ from uam_studio.app.session import (
 )
 from uam_studio.app.style import NOTE_STYLE, heading
 from uam_studio.flight.tables import WIND_RANGE_KTS
+from uam_studio.planning import plan_csv
 from uam_studio.planning.missions.mission import COORD_RANGE_KM, SCENARIOS, VERTIPORT
 
 CYCLE_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22")
@@ -400,6 +401,9 @@ class PlannerView(pn.viewable.Viewer):
 
         self.download = pn.widgets.FileDownload(callback=self._download, filename="mission.json",
                                                 label="Save mission (JSON)", button_type="primary", width=w)
+        self.download_plan = pn.widgets.FileDownload(callback=self._download_plan, filename="plan.csv",
+                                                     label="Save the plan's voltage (CSV)", width=w,
+                                                     css_classes=["uam-plan-csv"])
         self.upload = pn.widgets.FileInput(accept=".json,application/json", multiple=False, width=w,
                                            name="Load mission (JSON)")
         self.upload.param.watch(self._on_upload, "value")
@@ -476,7 +480,7 @@ class PlannerView(pn.viewable.Viewer):
         w = CONTROLS_WIDTH - 20
         controls = pn.Column(
             heading("Mission"), self.scenario, self.policy, self.q_max, self.r0, self.eod, self.return_wind,
-            heading("File"), self.download, self.upload, self.remove, self.reset,
+            heading("File"), self.download, self.download_plan, self.upload, self.remove, self.reset,
             pn.pane.Markdown("Mission files: the JSON that `uam-studio plan` reads.", width=w, styles=NOTE_STYLE),
             width=CONTROLS_WIDTH, css_classes=["uam-controls"],
         )
@@ -648,6 +652,12 @@ class PlannerView(pn.viewable.Viewer):
         name = "".join(c if c.isalnum() or c in "-_" else "_" for c in self.state.mission_name) or "mission"
         self.download.filename = f"{name}.json"
         return io.StringIO(self.state.to_json())
+
+    def _download_plan(self) -> io.StringIO:
+        """The shown plan's voltage series as CSV (:func:`~uam_studio.planning.plan_csv`)."""
+        name = "".join(c if c.isalnum() or c in "-_" else "_" for c in self.state.mission_name) or "mission"
+        self.download_plan.filename = f"{name}_plan.csv"
+        return io.StringIO(plan_csv(self.state.plan) if self.state.plan else "")
 
     # ------------------------------------------------------------------ plots
 

@@ -172,6 +172,25 @@ class PlanResult(Mapping[str, Any]):
 
 _RESULT_FIELDS = tuple(f.name for f in fields(PlanResult))
 
+PLAN_CSV_COLUMNS = ("time_s", "leg", "to", "altitude_m", "physics_voltage_v", "dynaformer_voltage_v")
+
+
+def plan_csv(plan: Mapping[str, Any]) -> str:
+    """A plan's voltage series as CSV text (a :class:`PlanResult` or its :meth:`~PlanResult.to_dict`):
+    time (s), the leg flown then (number, destination, altitude m), the physics model's voltage (V)
+    and the Dynaformer's (V, empty without a prediction)."""
+    phys = plan["physics"]
+    pred = (plan.get("predicted") or {}).get("voltage_v") or []
+    starts = list(phys.get("leg_start_s", []))
+    route, alts = list(plan["route"]), list(plan["altitudes_m"])
+    lines = [",".join(PLAN_CSV_COLUMNS)]
+    for i, (t, v) in enumerate(zip(phys["time_s"], phys["voltage_v"])):
+        k = int(np.searchsorted(starts, t, side="right"))  # legs that took off by t
+        leg = (str(k), route[k - 1], f"{alts[k - 1]:g}") if 0 < k <= len(route) else ("", "", "")
+        p = f"{pred[i]:.4f}" if i < len(pred) else ""
+        lines.append(",".join((f"{t:g}", *leg, f"{v:.4f}", p)))
+    return "\n".join(lines) + "\n"
+
 
 # ----------------------------------------------------------------------------- entry point
 

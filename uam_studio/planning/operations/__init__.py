@@ -2,10 +2,10 @@
 sensors, and the flight loop that records both sides.
 
 Public API: :func:`fly_mission` -> :class:`FlightRecord`, :class:`World`, :class:`Operator`,
-:func:`parse_event` (``"wind+30@1200"``), :class:`WindEvent`.
+:func:`parse_event` (``"wind+30@1200"``), :class:`WindEvent`, :func:`record_csv` (the record's series as CSV).
 """
 
-from uam_studio.planning.operations.fly import FlightRecord, fly_mission, position_at
+from uam_studio.planning.operations.fly import FlightRecord, fly_mission, position_at, record_csv
 from uam_studio.planning.operations.operator import Decision, Operator
 from uam_studio.planning.operations.world import (
     DEFAULT_FORECAST_SIGMA_KT,
@@ -20,5 +20,5 @@ from uam_studio.planning.operations.world import (
 __all__ = [
     "DEFAULT_FORECAST_SIGMA_KT", "DEFAULT_SENSOR_NOISE_MA", "DEFAULT_SENSOR_NOISE_MV", "Decision",
     "FlightRecord", "Operator", "Readings", "WindEvent", "World", "fly_mission", "parse_event",
-    "position_at",
+    "position_at", "record_csv",
 ]

@@ -127,6 +127,20 @@ class FlightRecord:
         return out
 
 
+RECORD_CSV_COLUMNS = ("time_s", "measured_voltage_v", "measured_current_a", "predicted_voltage_v",
+                      "true_voltage_v", "true_current_a")
+
+
+def record_csv(rec: FlightRecord) -> str:
+    """The record's 1 Hz series as CSV text, one row per second: time (s); what the operator had
+    (``measured_*``: the sensors, V and A; ``predicted_voltage_v``: its prediction, V); and what the
+    world was (``true_*``, V and A, hidden from the operator during the flight)."""
+    lines = [",".join(RECORD_CSV_COLUMNS)]
+    cols = [np.asarray(getattr(rec, c), dtype=float) for c in RECORD_CSV_COLUMNS]
+    lines += [",".join(f"{x:.5g}" if i == 0 else f"{x:.5f}" for i, x in enumerate(row)) for row in zip(*cols)]
+    return "\n".join(lines) + "\n"
+
+
 def _priority(mission: Mission, reached: Sequence[str]) -> int:
     return int(sum(mission.node(n).priority for n in reached if n != VERTIPORT))
 
