@@ -359,9 +359,11 @@ def test_layout_fits_the_screen_with_the_plan_above_the_fold(browser, app_url, s
         assert any(s["text"].startswith("Wind home") for s in sliders), sliders
         assert all(s["visible"] and re.search(r":\s*-?\d", s["text"]) for s in sliders), sliders
 
-        for tab in ("Planner", "Battery lab", "Retrain"):
+        for tab in ("Planner", "Battery lab", "Retrain", "Glossary"):
             page.locator(".bk-tab", has_text=tab).click()
-            if tab == "Battery lab":
+            if tab == "Glossary":
+                page.locator(".uam-glossary").get_by_text("Hindsight oracle").wait_for()
+            elif tab == "Battery lab":
                 page.locator(".uam-lab-summary").get_by_text("this setting").wait_for()
             elif tab == "Retrain":
                 page.locator(".uam-train-status").get_by_text("episodes:").wait_for()

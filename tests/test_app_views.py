@@ -318,3 +318,16 @@ def test_a_hidden_tab_changing_keeps_the_page_stylesheets_on_this_server():
     urls = [s.url for s in state._stylesheets[doc].values()]  # the session's shared stylesheet objects
     assert any("loading.css" in u for u in urls)
     assert not [u for u in urls if u.startswith("http")], urls
+
+
+def test_the_glossary_defines_what_the_app_shows_and_is_a_tab():
+    from uam_studio.app.main import TABS
+    from uam_studio.glossary import GLOSSARY, glossary_markdown
+
+    terms = " ".join(GLOSSARY)
+    for word in ("EOD", "RTE", "PC1 / PC2", "Stars", "Min V", "Hindsight oracle", "q_max", "R0", "90% band"):
+        assert word in terms, word
+    assert all(text.strip() for text in GLOSSARY.values())
+    build = dict(TABS)["Glossary"]
+    pane = build(None)
+    assert pane.object.count("**") == 2 * len(GLOSSARY) and glossary_markdown() in pane.object

@@ -562,7 +562,8 @@ COMMANDS: dict[str, Command] = {
                         _add_evaluate_arguments, _run_evaluate),
     "identify": Command("identify a real cell's parameter set from measured data (prints it as Python)",
                         _add_identify_arguments, _run_identify),
-    "serve": Command("start the app in a browser: Planner, Fly, Battery lab and Retrain tabs", _add_serve_arguments,
+    "serve": Command("start the app in a browser: Planner, Fly, Battery lab, Retrain and Glossary tabs",
+                     _add_serve_arguments,
                      _run_serve),
 }
 

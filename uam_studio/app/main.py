@@ -77,11 +77,19 @@ def _fly_tab(session: AppSession) -> Any:
     return view
 
 
+def _glossary_tab(session: AppSession) -> Any:
+    from uam_studio.glossary import glossary_markdown
+
+    return pn.pane.Markdown("## Glossary\n\n" + glossary_markdown(), css_classes=["uam-glossary"],
+                            sizing_mode="stretch_width", styles={"max-width": "900px"})
+
+
 TABS: list[tuple[str, Callable[[AppSession], Any]]] = [
     ("Planner", _planner_tab),
     ("Fly", _fly_tab),
     ("Battery lab", _battery_lab_tab),
     ("Retrain", _retrain_tab),
+    ("Glossary", _glossary_tab),
 ]
 """The tabs in order: (title, build). Append a pair to add a tab."""
 

@@ -1,0 +1,52 @@
+"""The words a student meets in the app, the CLI and the notebooks, each defined once.
+
+:data:`GLOSSARY` maps a term to its definition (plain text, units in brackets); the app's Glossary
+tab and the README's list are made from it.
+"""
+
+from __future__ import annotations
+
+GLOSSARY: dict[str, str] = {
+    "q_max (C)": "The battery's capacity in coulombs: the charge it can deliver when new. It falls as the "
+                 "cell ages (the NASA cell of the paper: 7600 C new). Smaller q_max: the voltage falls sooner.",
+    "R0 (ohm)": "The cell's internal (ohmic) resistance. It rises as the cell ages. A current I costs I x R0 "
+                "volts at once, so a high R0 hurts most in the high-current take-off and climb.",
+    "EOD (end of discharge)": "The cut-off voltage (3.0 V by default). A flight whose voltage goes below it "
+                              "has breached: it is unsafe, and scores 0.",
+    "Min V": "The lowest voltage a plan reaches on the physics model (V). The margin is Min V minus the EOD.",
+    "Physics model": "The electrochemical battery model (NASA's, as in the paper) that says what really "
+                     "happens to the cell's voltage for a given current. Every plan is checked on it.",
+    "Dynaformer": "A small transformer that reads the first 20 s of take-off current and voltage, infers "
+                  "the battery's health from them, and predicts the voltage for a whole planned flight.",
+    "90% band": "The range in which the Dynaformer expects the voltage to stay 9 times out of 10, given "
+                "what it could infer about the battery's health.",
+    "RTE (relative time error)": "|predicted EOD time - true EOD time| / true EOD time: how far off, as a "
+                                 "fraction of the flight, a prediction of when the cut-off is reached is.",
+    "PC1 / PC2": "The two principal components of the Dynaformer's health reading: two numbers that "
+                 "summarise the battery's state. PC1 follows R0 closely, PC2 follows q_max.",
+    "Stars (priority)": "How much a destination is worth: 1 to 3 stars. A plan's score is the sum of the "
+                        "stars of the destinations it reaches safely.",
+    "Charging cycle": "The flying between two landings at the vertiport; landing there recharges the cell.",
+    "Scenario": "single_flight: one leg only. single_charge: one charge, back to the vertiport at the end. "
+                "multi_charge: as many recharges at the vertiport as the plan wants.",
+    "Wind (kt)": "Knots along the leg: positive is a headwind (more power, more time), negative a tailwind. "
+                 "A destination's wind is the wind on legs flown to it.",
+    "Oracle (exact)": "An exhaustive search that finds the best plan when it knows the true battery and "
+                      "the true winds. It is the yardstick: 'gap to oracle' is how far a planner is from it.",
+    "Take-off check": "The first 20 s of every flight, measured before the plan is made: the aircraft "
+                      "infers its battery's health from them.",
+    "Blind pre-flight plan": "The plan made after the take-off check and then flown to the end without "
+                             "looking again, whatever the weather does.",
+    "Hindsight oracle": "The best plan knowing the true battery and the winds as they actually were at each "
+                        "leg's time. With no wind change it is the exact oracle's plan; after an injected "
+                        "change it is the best known plan (the oracle's plan for each wind period, and the "
+                        "route flown, each re-flown in the same world).",
+}
+
+
+def glossary_markdown() -> str:
+    """:data:`GLOSSARY` as a Markdown definition list (term in bold, one paragraph each)."""
+    return "\n\n".join(f"**{term}**: {text}" for term, text in GLOSSARY.items())
+
+
+__all__ = ["GLOSSARY", "glossary_markdown"]
