@@ -332,7 +332,11 @@ def test_retrain_state_trains_saves_and_the_planner_can_use_it(home):
     rows = rs.poll()
     assert not rs.running and rs.error == "" and rs.timesteps >= 300
     assert rows and rs.episodes == len(rows) and rows[-1]["episode"] == len(rows)
-    assert set(rows[0]) == {"episode", "reached", "cycles", "reached_ma", "cycles_ma"}
+    assert set(rows[0]) == {"episode", "reached", "cycles", "reward", "breach", "reached_ma", "cycles_ma",
+                            "reward_ma", "breach_ma"}
+    assert all(r["breach"] in (0.0, 1.0) and 0.0 <= r["breach_ma"] <= 1.0 for r in rows)
+    n = min(len(rows), RetrainState.MA_WINDOW)  # the moving average is the mean of the last episodes
+    assert rows[n - 1]["reward_ma"] == pytest.approx(sum(r["reward"] for r in rows[:n]) / n)
     path = Path(rs.agent_path)
     assert path.parent == home / "agents" and path.is_file() and "saved" in rs.status
     card = json.loads(zipfile.ZipFile(path).read("card.json"))

@@ -17,6 +17,7 @@ import uam_studio.planning.agents.dqn as dqn_mod
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.dqn import MaskedDQN, action_mask, masked_target
 from uam_studio.planning.agents.training import (
+    FINE_TUNE,
     DQNTrainConfig,
     EpisodeStats,
     greedy_action,
@@ -131,6 +132,26 @@ def test_exploration_samples_only_valid_actions_and_all_of_them():
     for _ in range(50):
         a, buffer_a = model._sample_action(learning_starts=10**6, n_envs=64)
         assert mask[np.arange(64), a].all() and (a == buffer_a).all()
+
+
+def test_warm_up_acts_with_the_network_when_not_random():
+    """A fine-tuning run's warm-up (``random_warmup=False``, :data:`FINE_TUNE`) plays the agent's own
+    (valid, greedy at epsilon 0) actions; the default warm-up is uniform among the valid ones."""
+    rng = np.random.default_rng(1)
+    obs = random_masked_obs(rng, 64)
+    mask = obs[:, N + 1:] > 0.5
+    own = small_model(random_warmup=False)
+    own.exploration_rate, own.num_timesteps, own._last_obs = 0.0, 0, obs
+    greedy, _ = own.predict(obs, deterministic=True)
+    for _ in range(5):
+        a, buffer_a = own._sample_action(learning_starts=10**6, n_envs=64)
+        assert (a == greedy).all() and (a == buffer_a).all()
+    uniform = small_model()
+    uniform.exploration_rate, uniform.num_timesteps, uniform._last_obs = 0.0, 0, obs
+    draws = [uniform._sample_action(learning_starts=10**6, n_envs=64)[0] for _ in range(20)]
+    assert all(mask[np.arange(64), a].all() for a in draws)
+    assert any((a != greedy).any() for a in draws)
+    assert FINE_TUNE["random_warmup"] is False
 
 
 def test_greedy_never_picks_invalid_even_with_highest_q():

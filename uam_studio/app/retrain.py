@@ -21,7 +21,7 @@ import panel as pn
 import param
 
 from uam_studio.app.planner_state import PlannerState
-from uam_studio.app.retrain_state import RetrainState
+from uam_studio.app.retrain_state import CURVE_COLUMNS, RetrainState
 from uam_studio.app.services import registry
 from uam_studio.app.session import ensure_bokeh_backend
 from uam_studio.app.style import NOTE_STYLE, heading
@@ -30,7 +30,6 @@ from uam_studio.planning.missions.mission import SCENARIOS
 
 POLL_MS = 1000  # curves and progress once a second: each update re-renders two plots
 SETTINGS_WIDTH = 270  # px, the settings' widgets
-CURVE_COLUMNS = ["episode", "reached", "cycles", "reached_ma", "cycles_ma"]
 
 
 class RetrainView(pn.viewable.Viewer):
@@ -90,6 +89,12 @@ class RetrainView(pn.viewable.Viewer):
         self.cycles_plot = pn.pane.HoloViews(hv.DynamicMap(self._cycles_element, streams=[self.buffer, ref]),
                                              linked_axes=False, css_classes=["uam-curve-cycles"],
                                              sizing_mode="stretch_width")
+        self.reward_plot = pn.pane.HoloViews(hv.DynamicMap(self._reward_element, streams=[self.buffer]),
+                                             linked_axes=False, css_classes=["uam-curve-reward"],
+                                             sizing_mode="stretch_width")
+        self.breach_plot = pn.pane.HoloViews(hv.DynamicMap(self._breach_element, streams=[self.buffer]),
+                                             linked_axes=False, css_classes=["uam-curve-breach"],
+                                             sizing_mode="stretch_width")
         self._poller = None
         s.param.watch(self._on_status, ["running", "status", "error", "timesteps", "episodes", "agent_path"])
         s.param.watch(self._on_reference_inputs, ["source", "scenario"])
@@ -106,9 +111,12 @@ class RetrainView(pn.viewable.Viewer):
             "cell (q_max, R0) each episode; *random missions* draws a new mission every episode. "
             f"Agents are saved in `{html.escape(str(agents_dir()))}` (set `UAM_STUDIO_HOME` to move it), "
             "never over the bundled ones, and appear in the Planner's policy list. *Fine-tune bundled* starts "
-            "from the scenario's bundled agent instead of random weights: on an 8-destination map this "
-            "reached the exact oracle's priority in 3 minutes where random weights did not "
-            "(`benchmarks/RESULTS.md`).", sizing_mode="stretch_width", styles={"font-size": "13px"})
+            "from the scenario's bundled agent instead of random weights, and plays its own (slightly "
+            "randomised) choices from the first episode on, where a run from random weights first plays ~100 "
+            "episodes at random to fill its memory: on an 8-destination map fine-tuning reached the exact "
+            "oracle's priority in 3 minutes where random weights did not (`benchmarks/RESULTS.md`). This tab "
+            "trains the paper's DQN; the default attention planner trains with `uam-studio train attention`.",
+            sizing_mode="stretch_width", styles={"font-size": "13px"})
         rewards = pn.pane.HTML("alpha: reward per destination x priority; beta: penalty per charging stop; "
                                "gamma: penalty for an end of discharge", width=w, styles=NOTE_STYLE,
                                margin=(0, 10))
@@ -117,7 +125,8 @@ class RetrainView(pn.viewable.Viewer):
                              pn.Row(self.alpha, self.beta, self.gamma), rewards, pn.Row(self.steps, self.seed),
                              pn.Row(self.start, self.stop), self.progress, self.progress_text, width=w + 20,
                              css_classes=["uam-train-settings"])
-        curves = pn.Column(self.status, self.reference_text, self.reached_plot, self.cycles_plot, min_width=520,
+        curves = pn.Column(self.status, self.reference_text, self.reached_plot, self.cycles_plot, self.reward_plot,
+                           self.breach_plot, min_width=520,
                            sizing_mode="stretch_width", styles={"flex": "1 1 520px"})
         return pn.Column(intro, self.error, pn.FlexBox(controls, curves, flex_wrap="wrap", gap="10px",
                                                        sizing_mode="stretch_width"),
@@ -186,16 +195,18 @@ class RetrainView(pn.viewable.Viewer):
         dashed line, with axes that fit them all (from the first episode on: 50 episodes wide)."""
         n = float(data["episode"].max()) if len(data) else 0.0
         x1 = max(50.0, n)
-        raw = hv.Curve(data, "episode", column, label="per episode").opts(color=raw_color, line_width=1)
+        raw = hv.Curve(data, "episode", column, label="per episode").opts(color=raw_color, line_width=1, alpha=0.35)
         ma = hv.Curve(data, "episode", f"{column}_ma", label=f"moving average ({RetrainState.MA_WINDOW})").opts(
             color=ma_color, line_width=2.5)
         ref_y = [reference] * 2 if reference is not None else [np.nan] * 2
         ref = hv.Curve(([0.0, x1], ref_y), "episode", column, label=ref_label).opts(
             color="#333333", line_width=1.5, line_dash="dashed")
         top = max([1.0, float(data[column].max()) if len(data) else 0.0, reference or 0.0])
+        bottom = min(0.0, float(data[column].min()) if len(data) else 0.0)
+        span = top - bottom
         return (raw * ma * ref).opts(
             hv.opts.Overlay(responsive=True, height=240, title=title, ylabel=ylabel, legend_position="right",
-                            show_grid=True, xlim=(0.0, x1), ylim=(-0.05 * top, 1.1 * top + 0.1),
+                            show_grid=True, xlim=(0.0, x1), ylim=(bottom - 0.05 * span, top + 0.1 * span + 0.1),
                             fontsize={"title": "10pt", "legend": "8pt"}),
             hv.opts.Curve(framewise=True))
 
@@ -211,5 +222,16 @@ class RetrainView(pn.viewable.Viewer):
 
     @classmethod
     def _cycles_element(cls, data: pd.DataFrame, reference: dict[str, Any] | None = None) -> hv.Overlay:
-        return cls._curve_pair(data, "cycles", "Charging cycles per episode", "charging cycles",
+        return cls._curve_pair(data, "cycles", "Charging cycles per episode (single charge: 1 = came home, "
+                               "0 = did not)", "charging cycles",
                                "#fdae6b", "#a63603", *cls._reference(reference, "cycles"))
+
+    @classmethod
+    def _reward_element(cls, data: pd.DataFrame) -> hv.Overlay:
+        return cls._curve_pair(data, "reward", "Reward per episode (alpha x priority - beta x stops - gamma x EOD)",
+                               "reward", "#bcbddc", "#54278f", None, "")
+
+    @classmethod
+    def _breach_element(cls, data: pd.DataFrame) -> hv.Overlay:
+        return cls._curve_pair(data, "breach", "End of discharge (EOD) per episode: 1 = the cell went below it",
+                               "breach (moving average: share)", "#fc9272", "#a50f15", None, "")

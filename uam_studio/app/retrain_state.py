@@ -40,6 +40,11 @@ def _clock(seconds: float) -> str:
     return f"{h}:{rest // 60:02d}:{rest % 60:02d}" if h else f"{rest // 60}:{rest % 60:02d}"
 
 
+CURVE_SERIES = ("reached", "cycles", "reward", "breach")  # per-episode values the Retrain tab plots
+CURVE_COLUMNS = ["episode", *CURVE_SERIES, *(f"{k}_ma" for k in CURVE_SERIES)]
+"""Columns of :meth:`RetrainState.poll`'s rows."""
+
+
 class RetrainState(param.Parameterized):
     """A DQN retraining run in the background (one per session at a time).
 
@@ -104,8 +109,7 @@ class RetrainState(param.Parameterized):
         self._failure: str | None = None
         self._finished = False
         self._target_steps = 0
-        self._reached: list[float] = []
-        self._cycles: list[float] = []
+        self._series: dict[str, list[float]] = {k: [] for k in CURVE_SERIES}
 
     def start(self, mission: Mission | None = None) -> bool:
         """Start training on ``mission`` (``source == "map"``) or on random missions. Returns False
@@ -136,7 +140,7 @@ class RetrainState(param.Parameterized):
         self._queue.clear()
         self._stop.clear()
         self._result, self._failure, self._finished = None, None, False
-        self._reached, self._cycles = [], []
+        self._series = {k: [] for k in CURVE_SERIES}
         self._target_steps = cfg.steps
         self._t_start, self._t_end = time.monotonic(), None
         self.request_reference(mission)
@@ -238,8 +242,10 @@ class RetrainState(param.Parameterized):
 
     def poll(self) -> list[dict[str, float]]:
         """Drain the episode queue (call on the session's thread). Returns the new episodes as rows
-        ``{"episode", "reached", "cycles", "reached_ma", "cycles_ma"}`` (moving averages over
-        :attr:`MA_WINDOW` episodes); updates the progress and, at the end, the status."""
+        of :data:`CURVE_COLUMNS`: ``episode`` and, per episode, ``reached`` (destinations), ``cycles``
+        (charging cycles), ``reward`` (undiscounted return) and ``breach`` (1 if the cell went below
+        EOD), each with its moving average over :attr:`MA_WINDOW` episodes (``<name>_ma``; for
+        ``breach`` the share of episodes that breached); updates the progress and, at the end, the status."""
         if self._proc is not None and not self._finished:
             self._queue.extend(self._proc.poll())
             if self._proc.finished:
@@ -249,13 +255,14 @@ class RetrainState(param.Parameterized):
         rows = []
         while self._queue:
             e = self._queue.popleft()
-            self._reached.append(float(e.reached))
-            self._cycles.append(float(e.charging_cycles))
-            w = self.MA_WINDOW
-            rows.append({"episode": float(e.episode), "reached": float(e.reached),
-                         "cycles": float(e.charging_cycles),
-                         "reached_ma": float(np.mean(self._reached[-w:])),
-                         "cycles_ma": float(np.mean(self._cycles[-w:]))})
+            values = {"reached": float(e.reached), "cycles": float(e.charging_cycles), "reward": float(e.reward),
+                      "breach": float(e.eod_breach)}
+            row = {"episode": float(e.episode)}
+            for key, value in values.items():
+                self._series[key].append(value)
+                row[key] = value
+                row[f"{key}_ma"] = float(np.mean(self._series[key][-self.MA_WINDOW:]))
+            rows.append(row)
             last_t = e.timestep
         changes: dict[str, Any] = {}
         if rows:

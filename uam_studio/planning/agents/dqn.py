@@ -146,6 +146,9 @@ class MaskedDQN(DQN):
     Accepts every argument of :class:`stable_baselines3.DQN`, plus:
 
     :param double_dqn: use the double-DQN target (online net picks the next action, target net values it)
+    :param random_warmup: before ``learning_starts`` transitions, act uniformly among the valid actions
+        (SB3's warm-up); False: act with the network, epsilon-greedy, as after it (a fine-tuned agent's
+        warm-up fills the buffer with its own play)
 
     Differences from SB3's DQN: exploration (warm-up and epsilon steps) samples uniformly among the
     valid actions, and epsilon is drawn per env of a vectorised batch (SB3 draws one coin for the whole
@@ -160,8 +163,9 @@ class MaskedDQN(DQN):
     policy: MaskedDQNPolicy
 
     def __init__(self, policy: str | type[MaskedDQNPolicy], env: Any, *args: Any, double_dqn: bool = False,
-                 **kwargs: Any) -> None:
+                 random_warmup: bool = True, **kwargs: Any) -> None:
         self.double_dqn = double_dqn
+        self.random_warmup = random_warmup
         super().__init__(policy, env, *args, **kwargs)
 
     # ------------------------------------------------------------------ exploration
@@ -208,10 +212,14 @@ class MaskedDQN(DQN):
     def _sample_action(
         self, learning_starts: int, action_noise: Any = None, n_envs: int = 1
     ) -> tuple[np.ndarray, np.ndarray]:
-        # SB3's warm-up samples the full action space; sample valid actions instead.
+        # SB3's warm-up samples the full action space; sample valid actions instead, or (no random
+        # warm-up) the network's epsilon-greedy ones.
         if self.num_timesteps < learning_starts:
             assert self._last_obs is not None, "self._last_obs was not set"
-            action = self.random_valid_actions(self._last_obs)  # type: ignore[arg-type]
+            if self.random_warmup:
+                action = self.random_valid_actions(self._last_obs)  # type: ignore[arg-type]
+            else:
+                action = np.asarray(self.predict(self._last_obs, deterministic=False)[0]).reshape(-1)
             return action, action
         return super()._sample_action(learning_starts, action_noise, n_envs)
 

@@ -110,6 +110,7 @@ class DQNTrainConfig:
     double_dqn: bool = True  # less over-estimation of the max; cheap
     safe_return: bool = False  # env option: a leg that leaves no way home ends the episode with -gamma
     init_agent: str | None = None  # warm start: copy this agent zip's network weights (same net_arch)
+    random_warmup: bool = True  # the first learning_starts transitions: uniform valid actions (False: the network's)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -280,6 +281,7 @@ def train_dqn(
             exploration_final_eps=config.exploration_final_eps,
             policy_kwargs={"net_arch": list(config.net_arch)},
             double_dqn=config.double_dqn,
+            random_warmup=config.random_warmup,
             seed=config.seed,
             device="cpu",
             verbose=verbose,
@@ -298,9 +300,10 @@ def train_dqn(
 
 
 # Exploration and warm-up of a fine-tuning run (``init_agent``): the agent already plans, so it
-# explores a little around its own choices instead of starting from uniform random actions.
+# explores a little around its own choices, warm-up included, instead of starting from uniform
+# random actions (which made a fine-tuning run start as badly as random weights).
 FINE_TUNE = {"exploration_initial_eps": 0.2, "exploration_fraction": 0.2, "exploration_final_eps": 0.02,
-             "learning_starts": 500}
+             "learning_starts": 500, "random_warmup": False}
 
 
 def _load_init_agent(agent_path: str | os.PathLike[str]) -> MaskedDQN:
@@ -454,6 +457,7 @@ _SETTINGS: dict[str, tuple[type, float, float]] = {
     "target_update_interval": (int, 1, 10**12), "exploration_fraction": (float, 0.0, 1.0),
     "exploration_initial_eps": (float, 0.0, 1.0), "exploration_final_eps": (float, 0.0, 1.0),
     "max_grad_norm": (float, 0.0, 1e12), "double_dqn": (bool, 0, 1), "seed": (int, 0, 2**32 - 1),
+    "random_warmup": (bool, 0, 1),
 }
 # Plain training counters of SB3's ``data`` JSON, set on the model after it is built.
 _COUNTERS: dict[str, tuple[type, float, float]] = {
