@@ -204,6 +204,18 @@ def test_planner_map_table_slider_update_route_and_summary(page, app_url):
     assert r0 > 0.2, text2
     assert text2.split("predicted:")[1] != text1.split("predicted:")[1]
     assert page.locator(".uam-error").get_by_text("Not applied").count() == 0
+
+    # 5. a wind out of range in the table: the reason shows beside the table, the cell keeps its value
+    wind = _row(page, "D1").locator('.tabulator-cell[tabulator-field="wind_kts"]')
+    wind.click()
+    editing.locator("input").fill("-200")
+    editing.locator("input").press("Enter")
+    message = page.locator(".uam-table-error").get_by_text("wind_kts")
+    message.wait_for()
+    assert "out of range" in message.inner_text() and page.locator(".uam-error").get_by_text("Not applied").count() == 0
+    box, table_box = message.bounding_box(), page.locator(".tabulator").first.bounding_box()
+    assert 0 <= table_box["y"] - (box["y"] + box["height"]) < 60, (box, table_box)  # right above the table
+    _row(page, "D1").locator('.tabulator-cell[tabulator-field="wind_kts"]', has_text="-20").wait_for()
     assert outside == []
 
 

@@ -415,6 +415,10 @@ class PlannerView(pn.viewable.Viewer):
                                    sizing_mode="stretch_width", margin=(0, 10))
         self.notice = pn.pane.Alert("", alert_type="info", visible=False, css_classes=["uam-notice"],
                                     sizing_mode="stretch_width", margin=(0, 10))
+        # A table edit that is not applied is explained beside the table, where the eye is.
+        self.table_error = pn.pane.Alert("", alert_type="danger", visible=False, css_classes=["uam-table-error"],
+                                         sizing_mode="stretch_width", margin=(0, 10))
+        self._editing_table = False
         s.param.watch(self._on_error, ["error", "notice"])
 
         self.table = pn.widgets.Tabulator(
@@ -490,7 +494,8 @@ class PlannerView(pn.viewable.Viewer):
             styles=NOTE_STYLE, margin=(0, 10))
         table = pn.panel(lambda: self.table, defer_load=True, height=230, sizing_mode="stretch_width") \
             if in_server_session() else self.table
-        center = pn.Column(self.map, hint, table, width=MAP_FRAME_PX + 100, css_classes=["uam-map-column"])
+        center = pn.Column(self.map, hint, self.table_error, table, width=MAP_FRAME_PX + 100,
+                           css_classes=["uam-map-column"])
         # Served, the plots that are not above the fold load right after the page (defer_load): the
         # map, the table, the summary, the comparison and the voltage come first.
         extras = (self.altitude_plot, self.health_plot)
@@ -585,8 +590,11 @@ class PlannerView(pn.viewable.Viewer):
 
     def _on_error(self, *events: param.parameterized.Event) -> None:
         s = self.state
-        self.error.object = f"**Not applied.** {html.escape(s.error)}" if s.error else ""
-        self.error.visible = bool(s.error)
+        text = f"**Not applied.** {html.escape(s.error)}" if s.error else ""
+        at_table = bool(s.error) and self._editing_table
+        self.table_error.object, self.table_error.visible = (text, True) if at_table else ("", False)
+        self.error.object = "" if at_table else text
+        self.error.visible = bool(s.error) and not at_table
         self.notice.object = html.escape(s.notice)
         self.notice.visible = bool(s.notice) and not s.error
 
@@ -618,7 +626,12 @@ class PlannerView(pn.viewable.Viewer):
             value = value.item()
         rows[i][event.column] = value
         self.state.notice = ""
-        if not self.state.set_destinations(rows):
+        self._editing_table = True
+        try:
+            applied = self.state.set_destinations(rows)
+        finally:
+            self._editing_table = False
+        if not applied:
             self._sync_destinations()
 
     def _on_draw(self, data: dict[str, list] | None = None, **_: Any) -> None:
