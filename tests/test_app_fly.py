@@ -87,3 +87,17 @@ def test_the_record_and_the_plan_save_as_csv(state):
     assert [int(r[1]) for r in legs] == sorted(int(r[1]) for r in legs)  # legs in flying order
     assert {r[2] for r in legs} == set(plan.route) and len(legs) == len(plan.physics["time_s"])
     assert all(float(r[4]) >= 3.0 for r in legs)  # the safe plan's physics voltage
+
+
+def test_flown_legs_are_numbered_with_their_altitude_on_the_map(state):
+    from uam_studio.app.fly import _leg_labels
+
+    view = FlyView(state)
+    state.fly()
+    state.t_s = state.end_s
+    labels = view.leg_labels.data
+    n = len(state.record.route)
+    assert labels["text"] == [f"#{k + 1} {a:g} m" for k, a in enumerate(state.record.altitudes_m)][:len(labels["text"])]
+    assert n - 1 <= len(labels["text"]) <= n  # every leg flown (a leg ending where it began has no label)
+    assert _leg_labels([(0.0, 0.0), (10.0, 0.0), (10.0, 0.0)], [500.0, 1000.0]) == {
+        "x": [5.0], "y": [0.0], "text": ["#1 500 m"]}

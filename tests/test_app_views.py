@@ -5,6 +5,7 @@ Also the ``uam-studio serve`` argument errors (one line, exit 2), without starti
 
 from __future__ import annotations
 
+import holoviews as hv
 import numpy as np
 import panel as pn
 import pytest
@@ -119,6 +120,10 @@ def test_failed_takeoff_draws_the_takeoff_not_an_empty_plot():
     t, v = data["physics"]
     assert len(t) > 5 and v[-1] < 3.0 and data["xlim"] == (0.0, t[-1]) and data["ylim"][0] < v.min()
     assert "cannot take off" in summary_html(state) and "data-level='unsafe'" in summary_html(state)
+    fig = hv.render(view._voltage_element(data))  # no legend entry for a series that has no data
+    labels = [item.label.value for legend in fig.legend for item in legend.items]
+    assert labels and all("Dynaformer" not in lbl for lbl in labels) and "physics" in labels, labels
+    assert data["legs"] == ([], [])  # no leg took off
     state.close()
 
 

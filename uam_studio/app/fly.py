@@ -19,6 +19,7 @@ import panel as pn
 import param
 
 from uam_studio.app.fly_state import SPEEDS, FlyState
+from uam_studio.app.planner import label_background
 from uam_studio.app.session import ensure_bokeh_backend
 from uam_studio.planning import VERTIPORT
 from uam_studio.planning.operations import record_csv
@@ -29,6 +30,18 @@ EOD_COLOR = "#d62728"
 EVENT_COLOR = "#e377c2"  # injected wind changes
 TIME_DIM, VOLT_DIM = hv.Dimension("time_min", label="time (min)"), hv.Dimension("voltage_v", label="voltage (V)")
 ROUTE_COLORS = ("#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b")
+
+
+def _leg_labels(path: list[tuple[float, float]], altitudes_m: list[float]) -> dict[str, list]:
+    """A label ``"#k altitude m"`` at the middle of each leg of ``path`` (km; the last one is the
+    aircraft, so the leg it flies is labelled from its take-off on)."""
+    out: dict[str, list] = {"x": [], "y": [], "text": []}
+    for k, ((x0, y0), (x1, y1)) in enumerate(zip(path, path[1:])):
+        if k < len(altitudes_m) and (x0, y0) != (x1, y1):
+            out["x"].append((x0 + x1) / 2)
+            out["y"].append((y0 + y1) / 2)
+            out["text"].append(f"#{k + 1} {altitudes_m[k]:g} m")
+    return out
 
 
 class FlyView(pn.viewable.Viewer):
@@ -66,6 +79,7 @@ class FlyView(pn.viewable.Viewer):
                                         css_classes=["uam-fly-log"], layout="fit_data_stretch",
                                         formatters={"reason": {"type": "textarea"}}, widths={"reason": 520})
         self.pos = hv.streams.Pipe(data=[])
+        self.leg_labels = hv.streams.Pipe(data={"x": [], "y": [], "text": []})
         self.seen = hv.streams.Pipe(data=[])
         self.series = hv.streams.Pipe(data=s.series_until())
         self.now = hv.streams.Pipe(data=0.0)
@@ -111,6 +125,8 @@ class FlyView(pn.viewable.Viewer):
             marker="square", size=14, color="black")
         flown = hv.DynamicMap(lambda data: hv.Path(data, ["x_km", "y_km"], label="flown").opts(
             color="#1f77b4", line_width=3), streams=[self.seen])
+        legs = hv.DynamicMap(lambda data: hv.Labels(data, ["x", "y"], "text").opts(
+            text_font_size="8pt", text_color="#333333", hooks=[label_background]), streams=[self.leg_labels])
         craft = hv.DynamicMap(lambda data: hv.Points(data, ["x_km", "y_km"], label="aircraft").opts(
             marker="triangle", size=16, color=EOD_COLOR), streams=[self.pos])
         pad = 8.0
@@ -118,7 +134,7 @@ class FlyView(pn.viewable.Viewer):
         x0, x1, y0, y1 = allx.min() - pad, allx.max() + pad, ally.min() - pad, ally.max() + pad
         span = max(x1 - x0, y1 - y0)  # equal scales on both axes in a square frame
         cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
-        return (vp * dests * labels * flown * craft).opts(
+        return (vp * dests * labels * flown * legs * craft).opts(
             title="flight", width=MAP_PX, height=MAP_PX, legend_position="bottom_right", show_legend=False,
             xlabel="x (km)", ylabel="y (km)",
             xlim=(cx - span / 2, cx + span / 2), ylim=(cy - span / 2, cy + span / 2))
@@ -179,6 +195,7 @@ class FlyView(pn.viewable.Viewer):
         nodes = [VERTIPORT] + list(s.record.route)
         path = [(m.node(n).x_km, m.node(n).y_km) for n in nodes[: max(leg, 0) + 1]] + [(x, y)]
         self.seen.send([path])
+        self.leg_labels.send(_leg_labels(path, s.record.altitudes_m))
         self.pos.send([(x, y)])
         self.series.send(s.series_until())
         self.now.send(float(s.t_s))

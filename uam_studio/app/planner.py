@@ -810,10 +810,11 @@ class PlannerView(pn.viewable.Viewer):
         x0, x1 = data["xlim"]
         starts, names = data["legs"]
         tb, lo, hi = data["band"]
+        # a series with no data gets no legend entry (a failed take-off has no prediction)
         return tpl["overlay"].clone([
-            tpl["band"].clone((tb, lo, hi), label=f"Dynaformer {100 * data['level']:.0f}%"),
-            tpl["physics"].clone(data["physics"]),
-            tpl["predicted"].clone(data["predicted"]),
+            tpl["band"].clone((tb, lo, hi), label=f"Dynaformer {100 * data['level']:.0f}%" if len(tb) else ""),
+            tpl["physics"].clone(data["physics"], label="physics" if len(data["physics"][0]) else ""),
+            tpl["predicted"].clone(data["predicted"], label="Dynaformer" if len(data["predicted"][0]) else ""),
             tpl["eod"].clone(([x0, x1], [data["eod"]] * 2), label=f"EOD {data['eod']:g} V"),
             tpl["leg_lines"].clone(list(starts)),
             tpl["leg_names"].clone({"x": [x + 0.004 * (x1 - x0) for x in starts], "y": [data["ylim"][1]] * len(starts),
@@ -833,7 +834,7 @@ class PlannerView(pn.viewable.Viewer):
         return hv.Points(df, ["PC1", "PC2"], ["R0 (ohm)", "q_max (C)"], label="training population").opts(
             color="R0 (ohm)", cmap="viridis", colorbar=True, size=5, alpha=0.6, tools=["hover"],
             width=WIDE_MIN_PX, height=280, title="Health estimate (Dynaformer PCs) vs population", show_grid=True,
-            legend_position="top", legend_cols=2)
+            legend_position="top", legend_cols=2, xlabel="PC1 (tracks R0)", ylabel="PC2 (tracks q_max)")
 
     @staticmethod
     def _health_element(data: tuple[float, float] | None) -> hv.Points:
