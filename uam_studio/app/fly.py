@@ -19,8 +19,8 @@ import panel as pn
 import param
 
 from uam_studio.app.fly_state import SPEEDS, FlyState
-from uam_studio.app.planner import label_background
 from uam_studio.app.session import ensure_bokeh_backend
+from uam_studio.app.style import label_background, no_scroll_zoom
 from uam_studio.planning import VERTIPORT
 from uam_studio.planning.operations import record_csv
 
@@ -136,7 +136,7 @@ class FlyView(pn.viewable.Viewer):
         cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
         return (vp * dests * labels * flown * legs * craft).opts(
             title="flight", width=MAP_PX, height=MAP_PX, legend_position="bottom_right", show_legend=False,
-            xlabel="x (km)", ylabel="y (km)",
+            xlabel="x (km)", ylabel="y (km)", hooks=[no_scroll_zoom],
             xlim=(cx - span / 2, cx + span / 2), ylim=(cy - span / 2, cy + span / 2))
 
     def _voltage(self) -> hv.Overlay:

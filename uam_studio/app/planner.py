@@ -28,7 +28,7 @@ from uam_studio.app.session import (
     respond_at_once,
     session_dispatcher,
 )
-from uam_studio.app.style import NOTE_STYLE, heading
+from uam_studio.app.style import NOTE_STYLE, heading, label_background, no_scroll_zoom
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning import plan_csv
 from uam_studio.planning.missions.mission import COORD_RANGE_KM, SCENARIOS, VERTIPORT
@@ -150,17 +150,6 @@ def leg_arrows(legs: dict[str, list]) -> dict[str, list]:
         out["angle"].append(float(np.arctan2(y1 - y0, x1 - x0) - np.pi / 2))
         out["color"].append(color)
     return out
-
-
-def label_background(plot: Any, element: Any) -> None:
-    """Bokeh hook: labels on a white box, so that route lines do not run through their text."""
-    glyph = plot.handles["glyph"]
-    glyph.background_fill_color, glyph.background_fill_alpha = "white", 0.85
-
-
-def no_scroll_zoom(plot: Any, element: Any) -> None:
-    """Bokeh hook: the mouse wheel scrolls the page, not the plot (the zoom stays in the toolbar)."""
-    plot.state.toolbar.active_scroll = None
 
 
 def _equal(a: Any, b: Any) -> bool:
@@ -661,15 +650,17 @@ class PlannerView(pn.viewable.Viewer):
         self.state.notice = ""
         self.state.load_json(event.new, self.upload.filename)
 
+    def _file_stem(self) -> str:
+        """The mission's name as a file name's stem (letters, digits, ``-`` and ``_``)."""
+        return "".join(c if c.isalnum() or c in "-_" else "_" for c in self.state.mission_name) or "mission"
+
     def _download(self) -> io.StringIO:
-        name = "".join(c if c.isalnum() or c in "-_" else "_" for c in self.state.mission_name) or "mission"
-        self.download.filename = f"{name}.json"
+        self.download.filename = f"{self._file_stem()}.json"
         return io.StringIO(self.state.to_json())
 
     def _download_plan(self) -> io.StringIO:
         """The shown plan's voltage series as CSV (:func:`~uam_studio.planning.plan_csv`)."""
-        name = "".join(c if c.isalnum() or c in "-_" else "_" for c in self.state.mission_name) or "mission"
-        self.download_plan.filename = f"{name}_plan.csv"
+        self.download_plan.filename = f"{self._file_stem()}_plan.csv"
         return io.StringIO(plan_csv(self.state.plan) if self.state.plan else "")
 
     # ------------------------------------------------------------------ plots

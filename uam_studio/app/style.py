@@ -1,4 +1,4 @@
-"""Small shared pieces of the views' look: section headings and note text."""
+"""Small shared pieces of the views' look: section headings, note text, and Bokeh hooks of the plots."""
 
 from __future__ import annotations
 
@@ -15,3 +15,14 @@ def heading(text: str, **params: Any) -> pn.pane.HTML:
     first tab and in tabs built later)."""
     params.setdefault("margin", (4, 10, 2, 10))
     return pn.pane.HTML(f"<div style='font-size:15px;font-weight:600'>{html.escape(text)}</div>", **params)
+
+
+def label_background(plot: Any, element: Any) -> None:
+    """Bokeh hook: labels on a white box, so that route lines do not run through their text."""
+    glyph = plot.handles["glyph"]
+    glyph.background_fill_color, glyph.background_fill_alpha = "white", 0.85
+
+
+def no_scroll_zoom(plot: Any, element: Any) -> None:
+    """Bokeh hook: the mouse wheel scrolls the page, not the plot (the zoom stays in the toolbar)."""
+    plot.state.toolbar.active_scroll = None
