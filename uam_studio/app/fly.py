@@ -20,7 +20,7 @@ import param
 
 from uam_studio.app.fly_state import SPEEDS, FlyState
 from uam_studio.app.session import ensure_bokeh_backend
-from uam_studio.app.style import label_background, no_scroll_zoom
+from uam_studio.app.style import label_background, leg_label, no_scroll_zoom
 from uam_studio.planning import VERTIPORT
 from uam_studio.planning.operations import record_csv
 
@@ -40,7 +40,7 @@ def _leg_labels(path: list[tuple[float, float]], altitudes_m: list[float]) -> di
         if k < len(altitudes_m) and (x0, y0) != (x1, y1):
             out["x"].append((x0 + x1) / 2)
             out["y"].append((y0 + y1) / 2)
-            out["text"].append(f"#{k + 1} {altitudes_m[k]:g} m")
+            out["text"].append(leg_label(k + 1, altitudes_m[k]))
     return out
 
 

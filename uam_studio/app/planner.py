@@ -28,7 +28,7 @@ from uam_studio.app.session import (
     respond_at_once,
     session_dispatcher,
 )
-from uam_studio.app.style import NOTE_STYLE, heading, label_background, no_scroll_zoom
+from uam_studio.app.style import NOTE_STYLE, heading, label_background, leg_label, no_scroll_zoom
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning import plan_csv
 from uam_studio.planning.missions.mission import COORD_RANGE_KM, SCENARIOS, VERTIPORT
@@ -75,7 +75,7 @@ def route_legs(plan: dict[str, Any] | None, state_rows: list[dict[str, Any]], ve
         row = {"leg": f"{i}: {'V' if prev == VERTIPORT else prev}\u2192{'V' if to == VERTIPORT else to}",
                "from": prev, "to": to, "x0": x0, "y0": y0, "x1": x1, "y1": y1, "altitude_m": float(alt),
                "cycle": cycle, "color": FAILED_COLOR if failed else cycle_color(cycle),
-               "completed": not failed, "label": f"#{i} {alt:g} m",
+               "completed": not failed, "label": leg_label(i, alt),
                "legend": FAILED_LABEL if failed else f"cycle {cycle}"}
         for c in LEG_COLUMNS:
             out[c].append(row[c])

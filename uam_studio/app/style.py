@@ -26,3 +26,8 @@ def label_background(plot: Any, element: Any) -> None:
 def no_scroll_zoom(plot: Any, element: Any) -> None:
     """Bokeh hook: the mouse wheel scrolls the page, not the plot (the zoom stays in the toolbar)."""
     plot.state.toolbar.active_scroll = None
+
+
+def leg_label(number: int, altitude_m: float) -> str:
+    """A leg's map label: its number in flying order (1-based) and its cruise altitude (m), ``"#2 500 m"``."""
+    return f"#{number} {altitude_m:g} m"

@@ -182,7 +182,7 @@ def _hindsight(mission: Mission, scenario: str, new_world: Callable[[], World], 
         plans.append((list(plan.route), list(plan.altitudes_m)))
     if not world.events:
         route, alts = plans[0]
-        return route, alts, _priority(mission, [n for n in route if n != VERTIPORT])
+        return route, alts, _priority(mission, route)
     best: tuple[list[str], list[float], int] | None = None
     for route, alts in [*plans, (list(flown[0]), list(flown[1]))]:
         breached, reached = _fly_fixed(new_world(), route, alts, takeoff)
