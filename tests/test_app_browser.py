@@ -278,6 +278,31 @@ def test_retraining_curve_grows_and_agent_is_selectable(page, app_url):
     policy.locator("option", has_text="Retrained: single_charge-map-").first.wait_for(state="attached")
 
 
+def test_attention_planner_retrains_with_live_curves_and_is_selectable(page, app_url):
+    """The Retrain tab's planner choice: the attention planner trains (the oracle solves the
+    training missions, then epochs), its priority-on-this-map curve grows beside the oracle's line,
+    and the saved planner appears in the Planner's policy list."""
+    _open(page, app_url)
+    page.locator(".bk-tab", has_text="Retrain").click()
+    page.locator(".uam-train-model button", has_text="Attention").click()
+    for css, value in ((".uam-train-missions", "12"), (".uam-train-epochs", "4")):
+        box = page.locator(css).locator("input")
+        box.fill(value)
+        box.press("Tab")
+    assert page.get_by_text("Steps (environment transitions)").first.is_hidden()  # the DQN's settings hidden
+    page.locator(".uam-train-start button").click()
+    page.locator(".uam-train-status").get_by_text("training the attention planner: 4 epochs on 12").wait_for()
+    page.locator(".uam-train-status").get_by_text("done: 4 epochs").wait_for(timeout=180_000)
+    page.wait_for_function(f"() => ({JS_CURVE_LENGTH})('Priority of its plan') === 4")
+    assert page.evaluate(JS_CURVE_LENGTH, "Imitation of the exact oracle") == 4
+    assert page.locator(".uam-curve-reached").first.is_hidden()  # the DQN's curves are not shown
+    progress = page.locator(".uam-train-progress-text").inner_text()
+    assert progress.startswith("12 of 12 missions solved by the oracle, 4 of 4 epochs (100%)"), progress
+    page.locator(".bk-tab", has_text="Planner").click()
+    policy = page.locator(".bk-input-group", has=page.get_by_text("Policy", exact=True)).locator("select")
+    policy.locator("option", has_text="Retrained: attention-map-").first.wait_for(state="attached")
+
+
 def test_training_session_does_not_block_another_session(browser, app_url):
     """Two sessions: while one trains, the other still replans (timings: benchmarks/bench_app.py)."""
     trainer, planner = browser.new_page(), browser.new_page()

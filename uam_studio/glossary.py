@@ -41,6 +41,10 @@ GLOSSARY: dict[str, str] = {
                         "leg's time. With no wind change it is the exact oracle's plan; after an injected "
                         "change it is the best known plan (the oracle's plan for each wind period, and the "
                         "route flown, each re-flown in the same world).",
+    "Episode (DQN)": "One mission played by the DQN agent from take-off until it stops or the battery "
+                     "runs out; the agent learns from the reward of its episodes (trial and error).",
+    "Epoch (attention)": "One pass of the attention planner's training over all its examples: the "
+                         "decisions of the exact oracle on the training missions (learning by imitation).",
 }
 
 

@@ -1,12 +1,13 @@
 """Take the README's screenshots of the Planner, Battery lab and Retrain tabs at 1366x768 (a
 classroom laptop; playwright + Debian's chromium).
 
-    python assets/screenshots/make_screenshots.py
+    python assets/screenshots/make_screenshots.py [--width 1920 --height 1080 --out DIR]
 
 Serves the app with ``panel serve`` on a free port (user folder in a temporary directory), adds a
 destination on the map and waits for the planner comparison, switches to the Battery lab (varying
-R0) and runs a short retraining, and writes ``planner.png``, ``battery_lab.png`` and ``retrain.png``
-next to this file. (The Fly tab's screenshot comes from its browser test.)
+R0), runs a short DQN retraining and a short attention-planner retraining, and writes
+``planner.png``, ``battery_lab.png``, ``retrain.png`` and ``retrain_attention.png`` in ``--out``
+(default: next to this file). (The Fly tab's screenshot comes from its browser test.)
 """
 
 from __future__ import annotations
@@ -38,7 +39,17 @@ JS_FRAME = """(title) => {
 
 
 def main() -> None:
+    import argparse
+
     from playwright.sync_api import sync_playwright
+
+    ap = argparse.ArgumentParser(description="the README's screenshots")
+    ap.add_argument("--width", type=int, default=1366)
+    ap.add_argument("--height", type=int, default=768)
+    ap.add_argument("--out", type=Path, default=HERE)
+    args = ap.parse_args()
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
 
     s = socket.socket()
     s.bind(("127.0.0.1", 0))
@@ -58,7 +69,7 @@ def main() -> None:
                 time.sleep(0.5)
         with sync_playwright() as p:
             browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
-            page = browser.new_page(viewport={"width": 1366, "height": 768})
+            page = browser.new_page(viewport={"width": args.width, "height": args.height})
             page.set_default_timeout(120_000)
             page.goto(f"http://127.0.0.1:{port}/main")
             page.locator(".uam-plan-summary[data-busy='false']").get_by_text("Route:").wait_for()
@@ -68,17 +79,17 @@ def main() -> None:
             page.locator(".uam-plan-summary[data-busy='false'][data-inputs*='|D1:']").wait_for()
             page.locator(".uam-plan-compare[data-pending='false'][data-inputs*='|D1:']").wait_for()
             page.locator(".uam-plan-summary").click()  # the map loses its focus outline
-            page.mouse.move(5, 760)  # no hover tooltip in the picture
+            page.mouse.move(5, args.height - 8)  # no hover tooltip in the picture
             page.wait_for_function("() => [...window.Bokeh.index.all_views()].filter("
                                    "v => v.model.type === 'Figure').length >= 4")  # plots load after the page
             time.sleep(2)
-            page.screenshot(path=str(HERE / "planner.png"))
+            page.screenshot(path=str(out / "planner.png"))
 
             page.locator(".bk-tab", has_text="Battery lab").click()
             page.locator(".bk-btn", has_text="R0").first.click()
             page.locator(".uam-lab-summary").get_by_text("R0 0.45 ohm").wait_for()
             time.sleep(2)
-            page.screenshot(path=str(HERE / "battery_lab.png"))
+            page.screenshot(path=str(out / "battery_lab.png"))
 
             page.locator(".bk-tab", has_text="Retrain").click()
             box = page.locator(".bk-input-group", has=page.get_by_text("Steps (environment transitions)"))
@@ -87,14 +98,23 @@ def main() -> None:
             page.locator(".uam-train-start button").click()
             page.locator(".uam-train-status").get_by_text("done:").wait_for(timeout=900_000)
             time.sleep(1.5)
-            page.screenshot(path=str(HERE / "retrain.png"))
+            page.screenshot(path=str(out / "retrain.png"))
+
+            page.locator(".uam-train-model button", has_text="Attention").click()
+            for css, value in ((".uam-train-missions", "60"), (".uam-train-epochs", "12")):
+                page.locator(css).locator("input").fill(value)
+                page.locator(css).locator("input").press("Tab")
+            page.locator(".uam-train-start button").click()
+            page.locator(".uam-train-status").get_by_text("done: 12 epochs").wait_for(timeout=900_000)
+            time.sleep(1.5)
+            page.screenshot(path=str(out / "retrain_attention.png"))
             browser.close()
     finally:
         proc.terminate()
         proc.wait(20)
         shutil.rmtree(home, ignore_errors=True)
-    for name in ("planner.png", "battery_lab.png", "retrain.png"):
-        print(f"{name}: {(HERE / name).stat().st_size / 1024:.0f} KB")
+    for name in ("planner.png", "battery_lab.png", "retrain.png", "retrain_attention.png"):
+        print(f"{name}: {(out / name).stat().st_size / 1024:.0f} KB")
 
 
 if __name__ == "__main__":

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from uam_studio.app.plans import PlanRequest, cached_plan, request_key
-from uam_studio.app.services import AGENT_PREFIX, one_line, predictor
+from uam_studio.app.services import agent_policy, one_line, predictor
 from uam_studio.errors import InputError
 from uam_studio.planning.missions.mission import Mission
 
@@ -100,9 +100,7 @@ def compare_row(mission: Mission, policy: str) -> dict[str, Any]:
     from uam_studio.planning.planner import plan_mission
 
     t0 = time.perf_counter()
-    name, agent_path = policy, None
-    if policy.startswith(AGENT_PREFIX):
-        name, agent_path = "dqn", policy[len(AGENT_PREFIX):]
+    name, agent_path = agent_policy(policy)
     try:
         pred: Any = False
         if name == "dqn" and _agent_reads_dynaformer(agent_path, mission.scenario):

@@ -20,7 +20,7 @@ import param
 
 from uam_studio.app.fly_state import SPEEDS, FlyState
 from uam_studio.app.session import ensure_bokeh_backend
-from uam_studio.app.style import label_background, leg_label, no_scroll_zoom
+from uam_studio.app.style import NAME_OFFSET_PX, label_background, leg_label, no_scroll_zoom, pixel_offset
 from uam_studio.planning import VERTIPORT
 from uam_studio.planning.operations import record_csv
 
@@ -120,7 +120,8 @@ class FlyView(pn.viewable.Viewer):
         names = [f"{d.name} {'*' * d.priority}" for d in m.destinations]
         dests = hv.Points((xs, ys, names), ["x_km", "y_km"], ["name"], label="destinations").opts(
             size=10, color="#ff7f0e", line_color="black", tools=["hover"])
-        labels = hv.Labels((xs, ys, names), ["x_km", "y_km"], "name").opts(yoffset=3.0, text_font_size="9pt")
+        labels = hv.Labels((xs, ys, names), ["x_km", "y_km"], "name").opts(
+            text_font_size="9pt", text_baseline="bottom", hooks=[pixel_offset(-NAME_OFFSET_PX)])
         vp = hv.Points([(m.vertiport.x_km, m.vertiport.y_km)], ["x_km", "y_km"], label="vertiport").opts(
             marker="square", size=14, color="black")
         flown = hv.DynamicMap(lambda data: hv.Path(data, ["x_km", "y_km"], label="flown").opts(

@@ -28,7 +28,15 @@ from uam_studio.app.session import (
     respond_at_once,
     session_dispatcher,
 )
-from uam_studio.app.style import NOTE_STYLE, heading, label_background, leg_label, no_scroll_zoom
+from uam_studio.app.style import (
+    NAME_OFFSET_PX,
+    NOTE_STYLE,
+    heading,
+    label_background,
+    leg_label,
+    no_scroll_zoom,
+    pixel_offset,
+)
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning import plan_csv
 from uam_studio.planning.missions.mission import COORD_RANGE_KM, SCENARIOS, VERTIPORT
@@ -85,11 +93,43 @@ def route_legs(plan: dict[str, Any] | None, state_rows: list[dict[str, Any]], ve
     return out
 
 
-ALT_LABEL_OFFSET_KM = 4.0  # altitude labels sit this far beside their leg
-ALT_LABEL_SPOTS = ((0.5, 1), (0.5, -1), (0.35, 1), (0.35, -1), (0.65, 1), (0.65, -1))  # (along, side)
+ALT_LABEL_GAP_KM = 1.5  # the gap between a leg and the near edge of its label (km, at the default zoom)
+ALT_LABEL_ALONG = (0.5, 0.35, 0.65, 0.25, 0.75, 0.1, 0.9)  # where along its leg a label may sit, in order of preference
+ALT_LABEL_STEPS = (1.0, 2.5, 4.5, 7.0)  # how far from the leg, in gaps (farther only where the near spots are taken)
 
 
 NAME_CHAR_KM = 2.6  # width of one character of a map name (9 pt bold) in km, at the map's default zoom
+LABEL_CHAR_KM = 2.1  # width of one character of a leg label (8 pt) in km, at the map's default zoom
+TEXT_HEIGHT_KM = 3.4  # height of a line of map text in km, at the map's default zoom
+NAME_RISE_KM = 3.6  # a name's edge from its place (NAME_OFFSET_PX at the default zoom, ~2.75 px per km)
+MARKER_KM = 2.0  # half the size of a place's marker in km
+
+
+Box = tuple[float, float, float, float]  # x0, y0, x1, y1 (km)
+
+
+def _overlap(a: Box, b: Box) -> float:
+    """Area (km^2) shared by two boxes."""
+    return max(0.0, min(a[2], b[2]) - max(a[0], b[0])) * max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
+
+
+def text_boxes(nodes: list[tuple[float, float]], names: list[str]) -> list[Box]:
+    """The boxes the places' markers and names take on the map at its default zoom: a marker's box per
+    place, and a name's above it (the vertiport's, named :data:`VERTIPORT`, below it; its whole width;
+    an empty name takes none)."""
+    out: list[Box] = [(x - MARKER_KM, y - MARKER_KM, x + MARKER_KM, y + MARKER_KM) for x, y in nodes]
+    for (x, y), name in zip(nodes, names):
+        if name:
+            half = 0.5 * NAME_CHAR_KM * len(name)
+            y0 = y - NAME_RISE_KM - TEXT_HEIGHT_KM if name == VERTIPORT else y + NAME_RISE_KM
+            out.append((x - half, y0, x + half, y0 + TEXT_HEIGHT_KM))
+    return out
+
+
+def label_box(x: float, y: float, text: str) -> Box:
+    """The box a leg label centred at (x, y) km takes at the map's default zoom."""
+    half_w, half_h = 0.5 * LABEL_CHAR_KM * len(text), 0.5 * TEXT_HEIGHT_KM
+    return x - half_w, y - half_h, x + half_w, y + half_h
 
 
 def altitude_labels(legs: dict[str, list], nodes: list[tuple[float, float]] = (),
@@ -98,40 +138,60 @@ def altitude_labels(legs: dict[str, list], nodes: list[tuple[float, float]] = ()
     flying order (``"#1 500 m"``, or ``"#1/#2 1000/500 m"`` out and back), so out-and-back legs
     share one label.
 
-    Each label goes beside its leg, at the first of :data:`ALT_LABEL_SPOTS` (midpoint or a third of
-    the way, either side) that lies farthest from every place of ``nodes`` (x, y km; their markers),
-    from the names drawn above them (``names``, aligned with ``nodes``; their whole width) and from
-    the labels placed before it. Columns ``x``, ``y``, ``text``.
+    Each label goes beside its leg, clear of the leg by :data:`ALT_LABEL_GAP_KM` (its whole box, at
+    any angle of the leg), at the spot (:data:`ALT_LABEL_ALONG` x either side x
+    :data:`ALT_LABEL_STEPS`) that overlaps least the places' markers of ``nodes`` (x, y km), the
+    names drawn above them (``names``, aligned with ``nodes``; their whole width) and the labels
+    placed before it; ties go to the earlier spot. Sizes are those at the map's default zoom
+    (:func:`text_boxes`, :func:`label_box`). Columns ``x``, ``y``, ``text``.
     """
     groups: dict[tuple[str, str], list[int]] = {}
     for i, (a, b) in enumerate(zip(legs["from"], legs["to"])):
         groups.setdefault(tuple(sorted((a, b))), []).append(i)
-    obstacles = [p for x, y in nodes for p in ((x, y), (x, y + 5.5))]
-    for (x, y), name in zip(nodes, names):
-        half = 0.5 * NAME_CHAR_KM * len(name)
-        obstacles += [(x + dx, y + 5.5) for dx in np.linspace(-half, half, max(2, int(2 * half / 3.0) + 1))]
+    taken = text_boxes(list(nodes), list(names))
     out: dict[str, list] = {"x": [], "y": [], "text": []}
     for idx in groups.values():
         i = idx[0]
+        alts = [legs["altitude_m"][k] for k in idx]
+        numbers = "/".join(f"#{k + 1}" for k in idx)
+        text = f"{numbers} " + (f"{alts[0]:g} m" if len(set(alts)) == 1 else "/".join(f"{a:g}" for a in alts) + " m")
         x0, y0, x1, y1 = (float(legs[c][i]) for c in ("x0", "y0", "x1", "y1"))
         dx, dy = x1 - x0, y1 - y0
         norm = float(np.hypot(dx, dy)) or 1.0
         nx, ny = -dy / norm, dx / norm
-        spots = [(x0 + t * dx + side * nx * ALT_LABEL_OFFSET_KM, y0 + t * dy + side * ny * ALT_LABEL_OFFSET_KM)
-                 for t, side in ALT_LABEL_SPOTS]
-        if obstacles:
-            clearance = [min(np.hypot(sx - ox, sy - oy) for ox, oy in obstacles) for sx, sy in spots]
-            best = spots[int(np.argmax(np.round(clearance, 1)))]  # ties: the earlier spot
-        else:
-            best = spots[0]
-        alts = [legs["altitude_m"][k] for k in idx]
-        numbers = "/".join(f"#{k + 1}" for k in idx)
+        w, h = label_box(0.0, 0.0, text)[2:]
+        reach = abs(nx) * w + abs(ny) * h  # the box's half-extent across the leg
+        best, best_cost = None, np.inf
+        for step in ALT_LABEL_STEPS:
+            for t in ALT_LABEL_ALONG:
+                for side in (1, -1):
+                    d = side * (reach + step * ALT_LABEL_GAP_KM)
+                    cx, cy = x0 + t * dx + d * nx, y0 + t * dy + d * ny
+                    box = label_box(cx, cy, text)
+                    cost = round(sum(_overlap(box, b) for b in taken), 2)
+                    if cost < best_cost:
+                        best, best_cost = (cx, cy), cost
+            if best_cost == 0.0:
+                break
+        assert best is not None
         out["x"].append(best[0])
         out["y"].append(best[1])
-        out["text"].append(f"{numbers} " + (f"{alts[0]:g} m" if len(set(alts)) == 1
-                                            else "/".join(f"{a:g}" for a in alts) + " m"))
-        obstacles.append(best)
+        out["text"].append(text)
+        taken.append(label_box(*best, text))
     return out
+
+
+def label_overlaps(labels: dict[str, list], nodes: list[tuple[float, float]], names: list[str]) -> list[tuple[str, str]]:
+    """Where leg labels (:func:`altitude_labels`' columns) cover another label, or a place's marker or
+    name (``nodes``, ``names`` as there), at the map's default zoom: ``(label, what it covers)`` pairs
+    (``"a place or its name"`` for the latter); empty when nothing overlaps."""
+    boxes = [label_box(x, y, t) for x, y, t in zip(labels["x"], labels["y"], labels["text"])]
+    others = text_boxes(list(nodes), list(names))
+    texts = labels["text"]
+    found = [(texts[i], texts[j]) for i in range(len(boxes)) for j in range(i + 1, len(boxes))
+             if _overlap(boxes[i], boxes[j]) > 0]
+    return found + [(texts[i], "a place or its name") for i, b in enumerate(boxes)
+                    if any(_overlap(b, o) > 0 for o in others)]
 
 
 ARROW_AT = 0.6  # arrowheads sit this far along their leg
@@ -672,7 +732,7 @@ class PlannerView(pn.viewable.Viewer):
         data = route_legs(s.plan, rows, (s.vertiport_x_km, s.vertiport_y_km))
         data["nodes"] = [(float(s.vertiport_x_km), float(s.vertiport_y_km))] + \
             [(float(r["x_km"]), float(r["y_km"])) for r in rows]
-        data["names"] = [""] + [f"{r['name']} {'*' * int(r['priority'])}" for r in rows]  # as drawn on the map
+        data["names"] = [VERTIPORT] + [f"{r['name']} {'*' * int(r['priority'])}" for r in rows]  # as drawn
         return data
 
     @staticmethod
@@ -685,14 +745,16 @@ class PlannerView(pn.viewable.Viewer):
     def _names_element(self, data: pd.DataFrame) -> hv.Overlay:
         s = self.state
         rows = s.destination_rows()
-        names = hv.Labels({"x": [r["x_km"] for r in rows], "y": [r["y_km"] + 3.5 for r in rows],
+        names = hv.Labels({"x": [r["x_km"] for r in rows], "y": [r["y_km"] for r in rows],
                            "text": [f"{r['name']} {'*' * int(r['priority'])}" for r in rows]},
                           kdims=["x", "y"], vdims="text").opts(text_font_size="9pt", text_font_style="bold",
-                                                               text_color="#222222", text_baseline="bottom")
+                                                               text_color="#222222", text_baseline="bottom",
+                                                               hooks=[pixel_offset(-NAME_OFFSET_PX)])
         vp = hv.Points([(s.vertiport_x_km, s.vertiport_y_km)], kdims=["x_km", "y_km"]).opts(
             marker="square", size=16, color="#d62728")
-        vp_label = hv.Labels([(s.vertiport_x_km, s.vertiport_y_km - 5.0, "vertiport")], kdims=["x", "y"],
-                             vdims="text").opts(text_font_size="9pt", text_color="#d62728", text_baseline="top")
+        vp_label = hv.Labels([(s.vertiport_x_km, s.vertiport_y_km, "vertiport")], kdims=["x", "y"],
+                             vdims="text").opts(text_font_size="9pt", text_color="#d62728", text_baseline="top",
+                                                hooks=[pixel_offset(NAME_OFFSET_PX)])
         return names * vp * vp_label
 
     @staticmethod

@@ -49,6 +49,7 @@ from uam_studio.app.services import (
     LEARNED_POLICIES,
     POLICY_LABELS,
     LatestWorker,
+    agent_policy,
     default_policy,
     one_line,
     policy_options,
@@ -359,8 +360,9 @@ class PlannerState(param.Parameterized):
         for label, v in self.policy_objects.items():
             if v == value:
                 return label
-        if value.startswith(AGENT_PREFIX):
-            return f"Retrained: {Path(value[len(AGENT_PREFIX):]).stem}"
+        policy, path = agent_policy(value)
+        if path is not None:  # an attention planner's weights are named by their folder
+            return f"Retrained: {Path(path).parent.name if policy == 'attention' else Path(path).stem}"
         return value
 
     def plan_label(self) -> str:
@@ -452,7 +454,7 @@ class PlannerState(param.Parameterized):
         oracle = "Oracle (exact)" if len(req.mission.destinations) <= EXACT_MAX else ORACLE_REFERENCE_LABEL
         label = COMPARE_LABELS.get(agent) or self.policy_label(agent)
         specs = {"agent": (agent, label)}
-        if agent != PAPER_POLICY and not agent.startswith(AGENT_PREFIX):  # a (retrained) DQN is the paper's method
+        if agent_policy(agent)[0] != PAPER_POLICY:  # a (retrained) DQN is the paper's method
             specs["paper"] = (PAPER_POLICY, COMPARE_LABELS[PAPER_POLICY])
         return {**specs, "greedy": ("greedy", "Greedy"), "oracle": ("oracle", oracle)}
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from uam_studio.app.services import AGENT_PREFIX, health_estimate, one_line, predictor, predictor_or_error
+from uam_studio.app.services import agent_policy, health_estimate, one_line, predictor, predictor_or_error
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.attention import WEIGHTS_NAME
 from uam_studio.planning.missions.mission import Mission
@@ -39,11 +39,12 @@ def _agent_stamp(req: PlanRequest) -> tuple[str, int, int] | None:
     from uam_studio.bundled import bundled_path
     from uam_studio.planning.agents.rollout import bundled_agent_path
 
-    if req.policy.startswith(AGENT_PREFIX):
-        path = Path(req.policy[len(AGENT_PREFIX):])
-    elif req.policy == "attention":
+    policy, agent_path = agent_policy(req.policy)
+    if agent_path is not None:
+        path = Path(agent_path)
+    elif policy == "attention":
         path = bundled_path(WEIGHTS_NAME)
-    elif req.policy == "dqn":
+    elif policy == "dqn":
         path = bundled_agent_path(req.mission.scenario)
     else:
         return None
@@ -125,9 +126,7 @@ def _compute_plan(req: PlanRequest) -> dict[str, Any]:
     t0 = time.perf_counter()
     out: dict[str, Any] = {"plan": None, "error": None, "health": None, "request": req}
     pred = predictor()
-    policy, agent_path = req.policy, None
-    if policy.startswith(AGENT_PREFIX):
-        policy, agent_path = "dqn", policy[len(AGENT_PREFIX):]
+    policy, agent_path = agent_policy(req.policy)
     try:
         out["plan"] = plan_mission(req.mission, policy, agent_path=agent_path,
                                    predictor=pred if pred is not None else False).to_dict()  # JSON state

@@ -1,10 +1,10 @@
-"""The Retrain tab: retrain a DQN agent on the current map or on random missions, live.
+"""The Retrain tab: retrain the paper's DQN agent or the attention planner, live.
 
 Training runs in a child process or a thread (:class:`~uam_studio.app.retrain_state.RetrainState`). This
-view drains its episode queue on a periodic callback of the session (so every widget and plot update
-happens on the session's own thread) and streams the rows into a :class:`holoviews.streams.Buffer`
-behind the learning curves, which show the exact oracle's plan of the map as a reference line
-(:attr:`RetrainState.reference`). The progress bar comes with steps, elapsed time and the time left.
+view drains its episode (epoch) queue on a periodic callback of the session (so every widget and plot
+update happens on the session's own thread) and streams the rows into a
+:class:`holoviews.streams.Buffer` behind the learning curves, which show the exact oracle's plan of the
+map as a reference line (:attr:`RetrainState.reference`). The progress bar comes with steps, elapsed time and the time left.
 A finished (or stopped) agent is saved in the user folder and appears in every session's Planner
 policy list.
 """
@@ -21,7 +21,7 @@ import panel as pn
 import param
 
 from uam_studio.app.planner_state import PlannerState
-from uam_studio.app.retrain_state import CURVE_COLUMNS, RetrainState
+from uam_studio.app.retrain_state import CURVE_COLUMNS, EPOCH_COLUMNS, MODELS, RetrainState
 from uam_studio.app.services import registry
 from uam_studio.app.session import ensure_bokeh_backend
 from uam_studio.app.style import NOTE_STYLE, heading
@@ -44,6 +44,8 @@ class RetrainView(pn.viewable.Viewer):
         s = state
         s.scenario = planner.scenario
         w = SETTINGS_WIDTH
+        self.model = pn.widgets.RadioButtonGroup(name="Planner", options=MODELS, value=s.model, width=w,
+                                                 css_classes=["uam-train-model"])
         self.source = pn.widgets.RadioButtonGroup(
             name="Missions", options={"Current map": "map", "Random missions": "random"}, value=s.source, width=w)
         self.scenario = pn.widgets.Select(name="Scenario", options=list(SCENARIOS), value=s.scenario, width=w)
@@ -57,10 +59,19 @@ class RetrainView(pn.viewable.Viewer):
         self.steps = pn.widgets.IntInput(name="Steps (environment transitions)", value=s.steps, start=100,
                                          end=1_000_000, step=500, width=w - 90)
         self.seed = pn.widgets.IntInput(name="Seed", value=s.seed, start=0, width=80)
+        half = (w - 10) // 2
+        self.missions = pn.widgets.IntInput(name="Training missions", value=s.missions, start=10, end=5000, step=50,
+                                            width=half, css_classes=["uam-train-missions"],
+                                            description="random missions of 2-6 destinations, each solved by "
+                                                        "the exact oracle: its choices are the examples")
+        self.epochs = pn.widgets.IntInput(name="Epochs", value=s.epochs, start=1, end=500, step=5, width=half,
+                                          css_classes=["uam-train-epochs"],
+                                          description="passes over the examples")
         self.start_from = pn.widgets.RadioButtonGroup(
             name="Start from", options={"Random weights": "scratch", "Fine-tune bundled": "bundled"},
             value=s.start_from, width=w, css_classes=["uam-train-start-from"])
-        for key in ("source", "scenario", "alpha", "beta", "gamma", "steps", "seed", "start_from"):
+        for key in ("model", "source", "scenario", "alpha", "beta", "gamma", "steps", "seed", "missions", "epochs",
+                    "start_from"):
             getattr(self, key).link(s, value=key)
         planner.param.watch(lambda ev: setattr(self.scenario, "value", ev.new), "scenario")
 
@@ -95,47 +106,83 @@ class RetrainView(pn.viewable.Viewer):
         self.breach_plot = pn.pane.HoloViews(hv.DynamicMap(self._breach_element, streams=[self.buffer]),
                                              linked_axes=False, css_classes=["uam-curve-breach"],
                                              sizing_mode="stretch_width")
+        self.epoch_buffer = hv.streams.Buffer(pd.DataFrame({c: [] for c in EPOCH_COLUMNS}), length=100_000,
+                                              index=False)
+        self.priority_plot = pn.pane.HoloViews(hv.DynamicMap(self._priority_element,
+                                                             streams=[self.epoch_buffer, ref]),
+                                               linked_axes=False, css_classes=["uam-curve-priority"],
+                                               sizing_mode="stretch_width")
+        self.loss_plot = pn.pane.HoloViews(hv.DynamicMap(self._loss_element, streams=[self.epoch_buffer]),
+                                           linked_axes=False, css_classes=["uam-curve-loss"],
+                                           sizing_mode="stretch_width")
+        self.dqn_curves = pn.Column(self.reached_plot, self.cycles_plot, self.reward_plot, self.breach_plot,
+                                    sizing_mode="stretch_width", margin=0)
+        self.attention_curves = pn.Column(self.priority_plot, self.loss_plot, sizing_mode="stretch_width", margin=0)
+        self.dqn_only = [self.alpha, self.beta, self.gamma, self.steps]
+        self.attention_only = [self.missions, self.epochs]
         self._poller = None
         s.param.watch(self._on_status, ["running", "status", "error", "timesteps", "episodes", "agent_path"])
         s.param.watch(self._on_reference_inputs, ["source", "scenario"])
+        s.param.watch(self._on_model, "model")
+        s.param.watch(self._on_status, "model")
+        s.param.watch(self._on_reference, "model")
         s.param.watch(self._on_reference, "reference")
         planner.param.watch(self._on_reference_inputs, "comparison")
         self._on_status()
         self._on_reference_inputs()
         self._on_reference()
+        self._on_model()
 
     def __panel__(self) -> pn.viewable.Viewable:
         w = SETTINGS_WIDTH
         intro = pn.pane.Markdown(
-            "Retrain the masked DQN agent. *Current map* trains on the Planner's destinations with a random "
-            "cell (q_max, R0) each episode; *random missions* draws a new mission every episode. "
-            f"Agents are saved in `{html.escape(str(agents_dir()))}` (set `UAM_STUDIO_HOME` to move it), "
-            "never over the bundled ones, and appear in the Planner's policy list. *Fine-tune bundled* starts "
-            "from the scenario's bundled agent instead of random weights, and plays its own (slightly "
-            "randomised) choices from the first episode on, where a run from random weights first plays ~100 "
-            "episodes at random to fill its memory: on an 8-destination map fine-tuning reached the exact "
-            "oracle's priority in 3 minutes where random weights did not (`benchmarks/RESULTS.md`). This tab "
-            "trains the paper's DQN; the default attention planner trains with `uam-studio train attention`.",
+            "Retrain a planner. **DQN (paper)** learns by trial and error, one episode after another: "
+            "*current map* trains on the Planner's destinations with a random cell (q_max, R0) each episode, "
+            "*random missions* draws a new mission every episode. *Fine-tune bundled* starts from the "
+            "scenario's bundled agent and plays its own (slightly randomised) choices from the first episode "
+            "on, where a run from random weights first plays ~100 episodes at random to fill its memory: on an "
+            "8-destination map fine-tuning reached the exact oracle's priority in 3 minutes where random "
+            "weights did not (`benchmarks/RESULTS.md`). **Attention (default planner)** learns by imitation: "
+            "random missions of 2-6 destinations are solved by the exact oracle, and the network learns to "
+            "rank the oracle's choice first; after each epoch it plans the *current map* (with the Planner's "
+            "search, and by its own first choices alone) and the curve shows the priority it reaches. "
+            "The full recipe (also 9-20 destinations) is `uam-studio train attention`. "
+            f"Both are saved in `{html.escape(str(agents_dir()))}` (set `UAM_STUDIO_HOME` to move it), "
+            "never over the bundled ones, and appear in the Planner's policy list.",
             sizing_mode="stretch_width", styles={"font-size": "13px"})
-        rewards = pn.pane.HTML("alpha: reward per destination x priority; beta: penalty per charging stop; "
-                               "gamma: penalty for an end of discharge", width=w, styles=NOTE_STYLE,
-                               margin=(0, 10))
-        controls = pn.Column(heading("Settings"), self.source, self.scenario,
+        self.rewards = pn.pane.HTML("alpha: reward per destination x priority; beta: penalty per charging stop; "
+                                    "gamma: penalty for an end of discharge", width=w, styles=NOTE_STYLE,
+                                    margin=(0, 10))
+        self.dqn_only.append(self.rewards)
+        controls = pn.Column(heading("Settings"), pn.pane.HTML("Planner", margin=(4, 10, 0, 10)), self.model,
+                             self.source, self.scenario,
                              pn.pane.HTML("Start from", margin=(4, 10, 0, 10)), self.start_from,
-                             pn.Row(self.alpha, self.beta, self.gamma), rewards, pn.Row(self.steps, self.seed),
+                             pn.Row(self.alpha, self.beta, self.gamma), self.rewards,
+                             pn.Row(self.missions, self.epochs), pn.Row(self.steps, self.seed),
                              pn.Row(self.start, self.stop), self.progress, self.progress_text, width=w + 20,
                              css_classes=["uam-train-settings"])
-        curves = pn.Column(self.status, self.reference_text, self.reached_plot, self.cycles_plot, self.reward_plot,
-                           self.breach_plot, min_width=520,
+        curves = pn.Column(self.status, self.reference_text, self.dqn_curves, self.attention_curves, min_width=520,
                            sizing_mode="stretch_width", styles={"flex": "1 1 520px"})
+        self._on_model()
         return pn.Column(intro, self.error, pn.FlexBox(controls, curves, flex_wrap="wrap", gap="10px",
                                                        sizing_mode="stretch_width"),
                          sizing_mode="stretch_width")
+
+    def _on_model(self, *events: Any) -> None:
+        """Show the chosen planner's settings and curves."""
+        attention = self.state.model == "attention"
+        for widget in self.dqn_only:
+            widget.visible = not attention
+        for widget in self.attention_only:
+            widget.visible = attention
+        self.dqn_curves.visible = not attention  # (a HoloViews pane's own `visible` fails in Panel 1.9)
+        self.attention_curves.visible = attention
 
     # ------------------------------------------------------------------ actions
 
     def _on_start(self, _event: Any) -> None:
         self.buffer.clear()
+        self.epoch_buffer.clear()
         if self.state.start(self.planner.mission):
             if self._poller is None:
                 self._poller = pn.state.add_periodic_callback(self._poll, period=POLL_MS, start=False)
@@ -143,7 +190,9 @@ class RetrainView(pn.viewable.Viewer):
 
     def _poll(self) -> None:
         rows = self.state.poll()
-        if rows:
+        if rows and "epoch" in rows[0]:
+            self.epoch_buffer.send(pd.DataFrame(rows, columns=EPOCH_COLUMNS))
+        elif rows:
             self.buffer.send(pd.DataFrame(rows, columns=CURVE_COLUMNS))
         if not self.state.running and self._poller is not None:
             self._poller.stop()
@@ -156,8 +205,10 @@ class RetrainView(pn.viewable.Viewer):
 
     def _on_reference(self, *events: Any) -> None:
         ref = self.state.reference
+        attention = self.state.model == "attention"
         if self.state.source != "map":
-            text = "Reference line: none for random missions (each episode is another map)."
+            text = ("Reference line: none (choose Current map to score each epoch on it)." if attention
+                    else "Reference line: none for random missions (each episode is another map).")
         elif ref is None:
             text = "Reference line: the exact oracle on this map (computing...)."
         elif ref.get("status") != "done":
@@ -166,18 +217,23 @@ class RetrainView(pn.viewable.Viewer):
             text = (f"Reference line (dashed): the exact oracle's plan of this map for the Planner's cell "
                     f"({ref['cell']}): {ref['reached']} of {ref['of']} destinations, "
                     f"priority {ref['priority']}, {ref['cycles']} charging cycle{'s' * (ref['cycles'] != 1)}. "
-                    "Training draws a new cell each episode, so it is a guide, not a bound.")
+                    + ("Each epoch's network plans this map for the same cell: the line is the best it can reach."
+                       if attention else "Training draws a new cell each episode, so it is a guide, not a bound."))
         self.reference_text.object = html.escape(text)
 
     def _on_status(self, *events: Any) -> None:
         s = self.state
         self.start.disabled = s.running
+        self.model.disabled = s.running  # the curves shown are the running planner's
         self.stop.disabled = not s.running
         self.progress.value = int(round(1000 * s.progress))
         self.progress_text.object = f"<span class='uam-train-progress-text'>{html.escape(s.progress_text())}</span>"
         self.error.object = html.escape(s.error)
         self.error.visible = bool(s.error)
-        episodes = f"episodes: <b class='uam-episodes'>{s.episodes}</b>, steps: {s.timesteps}"
+        if (s.run_model if s.running or s.episodes else s.model) == "attention":
+            episodes = f"epochs: <b class='uam-episodes'>{s.episodes}</b>"
+        else:
+            episodes = f"episodes: <b class='uam-episodes'>{s.episodes}</b>, steps: {s.timesteps}"
         self.status.object = f"<p>{html.escape(s.status)}</p><p>{episodes}</p>"
 
     def close(self) -> None:
@@ -235,3 +291,41 @@ class RetrainView(pn.viewable.Viewer):
     def _breach_element(cls, data: pd.DataFrame) -> hv.Overlay:
         return cls._curve_pair(data, "breach", "End of discharge (EOD) per episode: 1 = the cell went below it",
                                "breach (moving average: share)", "#fc9272", "#a50f15", None, "")
+
+    @staticmethod
+    def _priority_element(data: pd.DataFrame, reference: dict[str, Any] | None = None) -> hv.Overlay:
+        """The attention network's plan of the map after each epoch: with the Planner's search and by
+        its first choices alone (0 if unsafe), and the exact oracle's priority as a dashed line."""
+        n = float(data["epoch"].max()) if len(data) else 0.0
+        x1 = max(10.0, n)
+        search = hv.Curve(data, "epoch", "priority", label="its plan (Planner's search)").opts(
+            color="#08519c", line_width=2.5)
+        alone = hv.Curve(data, "epoch", "priority_net", label="first choices alone").opts(
+            color="#6baed6", line_width=1.5, line_dash="dotted")
+        ref_value = float(reference["priority"]) if reference is not None and reference.get("status") == "done" \
+            else np.nan
+        ref = hv.Curve(([0.0, x1], [ref_value] * 2), "epoch", "priority", label="exact oracle (this map)").opts(
+            color="#333333", line_width=1.5, line_dash="dashed")
+        values = [v for v in (*data["priority"], *data["priority_net"], ref_value) if np.isfinite(v)]
+        top = max([1.0, *values])
+        return (search * alone * ref).opts(
+            hv.opts.Overlay(responsive=True, height=260, title="Priority of its plan of this map after each epoch "
+                            "(0 = unsafe)", ylabel="priority reached", legend_position="right", show_grid=True,
+                            xlim=(0.0, x1), ylim=(-0.05 * top, 1.1 * top + 0.1),
+                            fontsize={"title": "10pt", "legend": "8pt"}),
+            hv.opts.Curve(framewise=True))
+
+    @staticmethod
+    def _loss_element(data: pd.DataFrame) -> hv.Overlay:
+        """Imitation loss (cross-entropy) and the share of decisions where the oracle's choice ranked first."""
+        n = float(data["epoch"].max()) if len(data) else 0.0
+        loss = hv.Curve(data, "epoch", "loss", label="loss (cross-entropy)").opts(color="#a63603", line_width=2)
+        acc = hv.Curve(data, "epoch", "accuracy", label="oracle's choice ranked first (share)").opts(
+            color="#54278f", line_width=2)
+        top = max([1.0, *(float(v) for v in data["loss"])]) if len(data) else 1.0
+        return (loss * acc).opts(
+            hv.opts.Overlay(responsive=True, height=240, title="Imitation of the exact oracle: loss and agreement",
+                            ylabel="loss / share", legend_position="right", show_grid=True,
+                            xlim=(0.0, max(10.0, n)), ylim=(0.0, 1.05 * top),
+                            fontsize={"title": "10pt", "legend": "8pt"}),
+            hv.opts.Curve(framewise=True))

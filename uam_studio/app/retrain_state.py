@@ -1,10 +1,11 @@
-"""State of the Retrain tab: a DQN retraining run in the background, and its learning curves' reference.
+"""State of the Retrain tab: a retraining run (the paper's DQN or the attention planner) in the background,
+and its learning curves' reference.
 
 :class:`RetrainState` validates the settings and trains with the library
-(:mod:`uam_studio.planning.agents.retrain`) in a child process or a thread with a stop flag; episode
-stats go through a queue that the view drains on its own (periodic) callback; progress comes with
-elapsed time and time left; the exact oracle's plan of the map (a comparison row,
-:mod:`uam_studio.app.comparison`) is the curves' reference.
+(:mod:`uam_studio.planning.agents.retrain`, :mod:`uam_studio.planning.agents.attention.retrain`) in a
+child process or a thread with a stop flag; episode (epoch) stats go through a queue that the view
+drains on its own (periodic) callback; progress comes with elapsed time and time left; the exact
+oracle's plan of the map (a comparison row, :mod:`uam_studio.app.comparison`) is the curves' reference.
 """
 
 from __future__ import annotations
@@ -16,7 +17,6 @@ import threading
 import time
 import traceback
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -26,9 +26,15 @@ from uam_studio.app.comparison import COMPARE_MODES, cached_row, compare_row, co
 from uam_studio.app.plans import PlanRequest
 from uam_studio.app.services import ACTIVITY, one_line
 from uam_studio.errors import InputError
+from uam_studio.planning.agents.attention.retrain import (
+    CLASS_EPOCHS,
+    CLASS_MISSIONS,
+    EPOCHS_RANGE,
+    MISSIONS_RANGE,
+)
 from uam_studio.planning.missions.mission import SCENARIOS, Mission
 
-__all__ = ["RUNNER_ENV", "RetrainState"]
+__all__ = ["CURVE_COLUMNS", "EPOCH_COLUMNS", "MODELS", "RUNNER_ENV", "RetrainState"]
 
 RUNNER_ENV = "UAM_STUDIO_RETRAIN_RUNNER"  # "process" (default) or "thread"
 
@@ -42,14 +48,19 @@ def _clock(seconds: float) -> str:
 
 CURVE_SERIES = ("reached", "cycles", "reward", "breach")  # per-episode values the Retrain tab plots
 CURVE_COLUMNS = ["episode", *CURVE_SERIES, *(f"{k}_ma" for k in CURVE_SERIES)]
-"""Columns of :meth:`RetrainState.poll`'s rows."""
+"""Columns of :meth:`RetrainState.poll`'s rows for a DQN run."""
+EPOCH_COLUMNS = ["epoch", "loss", "accuracy", "priority", "priority_net"]
+"""Columns of :meth:`RetrainState.poll`'s rows for an attention run (priorities NaN without a map)."""
+MODELS = {"DQN (paper)": "dqn", "Attention (default planner)": "attention"}
 
 
 class RetrainState(param.Parameterized):
-    """A DQN retraining run in the background (one per session at a time).
+    """A retraining run in the background (one per session at a time): the paper's DQN (``model="dqn"``)
+    or the attention planner (``model="attention"``: imitation of the exact oracle on random missions,
+    each epoch's network scored on the current map).
 
-    :meth:`start` validates the settings (:func:`uam_studio.planning.agents.retrain.training_setup`) and
-    starts the run: in a child process (``runner="process"``, the served app's default:
+    :meth:`start` validates the settings (:func:`uam_studio.planning.agents.retrain.training_setup`,
+    :func:`uam_studio.planning.agents.attention.retrain.attention_setup`) and starts the run: in a child process (``runner="process"``, the served app's default:
     :class:`~uam_studio.planning.agents.retrain.RetrainProcess`, lower CPU priority, no GIL shared with
     the sessions) or in a thread of this process (``runner="thread"``). :meth:`stop` sets the stop
     flag (the agent trained so far is still saved). Neither touches the param values: :meth:`poll`,
@@ -57,16 +68,24 @@ class RetrainState(param.Parameterized):
     the values that views watch and returns the new ones.
     """
 
-    source = param.Selector(default="map", objects=["map", "random"], doc="current map or random missions")
+    model = param.Selector(default="dqn", objects=list(MODELS.values()),
+                           doc="the paper's DQN, or the attention planner (the app's default planner)")
+    source = param.Selector(default="map", objects=["map", "random"],
+                            doc="DQN: train on the current map or on random missions; attention: score each "
+                                "epoch on the current map, or not at all (it always trains on random missions)")
     scenario = param.Selector(default="single_charge", objects=list(SCENARIOS))
     alpha = param.Number(default=1.0, bounds=(0.0, 100.0), doc="reward per destination x priority")
     beta = param.Number(default=1.0, bounds=(0.0, 100.0), doc="penalty per charging stop")
     gamma = param.Number(default=5.0, bounds=(0.0, 100.0), doc="penalty for an end of discharge")
     steps = param.Integer(default=5000, bounds=(100, 1_000_000), doc="environment transitions")
+    missions = param.Integer(default=CLASS_MISSIONS, bounds=MISSIONS_RANGE,
+                             doc="attention: training missions, each solved by the exact oracle")
+    epochs = param.Integer(default=CLASS_EPOCHS, bounds=EPOCHS_RANGE, doc="attention: passes over the examples")
     seed = param.Integer(default=0, bounds=(0, 2**31 - 1))
     start_from = param.Selector(default="scratch", objects=["scratch", "bundled"],
-                                doc="random weights, or fine-tune the scenario's bundled agent "
-                                    "(pretrained/dqn_<scenario>.zip; exploration from epsilon 0.2)")
+                                doc="random weights, or fine-tune the bundled agent (DQN: "
+                                    "pretrained/dqn_<scenario>.zip, exploration from epsilon 0.2; attention: "
+                                    "pretrained/attention_planner.pt)")
 
     running = param.Boolean(default=False)
     timesteps = param.Integer(default=0)
@@ -110,12 +129,15 @@ class RetrainState(param.Parameterized):
         self._finished = False
         self._target_steps = 0
         self._series: dict[str, list[float]] = {k: [] for k in CURVE_SERIES}
+        self._kind = "dqn"  # the model of the last run started
+        self._last_timestep = 0
+        self._run_epochs = 0
+        self._stage: tuple[str, int, int] | None = None  # an attention run's examples: (stage, done, total)
 
     def start(self, mission: Mission | None = None) -> bool:
-        """Start training on ``mission`` (``source == "map"``) or on random missions. Returns False
-        (with :attr:`error` set) for bad settings or while a run is going."""
-        from uam_studio.planning.agents.retrain import new_agent_path, training_setup
-
+        """Start training on ``mission`` (``source == "map"``) or on random missions (the attention
+        planner: always on random missions, scored on ``mission``). Returns False (with :attr:`error`
+        set) for bad settings or while a run is going."""
         if self.running:
             self.error = "training: a run is already going; stop it first"
             return False
@@ -123,53 +145,103 @@ class RetrainState(param.Parameterized):
         if self.source == "map" and mission is None:
             self.error = "training: no map to train on"
             return False
-        init_agent = None
-        if self.start_from == "bundled":
-            from uam_studio.planning.agents.rollout import bundled_agent_path
-
-            init_agent = str(bundled_agent_path(self.scenario))
         try:
-            cfg, env_fn = training_setup(self.scenario, m, self.alpha, self.beta, self.gamma, self.steps, self.seed,
-                                         init_agent=init_agent)
+            job = self._attention_job(m) if self.model == "attention" else self._dqn_job(m)
         except InputError as err:
-            what = "current map" if m is not None else "settings"
+            what = "current map" if m is not None and self.model == "dqn" else "settings"
             self.error = f"training ({what}): {one_line(err)}"
             return False
-        path = new_agent_path(self.scenario, "map" if m is not None else "random")
         self.error = ""
         self._queue.clear()
         self._stop.clear()
         self._result, self._failure, self._finished = None, None, False
         self._series = {k: [] for k in CURVE_SERIES}
-        self._target_steps = cfg.steps
+        self._kind, self._stage = self.model, None
+        self._target_steps, self._run_epochs = job["target"], job.get("epochs", 0)
         self._t_start, self._t_end = time.monotonic(), None
         self.request_reference(mission)
-        verb = "fine-tuning the bundled agent" if init_agent else "training"
-        self.param.update(running=True, timesteps=0, episodes=0, agent_path="",
-                          status=f"{verb} {cfg.steps} steps on {'the current map' if m else 'random missions'}")
+        self.param.update(running=True, timesteps=0, episodes=0, agent_path="", status=job["status"])
         if self.runner == "process":
             from uam_studio.planning.agents.retrain import RetrainProcess
 
-            self._proc = RetrainProcess(path, mission=m, source="app", pause_event=ACTIVITY.event,
-                                        scenario=self.scenario, alpha=self.alpha, beta=self.beta,
-                                        gamma=self.gamma, steps=self.steps, seed=self.seed, init_agent=init_agent)
+            self._proc = RetrainProcess(job["path"], mission=m, source="app", pause_event=ACTIVITY.event,
+                                        kind=self.model, **job["setup"])
             self._proc.start()
             return True
         self._proc = None
-        self._thread = threading.Thread(target=self._run, args=(cfg, env_fn, path, m), daemon=True,
-                                        name="uam-retrain")
+        self._thread = threading.Thread(target=self._run, args=(job["run"],), daemon=True, name="uam-retrain")
         self._thread.start()
         return True
 
-    def _run(self, cfg: Any, env_fn: Callable[[], Any], path: Path, mission: Mission | None) -> None:
-        import torch
+    def _init_agent(self, model: str) -> str | None:
+        """The bundled agent a fine-tuning starts from (None: random weights)."""
+        if self.start_from != "bundled":
+            return None
+        if model == "attention":
+            from uam_studio.planning.agents.attention.decode import bundled_weights_path
 
-        from uam_studio.planning.agents.retrain import retrain_dqn
+            return str(bundled_weights_path())
+        from uam_studio.planning.agents.rollout import bundled_agent_path
+
+        return str(bundled_agent_path(self.scenario))
+
+    def _dqn_job(self, m: Mission | None) -> dict[str, Any]:
+        """A DQN run: its agent path, the child process's settings, the thread's call, the step target."""
+        from uam_studio.planning.agents.retrain import new_agent_path, retrain_dqn, training_setup
+
+        init_agent = self._init_agent("dqn")
+        cfg, env_fn = training_setup(self.scenario, m, self.alpha, self.beta, self.gamma, self.steps, self.seed,
+                                     init_agent=init_agent)
+        path = new_agent_path(self.scenario, "map" if m is not None else "random")
+        verb = "fine-tuning the bundled agent" if init_agent else "training"
+
+        def run() -> Any:
+            return retrain_dqn(cfg, env_fn, path, mission=m, on_episode=self._queue.append, stop_event=self._stop,
+                               source="app")
+
+        return {"path": path, "run": run, "target": cfg.steps,
+                "setup": {"scenario": self.scenario, "alpha": self.alpha, "beta": self.beta, "gamma": self.gamma,
+                          "steps": self.steps, "seed": self.seed, "init_agent": init_agent},
+                "status": f"{verb} {cfg.steps} steps on {'the current map' if m else 'random missions'}"}
+
+    def _attention_job(self, m: Mission | None) -> dict[str, Any]:
+        """An attention run (see :meth:`_dqn_job`); its target counts missions solved and epochs."""
+        from uam_studio.planning.agents.attention import WEIGHTS_NAME
+        from uam_studio.planning.agents.attention.retrain import (
+            attention_setup,
+            new_attention_folder,
+            retrain_attention,
+        )
+
+        init_agent = self._init_agent("attention")
+        cfg = attention_setup(self.missions, self.epochs, self.seed)
+        if m is not None and m.scenario != self.scenario:  # scored as the reference line is: this run's scenario
+            m = dataclasses.replace(m, scenario=self.scenario)
+        folder = new_attention_folder("map" if m is not None else "random")
+        verb = "fine-tuning the bundled attention planner" if init_agent else "training the attention planner"
+
+        def progress(stage: str, done: int, total: int) -> None:
+            self._stage = (stage, done, total)
+
+        def run() -> Any:
+            return retrain_attention(cfg, folder, mission=m, on_epoch=self._queue.append, on_progress=progress,
+                                     stop_event=self._stop, source="app", init_weights=init_agent)
+
+        score = "scored on the current map after each epoch" if m is not None else "not scored on a map"
+        return {"path": folder / WEIGHTS_NAME, "run": run, "target": cfg.oracle_missions + cfg.epochs,
+                "epochs": cfg.epochs,
+                "setup": {"missions": self.missions, "epochs": self.epochs, "seed": self.seed,
+                          "init_agent": init_agent},
+                "status": f"{verb}: {cfg.epochs} epochs on {cfg.oracle_missions} random missions of "
+                          f"{cfg.oracle_dest[0]}-{cfg.oracle_dest[1]} destinations solved by the exact oracle, "
+                          f"{score}"}
+
+    def _run(self, run: Callable[[], Any]) -> None:
+        import torch
 
         torch.set_num_threads(1)  # leave the other core to the sessions
         try:
-            self._result = retrain_dqn(cfg, env_fn, path, mission=mission, on_episode=self._queue.append,
-                                       stop_event=self._stop, source="app")
+            self._result = run()
         except Exception as err:
             traceback.print_exc()
             self._failure = f"training failed: {type(err).__name__}: {one_line(err)}"
@@ -185,6 +257,11 @@ class RetrainState(param.Parameterized):
             self.status = "stopping..."
 
     @property
+    def run_model(self) -> str:
+        """The model of the last run started (``"dqn"`` before any run)."""
+        return self._kind
+
+    @property
     def progress(self) -> float:
         """Fraction of the steps done, 0-1."""
         return min(1.0, self.timesteps / self._target_steps) if self._target_steps else 0.0
@@ -197,15 +274,23 @@ class RetrainState(param.Parameterized):
         return (self._t_end if self._t_end is not None else time.monotonic()) - self._t_start
 
     def progress_text(self) -> str:
-        """Steps done of the total, percent, elapsed time and (while running) the time left at the
-        pace so far, e.g. ``"1200 of 5000 steps (24%) · 0:12 elapsed · about 0:38 left"``."""
+        """Work done of the total, percent, elapsed time and (while running) the time left at the
+        pace so far, e.g. ``"1200 of 5000 steps (24%) · 0:12 elapsed · about 0:38 left"`` (an attention
+        run: missions solved by the oracle, then epochs)."""
         if not self._target_steps:
             return "not started"
         p = self.progress
-        text = f"{self.timesteps} of {self._target_steps} steps ({100 * p:.0f}%) \u00b7 {_clock(self.elapsed_s)} elapsed"
+        if self._kind == "attention":
+            total = self._target_steps - self._run_epochs
+            solved = self._stage[1] if self._stage is not None else 0
+            done = f"{solved} of {total} missions solved by the oracle, {self.episodes} of {self._run_epochs} epochs"
+        else:
+            done = f"{self.timesteps} of {self._target_steps} steps"
+        text = f"{done} ({100 * p:.0f}%) \u00b7 {_clock(self.elapsed_s)} elapsed"
         if self.running:
             eta = self.elapsed_s * (1 - p) / p if p > 0 else None
-            text += f" \u00b7 about {_clock(eta)} left" if eta is not None else " \u00b7 time left: after the first episodes"
+            first = "epochs" if self._kind == "attention" else "episodes"
+            text += f" \u00b7 about {_clock(eta)} left" if eta is not None else f" \u00b7 time left: after the first {first}"
         return text
 
     def request_reference(self, mission: Mission | None) -> None:
@@ -241,17 +326,57 @@ class RetrainState(param.Parameterized):
             self.reference = row
 
     def poll(self) -> list[dict[str, float]]:
-        """Drain the episode queue (call on the session's thread). Returns the new episodes as rows
-        of :data:`CURVE_COLUMNS`: ``episode`` and, per episode, ``reached`` (destinations), ``cycles``
-        (charging cycles), ``reward`` (undiscounted return) and ``breach`` (1 if the cell went below
-        EOD), each with its moving average over :attr:`MA_WINDOW` episodes (``<name>_ma``; for
-        ``breach`` the share of episodes that breached); updates the progress and, at the end, the status."""
+        """Drain the episode queue (call on the session's thread); updates the progress and, at the
+        end, the status. Returns the new rows:
+
+        - a DQN run: one per episode, of :data:`CURVE_COLUMNS`: ``episode`` and ``reached``
+          (destinations), ``cycles`` (charging cycles), ``reward`` (undiscounted return) and
+          ``breach`` (1 if the cell went below EOD), each with its moving average over
+          :attr:`MA_WINDOW` episodes (``<name>_ma``; for ``breach`` the share of episodes that breached);
+        - an attention run: one per epoch, of :data:`EPOCH_COLUMNS`: ``loss``, ``accuracy`` (share of
+          decisions where the oracle's choice ranked first), ``priority`` (its plan of the map with
+          the Planner's search, 0 if unsafe) and ``priority_net`` (the network's first choices alone).
+        """
         if self._proc is not None and not self._finished:
             self._queue.extend(self._proc.poll())
+            self._stage = self._proc.stage
             if self._proc.finished:
                 self._result = self._proc.result
                 self._failure = f"training failed: {self._proc.error}" if self._proc.error else None
                 self._finished = True
+        rows = self._epoch_rows() if self._kind == "attention" else self._episode_rows()
+        changes: dict[str, Any] = {}
+        if self._kind == "attention":
+            solved = self._stage[1] if self._stage is not None else 0
+            epochs = self.episodes + len(rows)
+            if (solved + epochs, epochs) != (self.timesteps, self.episodes):
+                changes.update(timesteps=solved + epochs, episodes=epochs)
+        elif rows:
+            changes.update(timesteps=int(self._last_timestep), episodes=self.episodes + len(rows))
+        if self.running and self._finished:
+            changes["running"] = False
+            self._t_end = time.monotonic()
+            if self._failure:
+                changes.update(error=self._failure, status="training failed")
+            elif self._result is not None:
+                r = self._result
+                end = "stopped" if r.stopped else "done"
+                if self._kind == "attention":
+                    changes.update(timesteps=self._target_steps if not r.stopped else self.timesteps,
+                                   agent_path=str(r.path), error="",
+                                   status=f"{end}: {r.episodes} epoch{'s' * (r.episodes != 1)}; saved {r.path.parent.name} (now in the "
+                                          "Planner's policy list)")
+                else:
+                    changes.update(timesteps=r.timesteps, agent_path=str(r.path), error="",
+                                   status=f"{end}: {r.episodes} episodes, {r.timesteps} steps; saved "
+                                          f"{r.path.name} (now in the Planner's policy list)")
+            else:  # an attention run stopped while the oracle solved its training missions
+                changes.update(error="", status="stopped before the first epoch: nothing saved")
+        if changes:
+            self.param.update(**changes)
+        return rows
+
+    def _episode_rows(self) -> list[dict[str, float]]:
         rows = []
         while self._queue:
             e = self._queue.popleft()
@@ -263,23 +388,17 @@ class RetrainState(param.Parameterized):
                 row[key] = value
                 row[f"{key}_ma"] = float(np.mean(self._series[key][-self.MA_WINDOW:]))
             rows.append(row)
-            last_t = e.timestep
-        changes: dict[str, Any] = {}
-        if rows:
-            changes.update(timesteps=int(last_t), episodes=self.episodes + len(rows))
-        if self.running and self._finished:
-            changes["running"] = False
-            self._t_end = time.monotonic()
-            if self._failure:
-                changes.update(error=self._failure, status="training failed")
-            elif self._result is not None:
-                r = self._result
-                changes.update(timesteps=r.timesteps, agent_path=str(r.path), error="",
-                               status=f"{'stopped' if r.stopped else 'done'}: {r.episodes} episodes, "
-                                      f"{r.timesteps} steps; saved {r.path.name} (now in the Planner's "
-                                      "policy list)")
-        if changes:
-            self.param.update(**changes)
+            self._last_timestep = e.timestep
+        return rows
+
+    def _epoch_rows(self) -> list[dict[str, float]]:
+        rows = []
+        while self._queue:
+            e = self._queue.popleft()
+            ev = e.evaluation or {}
+            rows.append({"epoch": float(e.epoch), "loss": float(e.loss), "accuracy": float(e.accuracy),
+                         "priority": float(ev.get("priority", np.nan)),
+                         "priority_net": float(ev.get("priority_net", np.nan))})
         return rows
 
     def join(self, timeout: float | None = None) -> None:

@@ -32,6 +32,7 @@ __all__ = [
     "ACTIVITY",
     "FLIGHT_POOL",
     "AGENT_PREFIX",
+    "agent_policy",
     "APP_EOD_RANGE",
     "APP_Q_RANGE",
     "APP_R0_RANGE",
@@ -59,6 +60,17 @@ POLICY_LABELS = {"Attention (bundled, default)": "attention", "DQN (paper, up to
                  "Oracle (exact up to 8)": "oracle", "Greedy": "greedy"}
 AGENT_PREFIX = "agent:"  # policy value of a retrained agent: agent:<path>
 LEARNED_POLICIES = ("attention", "dqn")
+
+
+def agent_policy(value: str) -> tuple[str, str | None]:
+    """The library's ``(policy, agent_path)`` of a policy value: ``agent:<path>`` is a retrained DQN
+    agent (``*.zip``) or attention planner (``*.pt``); any other value is a policy with its bundled agent."""
+    if not value.startswith(AGENT_PREFIX):
+        return value, None
+    from uam_studio.planning.agents.retrain import agent_model
+
+    path = value[len(AGENT_PREFIX):]
+    return agent_model(path), path
 
 
 def one_line(err: BaseException, limit: int | None = None) -> str:

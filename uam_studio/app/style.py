@@ -8,6 +8,7 @@ from typing import Any
 import panel as pn
 
 NOTE_STYLE = {"font-size": "12px", "color": "#555"}
+NAME_OFFSET_PX = 10  # map names sit this many screen pixels above their place (the vertiport's below it)
 
 
 def heading(text: str, **params: Any) -> pn.pane.HTML:
@@ -21,6 +22,18 @@ def label_background(plot: Any, element: Any) -> None:
     """Bokeh hook: labels on a white box, so that route lines do not run through their text."""
     glyph = plot.handles["glyph"]
     glyph.background_fill_color, glyph.background_fill_alpha = "white", 0.85
+
+
+def pixel_offset(y_px: float) -> Any:
+    """A Bokeh hook that draws labels ``y_px`` screen pixels below their data point (negative: above).
+
+    The offset is in pixels, not km, so a label stays beside its point at every zoom (an offset in
+    data units grows with the zoom and drifts the label away)."""
+
+    def hook(plot: Any, element: Any) -> None:
+        plot.handles["glyph"].y_offset = y_px
+
+    return hook
 
 
 def no_scroll_zoom(plot: Any, element: Any) -> None:

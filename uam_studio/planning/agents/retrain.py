@@ -1,4 +1,4 @@
-"""Retraining a DQN agent and keeping retrained agents in the user's folder.
+"""Retraining a DQN agent and keeping retrained agents (DQN and attention) in the user's folder.
 
 Shared by ``uam-studio train dqn`` and the app's Retrain tab:
 
@@ -6,8 +6,10 @@ Shared by ``uam-studio train dqn`` and the app's Retrain tab:
   factory (a fixed map with a random cell each episode, or a random mission every episode);
 - :func:`retrain_dqn`: train (stoppable, streaming :class:`EpisodeStats`), build the model card and
   save the agent atomically (never into the bundled ``pretrained/`` folder);
-- :class:`RetrainProcess`: :func:`retrain_dqn` in a child process (lower CPU priority, one torch
-  thread), streaming the episodes back; a server keeps its cores and its GIL for its sessions;
+- :class:`RetrainProcess`: :func:`retrain_dqn` (or the attention planner's
+  :func:`~uam_studio.planning.agents.attention.retrain.retrain_attention`) in a child process (lower
+  CPU priority, one torch thread), streaming episodes (epochs) back; a server keeps its cores and its
+  GIL for its sessions;
 - :func:`user_home`, :func:`agents_dir`, :func:`list_agents`, :func:`new_agent_path`: the user folder,
   ``$UAM_STUDIO_HOME`` or ``~/.uam_studio``, whose ``agents/`` subfolder holds retrained agents.
 """
@@ -15,6 +17,7 @@ Shared by ``uam-studio train dqn`` and the app's Retrain tab:
 from __future__ import annotations
 
 import datetime
+import json
 import multiprocessing
 import os
 import queue as queue_mod
@@ -39,6 +42,7 @@ __all__ = [
     "AgentInfo",
     "RetrainProcess",
     "RetrainResult",
+    "agent_model",
     "agents_dir",
     "is_bundled",
     "list_agents",
@@ -65,19 +69,41 @@ def agents_dir() -> Path:
 class AgentInfo:
     """A retrained agent file and what its model card says."""
 
-    path: Path
-    name: str  # file stem
-    scenario: str | None
+    path: Path  # a DQN agent's zip, or an attention planner's weights file (attention_planner.pt)
+    name: str  # file stem (DQN) or folder name (attention)
+    scenario: str | None  # a DQN agent's scenario; None for the attention planner (every scenario)
     card: dict[str, Any] = field(repr=False)
+
+    @property
+    def model(self) -> str:
+        """``"dqn"`` or ``"attention"``."""
+        return "attention" if self.card.get("model") == "attention" else "dqn"
 
     @property
     def label(self) -> str:
         return f"{self.name} ({self.scenario})" if self.scenario else self.name
 
 
+def agent_model(path: str | os.PathLike[str]) -> str:
+    """Which planner a retrained agent file holds: ``"attention"`` (``*.pt``) or ``"dqn"`` (``*.zip``)."""
+    return "attention" if Path(path).suffix == ".pt" else "dqn"
+
+
+def _attention_card(weights: Path) -> dict[str, Any] | None:
+    """The card (``card.json``) beside an attention planner's weights, or None if it is not one."""
+    try:
+        card = json.loads((weights.parent / "card.json").read_text())
+    except (OSError, ValueError):
+        return None
+    return card if isinstance(card, dict) and card.get("model") == "attention" else None
+
+
 def list_agents(folder: str | os.PathLike[str] | None = None) -> list[AgentInfo]:
-    """The agents (``*.zip`` with a readable model card) in ``folder`` (default :func:`agents_dir`),
-    newest first. Unreadable files are skipped (they are not agents); a missing folder gives ``[]``."""
+    """The agents in ``folder`` (default :func:`agents_dir`), newest first: DQN agents (``*.zip`` with a
+    readable model card) and attention planners (``*/attention_planner.pt`` with a ``card.json`` of
+    model ``attention`` beside it). Unreadable files are skipped (they are not agents); a missing
+    folder gives ``[]``."""
+    from uam_studio.planning.agents.attention import WEIGHTS_NAME
     from uam_studio.planning.agents.training import load_card
 
     d = Path(folder) if folder is not None else agents_dir()
@@ -94,6 +120,14 @@ def list_agents(folder: str | os.PathLike[str] | None = None) -> list[AgentInfo]
             continue
         scenario = card.get("scenario") if card.get("scenario") in SCENARIOS else None
         out.append((mtime, AgentInfo(p, p.stem, scenario, card)))
+    for p in d.glob(f"*/{WEIGHTS_NAME}"):
+        card = _attention_card(p)
+        try:
+            mtime = p.stat().st_mtime
+        except OSError:
+            continue
+        if card is not None:
+            out.append((mtime, AgentInfo(p, p.parent.name, None, card)))
     out.sort(key=lambda t: (-t[0], t[1].name))
     return [a for _, a in out]
 
@@ -277,8 +311,8 @@ def retrain_dqn(
 # ----------------------------------------------------------------------------- in a child process
 
 
-def _process_main(setup: dict[str, Any], agent_path: str, mission: Mission | None, out: Any, stop: Any,
-                  source: str | None, nice: int, pause: Any, max_pause_s: float) -> None:
+def _process_main(kind: str, setup: dict[str, Any], agent_path: str, mission: Mission | None, out: Any,
+                  stop: Any, source: str | None, nice: int, pause: Any, max_pause_s: float) -> None:
     """Entry point of :class:`RetrainProcess`'s child: train, save, report on ``out``."""
     try:
         os.nice(nice)
@@ -296,6 +330,15 @@ def _process_main(setup: dict[str, Any], agent_path: str, mission: Mission | Non
         import torch
 
         torch.set_num_threads(1)
+        if kind == "attention":
+            from uam_studio.planning.agents.attention.retrain import attention_setup, retrain_attention
+
+            init = setup.pop("init_agent", None)
+            res = retrain_attention(attention_setup(**setup), Path(agent_path).parent, mission=mission,
+                                    on_epoch=on_episode, on_progress=lambda *p: out.put(("progress", *p)),
+                                    stop_event=stop, source=source, init_weights=init)
+            out.put(res if res is not None else ("nothing saved",))
+            return
         cfg, env_fn = training_setup(mission=mission, **setup)
         res = retrain_dqn(cfg, env_fn, agent_path, mission=mission, on_episode=on_episode, stop_event=stop,
                           source=source)
@@ -305,37 +348,53 @@ def _process_main(setup: dict[str, Any], agent_path: str, mission: Mission | Non
 
 
 class RetrainProcess:
-    """:func:`retrain_dqn` in a child process (``spawn``), streaming :class:`EpisodeStats` back.
+    """:func:`retrain_dqn` in a child process (``spawn``), streaming :class:`EpisodeStats` back (with
+    ``kind="attention"``: :func:`~uam_studio.planning.agents.attention.retrain.retrain_attention`,
+    streaming :class:`~uam_studio.planning.agents.attention.train.EpochStats`).
 
     Training in a thread of a server competes with its sessions for the GIL; a child process does
     not, and runs at a lower CPU priority (``nice``) with one torch thread. The settings are
     validated here, in the parent (:func:`training_setup` raises :class:`InputError`).
 
-    :param agent_path: the agent zip to write (never inside ``pretrained/``).
-    :param mission: the map to train on, or None for random missions.
+    :param agent_path: the agent zip to write (never inside ``pretrained/``); for the attention planner,
+        its weights file ``<new folder>/attention_planner.pt``.
+    :param mission: the map to train on, or None for random missions (the attention planner trains
+        on random missions and scores each epoch's network on this map).
     :param nice: niceness added in the child (0 for none).
     :param pause_event: a ``multiprocessing`` Event (of the ``spawn`` context); while it is set the
         child pauses between episodes (at most ``max_pause_s`` per episode). A server sets it while
         its sessions plan, so that training gives way even where niceness cannot help (a server
         that itself runs niced, a machine busy with other work).
-    :param setup: ``scenario``, ``alpha``, ``beta``, ``gamma``, ``steps``, ``seed`` of
-        :func:`training_setup`.
+    :param kind: ``"dqn"`` or ``"attention"``.
+    :param setup: ``scenario``, ``alpha``, ``beta``, ``gamma``, ``steps``, ``seed``, ``init_agent`` of
+        :func:`training_setup`; for the attention planner ``missions``, ``epochs``, ``seed`` of
+        :func:`~uam_studio.planning.agents.attention.retrain.attention_setup` and ``init_agent`` (a
+        weights file to start from).
     """
 
     def __init__(self, agent_path: str | os.PathLike[str], mission: Mission | None = None,
                  source: str | None = "app", nice: int = 10, pause_event: Any = None, max_pause_s: float = 2.0,
-                 **setup: Any) -> None:
+                 kind: str = "dqn", **setup: Any) -> None:
+        if kind not in ("dqn", "attention"):
+            raise InputError("kind", f"{kind!r}: allowed dqn, attention")
         if is_bundled(agent_path):
             raise InputError("agent_path", f"{agent_path}: must not be in the bundled pretrained/ folder")
-        self.config, _ = training_setup(mission=mission, **setup)
+        if kind == "attention":
+            from uam_studio.planning.agents.attention.retrain import attention_setup
+
+            self.config = attention_setup(**{k: v for k, v in setup.items() if k != "init_agent"})
+        else:
+            self.config, _ = training_setup(mission=mission, **setup)
+        self.kind = kind
         self.agent_path = Path(agent_path)
         ctx = multiprocessing.get_context("spawn")  # no fork of a threaded server
         self._out = ctx.Queue()
         self._stop = ctx.Event()
         self._proc = ctx.Process(target=_process_main, name="uam-retrain", daemon=True,
-                                 args=(setup, str(agent_path), mission, self._out, self._stop, source, nice,
-                                       pause_event, float(max_pause_s)))
+                                 args=(kind, setup, str(agent_path), mission, self._out, self._stop, source,
+                                       nice, pause_event, float(max_pause_s)))
         self.result: RetrainResult | None = None
+        self.stage: tuple[str, int, int] | None = None  # the attention run's last (stage, done, total)
         self.error: str | None = None
         self.finished = False
 
@@ -348,7 +407,8 @@ class RetrainProcess:
 
     def poll(self) -> list[Any]:
         """The episodes reported since the last call (never blocks). Sets :attr:`result` or
-        :attr:`error` and :attr:`finished` when the child is done."""
+        :attr:`error` and :attr:`finished` when the child is done (neither: an attention run stopped
+        before its first epoch saved nothing)."""
         episodes: list[Any] = []
         exited = not self._proc.is_alive() if self._proc.pid is not None else False
         while True:
@@ -362,6 +422,10 @@ class RetrainProcess:
                 self.result, self.finished = item, True
             elif isinstance(item, tuple) and item[:1] == ("error",):
                 self.error, self.finished = item[1], True
+            elif isinstance(item, tuple) and item[:1] == ("nothing saved",):  # stopped before any epoch
+                self.finished = True
+            elif isinstance(item, tuple) and item[:1] == ("progress",):
+                self.stage = (str(item[1]), int(item[2]), int(item[3]))
             else:
                 episodes.append(item)
         if exited and not self.finished:

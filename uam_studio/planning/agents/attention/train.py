@@ -16,7 +16,10 @@ bundled file):
    target of a second round of training on all the examples. No other planner is consulted.
 
 Examples are generated in ``workers`` processes; training is full-batch-free minibatch Adam on CPU
-(or ``device``).
+(or ``device``). A caller can watch the run (``on_progress`` while examples are made, ``on_epoch``
+after each epoch, with ``evaluate``'s score of the network so far), stop it (``stop_event``: the
+network trained so far is saved, ``"stopped_early"`` in its card) and start from saved weights
+(``init_weights``) instead of random ones.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from __future__ import annotations
 import json
 import multiprocessing as mp
 import os
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
@@ -51,7 +55,7 @@ from uam_studio.planning.solvers.oracle import (
     min_sortie_cover,
 )
 
-__all__ = ["AttentionTrainConfig", "oracle_examples", "train_attention"]
+__all__ = ["AttentionTrainConfig", "EpochStats", "oracle_examples", "train_attention"]
 
 SCENARIOS_TRAINED = ("single_charge", "multi_charge")
 
@@ -78,6 +82,61 @@ class AttentionTrainConfig:
         d = asdict(self)
         d["network"] = self.network.to_dict()
         return d
+
+
+@dataclass(frozen=True)
+class EpochStats:
+    """One finished training epoch.
+
+    :param phase: 1 (imitation of the exact oracle) or 2 (imitation of its own search)
+    :param epoch: 1-based epoch counter over both phases
+    :param epochs: epochs planned over both phases
+    :param loss: mean cross-entropy of the target's choice over the epoch's decisions
+    :param accuracy: share of the epoch's decisions where the network ranked the target's choice first (0-1)
+    :param wall_s: seconds since the run started (s)
+    :param evaluation: what the run's ``evaluate`` callback returned for the network after this epoch
+        (None without one)
+    """
+
+    phase: int
+    epoch: int
+    epochs: int
+    loss: float
+    accuracy: float
+    wall_s: float
+    evaluation: dict[str, Any] | None = None
+
+
+class _Watch:
+    """A run's callbacks, its stop flag and its epoch counter."""
+
+    def __init__(self, epochs: int, on_epoch: Callable[[EpochStats], Any] | None,
+                 evaluate: Callable[[AttentionPolicy], dict[str, Any]] | None,
+                 on_progress: Callable[[str, int, int], Any] | None, stop_event: threading.Event | None) -> None:
+        self.t0 = time.perf_counter()
+        self.epochs, self.on_epoch, self.evaluate, self.on_progress = epochs, on_epoch, evaluate, on_progress
+        self.stop_event = stop_event
+        self.done = 0
+
+    @property
+    def stopped(self) -> bool:
+        return self.stop_event is not None and self.stop_event.is_set()
+
+    def progress(self, stage: str, done: int, total: int) -> None:
+        if self.on_progress is not None:
+            self.on_progress(stage, done, total)
+
+    def epoch(self, net: AttentionPolicy, phase: int, loss: float, accuracy: float) -> None:
+        self.done += 1
+        if self.on_epoch is None:
+            return
+        evaluation = None
+        if self.evaluate is not None:
+            net.eval()
+            evaluation = self.evaluate(net)
+            net.train()
+        self.on_epoch(EpochStats(phase, self.done, self.epochs, loss, accuracy,
+                                 time.perf_counter() - self.t0, evaluation))
 
 
 # ----------------------------------------------------------------------------- examples
@@ -156,11 +215,27 @@ def _search_job(args: tuple[int, int, tuple[int, int], str, int]) -> tuple[Missi
     return m, [s for s in sorties if s]
 
 
-def _map(fn: Callable, jobs: list, workers: int) -> list:
+def _map(fn: Callable, jobs: list, workers: int, watch: _Watch, stage: str) -> list:
+    """``fn`` over ``jobs`` in order (in ``workers`` processes); stops early (fewer results) when the
+    watch is stopped, and reports each result as progress."""
+    out: list = []
     if workers <= 1:
-        return [fn(j) for j in jobs]
-    with mp.get_context("fork").Pool(workers, initializer=torch.set_num_threads, initargs=(1,)) as pool:
-        return pool.map(fn, jobs, chunksize=4)
+        results: Any = map(fn, jobs)
+        pool = None
+    else:
+        pool = mp.get_context("fork").Pool(workers, initializer=torch.set_num_threads, initargs=(1,))
+        results = pool.imap(fn, jobs, chunksize=4)
+    try:
+        for r in results:
+            out.append(r)
+            watch.progress(stage, len(out), len(jobs))
+            if watch.stopped:
+                break
+    finally:
+        if pool is not None:
+            pool.terminate()
+            pool.join()
+    return out
 
 
 # ----------------------------------------------------------------------------- training
@@ -193,7 +268,7 @@ class _Data:
 
 
 def _fit(net: AttentionPolicy, data: _Data, epochs: int, cfg: AttentionTrainConfig, rng: np.random.Generator,
-         log: Callable[[str], Any]) -> list[float]:
+         log: Callable[[str], Any], watch: _Watch, phase: int) -> list[float]:
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, max(1, epochs))
     loss_fn = nn.CrossEntropyLoss()
@@ -218,9 +293,16 @@ def _fit(net: AttentionPolicy, data: _Data, epochs: int, cfg: AttentionTrainConf
             total += float(loss.detach()) * idx.numel()
             count += idx.numel()
             correct += int((logits.argmax(-1) == target).sum())
+            if watch.stopped:
+                break
         sched.step()
         losses.append(total / count)
         log(f"epoch {ep + 1}/{epochs}: loss {total / count:.4f}, oracle's choice first {correct / count:.3f}")
+        net.to("cpu")
+        watch.epoch(net, phase, total / count, correct / count)
+        net.to(dev)
+        if watch.stopped:
+            break
     net.to("cpu").eval()
     return losses
 
@@ -235,17 +317,46 @@ def _check_out(out: Path) -> Path:
 
 
 def train_attention(cfg: AttentionTrainConfig, out: str | os.PathLike[str],
-                    log: Callable[[str], Any] = print) -> Path:
+                    log: Callable[[str], Any] = print, *,
+                    on_epoch: Callable[[EpochStats], Any] | None = None,
+                    evaluate: Callable[[AttentionPolicy], dict[str, Any]] | None = None,
+                    on_progress: Callable[[str, int, int], Any] | None = None,
+                    stop_event: threading.Event | None = None,
+                    init_weights: str | os.PathLike[str] | None = None,
+                    card_extra: dict[str, Any] | None = None) -> Path | None:
     """Train the attention planner (see the module docstring); returns the weights file ``out/attention_planner.pt``
-    (a model card ``card.json`` beside it and inside it)."""
+    (a model card ``card.json`` beside it and inside it).
+
+    :param log: called with each line of the run's log.
+    :param on_epoch: called with each :class:`EpochStats`, in the training thread.
+    :param evaluate: scores the network after each epoch (in eval mode), e.g. its plan of one map;
+        what it returns is :attr:`EpochStats.evaluation`. Used only with ``on_epoch``.
+    :param on_progress: called with ``(stage, done, total)`` as examples are made (stage ``"oracle"``:
+        missions solved by the exact oracle; ``"search"``: missions searched in phase 2).
+    :param stop_event: set it to stop: the network trained so far is saved (``"stopped_early": true``
+        in its card); None is returned (nothing saved) when no epoch had finished.
+    :param init_weights: start from this weights file's network (its size replaces ``cfg.network``)
+        instead of random weights.
+    :param card_extra: more entries for the model card (where the run came from, the map it watched).
+    :raises InputError: ``out`` is not a folder or holds the bundled planner; ``init_weights`` unreadable.
+    """
     out = _check_out(Path(out))
-    t0 = time.perf_counter()
+    watch = _Watch(cfg.epochs + (cfg.search_epochs if cfg.search_missions > 0 else 0), on_epoch, evaluate,
+                   on_progress, stop_event)
+    t0 = watch.t0
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
+    if init_weights is not None:
+        from uam_studio.planning.agents.attention.decode import load_policy
+
+        net, _ = load_policy(init_weights)
+        cfg = replace(cfg, network=net.config)
+    else:
+        net = AttentionPolicy(cfg.network)
     log(f"phase 1: exact oracle on {cfg.oracle_missions} missions of {cfg.oracle_dest[0]}-{cfg.oracle_dest[1]} "
         "destinations")
     jobs = [(cfg.seed, k, tuple(cfg.oracle_dest)) for k in range(cfg.oracle_missions)]
-    solved = _map(_oracle_job, jobs, cfg.workers)
+    solved = _map(_oracle_job, jobs, cfg.workers, watch, "oracle")
     tokens: list[np.ndarray] = []
     decisions: list[Decision] = []
     for mission, plans in solved:
@@ -256,11 +367,13 @@ def train_attention(cfg: AttentionTrainConfig, out: str | os.PathLike[str],
             tokens.append(tok.features)
     t_oracle = time.perf_counter() - t0
     log(f"  {len(decisions)} decisions in {t_oracle:.0f} s")
-    net = AttentionPolicy(cfg.network)
-    losses = _fit(net, _Data(tokens, decisions), cfg.epochs, cfg, rng, log)
+    if watch.stopped or not decisions:
+        log("stopped before the first epoch: nothing saved")
+        return None
+    losses = _fit(net, _Data(tokens, decisions), cfg.epochs, cfg, rng, log, watch, 1)
     stats: dict[str, Any] = {"oracle_decisions": len(decisions), "oracle_s": round(t_oracle, 1),
                              "phase1_loss": round(losses[-1], 4)}
-    if cfg.search_missions > 0:
+    if cfg.search_missions > 0 and not watch.stopped:
         t1 = time.perf_counter()
         global _SEARCH_NET
         _SEARCH_NET = net  # in eval mode after _fit
@@ -269,7 +382,7 @@ def train_attention(cfg: AttentionTrainConfig, out: str | os.PathLike[str],
         jobs2 = [(cfg.seed, k + i * cfg.search_missions, tuple(cfg.search_dest), sc, cfg.search_beam)
                  for i, sc in enumerate(SCENARIOS_TRAINED) for k in range(cfg.search_missions)]
         try:
-            searched = _map(_search_job, jobs2, cfg.workers)
+            searched = _map(_search_job, jobs2, cfg.workers, watch, "search")
         finally:
             _SEARCH_NET = None
         n2 = 0
@@ -282,10 +395,14 @@ def train_attention(cfg: AttentionTrainConfig, out: str | os.PathLike[str],
             tokens.append(tok.features)
         stats.update(search_decisions=n2, search_s=round(time.perf_counter() - t1, 1))
         log(f"  {n2} decisions in {stats['search_s']:.0f} s")
-        losses2 = _fit(net, _Data(tokens, decisions), cfg.search_epochs, replace(cfg, lr=cfg.lr * 0.5), rng, log)
-        stats["phase2_loss"] = round(losses2[-1], 4)
-    stats["train_s"] = round(time.perf_counter() - t0, 1)
-    card = {"format": FORMAT, "config": cfg.to_dict(), "stats": stats,
+        if not watch.stopped:
+            losses2 = _fit(net, _Data(tokens, decisions), cfg.search_epochs, replace(cfg, lr=cfg.lr * 0.5), rng,
+                           log, watch, 2)
+            stats["phase2_loss"] = round(losses2[-1], 4)
+    stats.update(train_s=round(time.perf_counter() - t0, 1), epochs_done=watch.done)
+    card = {"format": FORMAT, "model": "attention", "config": cfg.to_dict(), "stats": stats,
+            "init_weights": str(init_weights) if init_weights is not None else None,
+            "stopped_early": watch.stopped, **(card_extra or {}),
             "torch": torch.__version__, "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     out.mkdir(parents=True, exist_ok=True)
     path = out / WEIGHTS_NAME

@@ -1,0 +1,136 @@
+"""Retraining the attention planner from the app: a short run, watched on one map, saved in the user folder.
+
+Shared by the app's Retrain tab (through :class:`~uam_studio.planning.agents.retrain.RetrainProcess`)
+and by tests; ``uam-studio train attention`` runs the full recipe of
+:mod:`uam_studio.planning.agents.attention.train`.
+
+- :func:`attention_setup`: validate a short run's settings and build its
+  :class:`~uam_studio.planning.agents.attention.train.AttentionTrainConfig` (imitation of the exact
+  oracle on random missions of :data:`CLASS_DEST` destinations, one worker, no phase 2);
+- :func:`map_score`: the score of the network so far on one map (its plan, checked on the physics
+  model; an unsafe plan scores 0), the run's learning curve;
+- :func:`new_attention_folder`: a fresh folder for a run's weights in the user's agents folder;
+- :func:`retrain_attention`: train, watch, save (never into the bundled ``pretrained/`` folder).
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import os
+import threading
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from uam_studio.bundled import is_bundled
+from uam_studio.errors import InputError
+from uam_studio.planning.missions.mission import Mission, mission_to_dict
+
+__all__ = ["CLASS_DEST", "CLASS_EPOCHS", "CLASS_MISSIONS", "attention_setup", "map_score",
+           "new_attention_folder", "retrain_attention"]
+
+CLASS_MISSIONS = 150  # training missions of a class run (each solved by the exact oracle: ~0.3 s on one core)
+CLASS_EPOCHS = 20
+CLASS_DEST = (2, 6)  # destinations per training mission: the exact oracle's time grows fast above 6
+MISSIONS_RANGE = (10, 5000)
+EPOCHS_RANGE = (1, 500)
+
+
+def _count(name: str, value: Any, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise InputError(name, f"{value!r} is out of range; allowed integers in [{lo}, {hi}]")
+    return value
+
+
+def attention_setup(missions: int = CLASS_MISSIONS, epochs: int = CLASS_EPOCHS, seed: int = 0) -> Any:
+    """The :class:`~uam_studio.planning.agents.attention.train.AttentionTrainConfig` of a class run.
+
+    :param missions: training missions, solved by the exact oracle, in [10, 5000].
+    :param epochs: passes over their decisions, in [1, 500].
+    :param seed: the training missions' seed (``[seed, k]``; never a held-out seed), >= 0.
+    :raises InputError: a setting out of range.
+    """
+    from uam_studio.planning.agents.attention.train import AttentionTrainConfig
+
+    _count("missions", missions, *MISSIONS_RANGE)
+    _count("epochs", epochs, *EPOCHS_RANGE)
+    _count("seed", seed, 0, 2**31 - 1)
+    return AttentionTrainConfig(seed=seed, oracle_missions=missions, oracle_dest=CLASS_DEST, epochs=epochs,
+                                search_missions=0, workers=1, device="cpu")
+
+
+def _scored(plan: Any) -> tuple[int, bool, float | None]:
+    """A plan's reached priority (0 if unsafe), safety and lowest voltage (V) on the physics model."""
+    check = plan.check
+    safe = bool(check is not None and check.safe)
+    low = check.min_voltage_v if check is not None else None
+    return (int(plan.reached_priority) if safe else 0), safe, (float(low) if low is not None else None)
+
+
+def map_score(mission: Mission) -> Callable[[Any], dict[str, Any]]:
+    """A function that scores a network on ``mission``: ``{"priority", "safe", "min_voltage_v"}`` of
+    its plan with the Planner's own search
+    (:func:`~uam_studio.planning.agents.attention.decode.attention_plan`: beams and the physics
+    filter), and ``"priority_net"`` of the network's first choice at every step (beam width 1, no
+    filter): what the network itself has learned, which the search hides. Priorities are reached
+    priority on the physics model, 0 for an unsafe plan; V."""
+    from uam_studio.planning.agents.attention.decode import attention_plan
+
+    def score(net: Any) -> dict[str, Any]:
+        priority, safe, low = _scored(attention_plan(mission, net))
+        alone, _, _ = _scored(attention_plan(mission, net, beam_width=1, safety_filter=False))
+        return {"priority": priority, "safe": safe, "min_voltage_v": low, "priority_net": alone}
+
+    return score
+
+
+def new_attention_folder(source: str, folder: str | os.PathLike[str] | None = None) -> Path:
+    """A fresh folder ``attention-<source>-<UTC time>`` in ``folder`` (default: the user's agents folder)."""
+    from uam_studio.planning.agents.retrain import agents_dir
+
+    d = Path(folder) if folder is not None else agents_dir()
+    stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%d-%H%M%S")
+    base = "".join(c if c.isalnum() or c in "_.-" else "_" for c in f"attention-{source}-{stamp}")
+    p, k = d / base, 1
+    while p.exists():
+        k += 1
+        p = d / f"{base}-{k}"
+    return p
+
+
+def retrain_attention(config: Any, folder: str | os.PathLike[str], mission: Mission | None = None,
+                      on_epoch: Callable[[Any], Any] | None = None,
+                      on_progress: Callable[[str, int, int], Any] | None = None,
+                      stop_event: threading.Event | None = None, source: str | None = None,
+                      init_weights: str | os.PathLike[str] | None = None) -> Any:
+    """Train the attention planner (:func:`~uam_studio.planning.agents.attention.train.train_attention`)
+    into ``folder``.
+
+    :return: a :class:`~uam_studio.planning.agents.retrain.RetrainResult` (``path``: the weights file;
+        ``episodes`` and ``timesteps``: the epochs done), or None: stopped before the first epoch,
+        nothing saved.
+
+    :param mission: the map each epoch's network is scored on (:func:`map_score`; recorded in the
+        card), or None for no score.
+    :param init_weights: fine-tune this weights file (e.g. the bundled planner) instead of random weights.
+    :raises InputError: ``folder`` inside ``pretrained/``; unreadable ``init_weights``.
+    """
+    from uam_studio.planning.agents.attention import WEIGHTS_NAME
+    from uam_studio.planning.agents.attention.train import train_attention
+    from uam_studio.planning.agents.retrain import RetrainResult
+
+    out = Path(folder)
+    if is_bundled(out / WEIGHTS_NAME) or is_bundled(out):
+        raise InputError("agent_path", f"{out}: must not be in the bundled pretrained/ folder")
+    extra = {"source": source, "watched_map": mission_to_dict(mission) if mission is not None else None}
+    weights = train_attention(replace(config), out, log=lambda _line: None, on_epoch=on_epoch,
+                              evaluate=map_score(mission) if mission is not None else None,
+                              on_progress=on_progress, stop_event=stop_event, init_weights=init_weights,
+                              card_extra=extra)
+    if weights is None:
+        return None
+    card = json.loads((out / "card.json").read_text())
+    done = int(card["stats"]["epochs_done"])
+    return RetrainResult(weights, card, done, done, bool(card["stopped_early"]))
