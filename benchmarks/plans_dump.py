@@ -28,5 +28,19 @@ for scenario in ("single_charge", "multi_charge"):
                                     (plan_mission(m, pol, predictor=False) for m in ms)]
     out[f"{scenario}/oracle"] = [(r["route"], r["altitudes_m"]) for r in
                                  (plan_mission(m, "oracle", predictor=False) for m in ms[:n_oracle])]
+# single flight: every planner's one leg (the oracle's and the reference solver's: the safest level)
+ms = held_out_missions(n_oracle, 20261121, scenario="single_flight")
+for pol in ("attention", "greedy", "oracle", "reference"):
+    try:
+        if pol == "reference":
+            from uam_studio.planning.solvers.reference import reference_plan
+
+            plans = [reference_plan(m) for m in ms]
+            out[f"single_flight/{pol}"] = [(list(p.route), list(p.altitudes_m), p.messages) for p in plans]
+        else:
+            out[f"single_flight/{pol}"] = [(r["route"], r["altitudes_m"], r["messages"]) for r in
+                                           (plan_mission(m, pol, predictor=False).to_dict() for m in ms)]
+    except Exception:  # a checkout without this policy or scenario
+        continue
 json.dump(out, open(sys.argv[1], "w"))
 print({k: len(v) for k, v in out.items()})

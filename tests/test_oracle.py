@@ -8,10 +8,17 @@ import numpy as np
 import pytest
 
 from uam_studio.battery import simulate
-from uam_studio.planning.legs import MAX_DESTINATIONS, N_MAX, VERTIPORT_SLOT, LegTable
+from uam_studio.planning.legs import N_MAX, VERTIPORT_SLOT, LegTable
 from uam_studio.planning.missions.check import check_plan
 from uam_studio.planning.missions.generate import held_out_missions, random_mission
-from uam_studio.planning.missions.mission import Battery, Destination, Mission, Vertiport, mission_to_dict
+from uam_studio.planning.missions.mission import (
+    MAX_DESTINATIONS,
+    Battery,
+    Destination,
+    Mission,
+    Vertiport,
+    mission_to_dict,
+)
 from uam_studio.planning.solvers.greedy import greedy_plan
 from uam_studio.planning.solvers.oracle import feasible_sorties, min_sortie_cover, oracle_plan
 from uam_studio.planning.solvers.setup import fly_batch

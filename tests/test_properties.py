@@ -27,9 +27,16 @@ from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.errors import InputError
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning import plan_mission
-from uam_studio.planning.legs import MAX_DESTINATIONS, N_MAX
+from uam_studio.planning.legs import N_MAX
 from uam_studio.planning.missions.check import check_plan
-from uam_studio.planning.missions.mission import SCENARIOS, Battery, Destination, Mission, Vertiport
+from uam_studio.planning.missions.mission import (
+    MAX_DESTINATIONS,
+    SCENARIOS,
+    Battery,
+    Destination,
+    Mission,
+    Vertiport,
+)
 
 HALF_SQUARE_KM = 35.0
 SCALE = int(os.environ.get("UAM_PROPERTY_SCALE", "1"))  # more examples per test (a longer hunt than CI's)

@@ -7,9 +7,10 @@ import dataclasses
 
 import pytest
 
-from uam_studio.planning.legs import ALTITUDES_M, MAX_DESTINATIONS, LegTable
+from uam_studio.planning.legs import ALTITUDES_M, LegTable
 from uam_studio.planning.missions.check import check_plan
 from uam_studio.planning.missions.generate import held_out_missions
+from uam_studio.planning.missions.mission import MAX_DESTINATIONS
 from uam_studio.planning.planner import plan_mission
 from uam_studio.planning.solvers.greedy import greedy_plan
 from uam_studio.planning.solvers.oracle import feasible_sorties, oracle_plan

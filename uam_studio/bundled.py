@@ -33,14 +33,19 @@ HOME_ENV = "UAM_STUDIO_HOME"
 ENV_OVERRIDES = {"dynaformer.pt": "UAM_STUDIO_DYNAFORMER"}
 """Bundled file name -> the environment variable that replaces it with another file."""
 
-__all__ = ["ENV_OVERRIDES", "HOME_ENV", "PACKAGE", "bundled_path", "candidates", "is_bundled", "package_dir",
-           "require_bundled", "user_home"]
+__all__ = ["ENV_OVERRIDES", "HOME_ENV", "PACKAGE", "agents_dir", "bundled_path", "candidates", "is_bundled",
+           "package_dir", "require_bundled", "user_home"]
 
 
 def user_home() -> Path:
     """The user folder: ``$UAM_STUDIO_HOME`` if set, else ``~/.uam_studio`` (not created here)."""
     env = os.environ.get(HOME_ENV, "").strip()
     return Path(env).expanduser() if env else Path.home() / ".uam_studio"
+
+
+def agents_dir() -> Path:
+    """Where retrained agents are saved: ``<user_home()>/agents``."""
+    return user_home() / "agents"
 
 
 def _checkout_folder() -> Path | None:

@@ -150,7 +150,7 @@ _PLAN_FLAGS = {"agent_path": "--agent", "lookahead": "--lookahead", "policy": "-
 
 def _run_plan(args: argparse.Namespace) -> int:
     from uam_studio.planning import load_mission
-    from uam_studio.planning.legs import MAX_DESTINATIONS, check_destination_count
+    from uam_studio.planning.missions.mission import MAX_DESTINATIONS, check_destination_count
     from uam_studio.planning.planner import plan_mission
 
     mission = load_mission(args.mission)

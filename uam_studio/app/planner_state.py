@@ -58,14 +58,16 @@ from uam_studio.app.services import (
 from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight.tables import WIND_RANGE_KTS
-from uam_studio.planning.legs import MAX_DESTINATIONS, N_MAX, check_destination_count
+from uam_studio.planning.legs import N_MAX
 from uam_studio.planning.missions.mission import (
     COORD_RANGE_KM,
+    MAX_DESTINATIONS,
     SCENARIOS,
     Battery,
     Destination,
     Mission,
     Vertiport,
+    check_destination_count,
     mission_from_dict,
     mission_from_json,
     mission_to_dict,

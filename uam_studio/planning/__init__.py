@@ -34,18 +34,12 @@ and flying a mission with surprises, :func:`fly_mission`.
 
 import importlib
 
-from uam_studio.planning.legs import (
-    ALTITUDES_M,
-    MAX_DESTINATIONS,
-    N_ACTIONS,
-    N_MAX,
-    decode_action,
-    encode_action,
-)
+from uam_studio.planning.legs import ALTITUDES_M, N_ACTIONS, N_MAX, decode_action, encode_action
 from uam_studio.planning.missions.check import Plan, PlanCheck, check_plan, make_plan
 from uam_studio.planning.missions.generate import held_out_missions, random_mission
 from uam_studio.planning.missions.mission import (
     COORD_RANGE_KM,
+    MAX_DESTINATIONS,
     SCENARIOS,
     VERTIPORT,
     Battery,

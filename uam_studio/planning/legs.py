@@ -15,19 +15,15 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_charges_c, leg_profile, min_leg_distance_km
 from uam_studio.flight.profile import MAX_DISTANCE_KM
+from uam_studio.planning.missions.mission import MAX_DESTINATIONS, PAPER_DESTINATIONS, Mission
 
-if TYPE_CHECKING:
-    from uam_studio.planning.missions.mission import Mission
-
-N_MAX = 8  # destination slots of the discrete action space (the paper's DQN, the exact oracle)
-MAX_DESTINATIONS = 20  # the most destinations a mission may have (planners not tied to N_MAX)
+N_MAX = PAPER_DESTINATIONS  # destination slots of the discrete action space (the paper's DQN, the exact oracle)
 ALTITUDES_M = (500.0, 1000.0, 2000.0, 3000.0)  # the paper's cruise levels (m)
 N_ALTITUDES = len(ALTITUDES_M)
 VERTIPORT_SLOT = N_MAX  # target index of the vertiport
@@ -35,19 +31,6 @@ N_TARGETS = N_MAX + 1
 N_ACTIONS = N_TARGETS * N_ALTITUDES  # 36
 MIN_LEG_KM = tuple(min_leg_distance_km(h) for h in ALTITUDES_M)  # shortest leg per level (km)
 DT_S = 1.0  # sample step of every leg current (s)
-
-
-def check_destination_count(n: int, limit: int = MAX_DESTINATIONS, who: str | None = None) -> int:
-    """``n`` if a mission of ``n`` destinations can be planned (1 to ``limit``, default
-    :data:`MAX_DESTINATIONS`), else :class:`InputError`, one line, e.g.
-    ``destinations: 21 destinations; allowed 1 to 20``. ``who`` names a part with its own, smaller
-    limit (``"fly"``: ``destinations: 9 destinations; fly plans at most 8 (allowed 1 to 8)``)."""
-    if n < 1:
-        raise InputError("destinations", f"a mission needs at least 1 destination (allowed 1 to {limit})")
-    if n > limit:
-        what = f"{who} plans at most {limit} (allowed 1 to {limit})" if who else f"allowed 1 to {limit}"
-        raise InputError("destinations", f"{n} destinations; {what}")
-    return n
 
 
 def encode_action(target: int, alt_idx: int) -> int:

@@ -31,8 +31,9 @@ from pathlib import Path
 from typing import Any
 
 from uam_studio.atomic_io import remove_stale_temps
-from uam_studio.bundled import HOME_ENV, is_bundled, user_home
+from uam_studio.bundled import HOME_ENV, agents_dir, is_bundled, user_home
 from uam_studio.errors import InputError, check_range
+from uam_studio.planning.agents.run_result import RetrainResult
 from uam_studio.planning.env.environment import REWARD_DEFAULTS
 from uam_studio.planning.missions.mission import SCENARIOS, Mission, mission_to_dict
 
@@ -58,11 +59,6 @@ MAX_STEPS = 10_000_000
 
 
 # ----------------------------------------------------------------------------- user folder
-
-
-def agents_dir() -> Path:
-    """Where retrained agents are saved: ``<user_home()>/agents``."""
-    return user_home() / "agents"
 
 
 @dataclass(frozen=True)
@@ -196,18 +192,6 @@ def training_setup(
         env_kwargs.update(mission=mission, randomize_battery=True)
     env_fn = make_env(**env_kwargs)  # bad maps fail here, before training
     return cfg, env_fn
-
-
-@dataclass
-class RetrainResult:
-    """What :func:`retrain_dqn` produced."""
-
-    path: Path
-    card: dict[str, Any]
-    episodes: int
-    timesteps: int
-    stopped: bool  # stopped early by the stop event
-    model: Any = field(repr=False, default=None)
 
 
 class _Tally:

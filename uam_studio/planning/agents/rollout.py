@@ -22,9 +22,9 @@ import numpy as np
 from uam_studio.bundled import bundled_path
 from uam_studio.errors import InputError
 from uam_studio.planning.env import UAMPlanningEnv
-from uam_studio.planning.legs import N_ALTITUDES, N_MAX, VERTIPORT_SLOT, check_destination_count
+from uam_studio.planning.legs import N_ALTITUDES, N_MAX, VERTIPORT_SLOT
 from uam_studio.planning.missions.check import Plan
-from uam_studio.planning.missions.mission import Mission
+from uam_studio.planning.missions.mission import Mission, check_destination_count
 from uam_studio.planning.solvers.setup import prepare_mission, too_close
 
 __all__ = ["ROLLOUT_BASES", "bundled_agent_path", "dqn_route", "load_agent_cached", "rollout_agent"]

@@ -28,8 +28,15 @@ import numpy as np
 from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.errors import InputError
 from uam_studio.flight.tables import WIND_RANGE_KTS
-from uam_studio.planning.legs import MAX_DESTINATIONS, N_MAX
-from uam_studio.planning.missions.mission import SCENARIOS, Battery, Destination, Mission, Vertiport
+from uam_studio.planning.missions.mission import (
+    MAX_DESTINATIONS,
+    PAPER_DESTINATIONS,
+    SCENARIOS,
+    Battery,
+    Destination,
+    Mission,
+    Vertiport,
+)
 
 DEFAULT_Q_RANGE = PAPER_Q_RANGE
 DEFAULT_R0_RANGE = (0.017, 0.35)  # ohm; the paper's is 0.017-0.45, see the module docstring
@@ -56,7 +63,7 @@ def _pair(field: str, value, lo: float, hi: float) -> tuple[float, float]:
 
 def random_mission(
     rng: np.random.Generator,
-    n_dest=(1, N_MAX),
+    n_dest=(1, PAPER_DESTINATIONS),
     scenario: str = "single_charge",
     r0_range=DEFAULT_R0_RANGE,
     q_range=DEFAULT_Q_RANGE,
@@ -68,7 +75,7 @@ def random_mission(
 
     :param rng: numpy random generator (all randomness comes from it).
     :param n_dest: number of destinations, an int or an inclusive ``(lo, hi)`` range within
-        [1, 20] (``MAX_DESTINATIONS``; default 1 to ``N_MAX = 8``, the DQN's slots);
+        [1, 20] (``MAX_DESTINATIONS``; default 1 to ``PAPER_DESTINATIONS = 8``, the paper's missions);
         ``single_flight`` missions always have exactly one destination.
     :param scenario: one of ``single_flight``, ``single_charge``, ``multi_charge``.
     :param r0_range: uniform range of the cell's ohmic resistance (ohm).
@@ -107,7 +114,7 @@ def random_mission(
 def held_out_missions(
     n: int,
     seed: int,
-    n_dest=(6, N_MAX),
+    n_dest=(6, PAPER_DESTINATIONS),
     scenario: str = "single_charge",
     r0_range=DEFAULT_R0_RANGE,
     q_range=DEFAULT_Q_RANGE,

@@ -25,7 +25,7 @@ JSON format (public and stable)::
 Destination names must be non-empty, unique, free of commas (the CLI separates
 route entries with commas) and must not be ``"vertiport"`` (any case), the name
 of the vertiport node. A mission with no destinations is valid; planners report it.
-A file holds at most :data:`~uam_studio.planning.legs.MAX_DESTINATIONS` (20) destinations
+A file holds at most :data:`MAX_DESTINATIONS` (20) destinations
 (``destinations: 21 destinations; allowed 1 to 20``).
 Unknown keys are rejected, so a misspelt optional field never passes silently.
 
@@ -51,7 +51,6 @@ from uam_studio.battery import EOD_RANGE, Q_MAX_RANGE, R0_RANGE
 from uam_studio.errors import InputError, check_range, short_repr
 from uam_studio.flight.profile import MAX_DWELL_S
 from uam_studio.flight.tables import WIND_RANGE_KTS
-from uam_studio.planning.legs import MAX_DESTINATIONS, check_destination_count
 
 VERTIPORT = "vertiport"
 SCENARIOS = ("single_flight", "single_charge", "multi_charge")
@@ -59,6 +58,21 @@ COORD_RANGE_KM = (-200.0, 200.0)
 PRIORITY_RANGE = (1, 3)
 MAX_NAME_LEN = 64
 MAX_FILE_BYTES = 1_000_000  # mission JSON (bytes)
+MAX_DESTINATIONS = 20  # the most destinations a mission may have (planners not tied to the paper's 8)
+PAPER_DESTINATIONS = 8  # the paper's missions: at most 8 destinations (its DQN's slots, the exact oracle's limit)
+
+
+def check_destination_count(n: int, limit: int = MAX_DESTINATIONS, who: str | None = None) -> int:
+    """``n`` if a mission of ``n`` destinations can be planned (1 to ``limit``, default
+    :data:`MAX_DESTINATIONS`), else :class:`InputError`, one line, e.g.
+    ``destinations: 21 destinations; allowed 1 to 20``. ``who`` names a part with its own, smaller
+    limit (``"fly"``: ``destinations: 9 destinations; fly plans at most 8 (allowed 1 to 8)``)."""
+    if n < 1:
+        raise InputError("destinations", f"a mission needs at least 1 destination (allowed 1 to {limit})")
+    if n > limit:
+        what = f"{who} plans at most {limit} (allowed 1 to {limit})" if who else f"allowed 1 to {limit}"
+        raise InputError("destinations", f"{n} destinations; {what}")
+    return n
 
 _NUMBER = (int, float)
 

@@ -30,8 +30,8 @@ import numpy as np
 from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0, simulate
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_profile
-from uam_studio.planning.legs import DT_S, N_MAX, check_destination_count, takeoff_current
-from uam_studio.planning.missions.mission import VERTIPORT, Battery, Mission
+from uam_studio.planning.legs import DT_S, N_MAX, takeoff_current
+from uam_studio.planning.missions.mission import VERTIPORT, Battery, Mission, check_destination_count
 from uam_studio.planning.operations.operator import (
     HEALTH_Z,
     IN_FLIGHT_PLANNERS,

@@ -39,16 +39,14 @@ from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight import leg_profile
 from uam_studio.flight.tables import WIND_RANGE_KTS
-from uam_studio.planning.legs import (
-    ALTITUDES_M,
-    DT_S,
-    N_MAX,
-    N_TARGETS,
-    VERTIPORT_SLOT,
-    LegTable,
+from uam_studio.planning.legs import ALTITUDES_M, DT_S, N_MAX, N_TARGETS, VERTIPORT_SLOT, LegTable
+from uam_studio.planning.missions.mission import (
+    SCENARIOS,
+    VERTIPORT,
+    Battery,
+    Mission,
     check_destination_count,
 )
-from uam_studio.planning.missions.mission import SCENARIOS, VERTIPORT, Battery, Mission
 from uam_studio.planning.solvers.oracle import (
     Sortie,
     best_single_sortie,

@@ -88,7 +88,12 @@ from uam_studio.planning.legs import (
 from uam_studio.planning.missions.check import Plan, make_plan
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
 from uam_studio.planning.solvers.reference import reference_from_setup
-from uam_studio.planning.solvers.setup import fly_batch, prepare_mission, too_close
+from uam_studio.planning.solvers.setup import (
+    fly_batch,
+    prepare_mission,
+    single_flight_plan,
+    too_close,
+)
 
 EXACT_MAX = N_MAX  # the most destinations oracle_plan solves exactly; more go to the reference solver
 
@@ -299,32 +304,6 @@ def best_single_sortie(found: dict[int, Sortie], legs: LegTable) -> Sortie:
     return max(found.values(), key=lambda s: (mask_priority(legs, s.mask), -s.time_s, s.min_voltage_v))
 
 
-def safest_single_flight(legs: LegTable, alt_indices: Iterable[int], msgs: list[str],
-                         stats: dict[str, Any]) -> tuple[list[str], list[float]]:
-    """single_flight: the level (among ``alt_indices``) that flies a full cell to
-    ``destinations[0]`` with the highest minimum voltage, as ``(route, altitudes_m)`` (empty if no
-    level is safe); messages for what cannot be done, ``stats["min_voltage_by_altitude_v"]``."""
-    m = legs.mission
-    dest = m.destinations[0]
-    q, r0, eod = m.battery.q_max, m.battery.r0, m.eod_v
-    if len(m.destinations) > 1:
-        msgs.append(f"single flight: planning the leg to {dest.name} only")
-    levels = [a for a in alt_indices if legs.feasible[legs.home, 0, a]]
-    if not levels:
-        msgs.append(too_close(legs, 0) or f"cannot reach {dest.name} at any altitude")
-        return [], []
-    currents = [legs.current(legs.home, 0, a) for a in levels]
-    x0 = np.repeat(full_charge(q).as_array(), len(levels), axis=0)
-    ok, _, vmin = fly_batch(currents, x0, q, r0, eod)
-    stats["min_voltage_by_altitude_v"] = {ALTITUDES_M[a]: round(float(v), 4) for a, v in zip(levels, vmin)}
-    if not ok.any():
-        msgs.append(f"cannot reach {dest.name} at any altitude: the voltage falls below "
-                    f"{eod:.2f} V at every level (best minimum {vmin.max():.3f} V)")
-        return [], []
-    best = levels[int(np.argmax(np.where(ok, vmin, -np.inf)))]
-    return [dest.name], [ALTITUDES_M[best]]
-
-
 # ----------------------------------------------------------------------------- planner
 
 
@@ -348,14 +327,13 @@ def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iter
     dests = mission.destinations
     if scenario != "single_flight" and len(dests) > EXACT_MAX:
         return reference_from_setup(setup, "oracle", alt_indices, t0)
+    if scenario == "single_flight":
+        return single_flight_plan(setup, "oracle", alt_indices, t0)
     stats["exact"] = True
 
     def done(route: list[str], alts: list[float]) -> Plan:
         stats["time_s"] = round(time.perf_counter() - t0, 4)
         return make_plan(full_mission, "oracle", route, alts, msgs, stats)
-
-    if scenario == "single_flight":
-        return done(*safest_single_flight(legs, alt_indices, msgs, stats))
 
     found = feasible_sorties(legs, alt_indices, dominance, stats=stats)
     stats["feasible_sets"] = len(found)
@@ -401,7 +379,6 @@ __all__ = [
     "best_single_sortie",
     "coverable_mask",
     "mask_priority",
-    "safest_single_flight",
     "Sortie",
     "feasible_sorties",
     "min_sortie_cover",

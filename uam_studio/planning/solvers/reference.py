@@ -42,25 +42,23 @@ seconds.
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections.abc import Iterable
 
 import numpy as np
 
 from uam_studio.battery import full_charge, simulate
-from uam_studio.planning.legs import (
-    ALTITUDES_M,
-    DT_S,
-    MAX_DESTINATIONS,
-    N_ALTITUDES,
-    LegTable,
-    takeoff_current,
-)
+from uam_studio.planning.legs import ALTITUDES_M, DT_S, N_ALTITUDES, LegTable, takeoff_current
 from uam_studio.planning.missions.check import Plan, make_plan
-from uam_studio.planning.missions.mission import VERTIPORT, Mission
+from uam_studio.planning.missions.mission import MAX_DESTINATIONS, VERTIPORT, Mission
 from uam_studio.planning.solvers.greedy import greedy_plan
-from uam_studio.planning.solvers.setup import PlanSetup, fly_batch, prepare_mission, too_close
+from uam_studio.planning.solvers.setup import (
+    PlanSetup,
+    fly_batch,
+    prepare_mission,
+    single_flight_plan,
+    too_close,
+)
 
 REFERENCE_TIME_S = 3.0  # solver time (s) of one 20-destination plan, over all budgets tried
 BISECTION_STEPS = 7  # solves per plan (budgets tried)
@@ -412,8 +410,8 @@ def reference_plan(mission: Mission, scenario: str | None = None,
 
     ``stats``: ``exact`` (False), ``solver`` (``"ortools"``), ``budget_c`` (the charge budget of the
     solve that gave the kept plan, C), ``solves``, ``sorties`` (multi_charge), ``time_s`` and the
-    physics check's numbers. single_flight has one leg: the exact oracle's answer (the level with the
-    highest minimum voltage, :func:`~uam_studio.planning.solvers.oracle.oracle_plan`), ``exact`` True.
+    physics check's numbers. single_flight has one leg: the exact answer (the level with the highest
+    minimum voltage, :func:`~uam_studio.planning.solvers.setup.single_flight_plan`), ``exact`` True.
 
     :param mission: the mission (a dict in the JSON format is validated first).
     :param scenario: overrides ``mission.scenario``.
@@ -427,10 +425,8 @@ def reference_plan(mission: Mission, scenario: str | None = None,
     setup = prepare_mission(mission, scenario, policy)
     if setup.early is not None:
         return setup.early
-    if setup.scenario == "single_flight":
-        from uam_studio.planning.solvers.oracle import oracle_plan  # one leg: exact at any size
-
-        return dataclasses.replace(oracle_plan(setup.full_mission, "single_flight", alt_indices), policy=policy)
+    if setup.scenario == "single_flight":  # one leg: exact at any size
+        return single_flight_plan(setup, policy, alt_indices, t0)
     return reference_from_setup(setup, policy, alt_indices, t0, time_limit_s)
 
 

@@ -1,30 +1,25 @@
 """What the solvers share: the batched flight of many legs (:func:`fly_batch`, also used by
-:mod:`~uam_studio.planning.operations`) and the planners' preamble (:func:`prepare_mission` ->
+:mod:`~uam_studio.planning.operations`), the planners' preamble (:func:`prepare_mission` ->
 :class:`PlanSetup`: validate, pick the scenario, cap at the policy's number of destinations, stop
-early if the cell cannot finish the take-off).
+early if the cell cannot finish the take-off) and the exact answer of a single flight
+(:func:`safest_single_flight`, :func:`single_flight_plan`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import time
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from uam_studio.battery import DEFAULT_CELL, BatteryState, SimulationResult, simulate
+from uam_studio.battery import DEFAULT_CELL, BatteryState, SimulationResult, full_charge, simulate
 from uam_studio.battery.solver import integrate_current
 from uam_studio.errors import InputError
-from uam_studio.planning.legs import (
-    DT_S,
-    MAX_DESTINATIONS,
-    MIN_LEG_KM,
-    N_MAX,
-    LegTable,
-    takeoff_current,
-)
-from uam_studio.planning.missions.check import Plan
-from uam_studio.planning.missions.mission import SCENARIOS, Mission, as_mission
+from uam_studio.planning.legs import ALTITUDES_M, DT_S, MIN_LEG_KM, N_MAX, LegTable, takeoff_current
+from uam_studio.planning.missions.check import Plan, make_plan
+from uam_studio.planning.missions.mission import MAX_DESTINATIONS, SCENARIOS, Mission, as_mission
 
 _ROW_BATCH = 512  # trajectories integrated together (small blocks stay in cache: faster)
 _CHUNK_S = 128  # samples per integration pass
@@ -191,4 +186,45 @@ def prepare_mission(mission: Any, scenario: str | None, policy: str) -> PlanSetu
     return setup
 
 
-__all__ = ["PlanSetup", "destination_limit", "fly_batch", "prepare_mission", "takeoff_failure", "too_close"]
+# ----------------------------------------------------------------------------- single flight
+
+
+def safest_single_flight(legs: LegTable, alt_indices: Iterable[int], msgs: list[str],
+                         stats: dict[str, Any]) -> tuple[list[str], list[float]]:
+    """single_flight: the level (among ``alt_indices``) that flies a full cell to
+    ``destinations[0]`` with the highest minimum voltage, as ``(route, altitudes_m)`` (empty if no
+    level is safe); messages for what cannot be done, ``stats["min_voltage_by_altitude_v"]``."""
+    m = legs.mission
+    dest = m.destinations[0]
+    q, r0, eod = m.battery.q_max, m.battery.r0, m.eod_v
+    if len(m.destinations) > 1:
+        msgs.append(f"single flight: planning the leg to {dest.name} only")
+    levels = [a for a in alt_indices if legs.feasible[legs.home, 0, a]]
+    if not levels:
+        msgs.append(too_close(legs, 0) or f"cannot reach {dest.name} at any altitude")
+        return [], []
+    currents = [legs.current(legs.home, 0, a) for a in levels]
+    x0 = np.repeat(full_charge(q).as_array(), len(levels), axis=0)
+    ok, _, vmin = fly_batch(currents, x0, q, r0, eod)
+    stats["min_voltage_by_altitude_v"] = {ALTITUDES_M[a]: round(float(v), 4) for a, v in zip(levels, vmin)}
+    if not ok.any():
+        msgs.append(f"cannot reach {dest.name} at any altitude: the voltage falls below "
+                    f"{eod:.2f} V at every level (best minimum {vmin.max():.3f} V)")
+        return [], []
+    best = levels[int(np.argmax(np.where(ok, vmin, -np.inf)))]
+    return [dest.name], [ALTITUDES_M[best]]
+
+
+def single_flight_plan(setup: PlanSetup, policy: str, alt_indices: Iterable[int], t0: float) -> Plan:
+    """The exact plan of a single_flight ``setup`` (:func:`safest_single_flight`: one leg, any
+    number of destinations), labelled ``policy``; ``stats["exact"]`` True, ``stats["time_s"]`` since
+    ``t0`` (:func:`time.perf_counter`, s)."""
+    stats = setup.stats
+    stats["exact"] = True
+    route, alts = safest_single_flight(setup.legs, alt_indices, setup.messages, stats)
+    stats["time_s"] = round(time.perf_counter() - t0, 4)
+    return make_plan(setup.full_mission, policy, route, alts, setup.messages, stats)
+
+
+__all__ = ["PlanSetup", "destination_limit", "fly_batch", "prepare_mission", "safest_single_flight",
+           "single_flight_plan", "takeoff_failure", "too_close"]

@@ -50,8 +50,7 @@ from uam_studio.planning.agents.attention.model import AttentionConfig, Attentio
 from uam_studio.planning.legs import ALTITUDES_M, LegTable
 from uam_studio.planning.missions.check import Plan, make_plan
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
-from uam_studio.planning.solvers.oracle import safest_single_flight
-from uam_studio.planning.solvers.setup import fly_batch, prepare_mission, too_close
+from uam_studio.planning.solvers.setup import fly_batch, prepare_mission, safest_single_flight, too_close
 from uam_studio.tensor_files import TensorFileError, load_tensors
 
 FORMAT = "uam_studio.attention/1"

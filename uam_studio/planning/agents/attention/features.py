@@ -1,6 +1,6 @@
 """What the attention planner sees: the tokens of a mission and the features of one decision.
 
-A mission of ``n`` destinations (1 to :data:`~uam_studio.planning.legs.MAX_DESTINATIONS`) is ``n + 1``
+A mission of ``n`` destinations (1 to :data:`~uam_studio.planning.missions.mission.MAX_DESTINATIONS`) is ``n + 1``
 tokens: token ``t < n`` is ``mission.destinations[t]``, token ``n`` the vertiport. Each token has
 :data:`TOKEN_FEATURES` numbers, the node's own and the mission's (every token carries the cell's
 health and the scenario, so the encoder sees them):

@@ -1,6 +1,6 @@
 """Retraining the attention planner from the app: a short run, watched on one map, saved in the user folder.
 
-Shared by the app's Retrain tab (through :class:`~uam_studio.planning.agents.retrain.RetrainProcess`)
+Shared by the app's Retrain tab (through ``planning.agents.retrain.RetrainProcess``)
 and by tests; ``uam-studio train attention`` runs the full recipe of
 :mod:`uam_studio.planning.agents.attention.train`.
 
@@ -24,8 +24,9 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from uam_studio.bundled import is_bundled
+from uam_studio.bundled import agents_dir, is_bundled
 from uam_studio.errors import InputError
+from uam_studio.planning.agents.run_result import RetrainResult
 from uam_studio.planning.missions.mission import Mission, mission_to_dict
 
 __all__ = ["CLASS_DEST", "CLASS_EPOCHS", "CLASS_MISSIONS", "attention_setup", "map_score",
@@ -88,8 +89,6 @@ def map_score(mission: Mission) -> Callable[[Any], dict[str, Any]]:
 
 def new_attention_folder(source: str, folder: str | os.PathLike[str] | None = None) -> Path:
     """A fresh folder ``attention-<source>-<UTC time>`` in ``folder`` (default: the user's agents folder)."""
-    from uam_studio.planning.agents.retrain import agents_dir
-
     d = Path(folder) if folder is not None else agents_dir()
     stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%d-%H%M%S")
     base = "".join(c if c.isalnum() or c in "_.-" else "_" for c in f"attention-{source}-{stamp}")
@@ -108,7 +107,7 @@ def retrain_attention(config: Any, folder: str | os.PathLike[str], mission: Miss
     """Train the attention planner (:func:`~uam_studio.planning.agents.attention.train.train_attention`)
     into ``folder``.
 
-    :return: a :class:`~uam_studio.planning.agents.retrain.RetrainResult` (``path``: the weights file;
+    :return: a :class:`~uam_studio.planning.agents.run_result.RetrainResult` (``path``: the weights file;
         ``episodes`` and ``timesteps``: the epochs done), or None: stopped before the first epoch,
         nothing saved.
 
@@ -119,7 +118,6 @@ def retrain_attention(config: Any, folder: str | os.PathLike[str], mission: Miss
     """
     from uam_studio.planning.agents.attention import WEIGHTS_NAME
     from uam_studio.planning.agents.attention.train import train_attention
-    from uam_studio.planning.agents.retrain import RetrainResult
 
     out = Path(folder)
     if is_bundled(out / WEIGHTS_NAME) or is_bundled(out):
