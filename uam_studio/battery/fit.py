@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError, check_range
+from .eod import first_below
 from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, CellParameters
 from .simulate import CURRENT_LIMIT_A, DT_RANGE, EOD_RANGE, simulate
 from .solver import integrate_current
@@ -507,9 +508,9 @@ def two_sided_z(level: float) -> float:
 def crossing_times(voltage: np.ndarray, dt: float, eod_v: float) -> tuple[np.ndarray, np.ndarray]:
     """Per row of voltage [N, T] (sample k at (k+1) dt): (grid time of the first sample below
     ``eod_v``, linearly interpolated crossing time), both s, inf where the row stays above."""
-    below = voltage < eod_v
-    hit = below.any(axis=1)
-    k = np.argmax(below, axis=1)
+    k = first_below(voltage, eod_v)
+    hit = k >= 0
+    k = np.maximum(k, 0)
     grid = np.where(hit, (k + 1) * dt, np.inf)
     prev = voltage[np.arange(voltage.shape[0]), np.maximum(k - 1, 0)]
     now = voltage[np.arange(voltage.shape[0]), k]

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError, check_range
+from .eod import first_below
 from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0, CellParameters
 from .solver import integrate_current, output_voltage, step
 from .state import STATE_NAMES, BatteryState, full_charge
@@ -153,9 +154,9 @@ def _integrate_until_eod(current, x0: BatteryState, q_total, r0, eod_v, dt, cell
         v, seq = integrate_current(current[alive, start:stop], BatteryState.from_array(state[alive]),
                                    q_total[alive], r0[alive], dt, cell)
         voltage[alive, start:stop] = v
-        below = ~(v >= eod_v)  # NaN counts as below
-        hit = below.any(axis=1)
-        first = np.where(hit, np.argmax(below, axis=1), stop - start)
+        first = first_below(v, eod_v)
+        hit = first >= 0
+        first = np.where(hit, first, stop - start)
         last = first - 1  # last valid sample of this chunk, -1 if none
         rows, cols = np.arange(alive.size), np.maximum(last, 0)
         picked = np.stack([seq[n][rows, cols] for n in STATE_NAMES], axis=-1)
@@ -257,8 +258,8 @@ def simulate_constant_power(
                     seq[n][:, k + 1:] = seq[n][:, k:k + 1]
                 break
     time_s = dt * np.arange(1, t + 1)
-    below = ~(volts >= eod)
-    k_eod = np.where(below.any(axis=1), np.argmax(below, axis=1), t)
+    k_eod = first_below(volts, eod)
+    k_eod = np.where(k_eod >= 0, k_eod, t)
     seq_arr = np.stack([seq[n] for n in STATE_NAMES], axis=-1)
     last = k_eod - 1
     final = np.where((last >= 0)[:, None], seq_arr[np.arange(b), np.maximum(last, 0)], x0.as_array())

@@ -18,6 +18,7 @@ import time
 import numpy as np
 
 from ..battery import rest_voltage, simulate
+from ..battery.eod import first_below
 from ..battery.fit import eod_intervals, fit_health, fit_health_batch
 from .data import make_dataset
 from .predictor import DynaformerPredictor
@@ -29,13 +30,6 @@ SETS = {
     "extrapolation_flight": dict(band="extra", flight_fraction=1.0),
     "extrapolation_generic": dict(band="extra", flight_fraction=0.0),
 }
-
-
-def _first_below(v: np.ndarray, limit: np.ndarray, eod_v: float) -> np.ndarray:
-    """Index of the first sample below eod_v before ``limit`` per row; -1 if none."""
-    t = v.shape[1]
-    below = (v < eod_v) & (np.arange(t)[None, :] < limit[:, None])
-    return np.where(below.any(1), np.argmax(below, 1), -1)
 
 
 def predict_set(pred: DynaformerPredictor, ds, context_s: int = 20, noise_v: float = 0.0,
@@ -54,8 +48,8 @@ def predict_set(pred: DynaformerPredictor, ds, context_s: int = 20, noise_v: flo
 
 
 def eod_metrics(ds, v_pred: np.ndarray, context_s: int = 20) -> dict:
-    true_k = _first_below(ds.voltage_v, ds.length, EOD_V)
-    pred_k = _first_below(v_pred, ds.length, EOD_V)
+    true_k = first_below(ds.voltage_v, EOD_V, ds.length)
+    pred_k = first_below(v_pred, EOD_V, ds.length)
     has = true_k >= 0
     rte = np.abs(pred_k[has] - true_k[has]).astype(float) / (true_k[has] + 1.0)
     rte = np.where(pred_k[has] < 0, np.abs(ds.length[has] - true_k[has]) / (true_k[has] + 1.0), rte)
@@ -166,7 +160,7 @@ LEVEL = 0.9
 
 def _eod_times(v: np.ndarray, length: np.ndarray, eod_v: float = EOD_V) -> np.ndarray:
     """Time (s) of the first sample below eod_v inside each row's length; inf where none."""
-    k = _first_below(v, length, eod_v)
+    k = first_below(v, eod_v, length)
     return np.where(k >= 0, k + 1.0, np.inf)
 
 

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..battery import simulate
+from ..battery.eod import first_below
 from ..errors import InputError, check_range
 from ..flight import leg_profile
 from .evaluate import EOD_V, eod_metrics, health_correlations, physics_fit_eod, predict_set
@@ -60,8 +61,8 @@ class PhysicsComparison:
 
 
 def _first_below(v: np.ndarray, limit: float) -> int | None:
-    below = v < limit
-    return int(np.argmax(below)) if below.any() else None
+    k = int(first_below(v, limit))
+    return k if k >= 0 else None
 
 
 def compare_with_physics(predictor: Any, current_a, q_max: float, r0: float, context_s: int = 20,

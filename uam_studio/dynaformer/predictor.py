@@ -26,6 +26,7 @@ import torch
 from scipy.ndimage import median_filter
 
 from ..battery import rest_voltage, simulate
+from ..battery.eod import first_below
 from ..battery.fit import (
     MIN_CONTEXT_S,
     HealthEstimate,
@@ -373,8 +374,8 @@ class DynaformerPredictor:
         """Predicted EOD time (s): first sample below ``eod_v``; NaN if the profile ends first."""
         v = np.atleast_2d(self.predict(context_current_a, context_voltage_v, current_a, dt_s,
                                        health_source=health_source, noise_v=noise_v, estimate=estimate))
-        below = v < eod_v
-        eod = np.where(below.any(1), (np.argmax(below, 1) + 1) * dt_s, np.nan)
+        k = first_below(v, eod_v)
+        eod = np.where(k >= 0, (k + 1) * dt_s, np.nan)
         return float(eod[0]) if np.ndim(current_a) == 1 else eod
 
     # ------------------------------------------------------------------ uncertainty

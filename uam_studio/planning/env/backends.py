@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from uam_studio.battery import DEFAULT_CELL, EOD_RANGE, STATE_NAMES, BatteryState, full_charge, simulate
+from uam_studio.battery.eod import first_below
 from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.battery.solver import integrate_current
 from uam_studio.errors import InputError
@@ -163,9 +164,9 @@ class PhysicsBattery(BatteryBackend):
         with np.errstate(all="ignore"):
             v, seq = integrate_current(cur, self.state, self._q_total, self._r0, DT_S, DEFAULT_CELL)
         v = v[0]
-        below = ~(v >= self.eod_v)  # NaN counts as below
-        if below.any():
-            v = np.nan_to_num(v[: int(np.argmax(below)) + 1], nan=0.0, posinf=0.0, neginf=0.0)
+        k = int(first_below(v, self.eod_v))
+        if k >= 0:
+            v = np.nan_to_num(v[: k + 1], nan=0.0, posinf=0.0, neginf=0.0)
             return LegOutcome(v, True, float(v.min()), float(v[-1]))
         self.state = BatteryState(**{n: seq[n][:, -1].copy() for n in STATE_NAMES})
         return LegOutcome(v, False, float(v.min()), float(v[-1]))
@@ -202,9 +203,9 @@ class DynaformerBattery(BatteryBackend):
         profile = np.concatenate([self._sortie, np.asarray(current_a, dtype=float)])
         pred = np.asarray(self.predictor.predict(*self.context, profile, dt_s=DT_S), dtype=float).reshape(-1)
         v = np.nan_to_num(pred[self._sortie.size: profile.size], nan=0.0, posinf=0.0, neginf=0.0)
-        below = v < self.eod_v
-        if below.any():
-            v = v[: int(np.argmax(below)) + 1]
+        k = int(first_below(v, self.eod_v))
+        if k >= 0:
+            v = v[: k + 1]
             return LegOutcome(v, True, float(v.min()), float(v[-1]))
         self._sortie = profile
         return LegOutcome(v, False, float(v.min()), float(v[-1]))

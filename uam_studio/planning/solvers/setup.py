@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from uam_studio.battery import DEFAULT_CELL, BatteryState, SimulationResult, full_charge, simulate
+from uam_studio.battery.eod import below_eod
 from uam_studio.battery.solver import integrate_current
 from uam_studio.errors import InputError
 from uam_studio.planning.legs import ALTITUDES_M, DT_S, MIN_LEG_KM, N_MAX, LegTable, takeoff_current
@@ -75,7 +76,7 @@ def fly_batch(
                     np.full(alive.size, q_total), np.full(alive.size, float(r0)), DT_S, DEFAULT_CELL)
                 n_real = np.minimum(lens[alive] - start, width)
                 real = np.arange(width)[None, :] < n_real[:, None]
-                below = ~(v >= eod_v) & real  # NaN counts as below
+                below = below_eod(v, eod_v) & real
                 hit = below.any(axis=1)
                 v_min[rows[alive]] = np.minimum(v_min[rows[alive]], np.where(real, v, np.inf).min(axis=1))
                 last = n_real - 1
