@@ -54,7 +54,7 @@ from uam_studio.planning.solvers.oracle import (
     mask_priority,
     sortie_cover_table,
 )
-from uam_studio.planning.solvers.setup import fly_batch
+from uam_studio.planning.solvers.setup import fly_batch, safest_level
 
 HEALTH_Z = 1.64  # std of the health estimate the belief cell is taken at (one-sided 95%)
 WIND_Z = 1.64  # one-sided joint bound (std) on the next leg's and the way home's winds
@@ -484,9 +484,7 @@ class Operator:
                 [a for a in range(len(ALTITUDES_M)) if legs.feasible[VERTIPORT_SLOT, 0, a]]
             if not levels:
                 return [], [], f"{self.names[0]} cannot be reached at any level"
-            cur = [legs.current(VERTIPORT_SLOT, 0, a) for a in levels]
-            ok, _, vmin = fly_batch(cur, np.repeat(state[None, :], len(levels), 0), q, r0, self.eod_v)
-            best = levels[int(np.argmax(np.where(ok, vmin, -np.inf)))]
+            best, _, vmin = safest_level(legs, VERTIPORT_SLOT, 0, levels, state, q, r0, self.eod_v)
             return [self.names[0]], [ALTITUDES_M[best]], f"highest expected minimum voltage ({vmin.max():.3f} V)"
 
         if here == VERTIPORT_SLOT and self.scenario == "single_charge" and self.sorties >= 1:

@@ -204,16 +204,24 @@ def safest_single_flight(legs: LegTable, alt_indices: Iterable[int], msgs: list[
     if not levels:
         msgs.append(too_close(legs, 0) or f"cannot reach {dest.name} at any altitude")
         return [], []
-    currents = [legs.current(legs.home, 0, a) for a in levels]
-    x0 = np.repeat(full_charge(q).as_array(), len(levels), axis=0)
-    ok, _, vmin = fly_batch(currents, x0, q, r0, eod)
+    best, ok, vmin = safest_level(legs, legs.home, 0, levels, full_charge(q).as_array()[0], q, r0, eod)
     stats["min_voltage_by_altitude_v"] = {ALTITUDES_M[a]: round(float(v), 4) for a, v in zip(levels, vmin)}
     if not ok.any():
         msgs.append(f"cannot reach {dest.name} at any altitude: the voltage falls below "
                     f"{eod:.2f} V at every level (best minimum {vmin.max():.3f} V)")
         return [], []
-    best = levels[int(np.argmax(np.where(ok, vmin, -np.inf)))]
     return [dest.name], [ALTITUDES_M[best]]
+
+
+def safest_level(legs: LegTable, src: int, dst: int, levels: list[int], state: np.ndarray, q_max: float,
+                 r0: float, eod_v: float) -> tuple[int, np.ndarray, np.ndarray]:
+    """Fly the leg ``src`` -> ``dst`` of ``legs`` at each of ``levels`` (indices into ``ALTITUDES_M``)
+    from the battery ``state`` (8 values; q_max C, r0 ohm) and pick the level with the highest minimum
+    voltage among those that stay at or above ``eod_v`` (V): ``(level, ok, min_voltage_v)`` per level
+    (the first level where none is ok)."""
+    currents = [legs.current(src, dst, a) for a in levels]
+    ok, _, vmin = fly_batch(currents, np.repeat(np.asarray(state)[None, :], len(levels), axis=0), q_max, r0, eod_v)
+    return levels[int(np.argmax(np.where(ok, vmin, -np.inf)))], ok, vmin
 
 
 def single_flight_plan(setup: PlanSetup, policy: str, alt_indices: Iterable[int], t0: float) -> Plan:
@@ -227,5 +235,5 @@ def single_flight_plan(setup: PlanSetup, policy: str, alt_indices: Iterable[int]
     return make_plan(setup.full_mission, policy, route, alts, setup.messages, stats)
 
 
-__all__ = ["PlanSetup", "destination_limit", "fly_batch", "prepare_mission", "safest_single_flight",
+__all__ = ["PlanSetup", "destination_limit", "fly_batch", "prepare_mission", "safest_level", "safest_single_flight",
            "single_flight_plan", "takeoff_failure", "too_close"]
