@@ -25,7 +25,7 @@ from uam_studio.planning.env import UAMPlanningEnv
 from uam_studio.planning.legs import N_ALTITUDES, N_MAX, VERTIPORT_SLOT
 from uam_studio.planning.missions.check import Plan
 from uam_studio.planning.missions.mission import Mission, check_destination_count
-from uam_studio.planning.solvers.setup import prepare_mission, too_close
+from uam_studio.planning.solvers.setup import prepare_mission, single_flight_note, too_close
 
 __all__ = ["ROLLOUT_BASES", "bundled_agent_path", "dqn_route", "load_agent_cached", "rollout_agent"]
 
@@ -60,8 +60,7 @@ def dqn_route(mission: Mission, agent_path: str | os.PathLike[str] | None, predi
             messages.append(reason)
     servable = legs.feasible[VERTIPORT_SLOT, :len(dests), 0]
     if scenario == "single_flight":
-        if len(dests) > 1:
-            messages.append(f"single flight: planning the leg to {dests[0].name} only")
+        messages.extend(filter(None, [single_flight_note(mission)]))
         servable = servable[:1]
     if not servable.any():
         return [], []

@@ -20,7 +20,7 @@ from uam_studio.battery import full_charge
 from uam_studio.planning.legs import ALTITUDES_M
 from uam_studio.planning.missions.check import Plan, make_plan
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
-from uam_studio.planning.solvers.setup import fly_batch, prepare_mission, too_close
+from uam_studio.planning.solvers.setup import fly_batch, prepare_mission, single_flight_note, too_close
 
 
 def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
@@ -48,8 +48,7 @@ def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
         if reason is not None:
             msgs.append(reason)
     if scenario == "single_flight":
-        if n > 1:
-            msgs.append(f"single flight: planning the leg to {dests[0].name} only")
+        msgs.extend(filter(None, [single_flight_note(mission)]))
         a = legs.cheapest_level(home, 0)
         if a is not None and fly(home, 0, a, fresh)[0]:
             route, alts = [dests[0].name], [ALTITUDES_M[a]]

@@ -124,6 +124,13 @@ def takeoff_failure(q_max: float, r0: float, eod_v: float) -> str | None:
             f"(q_max {q_max:.0f} C, r0 {r0:.3f} ohm)")
 
 
+def single_flight_note(mission: Mission) -> str | None:
+    """The note every planner gives for a single_flight mission of more than one destination (it flies
+    the leg to the first one only), else None."""
+    dests = mission.destinations
+    return f"single flight: planning the leg to {dests[0].name} only" if len(dests) > 1 else None
+
+
 def too_close(legs: LegTable, k: int) -> str | None:
     d = legs.dist[legs.home, k]
     if d < MIN_LEG_KM[0]:
@@ -198,8 +205,7 @@ def safest_single_flight(legs: LegTable, alt_indices: Iterable[int], msgs: list[
     m = legs.mission
     dest = m.destinations[0]
     q, r0, eod = m.battery.q_max, m.battery.r0, m.eod_v
-    if len(m.destinations) > 1:
-        msgs.append(f"single flight: planning the leg to {dest.name} only")
+    msgs.extend(filter(None, [single_flight_note(m)]))
     levels = [a for a in alt_indices if legs.feasible[legs.home, 0, a]]
     if not levels:
         msgs.append(too_close(legs, 0) or f"cannot reach {dest.name} at any altitude")
@@ -236,4 +242,4 @@ def single_flight_plan(setup: PlanSetup, policy: str, alt_indices: Iterable[int]
 
 
 __all__ = ["PlanSetup", "destination_limit", "fly_batch", "prepare_mission", "safest_level", "safest_single_flight",
-           "single_flight_plan", "takeoff_failure", "too_close"]
+           "single_flight_note", "single_flight_plan", "takeoff_failure", "too_close"]

@@ -50,7 +50,13 @@ from uam_studio.planning.agents.attention.model import AttentionConfig, Attentio
 from uam_studio.planning.legs import ALTITUDES_M, LegTable
 from uam_studio.planning.missions.check import Plan, make_plan
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
-from uam_studio.planning.solvers.setup import fly_batch, prepare_mission, safest_single_flight, too_close
+from uam_studio.planning.solvers.setup import (
+    fly_batch,
+    prepare_mission,
+    safest_single_flight,
+    single_flight_note,
+    too_close,
+)
 from uam_studio.tensor_files import TensorFileError, load_tensors
 
 FORMAT = "uam_studio.attention/1"
@@ -326,8 +332,7 @@ def _single_flight(legs: LegTable, safety_filter: bool, msgs: list[str], stats: 
     if safety_filter:
         return safest_single_flight(legs, range(len(ALTITUDES_M)), msgs, stats)
     dest = legs.mission.destinations[0]
-    if len(legs.mission.destinations) > 1:
-        msgs.append(f"single flight: planning the leg to {dest.name} only")
+    msgs.extend(filter(None, [single_flight_note(legs.mission)]))
     a = legs.cheapest_level(legs.home, 0)
     if a is None:
         msgs.append(too_close(legs, 0) or f"cannot reach {dest.name} at any altitude")
