@@ -1,7 +1,7 @@
 """Health intervals on realistic flights: coverage, width and error of the 90% EOD intervals of the physics
 fit and of the Dynaformer, per noise x context x log start, on flights of mixed legs drawn with fresh seeds.
 
-    OMP_NUM_THREADS=1 python benchmarks/bench_intervals.py [--n 100] [--seed 29100]
+    OMP_NUM_THREADS=1 python benchmarks/bench_intervals.py [--n 100] [--seed 29100] [--noise-mv 0 1 5 10 20]
 
 Each flight: a cell uniform in the paper's box (R0 up to 0.3 ohm: above it the cell cannot finish a climb),
 legs of the flight model (5-120 km, the four altitudes, winds -39..39 kt, no recharge) added until the
@@ -57,6 +57,8 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--n", type=int, default=100, help="flights per cell")
     ap.add_argument("--seed", type=int, default=29100)
+    ap.add_argument("--noise-mv", type=float, nargs="+", default=list(NOISES_MV),
+                    help="sensor noise levels (mV), 0-20 (default: 0 1 5 10)")
     args = ap.parse_args()
     pred = load_pretrained()
     t0 = time.perf_counter()
@@ -65,7 +67,7 @@ def main() -> None:
     fails = []
     for a_k, align in enumerate(ALIGNMENTS):
         for ctx in CONTEXTS_S:
-            for noise_mv in NOISES_MV:
+            for noise_mv in args.noise_mv:
                 rng = np.random.default_rng([args.seed, a_k, ctx, int(noise_mv * 10)])
                 cover = {"phys": [], "dyn": []}
                 width = {"phys": [], "dyn": []}
