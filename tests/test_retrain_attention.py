@@ -37,7 +37,8 @@ def _run(rs: RetrainState, mission, timeout_s: float = 180) -> list[dict[str, fl
 
 def test_attention_run_in_a_child_process_streams_epochs_scores_the_map_and_plans(home):
     planner = PlannerState(policy="greedy")
-    rs = RetrainState(model="attention", source="map", missions=12, epochs=3, seed=3)
+    rs = RetrainState(model="attention", source="map", missions=12, epochs=3, seed=3, scenario="multi_charge")
+    assert planner.mission.scenario == "single_charge"  # scored as the run's scenario, like its reference line
     assert rs.runner == "process"
     rows = _run(rs, planner.mission)
     assert rs.error == "" and rs.status.startswith("done: 3 epochs; saved attention-map-"), rs.status
@@ -53,6 +54,7 @@ def test_attention_run_in_a_child_process_streams_epochs_scores_the_map_and_plan
     card = json.loads((path.parent / "card.json").read_text())
     assert card["model"] == "attention" and card["source"] == "app" and card["stopped_early"] is False
     assert card["watched_map"]["name"] == planner.mission.name and card["stats"]["epochs_done"] == 3
+    assert card["watched_map"]["scenario"] == "multi_charge"
     assert card["config"]["oracle_missions"] == 12 and card["init_weights"] is None
 
     # the Planner lists it, plans with it as the attention planner, and compares it with the paper's DQN

@@ -164,7 +164,7 @@ class RetrainState(param.Parameterized):
         if self.runner == "process":
             from uam_studio.planning.agents.retrain import RetrainProcess
 
-            self._proc = RetrainProcess(job["path"], mission=m, source="app", pause_event=ACTIVITY.event,
+            self._proc = RetrainProcess(job["path"], mission=job["mission"], source="app", pause_event=ACTIVITY.event,
                                         kind=self.model, **job["setup"])
             self._proc.start()
             return True
@@ -186,7 +186,8 @@ class RetrainState(param.Parameterized):
         return str(bundled_agent_path(self.scenario))
 
     def _dqn_job(self, m: Mission | None) -> dict[str, Any]:
-        """A DQN run: its agent path, the child process's settings, the thread's call, the step target."""
+        """A DQN run: its agent path, the map it trains on, the child process's settings, the thread's call,
+        the step target."""
         from uam_studio.planning.agents.retrain import new_agent_path, retrain_dqn, training_setup
 
         init_agent = self._init_agent("dqn")
@@ -199,7 +200,7 @@ class RetrainState(param.Parameterized):
             return retrain_dqn(cfg, env_fn, path, mission=m, on_episode=self._queue.append, stop_event=self._stop,
                                source="app")
 
-        return {"path": path, "run": run, "target": cfg.steps,
+        return {"path": path, "run": run, "target": cfg.steps, "mission": m,
                 "setup": {"scenario": self.scenario, "alpha": self.alpha, "beta": self.beta, "gamma": self.gamma,
                           "steps": self.steps, "seed": self.seed, "init_agent": init_agent},
                 "status": f"{verb} {cfg.steps} steps on {'the current map' if m else 'random missions'}"}
@@ -228,7 +229,7 @@ class RetrainState(param.Parameterized):
                                      stop_event=self._stop, source="app", init_weights=init_agent)
 
         score = "scored on the current map after each epoch" if m is not None else "not scored on a map"
-        return {"path": folder / WEIGHTS_NAME, "run": run, "target": cfg.oracle_missions + cfg.epochs,
+        return {"path": folder / WEIGHTS_NAME, "run": run, "target": cfg.oracle_missions + cfg.epochs, "mission": m,
                 "epochs": cfg.epochs,
                 "setup": {"missions": self.missions, "epochs": self.epochs, "seed": self.seed,
                           "init_agent": init_agent},
