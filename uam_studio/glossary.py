@@ -27,6 +27,10 @@ GLOSSARY: dict[str, str] = {
     "Stars (priority)": "How much a destination is worth: 1 to 3 stars. A plan's score is the sum of the "
                         "stars of the destinations it reaches safely.",
     "Charging cycle": "The flying between two landings at the vertiport; landing there recharges the cell.",
+    "Fleet prior": "What is known of a cell's health before it is measured: the range of q_max and R0 its "
+                   "fleet spans (the paper's box for the NASA cell). A health fit multiplies what the "
+                   "readings say by it, so a short or noisy take-off gives the fleet's typical cell, not a "
+                   "wild guess; a long flight outweighs it.",
     "Scenario": "single_flight: one leg only. single_charge: one charge, back to the vertiport at the end. "
                 "multi_charge: as many recharges at the vertiport as the plan wants.",
     "Wind (kt)": "Knots along the leg: positive is a headwind (more power, more time), negative a tailwind. "

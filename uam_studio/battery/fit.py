@@ -27,22 +27,24 @@ coupling) keeps it out of local minima. The estimate is bounded to the box :data
 :data:`FIT_R0_RANGE`.
 
 The uncertainty. Covariance of (w, R0) = sigma^2 (J^T J)^-1 at the optimum (sigma: the noise
-std), plus a weak Gaussian prior as wide as the box, which only matters when the context holds no
-information (e.g. all at rest); with a fitted pre-roll, the (w, R0) marginal. Draws and intervals
-are Gaussian in (w, R0) and clipped to the box. No calibration factor: on held-out flights the 90%
-EOD intervals held the truth on 82-97% of cases per cell (``uam-studio evaluate dynaformer --table
-noise``).
+std), plus a weak Gaussian prior as wide as the box; with a fitted pre-roll, the (w, R0) marginal.
+By default (``prior=True``) this Gaussian is then multiplied by the cell type's fleet prior
+(:func:`~uam_studio.battery.health_prior.fleet_prior`: the health range its fleet spans, which is
+known before any measurement): it decides the estimate only where the context says little (a short
+take-off, a noisy sensor). Draws and intervals are Gaussian in (w, R0) and clipped to the box. No
+calibration factor (coverage per noise x context cell: ``benchmarks/bench_intervals.py``).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..errors import InputError, check_range
 from .eod import first_below
+from .health_prior import Q_REF_C, HealthPrior, combine, fleet_prior
 from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, CellParameters
 from .simulate import CURRENT_LIMIT_A, DT_RANGE, EOD_RANGE, simulate
 from .solver import integrate_current
@@ -57,7 +59,6 @@ MIN_CONTEXT_S = 20.0  # s: shortest context accepted
 FIT_Q_RANGE = (2000.0, 16000.0)  # C: box of the estimate and of its draws
 FIT_R0_RANGE = (0.0, 1.0)  # ohm
 NOISE_FLOOR_V = 0.5e-3  # V: the noise std used is never below this
-Q_REF_C = 6500.0  # C: w = Q_REF_C / q_max
 CURVE_CUTOFF_V = EOD_RANGE[0]  # V: contexts and bands are simulated down to here
 MAX_ITER = 30
 PREROLL_MAX_S = 60.0  # s: longest load before the log's first sample that the fit looks for
@@ -128,6 +129,14 @@ class HealthEstimate:
         return preroll_states(np.full(n, self.preroll_current_a), np.full(n, self.preroll_s), points[:, 0],
                               points[:, 1], dt, cell)
 
+    def with_prior(self, prior: HealthPrior) -> HealthEstimate:
+        """This estimate's Gaussian in (w, R0) multiplied by ``prior`` (and clipped to the fit's box):
+        the posterior that :func:`fit_health` returns by default."""
+        mean, cov_w = combine([(np.array([self.w, self.r0]), self.cov_w), (prior.mean, prior.cov)])
+        w, r = (float(x) for x in np.clip(mean, _LO[:2], _HI[:2]))
+        cov_w = 0.5 * (cov_w + cov_w.T)
+        return replace(self, q_max=Q_REF_C / w, r0=r, cov=_cov_qr(w, cov_w), cov_w=cov_w)
+
     def sigma_points(self, scale: float = 1.0) -> np.ndarray:
         """(q_max C, r0 ohm) at the estimate and at +-``scale`` along each Cholesky column of
         ``cov_w``, shape [5, 2] (rows: centre, +col0, -col0, +col1, -col1), clipped to the box."""
@@ -137,6 +146,12 @@ class HealthEstimate:
         for i in range(2):
             pts += [centre + scale * chol[:, i], centre - scale * chol[:, i]]
         return _to_qr(np.array(pts))
+
+
+def _cov_qr(w: float, cov_w: np.ndarray) -> np.ndarray:
+    """Covariance of (q_max C, r0 ohm) from that of (w, r0): the delta method at w."""
+    t = np.array([[-Q_REF_C / w ** 2, 0.0], [0.0, 1.0]])  # d(q_max, r0) / d(w, r0)
+    return t @ cov_w @ t.T
 
 
 def _chol(cov: np.ndarray) -> np.ndarray:
@@ -361,7 +376,7 @@ def _search_preroll(cur: np.ndarray, volt: np.ndarray, dt: float, cell: CellPara
 
 def fit_health_batch(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | None = None,
                      initial_state: BatteryState | None = None, start: str = "auto",
-                     cell: CellParameters = DEFAULT_CELL) -> list[HealthEstimate]:
+                     cell: CellParameters = DEFAULT_CELL, prior: bool | HealthPrior = True) -> list[HealthEstimate]:
     """Fit (q_max, R0) to each of B contexts of one length; see :func:`fit_health`.
 
     :param current_a: measured per-cell current (A), shape [B, T], from the log's first sample.
@@ -379,6 +394,9 @@ def fit_health_batch(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | N
         raise InputError("initial_state", f"batch {initial_state.batch_size} does not match {cur.shape[0]}")
     if initial_state is not None and initial_state.batch_size == 1 and cur.shape[0] > 1:
         initial_state = _rep_state(initial_state, cur.shape[0])
+    if not isinstance(prior, (bool, HealthPrior)):
+        raise InputError("prior", "expected True (the cell type's fleet prior), False or a HealthPrior")
+    known = fleet_prior(cell) if prior is True else (prior or None)
     b = cur.shape[0]
     preroll = np.zeros(b)
     with np.errstate(all="ignore"):
@@ -418,19 +436,18 @@ def fit_health_batch(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | N
         else:
             cw = np.linalg.inv(jtj[k] / sig[k] ** 2 + np.diag(_PRIOR_PREC[:2]))
         w, r = float(wr[k, 0]), float(wr[k, 1])
-        q = Q_REF_C / w
-        t = np.array([[-Q_REF_C / w ** 2, 0.0], [0.0, 1.0]])  # d(q_max, r0) / d(w, r0)
         cw = 0.5 * (cw + cw.T)
-        out.append(HealthEstimate(q_max=q, r0=r, cov=t @ cw @ t.T, noise_v=float(sig[k]),
-                                  n_samples=int(mask[k].sum()), cov_w=cw, rms_residual_v=float(rms[k]),
-                                  iterations=int(iters[k]), preroll_s=float(preroll[k]),
-                                  preroll_current_a=float(cur[k, 0]) if preroll[k] > 0 else 0.0))
+        est = HealthEstimate(q_max=Q_REF_C / w, r0=r, cov=_cov_qr(w, cw), noise_v=float(sig[k]),
+                             n_samples=int(mask[k].sum()), cov_w=cw, rms_residual_v=float(rms[k]),
+                             iterations=int(iters[k]), preroll_s=float(preroll[k]),
+                             preroll_current_a=float(cur[k, 0]) if preroll[k] > 0 else 0.0)
+        out.append(est if known is None else est.with_prior(known))
     return out
 
 
 def fit_health(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | None = None,
                eod_v: float = DEFAULT_EOD_V, initial_state: BatteryState | None = None, start: str = "auto",
-               cell: CellParameters = DEFAULT_CELL) -> HealthEstimate:
+               cell: CellParameters = DEFAULT_CELL, prior: bool | HealthPrior = True) -> HealthEstimate:
     """Maximum-likelihood (q_max, R0) of one cell from a measured context, with its covariance.
 
     :param current_a: measured per-cell current (A), shape [T], ``current_a[k]`` flowing during
@@ -450,13 +467,18 @@ def fit_health(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | None = 
         well, and kept where it lowers the chi-square by more than :data:`PREROLL_CHI2`
         (``HealthEstimate.preroll_s``; the covariance is then the (w, R0) marginal).
         ``"full"``: full and rested at the first sample.
+    :param cell: the cell type's parameter set (its fleet's health range is the default prior).
+    :param prior: True: the likelihood's Gaussian in (w, R0) multiplied by the fleet prior of ``cell``
+        (:func:`~uam_studio.battery.health_prior.fleet_prior`); a :class:`HealthPrior`: by that one;
+        False: the likelihood alone (with a weak prior as wide as the fit's box), for a caller that
+        combines several fits with its own prior once.
     :raises InputError: NaN or inf, a context shorter than 20 s, mismatched lengths, a negative
         noise level, naming the field.
     """
     check_range("eod_v", eod_v, *EOD_RANGE, " V")
     cur, volt, dt = check_context(current_a, voltage_v, dt_s, ndim=(1,))
     _check_noise(noise_v)
-    return fit_health_batch(cur[None], volt[None], dt, noise_v, initial_state, start, cell)[0]
+    return fit_health_batch(cur[None], volt[None], dt, noise_v, initial_state, start, cell, prior)[0]
 
 
 # ------------------------------------------------------------------------------- intervals, bands

@@ -65,6 +65,10 @@ class CellParameters:
     r0_activation_k: float = 0.0
     k_activation_k: float = 0.0
     t_reference_k: float = 298.15
+    # The health range of the fleet this cell type comes from: what is known of a cell of this type
+    # before it is measured (the prior of a health fit, :mod:`uam_studio.battery.health_prior`).
+    fleet_q_range: tuple[float, float] = PAPER_Q_RANGE  # C
+    fleet_r0_range: tuple[float, float] = PAPER_R0_RANGE  # ohm
 
     @property
     def xn_min(self) -> float:
@@ -137,6 +141,13 @@ NASA_18650 = Cell("NASA 18650 (Daigle & Kulkarni 2013)", DEFAULT_CELL, DEFAULT_Q
 # ``uam-studio identify vtc6 --data PATH`` (its output, pasted): the card is pretrained/vtc6_cell.md.
 # Identified from cell VAH07's first C/5 discharge and first four missions (30 s samples) and cell
 # VAH01's 1 Hz mission; the open-circuit-voltage curve is the positive electrode's (u0p, ap).
+# The VTC6 fleet: q_max in proportion to the C/5 capacities measured over the lives of the dataset's
+# four resampled cells (VAH07/09/27/30: 2.43-3.16 Ah against 3.03 Ah for the fit's 10942.8 C), widened
+# by 2% either way; R0 from the new cell's 0.0208 ohm up to 2.5x it (an assumption: the dataset measures
+# no resistance over life). Cell VAH01, whose mission the validation flies, is none of the four.
+VTC6_FLEET_Q_RANGE = (8600.0, 11650.0)  # C
+VTC6_FLEET_R0_RANGE = (0.015, 0.052)  # ohm
+
 VTC6_PARAMS = replace(
     DEFAULT_CELL,
     kn=11227.5491,
@@ -153,5 +164,7 @@ VTC6_PARAMS = replace(
     thermal_tau_s=442.95203,
     r0_activation_k=9.06508125,
     k_activation_k=1.04678599,
+    fleet_q_range=VTC6_FLEET_Q_RANGE,
+    fleet_r0_range=VTC6_FLEET_R0_RANGE,
 )
 VTC6 = Cell("Sony-Murata VTC6 18650 (identified on the CMU eVTOL dataset)", VTC6_PARAMS, 10942.8444, 0.0208113676)

@@ -37,7 +37,7 @@ from .cmu_data import (
     resampled_missions,
 )
 from .identify import FitSegment, identify_cell
-from .parameters import DEFAULT_CELL, Cell
+from .parameters import DEFAULT_CELL, VTC6_FLEET_Q_RANGE, VTC6_FLEET_R0_RANGE, Cell
 from .simulate import SimulationResult, simulate, simulate_constant_power
 
 IDENTIFICATION_FILE = "VAH07.csv.mat"
@@ -117,7 +117,8 @@ def vtc6_fit_segments(folder: str | Path, n_missions: int = 4, hold_out: str = "
 def identify_vtc6(folder: str | Path, n_missions: int = 4, hold_out: str = "none", max_nfev: int = 300) -> Cell:
     """Identify the VTC6 cell from the dataset in ``folder`` (see the module docstring); about a minute."""
     start = replace(DEFAULT_CELL, r0_activation_k=2000.0, k_activation_k=2000.0, thermal_mass=45.0,
-                    thermal_tau_s=300.0, t_ambient_k=298.15)
+                    thermal_tau_s=300.0, t_ambient_k=298.15, fleet_q_range=VTC6_FLEET_Q_RANGE,
+                    fleet_r0_range=VTC6_FLEET_R0_RANGE)
     fit = identify_cell(vtc6_fit_segments(folder, n_missions, hold_out), start, 11000.0, 0.02, max_nfev=max_nfev)
     return Cell(f"Sony-Murata VTC6 (identified, held out: {hold_out})", fit.cell, fit.q_max, fit.r0)
 

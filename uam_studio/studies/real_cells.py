@@ -8,8 +8,9 @@ models on a real VTC6? Every row is scored on measurements; the held-out status 
   against the measured voltage of cell VAH01's 1 Hz mission: RMSE (mV) and the error of the lowest
   (landing) voltage (mV), for the bundled VTC6 set (its fit read this mission), refits that held out the
   landing or the whole cell, and the NASA cell (as bundled, and with q_max/R0 fitted to the mission);
-- health: q_max/R0 fitted to the first 20/60/120 s of the mission (the VTC6 set), the landing's lowest
-  voltage predicted by power with its 90% interval (draws of the fit's uncertainty);
+- health: q_max/R0 fitted to the first 20/60/120 s of the mission (the VTC6 set, with the VTC6 fleet's
+  prior, as by default), the landing's lowest voltage predicted by power with its 90% interval (draws
+  of the fit's uncertainty); and the same without the prior (the likelihood alone);
 - Dynaformer: the bundled model (trained on the NASA cell, 0.05-3 A) on the same contexts;
 - capacity: q_max fitted to each C/5 reference discharge of the four resampled lives (the whole discharge,
   and only its part above 3.4 V), the capacity to 2.5 V it gives against the dataset's integrated capacity;
@@ -54,6 +55,7 @@ class RealCellReport:
 
     physics: list[dict] = field(default_factory=list)
     health: list[dict] = field(default_factory=list)
+    health_likelihood: list[dict] = field(default_factory=list)
     dynaformer: list[dict] = field(default_factory=list)
     capacity: list[dict] = field(default_factory=list)
     safety: list[dict] = field(default_factory=list)
@@ -61,7 +63,7 @@ class RealCellReport:
 
     def as_dict(self) -> dict:
         return {"measured_landing_min_v": self.measured_landing_min_v, "physics": self.physics,
-                "health": self.health, "dynaformer": self.dynaformer, "capacity": self.capacity,
+                "health": self.health, "health_likelihood": self.health_likelihood, "dynaformer": self.dynaformer, "capacity": self.capacity,
                 "safety": self.safety}
 
 
@@ -88,18 +90,20 @@ def physics_row(label: str, held_out: str, cell: Cell, mission: MissionLog) -> d
 def _mission_fitted_nasa(mission: MissionLog) -> Cell:
     """The NASA parameter set with only q_max and R0 fitted to the whole mission (current-driven)."""
     params = replace(NASA_18650.params, t_ambient_k=ZERO_C + float(mission.log.temperature_c[0]))
-    est = fit_health(mission.log.current_a, mission.log.voltage_v, 1.0, cell=params, start="full")
+    est = fit_health(mission.log.current_a, mission.log.voltage_v, 1.0, cell=params, start="full",
+                     prior=False)  # a reference fit: the NASA fleet is not this cell's
     return Cell("NASA set, q_max and R0 fitted to this mission", NASA_18650.params, est.q_max, est.r0)
 
 
-def health_rows(cell: Cell, mission: MissionLog, rng: np.random.Generator) -> list[dict]:
-    """q_max/R0 from the mission's first seconds; the landing's lowest voltage predicted by power."""
+def health_rows(cell: Cell, mission: MissionLog, rng: np.random.Generator, prior: bool = True) -> list[dict]:
+    """q_max/R0 from the mission's first seconds (with the cell type's fleet prior, or without:
+    ``prior``); the landing's lowest voltage predicted by power."""
     params = replace(cell.params, t_ambient_k=ZERO_C + float(mission.log.temperature_c[0]))
     log = mission.log
     truth = float(_landing_min(log.voltage_v, mission))
     rows = []
     for ctx in CONTEXTS_S:
-        est = fit_health(log.current_a[:ctx], log.voltage_v[:ctx], 1.0, cell=params, start="full")
+        est = fit_health(log.current_a[:ctx], log.voltage_v[:ctx], 1.0, cell=params, start="full", prior=prior)
         draws = np.vstack([[est.q_max, est.r0], est.sample(N_DRAWS, rng)])
         res = simulate_constant_power(np.broadcast_to(mission.power_w, (len(draws), len(mission.power_w))), 1.0,
                                       draws[:, 0], draws[:, 1], eod_v=2.5, cell=params)
@@ -149,7 +153,8 @@ def capacity_rows(folder: Path, cell: Cell) -> list[dict]:
             row = {"cell": log.name, "test": k, "time_h": ref.time_h, "measured_ah": ref.capacity_ah}
             above = int(np.argmax(volt < CAPACITY_FIT_ABOVE_V)) or len(volt)
             for key, n in (("", above), ("_whole", len(volt))):
-                est = fit_health(cur[:n], volt[:n], CAPACITY_DT_S, cell=p, start="full")
+                est = fit_health(cur[:n], volt[:n], CAPACITY_DT_S, cell=p, start="full",
+                                 prior=False)  # the fleet range came from these discharges
                 steps = int(2 * ref.capacity_ah * 3600 / ref.current_a / CAPACITY_DT_S)
                 res = simulate(np.full(steps, ref.current_a), CAPACITY_DT_S, est.q_max, est.r0, eod_v=2.5, cell=p)
                 cap = float(res.eod_s * ref.current_a / 3600) if res.eod_reached else math.nan
@@ -189,6 +194,7 @@ def real_cell_report(data: str | Path | None = None, refit: bool = True, capacit
     report.physics.append(physics_row("NASA 18650 (default)", "all (not fitted)", NASA_18650, mission))
     report.physics.append(physics_row("NASA set, q_max/R0 fitted", "none", _mission_fitted_nasa(mission), mission))
     report.health = health_rows(VTC6, mission, np.random.default_rng(seed))
+    report.health_likelihood = health_rows(VTC6, mission, np.random.default_rng(seed), prior=False)
     report.dynaformer = dynaformer_rows(mission)
     if capacity:
         report.capacity = capacity_rows(folder, VTC6)
@@ -215,12 +221,16 @@ def format_report(report: RealCellReport) -> str:
                    f"({_fmt(r['rmse_mv_current'], '6.1f')}) {_fmt(r['landing_min_err_mv_power'], '+9.1f'):>11s} "
                    f"({_fmt(r['landing_min_err_mv_current'], '+8.1f')})  "
                    + (f"reached at {cut:.0f} s" if cut is not None else "never"))
-    out += ["", "health fit (VTC6 set) from the mission's first seconds: landing's lowest voltage, 90% interval",
-            f"{'context':>8s} {'q_max C':>8s} {'R0 ohm':>8s} {'predicted V':>11s} {'90% interval V':>17s} "
-            f"{'error mV':>9s} inside"]
-    for r in report.health:
-        out.append(f"{r['context_s']:>6d} s {r['q_max_c']:8.0f} {r['r0_ohm']:8.4f} {r['predicted_v']:11.3f} "
-                   f"{r['low_v']:8.3f}-{r['high_v']:.3f} {r['error_mv']:+9.1f} {'yes' if r['inside'] else 'NO'}")
+    for title, rows in (("health fit (VTC6 set, VTC6 fleet prior: the default)", report.health),
+                        ("health fit (VTC6 set, likelihood alone: prior=False)", report.health_likelihood)):
+        if not rows:
+            continue
+        out += ["", f"{title} from the mission's first seconds: landing's lowest voltage, 90% interval",
+                f"{'context':>8s} {'q_max C':>8s} {'R0 ohm':>8s} {'predicted V':>11s} {'90% interval V':>17s} "
+                f"{'error mV':>9s} inside"]
+        for r in rows:
+            out.append(f"{r['context_s']:>6d} s {r['q_max_c']:8.0f} {r['r0_ohm']:8.4f} {r['predicted_v']:11.3f} "
+                       f"{r['low_v']:8.3f}-{r['high_v']:.3f} {r['error_mv']:+9.1f} {'yes' if r['inside'] else 'NO'}")
     out += ["", "Dynaformer as bundled (trained on the NASA cell), same contexts"]
     for r in report.dynaformer:
         if "error" in r:

@@ -6,7 +6,7 @@ take-off check and at every arrival) it
 
 1. estimates the health (q_max, R0) with its uncertainty from **all** readings since the last
    full charge (:func:`uam_studio.battery.fit.fit_health`), combined by precision with the
-   estimates of earlier charges and with the fleet prior (:func:`fleet_prior`: the paper's health
+   estimates of earlier charges and with the fleet prior (:func:`uam_studio.battery.health_prior.fleet_prior`: the paper's health
    box; a 20 s take-off says much about R0 and little about q_max, which the flight then sharpens);
 2. estimates the wind: the actual wind of each flown leg follows from its measured duration
    (cruise time = distance / ground speed); the shift common to all legs is estimated from those
@@ -34,8 +34,8 @@ from typing import Any
 import numpy as np
 
 from uam_studio.battery import BatteryState, full_charge, simulate
-from uam_studio.battery.fit import Q_REF_C, HealthEstimate, fit_health
-from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
+from uam_studio.battery.fit import HealthEstimate, fit_health
+from uam_studio.battery.health_prior import Q_REF_C, combine, fleet_prior
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight import leg_profile
 from uam_studio.flight.tables import WIND_RANGE_KTS
@@ -66,8 +66,6 @@ OBSERVED_WIND_SD_KT = 1.0  # kt, std of a wind measured by flying its leg
 Q_PLAN_RANGE = (2000.0, 12000.0)  # C, belief cell bounds
 R0_PLAN_RANGE = (0.005, 1.5)  # ohm
 MIN_FIT_SAMPLES = 20
-FLEET_Q_RANGE = PAPER_Q_RANGE  # C, the paper's range of q_max: the fleet the cell comes from
-FLEET_R0_RANGE = PAPER_R0_RANGE  # ohm, the paper's range of R0
 
 
 @dataclass(frozen=True)
@@ -170,29 +168,6 @@ class WindBelief:
         return self.forecast[node] + mean, math.sqrt(sd ** 2 + self.sigma ** 2)
 
 
-def combine(parts: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """Precision-weighted mean and covariance of independent Gaussian estimates ``(mean [2], cov 2x2)``."""
-    prec = np.zeros((2, 2))
-    vec = np.zeros(2)
-    for mean, cov in parts:
-        p = np.linalg.inv(np.asarray(cov, dtype=float) + np.diag([1e-12, 1e-12]))
-        prec += p
-        vec += p @ np.asarray(mean, dtype=float)
-    cov = np.linalg.inv(prec)
-    return cov @ vec, cov
-
-
-def fleet_prior(q_range: tuple[float, float] = FLEET_Q_RANGE, r0_range: tuple[float, float] = FLEET_R0_RANGE
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """The operator's prior on an unknown cell: the fleet's health box (the paper's ranges) as a
-    Gaussian in (w, r0), w = 6500 C / q_max, with the mean and std of a uniform draw from the box:
-    ``(mean [w, r0 ohm], covariance)``."""
-    w = (Q_REF_C / q_range[1], Q_REF_C / q_range[0])
-    mean = np.array([sum(w) / 2, sum(r0_range) / 2])
-    sd = np.array([w[1] - w[0], r0_range[1] - r0_range[0]]) / math.sqrt(12.0)
-    return mean, np.diag(sd ** 2)
-
-
 @dataclass
 class _Segment:
     """Readings since the last full charge."""
@@ -241,7 +216,8 @@ class Operator:
         self.wind_z = check_range("wind_z", wind_z, 0.0, 5.0)
         self.plan_wind_z = check_range("plan_wind_z", plan_wind_z, 0.0, 5.0)
         self.noise_v = None if sensor_noise_mv is None else max(float(sensor_noise_mv), 0.5) * 1e-3
-        self.prior = fleet_prior()
+        prior = fleet_prior()  # the paper's health box: the fleet of the default cell
+        self.prior = (prior.mean, prior.cov)
         self.winds = WindBelief({n: mission.node(n).wind_kts for n in mission.node_names}, forecast_sigma_kt)
         self.names = tuple(d.name for d in mission.destinations)
         self.node = VERTIPORT
@@ -295,7 +271,7 @@ class Operator:
         cur, volt = self.segment.arrays()
         if cur.size < MIN_FIT_SAMPLES:
             return None
-        return fit_health(cur, volt, DT_S, noise_v=self.noise_v, eod_v=self.eod_v)
+        return fit_health(cur, volt, DT_S, noise_v=self.noise_v, eod_v=self.eod_v, prior=False)  # prior: once, in health()
 
     def health(self) -> tuple[float, float, float, float]:
         """(w, its std, r0 ohm, its std) from all readings so far and the fleet prior; w = 6500 C / q_max."""
@@ -573,5 +549,5 @@ class Operator:
             f"({ALTITUDES_M[best]:g} m)")
 
 
-__all__ = ["HEALTH_Z", "IN_FLIGHT_PLANNERS", "WIND_Z", "Decision", "Operator", "WindBelief", "combine", "fleet_prior",
+__all__ = ["HEALTH_Z", "IN_FLIGHT_PLANNERS", "WIND_Z", "Decision", "Operator", "WindBelief",
            "wind_from_duration"]

@@ -1,0 +1,74 @@
+"""What is known of a cell's health before it is measured: the health range of its fleet, as a
+Gaussian prior on (w, R0) with w = 6500 C / q_max (the coordinates of the health fit, in which the
+voltage is close to linear).
+
+Public API:
+
+- :class:`HealthPrior`: mean (w, R0 ohm) and 2x2 covariance in (w, R0).
+- :func:`fleet_prior`: the prior of a cell type, from its parameter set's ``fleet_q_range`` (C) and
+  ``fleet_r0_range`` (ohm): the mean and std of a cell drawn uniformly from that box.
+- :func:`combine`: Gaussians in (w, R0) multiplied by precision (a prior and independent fits).
+
+A 20 s take-off says much about R0 and little about q_max; with a noisy sensor it says little about
+either, and the fleet's range is then most of what is known. The health fit
+(:func:`uam_studio.battery.fit.fit_health`) multiplies its likelihood's Gaussian by this prior by
+default; the operator, which combines the fits of several charges, multiplies the prior in once.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .parameters import DEFAULT_CELL, CellParameters
+
+__all__ = ["Q_REF_C", "HealthPrior", "combine", "fleet_prior"]
+
+Q_REF_C = 6500.0  # C: w = Q_REF_C / q_max
+
+
+@dataclass(frozen=True, eq=False)
+class HealthPrior:
+    """A Gaussian belief on (w, R0), w = 6500 C / q_max.
+
+    :param mean: (w, R0 ohm).
+    :param cov: 2x2 covariance of (w, R0) (-, -ohm, ohm^2).
+    """
+
+    mean: np.ndarray
+    cov: np.ndarray
+
+    @classmethod
+    def from_ranges(cls, q_range: tuple[float, float], r0_range: tuple[float, float]) -> HealthPrior:
+        """The mean and covariance of a cell drawn uniformly from the box ``q_range`` (C) x
+        ``r0_range`` (ohm), uniform in (w, R0)."""
+        w = (Q_REF_C / q_range[1], Q_REF_C / q_range[0])
+        mean = np.array([sum(w) / 2, sum(r0_range) / 2])
+        sd = np.array([w[1] - w[0], r0_range[1] - r0_range[0]]) / math.sqrt(12.0)
+        return cls(mean, np.diag(sd ** 2))
+
+    @property
+    def q_max(self) -> float:
+        """q_max (C) at the prior's mean."""
+        return Q_REF_C / float(self.mean[0])
+
+
+def fleet_prior(cell: CellParameters = DEFAULT_CELL) -> HealthPrior:
+    """The prior of a cell of type ``cell``: its fleet's health box (``cell.fleet_q_range`` C,
+    ``cell.fleet_r0_range`` ohm) as a Gaussian (:meth:`HealthPrior.from_ranges`)."""
+    return HealthPrior.from_ranges(cell.fleet_q_range, cell.fleet_r0_range)
+
+
+def combine(parts: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Gaussians ``(mean [2], cov [2, 2])`` in (w, R0) multiplied by precision: ``(mean, cov)``."""
+    prec = np.zeros((2, 2))
+    vec = np.zeros(2)
+    for mean, cov in parts:
+        cov = np.asarray(cov, dtype=float)
+        p = np.linalg.inv(cov + np.diag(1e-9 * np.abs(np.diag(cov)) + 1e-300))  # relative jitter: never singular
+        prec += p
+        vec += p @ np.asarray(mean, dtype=float)
+    cov = np.linalg.inv(prec)
+    return cov @ vec, cov
