@@ -5,8 +5,9 @@ Public API: :func:`fly_mission` -> :class:`FlightRecord`, :class:`World`, :class
 :func:`parse_event` (``"wind+30@1200"``), :class:`WindEvent`, :func:`record_csv` (the record's series as CSV).
 """
 
+from uam_studio.planning.operations.decision import Decision
 from uam_studio.planning.operations.fly import FlightRecord, fly_mission, position_at, record_csv
-from uam_studio.planning.operations.operator import Decision, Operator
+from uam_studio.planning.operations.operator import Operator
 from uam_studio.planning.operations.world import (
     DEFAULT_FORECAST_SIGMA_KT,
     DEFAULT_SENSOR_NOISE_MA,

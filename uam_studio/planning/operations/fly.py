@@ -32,12 +32,12 @@ from uam_studio.errors import InputError
 from uam_studio.flight import leg_profile
 from uam_studio.planning.legs import DT_S, N_MAX, takeoff_current
 from uam_studio.planning.missions.mission import VERTIPORT, Battery, Mission, check_destination_count
+from uam_studio.planning.operations.decision import Decision
 from uam_studio.planning.operations.operator import (
     HEALTH_Z,
     IN_FLIGHT_PLANNERS,
     PLAN_WIND_Z,
     WIND_Z,
-    Decision,
     Operator,
 )
 from uam_studio.planning.operations.world import (
@@ -310,7 +310,7 @@ def _predict_leg(op: Operator, d: Decision, first: bool) -> np.ndarray:
     wind = float(np.clip(wind, -39.0, 39.0))
     dwell = m.node(d.next_to).dwell_s if d.next_to != VERTIPORT else 0.0
     prof = leg_profile(m.distance_km(d.node, d.next_to), d.next_altitude_m, wind, DT_S, dwell)
-    cur, _ = op.segment.arrays()
+    cur, _ = op.health_belief.segment.arrays()
     skip = cur.size if first else 0
     future = np.asarray(prof.current_a, dtype=float)[skip:]
     hist = np.clip(cur, -50, 50)

@@ -4,13 +4,15 @@ It sees the mission with its *forecast* winds, the stated accuracy of that forec
 sensor readings; never the true cell nor the actual winds. At each decision point (after the
 take-off check and at every arrival) it
 
-1. estimates the health (q_max, R0) with its uncertainty from **all** readings since the last
-   full charge (:func:`uam_studio.battery.fit.fit_health`), combined by precision with the
-   estimates of earlier charges and with the fleet prior (:func:`uam_studio.battery.health_prior.fleet_prior`: the paper's health
-   box; a 20 s take-off says much about R0 and little about q_max, which the flight then sharpens);
-2. estimates the wind: the actual wind of each flown leg follows from its measured duration
-   (cruise time = distance / ground speed); the shift common to all legs is estimated from those
-   residuals with a Gaussian prior, and every unflown leg is predicted as forecast + shift;
+1. estimates the health (q_max, R0) with its uncertainty
+   (:class:`~uam_studio.planning.operations.health_belief.HealthBelief`: the fit of **all** readings
+   since the last full charge, combined by precision with the fits of earlier charges and with the
+   fleet prior; a 20 s take-off says much about R0 and little about q_max, which the flight then
+   sharpens);
+2. estimates the wind (:class:`~uam_studio.planning.operations.wind_belief.WindBelief`): the actual
+   wind of each flown leg follows from its measured duration (cruise time = distance / ground speed);
+   the shift common to all legs is estimated from those residuals with a Gaussian prior, and every
+   unflown leg is predicted as forecast + shift;
 3. plans the rest from its present node and estimated battery state on its *expected* belief
    (median health, predicted winds), with the attention planner (``planner="attention"``, the
    default: :func:`~uam_studio.planning.agents.attention.decode.continue_route`) or exactly
@@ -27,15 +29,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
-from functools import lru_cache
-from typing import Any
 
 import numpy as np
 
 from uam_studio.battery import BatteryState, full_charge, simulate
-from uam_studio.battery.fit import HealthEstimate, fit_health
-from uam_studio.battery.health_prior import Q_REF_C, combine, fleet_prior
+from uam_studio.battery.health_prior import Q_REF_C
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight import leg_profile
 from uam_studio.flight.tables import WIND_RANGE_KTS
@@ -47,6 +45,9 @@ from uam_studio.planning.missions.mission import (
     Mission,
     check_destination_count,
 )
+from uam_studio.planning.operations.decision import Decision
+from uam_studio.planning.operations.health_belief import HealthBelief
+from uam_studio.planning.operations.wind_belief import WindBelief, wind_from_duration
 from uam_studio.planning.solvers.oracle import (
     Sortie,
     best_single_sortie,
@@ -59,126 +60,8 @@ from uam_studio.planning.solvers.setup import fly_batch, safest_level
 HEALTH_Z = 1.64  # std of the health estimate the belief cell is taken at (one-sided 95%)
 WIND_Z = 1.64  # one-sided joint bound (std) on the next leg's and the way home's winds
 PLAN_WIND_Z = 0.5  # std of a leg's predicted wind the expected belief takes
-SHIFT_PRIOR_KT = 5.0  # kt, prior std of a wind shift common to every leg
-EVENT_PRIOR_KT = 30.0  # kt, prior std of the shift after a surprise
-SURPRISE_Z = 2.5  # a flown leg's wind this many std off its prediction is a surprise
-OBSERVED_WIND_SD_KT = 1.0  # kt, std of a wind measured by flying its leg
 Q_PLAN_RANGE = (2000.0, 12000.0)  # C, belief cell bounds
 R0_PLAN_RANGE = (0.005, 1.5)  # ohm
-MIN_FIT_SAMPLES = 20
-
-
-@dataclass(frozen=True)
-class Decision:
-    """One (re-)plan: when, where, what it knew, what it chose and why.
-
-    ``time_s`` (s since the first take-off), ``node``, ``reason``, the health estimate
-    (``q_max_c``, ``q_max_sd_c``, ``r0_ohm``, ``r0_sd_ohm``), the belief cell it planned with
-    (``plan_q_max_c``, ``plan_r0_ohm``), the estimated common wind shift (``wind_shift_kts`` with
-    ``wind_shift_sd_kts``), the planned remaining ``route`` and ``altitudes_m``, the next leg
-    (``next_to``, ``next_altitude_m``; None: the flight ends) and ``compute_s`` (s of wall time).
-    """
-
-    time_s: float
-    node: str
-    kind: str
-    reason: str
-    q_max_c: float
-    q_max_sd_c: float
-    r0_ohm: float
-    r0_sd_ohm: float
-    plan_q_max_c: float
-    plan_r0_ohm: float
-    wind_shift_kts: float
-    wind_shift_sd_kts: float
-    route: tuple[str, ...]
-    altitudes_m: tuple[float, ...]
-    next_to: str | None
-    next_altitude_m: float | None
-    compute_s: float = 0.0
-
-    def to_dict(self) -> dict[str, Any]:
-        d = dataclasses.asdict(self)
-        d["route"], d["altitudes_m"] = list(self.route), list(self.altitudes_m)
-        return {k: (round(v, 6) if isinstance(v, float) else v) for k, v in d.items()}
-
-
-@lru_cache(maxsize=4096)
-def _duration_curve(distance_km: float, altitude_m: float, dwell_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Leg duration (s) over a 1 kt grid of winds (kt): monotone, for inverting a measured duration."""
-    winds = np.arange(WIND_RANGE_KTS[0], WIND_RANGE_KTS[1] + 0.5, 1.0)
-    dur = np.array([math.ceil(leg_profile(distance_km, altitude_m, float(w), DT_S, dwell_s).duration_s / DT_S - 1e-9)
-                    for w in winds], dtype=float)
-    return winds, dur
-
-
-def wind_from_duration(distance_km: float, altitude_m: float, dwell_s: float, duration_s: float) -> float:
-    """The wind (kt) under which a leg takes ``duration_s`` (s): the inverse of the leg's timing."""
-    winds, dur = _duration_curve(round(distance_km, 6), float(altitude_m), float(dwell_s))
-    return float(np.interp(duration_s, dur, winds))
-
-
-class WindBelief:
-    """Forecast winds plus an estimated shift common to every leg; flown legs are known.
-
-    Each flown leg's actual wind gives a residual against the forecast. The common shift has a
-    Gaussian prior (std ``SHIFT_PRIOR_KT``) and each residual is the shift plus the node's own forecast
-    error (std ``sigma_kt``). A residual further than ``SURPRISE_Z`` std from its prediction is a
-    surprise (the weather changed): the shift is then re-estimated from the residuals since, under a
-    wide prior (``EVENT_PRIOR_KT``), and winds measured before it are moved by the change.
-
-    :param forecast: kt by node name (the mission's winds).
-    :param sigma_kt: the forecast's stated error std per node (kt).
-    """
-
-    def __init__(self, forecast: dict[str, float], sigma_kt: float) -> None:
-        self.forecast = dict(forecast)
-        self.sigma = max(float(sigma_kt), 1.0)
-        self.observed: dict[str, tuple[float, float]] = {}  # node -> (wind kt, shift when measured)
-        self.residuals: list[float] = []
-        self.prior_kt = SHIFT_PRIOR_KT
-        self.surprises = 0
-
-    def observe(self, node: str, wind_kts: float) -> tuple[float, bool]:
-        """Record the actual wind (kt) of a flown leg to ``node``; returns (residual to the forecast, kt;
-        whether it was a surprise)."""
-        r = float(wind_kts) - self.forecast[node]
-        mean, sd = self.shift()
-        surprise = abs(r - mean) > SURPRISE_Z * math.sqrt(sd ** 2 + self.sigma ** 2)
-        if surprise:
-            self.residuals = []
-            self.prior_kt = EVENT_PRIOR_KT
-            self.surprises += 1
-        self.residuals.append(r)
-        self.observed[node] = (float(wind_kts), self.shift()[0])
-        return r, surprise
-
-    def shift(self) -> tuple[float, float]:
-        """Posterior mean and std (kt) of the wind shift common to all legs."""
-        prec = 1.0 / self.prior_kt ** 2 + len(self.residuals) / self.sigma ** 2
-        mean = (sum(self.residuals) / self.sigma ** 2) / prec
-        return mean, math.sqrt(1.0 / prec)
-
-    def predict(self, node: str) -> tuple[float, float]:
-        """Predicted wind (kt) on a leg to ``node`` and its std (kt)."""
-        mean, sd = self.shift()
-        if node in self.observed:
-            wind, shift_then = self.observed[node]
-            return wind + mean - shift_then, math.sqrt(OBSERVED_WIND_SD_KT ** 2 + sd ** 2)
-        return self.forecast[node] + mean, math.sqrt(sd ** 2 + self.sigma ** 2)
-
-
-@dataclass
-class _Segment:
-    """Readings since the last full charge."""
-
-    current: list[np.ndarray] = field(default_factory=list)
-    voltage: list[np.ndarray] = field(default_factory=list)
-
-    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        if not self.current:
-            return np.zeros(0), np.zeros(0)
-        return np.concatenate(self.current), np.concatenate(self.voltage)
 
 
 IN_FLIGHT_PLANNERS = ("attention", "oracle")  # the operator's planners (the first is the default)
@@ -216,16 +99,12 @@ class Operator:
         self.wind_z = check_range("wind_z", wind_z, 0.0, 5.0)
         self.plan_wind_z = check_range("plan_wind_z", plan_wind_z, 0.0, 5.0)
         self.noise_v = None if sensor_noise_mv is None else max(float(sensor_noise_mv), 0.5) * 1e-3
-        prior = fleet_prior()  # the paper's health box: the fleet of the default cell
-        self.prior = (prior.mean, prior.cov)
+        self.health_belief = HealthBelief(self.noise_v, self.eod_v)  # the paper's box: the default cell's fleet
         self.winds = WindBelief({n: mission.node(n).wind_kts for n in mission.node_names}, forecast_sigma_kt)
         self.names = tuple(d.name for d in mission.destinations)
         self.node = VERTIPORT
         self.visited: list[str] = []
         self.time_s = 0.0
-        self.segment = _Segment()
-        self.past: list[HealthEstimate] = []
-        self.estimate: HealthEstimate | None = None
         self.decisions: list[Decision] = []
         self.sorties = 0
         self._last_route: tuple[str, ...] | None = None
@@ -237,8 +116,7 @@ class Operator:
     def observe(self, time_s: np.ndarray, current_a: np.ndarray, voltage_v: np.ndarray) -> None:
         """Take readings (s, A, V) at 1 Hz."""
         if len(time_s):
-            self.segment.current.append(np.asarray(current_a, dtype=float))
-            self.segment.voltage.append(np.asarray(voltage_v, dtype=float))
+            self.health_belief.observe(current_a, voltage_v)
             self.time_s = float(time_s[-1])
 
     def arrived(self, to: str) -> str:
@@ -255,10 +133,7 @@ class Operator:
         self._leg = None
         if to == VERTIPORT:
             self.sorties += 1
-            est = self._fit()
-            if est is not None:
-                self.past.append(est)
-            self.segment = _Segment()
+            self.health_belief.recharged()
         else:
             self.visited.append(to)
         note = f"wind to {to} {wind:+.0f} kt ({resid:+.0f} kt against the forecast)"
@@ -267,21 +142,10 @@ class Operator:
         self.last_observation = note
         return note
 
-    def _fit(self) -> HealthEstimate | None:
-        cur, volt = self.segment.arrays()
-        if cur.size < MIN_FIT_SAMPLES:
-            return None
-        return fit_health(cur, volt, DT_S, noise_v=self.noise_v, eod_v=self.eod_v, prior=False)  # prior: once, in health()
-
     def health(self) -> tuple[float, float, float, float]:
-        """(w, its std, r0 ohm, its std) from all readings so far and the fleet prior; w = 6500 C / q_max."""
-        est = self._fit()
-        self.estimate = est if est is not None else self.estimate
-        fits = self.past + ([est] if est is not None else [])
-        if not fits:
-            raise InputError("readings", f"at least {MIN_FIT_SAMPLES} s of readings are needed before planning")
-        mean, cov = combine([self.prior] + [(np.array([e.w, e.r0]), np.asarray(e.cov_w)) for e in fits])
-        return float(mean[0]), float(math.sqrt(cov[0, 0])), float(mean[1]), float(math.sqrt(cov[1, 1]))
+        """(w, its std, r0 ohm, its std) from all readings so far and the fleet prior; w = 6500 C / q_max
+        (:meth:`HealthBelief.health`)."""
+        return self.health_belief.health()
 
     # ------------------------------------------------------------------ planning
     def _belief(self, health: tuple[float, float, float, float], health_z: float, wind_z: float
@@ -305,7 +169,7 @@ class Operator:
 
     def _state(self, q_plan: float, r_plan: float) -> BatteryState:
         """Battery state of a believed cell after the readings since the last full charge."""
-        cur, _ = self.segment.arrays()
+        cur, _ = self.health_belief.segment.arrays()
         if cur.size == 0:
             return full_charge(q_plan)
         res = simulate(np.clip(cur, -50, 50), DT_S, q_plan, r_plan, 2.5)
@@ -373,8 +237,7 @@ class Operator:
         try:
             w, w_sd, r, r_sd = self.health()
         except InputError:
-            mean, cov = self.prior
-            w, w_sd, r, r_sd = float(mean[0]), math.sqrt(cov[0, 0]), float(mean[1]), math.sqrt(cov[1, 1])
+            w, w_sd, r, r_sd = self.health_belief.prior_health()
         q, q_sd = Q_REF_C / w, Q_REF_C * w_sd / w ** 2
         shift, shift_sd = self.winds.shift()
         d = Decision(self.time_s, self.node, "abort", reason, q, q_sd, r, r_sd, q, r, shift, shift_sd, (), (),
@@ -549,5 +412,4 @@ class Operator:
             f"({ALTITUDES_M[best]:g} m)")
 
 
-__all__ = ["HEALTH_Z", "IN_FLIGHT_PLANNERS", "WIND_Z", "Decision", "Operator", "WindBelief",
-           "wind_from_duration"]
+__all__ = ["HEALTH_Z", "IN_FLIGHT_PLANNERS", "PLAN_WIND_Z", "WIND_Z", "Operator"]

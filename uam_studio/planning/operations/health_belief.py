@@ -1,0 +1,93 @@
+"""What the operator believes about its cell's health: the fleet prior, times the health fit of every
+charge flown so far (:func:`uam_studio.battery.fit.fit_health` of all readings since each full
+charge, fitted without the prior and multiplied by it once).
+
+Public API: :class:`HealthBelief` (``observe`` readings, ``recharged`` at the vertiport, ``health``:
+(w, its std, R0 ohm, its std), w = 6500 C / q_max).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from uam_studio.battery.fit import HealthEstimate, fit_health
+from uam_studio.battery.health_prior import HealthPrior, combine, fleet_prior
+from uam_studio.errors import InputError
+from uam_studio.planning.legs import DT_S
+
+__all__ = ["MIN_FIT_SAMPLES", "ChargeReadings", "HealthBelief"]
+
+MIN_FIT_SAMPLES = 20  # s of readings (at 1 Hz) before a fit
+
+
+@dataclass
+class ChargeReadings:
+    """Readings (A, V at 1 Hz) since the last full charge."""
+
+    current: list[np.ndarray] = field(default_factory=list)
+    voltage: list[np.ndarray] = field(default_factory=list)
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """(current A, voltage V), one array each; empty before any reading."""
+        if not self.current:
+            return np.zeros(0), np.zeros(0)
+        return np.concatenate(self.current), np.concatenate(self.voltage)
+
+
+class HealthBelief:
+    """The health belief of one cell over its charges.
+
+    :param noise_v: the voltage sensor's stated noise std (V), or None to estimate it from the residuals.
+    :param eod_v: the cut-off (V).
+    :param prior: what is known before any reading; default: the paper's health box (the fleet of the
+        default cell, :func:`~uam_studio.battery.health_prior.fleet_prior`).
+    """
+
+    def __init__(self, noise_v: float | None, eod_v: float, prior: HealthPrior | None = None) -> None:
+        self.noise_v = noise_v
+        self.eod_v = eod_v
+        self.prior = prior if prior is not None else fleet_prior()
+        self.segment = ChargeReadings()
+        self.past: list[HealthEstimate] = []  # the fits of earlier charges
+        self.estimate: HealthEstimate | None = None  # the latest fit of this charge
+
+    def observe(self, current_a: np.ndarray, voltage_v: np.ndarray) -> None:
+        """ChargeReadings (A, V) at 1 Hz."""
+        self.segment.current.append(np.asarray(current_a, dtype=float))
+        self.segment.voltage.append(np.asarray(voltage_v, dtype=float))
+
+    def recharged(self) -> None:
+        """Landed at the vertiport and recharged: this charge's fit joins the earlier ones."""
+        est = self.fit()
+        if est is not None:
+            self.past.append(est)
+        self.segment = ChargeReadings()
+
+    def fit(self) -> HealthEstimate | None:
+        """The likelihood of this charge's readings (no prior: it is multiplied in once, by
+        :meth:`health`); None below :data:`MIN_FIT_SAMPLES` readings."""
+        cur, volt = self.segment.arrays()
+        if cur.size < MIN_FIT_SAMPLES:
+            return None
+        return fit_health(cur, volt, DT_S, noise_v=self.noise_v, eod_v=self.eod_v, prior=False)
+
+    def health(self) -> tuple[float, float, float, float]:
+        """(w, its std, r0 ohm, its std) from all readings so far and the prior; w = 6500 C / q_max.
+
+        :raises InputError: fewer than :data:`MIN_FIT_SAMPLES` readings in all.
+        """
+        est = self.fit()
+        self.estimate = est if est is not None else self.estimate
+        fits = self.past + ([est] if est is not None else [])
+        if not fits:
+            raise InputError("readings", f"at least {MIN_FIT_SAMPLES} s of readings are needed before planning")
+        mean, cov = combine([(self.prior.mean, self.prior.cov)] + [(np.array([e.w, e.r0]), e.cov_w) for e in fits])
+        return float(mean[0]), float(math.sqrt(cov[0, 0])), float(mean[1]), float(math.sqrt(cov[1, 1]))
+
+    def prior_health(self) -> tuple[float, float, float, float]:
+        """(w, its std, r0 ohm, its std) of the prior alone."""
+        mean, cov = self.prior.mean, self.prior.cov
+        return float(mean[0]), math.sqrt(cov[0, 0]), float(mean[1]), math.sqrt(cov[1, 1])
