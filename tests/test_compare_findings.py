@@ -182,7 +182,7 @@ def test_env_clone_is_independent():
 def test_ranked_actions_are_valid_and_sorted(tiny_agent):
     import torch as th
 
-    from uam_studio.planning.agents.training import ranked_actions
+    from uam_studio.planning.agents.dqn import ranked_actions
     from uam_studio.planning.env import UAMPlanningEnv
 
     env = UAMPlanningEnv(mission=held_out_missions(1, 12)[0])

@@ -173,7 +173,8 @@ elif kind == "dynaformer":
     save(0, run=folder.parent / "warm-up")  # first-call costs are paid here, not in each victim
 elif kind == "dqn":
     from uam_studio.planning.agents.retrain import training_setup
-    from uam_studio.planning.agents.training import save_agent, train_dqn
+    from uam_studio.planning.agents.agent_file import save_agent
+    from uam_studio.planning.agents.training import train_dqn
 
     cfg, env_fn = training_setup("single_charge", steps=DQN_STEPS, seed=0)
     model = train_dqn(cfg, env_fn)  # the default (256, 256) network: a 0.9 MB agent
@@ -245,7 +246,7 @@ def _check_dynaformer(folder: Path) -> None:
 
 
 def _check_dqn(folder: Path) -> None:
-    from uam_studio.planning.agents.training import load_agent, load_card
+    from uam_studio.planning.agents.agent_file import load_agent, load_card
 
     agent, card = folder / "agent.zip", folder / "card.json"
     if agent.exists():

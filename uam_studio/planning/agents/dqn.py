@@ -40,6 +40,8 @@ from torch.nn import functional as F
 
 __all__ = [
     "MaskedDQN",
+    "greedy_action",
+    "ranked_actions",
     "MaskedDQNPolicy",
     "MaskedQNetwork",
     "action_mask",
@@ -258,3 +260,26 @@ class MaskedDQN(DQN):
         self._n_updates += gradient_steps
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("train/loss", np.mean(losses))
+
+
+def greedy_action(model: MaskedDQN, obs: np.ndarray) -> int:
+    """The deterministic masked action for one observation ``(obs_dim,)``.
+
+    :raises ValueError: if the observation's mask has no valid action
+    """
+    obs = np.asarray(obs, dtype=np.float32)
+    n = int(model.action_space.n)  # type: ignore[attr-defined]
+    if not (obs.reshape(-1)[-n:] > 0.5).any():
+        raise ValueError("no valid action in this observation's mask")
+    action, _ = model.predict(obs, deterministic=True)
+    return int(np.asarray(action).reshape(-1)[0])
+
+
+def ranked_actions(model: MaskedDQN, obs: np.ndarray) -> np.ndarray:
+    """The valid actions of one observation ``(obs_dim,)``, best Q-value first (empty if none is valid)."""
+    obs = np.asarray(obs, dtype=np.float32).reshape(1, -1)
+    n = int(model.action_space.n)  # type: ignore[attr-defined]
+    valid = np.flatnonzero(obs[0, -n:] > 0.5)
+    with th.no_grad():
+        q = model.policy.q_net(th.as_tensor(obs, device=model.device)).cpu().numpy()[0]
+    return valid[np.argsort(-q[valid], kind="stable")]

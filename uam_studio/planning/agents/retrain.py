@@ -99,8 +99,8 @@ def list_agents(folder: str | os.PathLike[str] | None = None) -> list[AgentInfo]
     readable model card) and attention planners (``*/attention_planner.pt`` with a ``card.json`` of
     model ``attention`` beside it). Unreadable files are skipped (they are not agents); a missing
     folder gives ``[]``."""
+    from uam_studio.planning.agents.agent_file import load_card
     from uam_studio.planning.agents.attention import WEIGHTS_NAME
-    from uam_studio.planning.agents.training import load_card
 
     d = Path(folder) if folder is not None else agents_dir()
     if not d.is_dir():
@@ -247,13 +247,14 @@ def retrain_dqn(
         ``"stopped_early": true`` in its card.
     :param source: a short note on where the run came from (``"cli"``, ``"app"``), kept in the card.
     :param card_path: also write the card as this JSON file, consistent with the agent (see
-        :func:`~uam_studio.planning.agents.training.save_agent`).
+        :func:`~uam_studio.planning.agents.agent_file.save_agent`).
     :raises InputError: ``agent_path`` inside ``pretrained/``.
 
     Stale temp files left in the agent's folder by killed saves are deleted before training.
     """
     from uam_studio import __version__ as version
-    from uam_studio.planning.agents.training import save_agent, train_dqn
+    from uam_studio.planning.agents.agent_file import save_agent
+    from uam_studio.planning.agents.training import train_dqn
     from uam_studio.planning.env import OBS_DIM
 
     agent = Path(agent_path)
