@@ -98,6 +98,16 @@ def test_at_most_twenty_destinations_in_a_file(tmp_path):
     assert len(mission_from_dict(d).destinations) == 20
 
 
+@pytest.mark.parametrize("n", [21, 25, 60])
+def test_a_mission_itself_holds_at_most_twenty_destinations(n):
+    """The limit lives in Mission: built directly (not from a file), 21 or more are refused the same way."""
+    dests = tuple(Destination(f"P{k}", -150.0 + 5 * k, 10.0, 1, 0.0) for k in range(n))
+    with pytest.raises(InputError) as err:
+        Mission("many", Vertiport(0.0, 0.0), dests)
+    assert str(err.value) == f"destinations: {n} destinations; allowed 1 to 20"
+    assert len(Mission("twenty", Vertiport(0.0, 0.0), dests[:20]).destinations) == 20
+
+
 def test_generator_draws_up_to_twenty_destinations_and_keeps_small_draws():
     from uam_studio.planning import held_out_missions, random_mission
     from uam_studio.planning.missions.generate import MIN_SEPARATION_KM

@@ -150,12 +150,9 @@ _PLAN_FLAGS = {"agent_path": "--agent", "lookahead": "--lookahead", "policy": "-
 
 def _run_plan(args: argparse.Namespace) -> int:
     from uam_studio.planning import load_mission
-    from uam_studio.planning.missions.mission import MAX_DESTINATIONS, check_destination_count
     from uam_studio.planning.planner import plan_mission
 
-    mission = load_mission(args.mission)
-    if len(mission.destinations) > MAX_DESTINATIONS:  # load_mission refuses them first; the limit, explicit
-        check_destination_count(len(mission.destinations))
+    mission = load_mission(args.mission)  # a Mission holds 1-20 destinations: checked in the mission
     try:
         res = plan_mission(mission, args.policy, q_max=args.q_max, r0=args.r0, agent_path=args.agent,
                            lookahead=args.lookahead)

@@ -67,7 +67,6 @@ from uam_studio.planning.missions.mission import (
     Destination,
     Mission,
     Vertiport,
-    check_destination_count,
     mission_from_dict,
     mission_from_json,
     mission_to_dict,
@@ -251,9 +250,7 @@ class PlannerState(param.Parameterized):
             if n == 0:
                 raise InputError("destinations", "a mission needs at least 1 destination (allowed 1 to "
                                                  f"{MAX_DESTINATIONS}); add another before removing the last one")
-            if n > MAX_DESTINATIONS:
-                check_destination_count(n)
-        self._build(**out)  # the library validates the rest (names, priorities, coordinates...)
+        self._build(**out)  # the library validates the rest (Mission: 1-20 destinations, names, priorities...)
         return out
 
     def apply(self, **changes: Any) -> bool:

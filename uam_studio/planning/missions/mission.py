@@ -215,6 +215,8 @@ class Mission:
         if not isinstance(self.vertiport, Vertiport):
             raise InputError("vertiport", f"expected a Vertiport, got {type(self.vertiport).__name__}")
         dests = tuple(self.destinations)
+        if len(dests) > MAX_DESTINATIONS:  # the one check of the mission's size; planners check their own caps
+            check_destination_count(len(dests))
         seen: dict[str, int] = {}
         for i, d in enumerate(dests):
             if not isinstance(d, Destination):
@@ -295,8 +297,8 @@ def mission_from_dict(d: Any) -> Mission:
     raw = d["destinations"]
     if not isinstance(raw, list):
         raise InputError("destinations", f"expected a list, got {type(raw).__name__}")
-    if len(raw) > MAX_DESTINATIONS:
-        check_destination_count(len(raw))  # destinations: 21 destinations; allowed 1 to 20
+    if len(raw) > MAX_DESTINATIONS:  # before reading them: the same check as Mission's
+        check_destination_count(len(raw))
     destinations = tuple(_destination_from_dict(i, x) for i, x in enumerate(raw))
     scenario = d["scenario"]
     if not isinstance(scenario, str) or scenario not in SCENARIOS:
