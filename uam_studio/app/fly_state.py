@@ -22,7 +22,12 @@ from uam_studio.app.services import FLIGHT_POOL, LatestWorker, one_line
 from uam_studio.errors import InputError
 from uam_studio.planning import VERTIPORT, Mission
 from uam_studio.planning.operations import FlightRecord, WindEvent, fly_mission, parse_event, position_at
-from uam_studio.planning.operations.world import MAX_NOISE_MV, MAX_SIGMA_KT
+from uam_studio.planning.operations.world import (
+    DEFAULT_FORECAST_SIGMA_KT,
+    DEFAULT_SENSOR_NOISE_MV,
+    MAX_NOISE_MV,
+    MAX_SIGMA_KT,
+)
 
 SPEEDS = (10, 30, 100, 300, 1000)  # playback speed-ups (simulated s per wall s)
 ERROR_CHARS = 300  # an error line is cut here
@@ -61,8 +66,8 @@ class FlyState(param.Parameterized):
     """
 
     seed = param.Integer(default=0, bounds=(0, 10**9))
-    forecast_sigma_kt = param.Number(default=13.0, bounds=(0.0, MAX_SIGMA_KT))
-    sensor_noise_mv = param.Number(default=5.0, bounds=(0.0, MAX_NOISE_MV))
+    forecast_sigma_kt = param.Number(default=DEFAULT_FORECAST_SIGMA_KT, bounds=(0.0, MAX_SIGMA_KT))
+    sensor_noise_mv = param.Number(default=DEFAULT_SENSOR_NOISE_MV, bounds=(0.0, MAX_NOISE_MV))
     speed = param.Selector(default=100, objects=list(SPEEDS))
     inject_kts = param.Number(default=25.0, bounds=(-60.0, 60.0))
     events = param.List(default=[], item_type=WindEvent)

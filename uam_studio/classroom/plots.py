@@ -20,6 +20,7 @@ import holoviews as hv
 import holoviews.plotting.bokeh  # noqa: F401  (registers the bokeh backend, so .opts() works before hv.extension)
 import numpy as np
 
+from uam_studio.battery import DEFAULT_EOD_V
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
 from uam_studio.planning.operations import FlightRecord
 
@@ -86,7 +87,7 @@ def curves(series: Mapping[str, tuple[Sequence[float], Sequence[float]]], xlabel
     return hv.Overlay(items).opts(title=title, width=width, height=height, legend_position="right", **opts)
 
 
-def flight_voltage(rec: FlightRecord, eod_v: float = 3.0, title: str | None = None, width: int = 760,
+def flight_voltage(rec: FlightRecord, eod_v: float = DEFAULT_EOD_V, title: str | None = None, width: int = 760,
                    height: int = 320) -> hv.Overlay:
     """A flight's voltage (V) over time (s): the sensor's readings, the operator's prediction for each leg
     (made when it chose the leg), the world's noise-free truth, the cut-off, and a dotted line at each

@@ -25,7 +25,7 @@ import numpy as np
 import torch
 from scipy.ndimage import median_filter
 
-from ..battery import rest_voltage, simulate
+from ..battery import DEFAULT_EOD_V, rest_voltage, simulate
 from ..battery.eod import first_below
 from ..battery.fit import (
     MIN_CONTEXT_S,
@@ -369,7 +369,7 @@ class DynaformerPredictor:
         return v[0] if (single and single_ctx) else v
 
     def predict_eod_s(self, context_current_a, context_voltage_v, current_a, dt_s: float = 1.0,
-                      eod_v: float = 3.0, health_source: str | None = None, noise_v: float | None = None,
+                      eod_v: float = DEFAULT_EOD_V, health_source: str | None = None, noise_v: float | None = None,
                       estimate=None):
         """Predicted EOD time (s): first sample below ``eod_v``; NaN if the profile ends first."""
         v = np.atleast_2d(self.predict(context_current_a, context_voltage_v, current_a, dt_s,
@@ -412,7 +412,7 @@ class DynaformerPredictor:
 
     @torch.no_grad()
     def eod_interval_s(self, context_current_a, context_voltage_v, current_a, dt_s: float = 1.0,
-                       level: float = 0.9, eod_v: float = 3.0, noise_v: float | None = None, estimate=None,
+                       level: float = 0.9, eod_v: float = DEFAULT_EOD_V, noise_v: float | None = None, estimate=None,
                        health_source: str | None = None):
         """``level`` interval (low, median, high) of the time (s) from the log's first sample to the
         first sample below ``eod_v`` along ``current_a`` (the same time as :meth:`predict_eod_s`),
@@ -506,7 +506,7 @@ def _sha256(path) -> str:
 
 @torch.no_grad()
 def decoder_error_scores(pred: DynaformerPredictor, n: int = DECODER_CAL_N, seed: int = DECODER_CAL_SEED,
-                         eod_v: float = 3.0) -> np.ndarray:
+                         eod_v: float = DEFAULT_EOD_V) -> np.ndarray:
     """The decoder's own EOD error on ``n`` synthetic flights (training ranges, ``seed``), given the
     exact health (read as in :meth:`DynaformerPredictor._reobserved_latent`) and a 20 s observed
     context: per flight whose true EOD falls after the context, the smallest lam >= 0 such that

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from uam_studio.battery import simulate
+from uam_studio.battery import DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0, simulate
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_feasible, leg_profile
 from uam_studio.planning.env.environment import REWARD_DEFAULTS
@@ -41,9 +41,9 @@ def altitude_by_distance(
     distances_km: Iterable[float],
     wind_kts: float = 0.0,
     altitudes_m: Sequence[float] = ALTITUDES_M,
-    q_max: float = 7600.0,
-    r0: float = 0.117215,
-    eod_v: float = 3.0,
+    q_max: float = DEFAULT_Q_MAX,
+    r0: float = DEFAULT_R0,
+    eod_v: float = DEFAULT_EOD_V,
 ) -> list[dict[str, Any]]:
     """One leg from a full cell, at every altitude, for every distance.
 

@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
+from uam_studio.battery.parameters import DEFAULT_EOD_V, PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.errors import InputError
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.missions.mission import (
@@ -68,7 +68,7 @@ def random_mission(
     r0_range=DEFAULT_R0_RANGE,
     q_range=DEFAULT_Q_RANGE,
     radius_km=DEFAULT_RADIUS_KM,
-    eod_v: float = 3.0,
+    eod_v: float = DEFAULT_EOD_V,
     name: str = "random mission",
 ) -> Mission:
     """A random mission (see the module docstring).

@@ -47,7 +47,7 @@ from pathlib import Path
 from typing import Any
 
 from uam_studio.atomic_io import atomic_write_text, remove_stale_temps
-from uam_studio.battery import EOD_RANGE, Q_MAX_RANGE, R0_RANGE
+from uam_studio.battery import DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0, EOD_RANGE, Q_MAX_RANGE, R0_RANGE
 from uam_studio.errors import InputError, check_range, short_repr
 from uam_studio.flight.profile import MAX_DWELL_S
 from uam_studio.flight.tables import WIND_RANGE_KTS
@@ -191,8 +191,8 @@ class Destination:
 class Battery:
     """Health parameters of the cell: ``q_max`` (C) and ``r0`` (ohm)."""
 
-    q_max: float = 7600.0
-    r0: float = 0.117215
+    q_max: float = DEFAULT_Q_MAX
+    r0: float = DEFAULT_R0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "q_max", _number("q_max", self.q_max, *Q_MAX_RANGE, " C"))
@@ -208,7 +208,7 @@ class Mission:
     destinations: tuple[Destination, ...] = field(default_factory=tuple)
     scenario: str = "single_charge"
     battery: Battery = field(default_factory=Battery)
-    eod_v: float = 3.0
+    eod_v: float = DEFAULT_EOD_V
 
     def __post_init__(self) -> None:
         _name("name", self.name)

@@ -48,6 +48,7 @@ from uam_studio.planning.missions.mission import (
 from uam_studio.planning.operations.decision import Decision
 from uam_studio.planning.operations.health_belief import HealthBelief
 from uam_studio.planning.operations.wind_belief import WindBelief, wind_from_duration
+from uam_studio.planning.operations.world import DEFAULT_FORECAST_SIGMA_KT
 from uam_studio.planning.solvers.oracle import (
     Sortie,
     best_single_sortie,
@@ -81,7 +82,7 @@ class Operator:
     :param planner: ``"attention"`` (the learned planner, default) or ``"oracle"`` (exact search).
     """
 
-    def __init__(self, mission: Mission, scenario: str | None = None, forecast_sigma_kt: float = 13.0,
+    def __init__(self, mission: Mission, scenario: str | None = None, forecast_sigma_kt: float = DEFAULT_FORECAST_SIGMA_KT,
                  sensor_noise_mv: float | None = None, health_z: float = HEALTH_Z, wind_z: float = WIND_Z,
                  plan_wind_z: float = PLAN_WIND_Z, planner: str = "attention") -> None:
         if planner not in IN_FLIGHT_PLANNERS:
