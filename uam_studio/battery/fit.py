@@ -43,6 +43,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import InputError, check_range
+from ..flight.context import TAKEOFF_CONTEXT_S
 from .eod import first_below
 from .health_prior import Q_REF_C, HealthPrior, combine, fleet_prior
 from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, CellParameters
@@ -55,7 +56,7 @@ __all__ = ["FIT_Q_RANGE", "FIT_R0_RANGE", "MIN_CONTEXT_S", "NOISE_FLOOR_V", "Hea
            "fit_health", "fit_health_batch", "interval_ends", "interval_points", "preroll_states", "two_sided_z",
            "voltage_band", "with_preroll"]
 
-MIN_CONTEXT_S = 20.0  # s: shortest context accepted
+MIN_CONTEXT_S = float(TAKEOFF_CONTEXT_S)  # s: shortest context accepted: the take-off context
 FIT_Q_RANGE = (2000.0, 16000.0)  # C: box of the estimate and of its draws
 FIT_R0_RANGE = (0.0, 1.0)  # ohm
 NOISE_FLOOR_V = 0.5e-3  # V: the noise std used is never below this

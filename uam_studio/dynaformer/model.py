@@ -37,6 +37,7 @@ from dataclasses import asdict, dataclass
 import torch
 from torch import nn
 
+from ..flight import TAKEOFF_CONTEXT_S
 from .data import TRAIN_R_RANGE
 
 V_CENTER, V_SCALE = 3.6, 0.5  # V: voltage normalisation
@@ -58,7 +59,7 @@ class DynaformerConfig:
     memory_tokens: int = 4
     max_context: int = 1024  # samples; longer contexts are strided down to this
     health: str = "takeoff"  # "takeoff" (TakeoffHealth) or "transformer" (the patch encoder)
-    health_window: int = 20  # samples (s) of the take-off that TakeoffHealth reads
+    health_window: int = TAKEOFF_CONTEXT_S  # samples (s) of the take-off that TakeoffHealth reads
 
     def to_dict(self) -> dict:
         return asdict(self)

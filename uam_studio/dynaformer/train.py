@@ -35,6 +35,7 @@ from tqdm.auto import tqdm
 from uam_studio.errors import InputError
 
 from ..atomic_io import remove_stale_temps
+from ..flight import TAKEOFF_CONTEXT_S
 from ..tensor_files import TensorFileError, load_tensors
 from .artifact import atomic_torch_save, save_artifact
 from .data import TRAIN_Q_RANGE, DischargeSet, make_dataset
@@ -42,7 +43,7 @@ from .model import R0_HALF as R_HALF
 from .model import R0_MID as R_MID
 from .model import Dynaformer, DynaformerConfig, takeoff_targets
 
-DEFAULT_CONTEXT_S = 20
+DEFAULT_CONTEXT_S = TAKEOFF_CONTEXT_S  # s: the take-off context (uam_studio.flight.context)
 ENCODER_PARTS = ("enc_in", "encoder", "to_latent", "health_head")  # trained in stage 1, frozen in stage 2
 CONTEXT_SET_LEN = 600  # samples (s) of each extra short-context cell
 CONTEXT_BATCH_MAX_S = 120  # s: the extra context batch stays short (cheap); discharges carry the long ones

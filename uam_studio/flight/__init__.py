@@ -1,5 +1,6 @@
 """Flight model: a leg (distance km, altitude m, wind kt) -> pack power (kW) -> per-cell current (A)."""
 
+from uam_studio.flight.context import TAKEOFF_CONTEXT_S
 from uam_studio.flight.profile import (
     CLIMB_GROUND_SPEED_MPS,
     PHASES,
@@ -33,6 +34,7 @@ from uam_studio.flight.tables import (
 )
 
 __all__ = [
+    "TAKEOFF_CONTEXT_S",
     "ALTITUDE_RANGE_M",
     "CLIMB_GROUND_SPEED_MPS",
     "CRUISE_TABLE_DISTANCE_KM",

@@ -21,9 +21,10 @@ from uam_studio.battery.eod import first_below
 from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.battery.solver import integrate_current
 from uam_studio.errors import InputError
+from uam_studio.flight import TAKEOFF_CONTEXT_S
 from uam_studio.planning.legs import DT_S, takeoff_current
 
-CONTEXT_S = 20  # s of take-off observed to infer the health (the paper's 20 s)
+CONTEXT_S = TAKEOFF_CONTEXT_S  # s of take-off observed to infer the health (uam_studio.flight.context)
 HEALTH_CLIP = 5.0
 
 

@@ -16,12 +16,12 @@ import numpy as np
 
 from uam_studio.battery import BatteryState, full_charge, simulate
 from uam_studio.errors import InputError, check_range
-from uam_studio.flight import leg_profile
+from uam_studio.flight import TAKEOFF_CONTEXT_S, leg_profile
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.legs import DT_S
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
 
-TAKEOFF_CHECK_S = 20  # s of take-off the operator reads before its first plan
+TAKEOFF_CHECK_S = TAKEOFF_CONTEXT_S  # s of take-off the operator reads before its first plan
 DEFAULT_FORECAST_SIGMA_KT = 13.0  # kt, std of the forecast error of each destination's wind
 DEFAULT_SENSOR_NOISE_MV = 5.0  # mV, std of the voltage sensor's Gaussian noise
 DEFAULT_SENSOR_NOISE_MA = 20.0  # mA, std of the current sensor's Gaussian noise
