@@ -20,7 +20,7 @@ from uam_studio.planning.planner import MAX_POINTS, plan_mission
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "assets" / "example_mission.json"
 KEYS = {"policy", "route", "altitudes_m", "charging_cycles", "reached", "reached_priority", "predicted",
-        "physics", "safe", "min_voltage_v", "exact", "messages"}
+        "physics", "safe", "min_voltage_v", "exact", "messages", "band"}
 
 
 def _example() -> dict:
@@ -73,6 +73,11 @@ def _check_result(res: dict, mission: dict) -> None:
         assert set(res["predicted"]) == {"time_s", "voltage_v"}
         assert res["predicted"]["time_s"] == phys["time_s"]
         assert len(res["predicted"]["voltage_v"]) == len(phys["time_s"])
+    if res["band"] is not None:  # computed in the pass that predicts: on the same samples, around it
+        band = res["band"]
+        assert res["predicted"] is not None and band["time_s"] == phys["time_s"] and band["level"] == 0.9
+        assert all(lo <= hi for lo, hi in zip(band["low_v"], band["high_v"]))
+        assert band["min_low_v"] <= min(band["low_v"]) + 1e-4
     json.dumps(dict(res), allow_nan=False)
 
 

@@ -105,7 +105,8 @@ def compare_row(mission: Mission, policy: str) -> dict[str, Any]:
         pred: Any = False
         if name == "dqn" and _agent_reads_dynaformer(agent_path, mission.scenario):
             pred = predictor() or False
-        row = _row_from_plan(plan_mission(mission, name, agent_path=agent_path, predictor=pred), mission)
+        row = _row_from_plan(plan_mission(mission, name, agent_path=agent_path, predictor=pred,
+                                            band_level=None), mission)  # rows read no band
     except InputError as err:
         row = {"status": "error", "error": one_line(err)}
     except Exception as err:  # never a traceback in the app; the server log keeps it

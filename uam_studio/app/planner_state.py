@@ -145,7 +145,7 @@ class PlannerState(param.Parameterized):
     plan_request = param.ClassSelector(class_=PlanRequest, default=None, allow_None=True)
     plan_error = param.String(default="")
     band = param.Dict(default=None, allow_None=True, doc="the Dynaformer's voltage band of the plan "
-                                                          "(prediction_band), None without one")
+                                                          "(the plan's band), None without one")
     takeoff = param.Dict(default=None, allow_None=True, doc="the failed take-off on the physics model "
                                                              "(takeoff_attempt), None if the cell takes off")
     comparison = param.Dict(default=None, allow_None=True,

@@ -17,7 +17,7 @@ from uam_studio.app.services import agent_policy, health_estimate, one_line, pre
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.attention import WEIGHTS_NAME
 from uam_studio.planning.missions.mission import Mission
-from uam_studio.planning.safety import prediction_band, takeoff_attempt
+from uam_studio.planning.safety import takeoff_attempt
 
 __all__ = ["PLAN_CACHE_SIZE", "PlanRequest", "cached_plan", "compute_plan", "request_key"]
 
@@ -128,7 +128,7 @@ def _compute_plan(req: PlanRequest) -> dict[str, Any]:
     pred = predictor()
     policy, agent_path = agent_policy(req.policy)
     try:
-        out["plan"] = plan_mission(req.mission, policy, agent_path=agent_path,
+        out["plan"] = plan_mission(req.mission, policy, agent_path=agent_path,  # with the band, one pass
                                    predictor=pred if pred is not None else False).to_dict()  # JSON state
         if pred is None:
             out["plan"]["messages"].append(predictor_or_error()[1] or "no Dynaformer")
@@ -137,17 +137,12 @@ def _compute_plan(req: PlanRequest) -> dict[str, Any]:
     except Exception as err:  # never a traceback in the app; the server log keeps it
         traceback.print_exc()
         out["error"] = f"planning failed: {type(err).__name__}: {one_line(err)}"
-    out["band"], out["takeoff"] = None, None
     plan = out["plan"]
-    if plan is not None:
+    out["band"], out["takeoff"] = (plan or {}).get("band"), None
+    if plan is not None and not plan["route"]:
         try:
-            if plan["route"] and pred is not None:
-                out["band"] = prediction_band(req.mission, plan, pred)
-            elif not plan["route"]:
-                out["takeoff"] = takeoff_attempt(req.mission)
-        except (InputError, ValueError, RuntimeError) as err:
-            plan["messages"].append(f"Dynaformer band unavailable ({one_line(err)})")
-        except Exception:  # the band and the take-off trace are extras: the plan stands without them
+            out["takeoff"] = takeoff_attempt(req.mission)
+        except Exception:  # the take-off trace is an extra: the plan stands without it
             traceback.print_exc()
     try:
         b = req.mission.battery

@@ -3,7 +3,7 @@
 Rooms (each imports only the ones below it; import-linter contract in pyproject.toml)::
 
     planner.py     plan_mission: the one entry point of the CLI and the app
-    safety.py      a plan's safety verdict by source, the Dynaformer's voltage band, a failed take-off
+    safety.py      a plan's safety verdict by source, a failed take-off
     operations/    flying a mission in real time (world, operator, flight loop)
     agents/        the attention planner, DQN networks, training, agent files, retraining, rollout
                    (the only torch users)
@@ -24,8 +24,8 @@ Planning: the action space (:mod:`~uam_studio.planning.legs`: ``N_MAX``, ``ALTIT
 (:func:`attention_plan`, the learned default, 1-20 destinations; :func:`oracle_plan`, exact up to 8,
 :func:`reference_plan` beyond; :func:`greedy_plan`, baseline), the physics check
 :func:`check_plan` (-> :class:`PlanCheck`) and the one entry point of the CLI and the app,
-:func:`plan_mission` (any of :data:`POLICIES`, checked on physics, with the Dynaformer's prediction;
--> :class:`PlanResult`), its :func:`safety_verdict` by source and the Dynaformer's :func:`prediction_band`,
+:func:`plan_mission` (any of :data:`POLICIES`, checked on physics, with the Dynaformer's prediction and
+its voltage band; -> :class:`PlanResult`), its :func:`safety_verdict` by source,
 and flying a mission with surprises, :func:`fly_mission`.
 
 ``env``, ``solvers``, ``agents``, ``planner``, ``safety`` and ``operations`` are imported lazily (attribute access), so
@@ -67,7 +67,6 @@ _LAZY = {
     "POLICIES": "planner",
     "attention_plan": "agents.attention.decode",
     "safety_verdict": "safety",
-    "prediction_band": "safety",
     "fly_mission": "operations",
 }
 

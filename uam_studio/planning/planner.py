@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from uam_studio.bundled import require_bundled
-from uam_studio.errors import InputError
+from uam_studio.errors import InputError, check_range
 from uam_studio.planning.agents.attention import WEIGHTS_NAME
 from uam_studio.planning.agents.rollout import dqn_route
 from uam_studio.planning.env import observe_takeoff
@@ -98,13 +98,18 @@ def _load_predictor(predictor: Any, messages: list[str]) -> Any:
         return None
 
 
-def _predict(check: PlanCheck, predictor: Any, messages: list[str]) -> np.ndarray | None:
-    """Dynaformer voltage on the physics route's time grid, sortie by sortie, or None."""
+def _predict(check: PlanCheck, predictor: Any, messages: list[str], band_level: float | None
+             ) -> tuple[np.ndarray | None, tuple[np.ndarray, np.ndarray] | None]:
+    """Dynaformer voltage (V) on the physics route's time grid, sortie by sortie (each from a full
+    charge, read from the take-off's first 20 s on the physics model), or None; with ``band_level``,
+    also its pointwise band (low, high V) at that coverage from the predictor's ``voltage_band``
+    (None where it has none or fails: a message)."""
     sim = check.sim
     assert sim is not None
-    ci, cv = observe_takeoff(sim.q_max, sim.r0)  # the 20 s context
+    ci, cv = observe_takeoff(sim.q_max, sim.r0)  # the take-off context
     cuts = sim.sortie_cuts()
-    parts = []
+    parts, lows, highs = [], [], []
+    band_fn = getattr(predictor, "voltage_band", None) if band_level is not None else None
     try:
         for a, b in zip(cuts[:-1], cuts[1:]):
             v = np.asarray(predictor.predict(ci, cv, sim.current_a[a:b], dt_s=sim.dt_s), dtype=float)
@@ -112,8 +117,18 @@ def _predict(check: PlanCheck, predictor: Any, messages: list[str]) -> np.ndarra
     except (InputError, ValueError, RuntimeError) as err:
         messages.append(f"Dynaformer prediction failed ({' '.join(str(err).split())}); "
                         "showing the physics model only")
-        return None
-    return np.concatenate(parts) if parts else np.zeros(0)
+        return None, None
+    band = None
+    if band_fn is not None:
+        try:
+            for a, b in zip(cuts[:-1], cuts[1:]):
+                lo, _, hi = band_fn(ci, cv, sim.current_a[a:b], dt_s=sim.dt_s, level=band_level)
+                lows.append(np.asarray(lo, dtype=float).reshape(-1)[: b - a])
+                highs.append(np.asarray(hi, dtype=float).reshape(-1)[: b - a])
+            band = (np.concatenate(lows), np.concatenate(highs)) if lows else None
+        except (InputError, ValueError, RuntimeError) as err:
+            messages.append(f"Dynaformer band unavailable ({' '.join(str(err).split())})")
+    return (np.concatenate(parts) if parts else np.zeros(0)), band
 
 
 # ----------------------------------------------------------------------------- result
@@ -132,6 +147,8 @@ class PlanResult(Mapping[str, Any]):
     :param reached: destinations reached on the physics model, in order.
     :param reached_priority: their total priority.
     :param predicted: the Dynaformer's voltage, ``{"time_s", "voltage_v"}`` (s, V), or None.
+    :param band: the Dynaformer's pointwise voltage band, ``{"time_s", "low_v", "high_v", "level",
+        "min_low_v", "min_high_v"}`` (s, V, coverage 0-1, V over every sample), or None.
     :param physics: the physics model's voltage, ``{"time_s", "voltage_v", "eod_s", "leg_start_s"}``
         (s, V, s or None, and the take-off time (s) of each leg that took off, in flying order).
     :param safe: the route stays at or above the cut-off.
@@ -153,6 +170,7 @@ class PlanResult(Mapping[str, Any]):
     min_voltage_v: float | None
     exact: bool | None
     messages: list[str]
+    band: dict[str, Any] | None = None
 
     def __getitem__(self, key: str) -> Any:
         if key not in _RESULT_FIELDS:
@@ -171,6 +189,7 @@ class PlanResult(Mapping[str, Any]):
 
 
 _RESULT_FIELDS = tuple(f.name for f in fields(PlanResult))
+BAND_LEVEL = 0.9  # default coverage of the Dynaformer's voltage band along a plan
 
 PLAN_CSV_COLUMNS = ("time_s", "leg", "to", "altitude_m", "physics_voltage_v", "dynaformer_voltage_v")
 
@@ -203,6 +222,7 @@ def plan_mission(
     agent_path: str | os.PathLike[str] | None = None,
     predictor: Any = None,
     lookahead: int = 0,
+    band_level: float | None = BAND_LEVEL,
 ) -> PlanResult:
     """Plan ``mission`` with ``policy``, check it with the physics model, predict it with the Dynaformer.
 
@@ -218,6 +238,8 @@ def plan_mission(
     :param lookahead: dqn only: policy rollout over the agent's K best safe actions (and the greedy
         rule's action) per step, continued by the filtered agent and by the greedy rule
         (:func:`~uam_studio.planning.agents.rollout.rollout_agent`); 0 (default) for the filtered agent alone; 0-8.
+    :param band_level: coverage (0.5-0.99) of the Dynaformer's voltage band along the route, computed
+        in the same pass as the prediction (the predictor's ``voltage_band``); None for no band.
     :return: a :class:`PlanResult` (``to_dict()``: the plain-JSON form). Series are rounded to 4
         decimals and thinned to at most :data:`MAX_POINTS` samples (the lowest physics and predicted
         voltages are always kept).
@@ -240,6 +262,8 @@ def plan_mission(
         raise InputError("agent_path", f"only used with the attention and dqn policies (not {policy})")
     if lookahead and policy != "dqn":
         raise InputError("lookahead", f"only used with the dqn policy (not {policy})")
+    if band_level is not None:
+        check_range("band_level", band_level, 0.5, 0.99)
     messages: list[str] = []
 
     pred_model = _load_predictor(predictor, messages)
@@ -272,13 +296,14 @@ def plan_mission(
 
     physics: dict[str, Any] = {"time_s": [], "voltage_v": [], "eod_s": None, "leg_start_s": []}
     predicted: dict[str, Any] | None = None
+    band: dict[str, Any] | None = None
     if check.sim is not None:
         sim = check.sim
-        v_pred = _predict(check, pred_model, messages) if pred_model is not None else None
+        v_pred, v_band = _predict(check, pred_model, messages, band_level) if pred_model is not None else (None, None)
         if v_pred is not None and v_pred.size != sim.voltage_v.size:
             messages.append(f"Dynaformer returned {v_pred.size} samples for {sim.voltage_v.size}; "
                             "showing the physics model only")
-            v_pred = None
+            v_pred, v_band = None, None
         keep = [int(np.argmin(sim.voltage_v))] + ([int(np.argmin(v_pred))] if v_pred is not None else [])
         idx = _sample_index(sim.time_s.size, keep)
         t = _round_list(sim.time_s[idx])
@@ -286,6 +311,10 @@ def plan_mission(
                    "leg_start_s": [round(float(leg.start_s), 1) for leg in sim.legs if leg.start_s is not None]}
         if v_pred is not None:
             predicted = {"time_s": list(t), "voltage_v": _round_list(v_pred[idx])}
+        if v_band is not None and v_band[0].size == sim.voltage_v.size:
+            low, high = v_band
+            band = {"time_s": list(t), "low_v": _round_list(low[idx]), "high_v": _round_list(high[idx]),
+                    "level": float(band_level), "min_low_v": float(low.min()), "min_high_v": float(high.min())}
 
     return PlanResult(
         policy=policy,
@@ -300,4 +329,5 @@ def plan_mission(
         min_voltage_v=_round_opt(check.min_voltage_v),
         exact=exact,
         messages=_dedupe(messages),
+        band=band,
     )

@@ -1,7 +1,7 @@
-"""How safe a plan is, by source: the physics model and the Dynaformer, with the Dynaformer's band.
+"""How safe a plan is, by source: the physics model and the Dynaformer, with the Dynaformer's band
+(the plan's ``band``, computed by :func:`~uam_studio.planning.planner.plan_mission` in the pass that
+predicts it).
 
-- :func:`prediction_band`: the Dynaformer's pointwise voltage band (V) along a plan's route, sortie
-  by sortie as :func:`~uam_studio.planning.planner.plan_mission` predicts it.
 - :func:`takeoff_attempt`: the physics model's take-off and climb to 500 m of a cell that falls
   below the cut-off before the end (the voltage trace of a cell that cannot take off).
 - :func:`safety_verdict`: whether a plan stays above the cut-off on each model, as a level
@@ -18,55 +18,10 @@ from typing import Any
 
 import numpy as np
 
-from uam_studio.planning.env import observe_takeoff
-from uam_studio.planning.missions.check import check_plan
 from uam_studio.planning.missions.mission import Mission
 from uam_studio.planning.solvers.setup import fly_takeoff
 
-__all__ = ["BAND_LEVEL", "BAND_METHOD", "prediction_band", "safety_verdict", "takeoff_attempt"]
-
-BAND_LEVEL = 0.9  # default coverage of the Dynaformer's voltage band
-BAND_METHOD = "voltage_band"  # predictor method giving (low, median, high) voltages (V) on a current profile
-
-
-def prediction_band(mission: Mission, plan: Mapping[str, Any], pred: Any, level: float = BAND_LEVEL) \
-        -> dict[str, Any] | None:
-    """The Dynaformer's pointwise ``level`` voltage band along ``plan``'s route.
-
-    Each sortie is predicted as :func:`~uam_studio.planning.planner.plan_mission` predicts it (context:
-    the first 20 s of the take-off on the physics model; profile: the route's current since the last
-    recharge, :meth:`~uam_studio.planning.missions.route.RouteSimulation.sortie_cuts`), with the
-    predictor's :data:`BAND_METHOD` (``voltage_band``). The band is returned on the plan's own time
-    samples, its lowest values from every sample.
-
-    :param mission: the planned mission.
-    :param plan: the plan (``route``, ``altitudes_m`` and ``physics["time_s"]``, s).
-    :param pred: a Dynaformer predictor.
-    :param level: the band's coverage, 0-1.
-    :return: ``{"time_s", "low_v", "high_v", "level", "min_low_v", "min_high_v"}`` (s, V), or None
-        when the route is empty or the predictor has no :data:`BAND_METHOD`.
-    """
-    band_fn = getattr(pred, BAND_METHOD, None)
-    if band_fn is None or not plan.get("route"):
-        return None
-    sim = check_plan(mission, plan["route"], plan["altitudes_m"]).sim
-    if sim is None:
-        return None
-    ci, cv = observe_takeoff(sim.q_max, sim.r0)  # the 20 s context
-    cuts = sim.sortie_cuts()
-    lows, highs = [], []
-    for a, b in zip(cuts[:-1], cuts[1:]):
-        lo, _, hi = band_fn(ci, cv, sim.current_a[a:b], dt_s=sim.dt_s, level=level)
-        lows.append(np.asarray(lo, dtype=float).reshape(-1)[: b - a])
-        highs.append(np.asarray(hi, dtype=float).reshape(-1)[: b - a])
-    low, high = np.concatenate(lows), np.concatenate(highs)
-    t = np.asarray(plan["physics"]["time_s"], dtype=float)
-    full_t = np.asarray(sim.time_s, dtype=float)[: low.size]
-    return {"time_s": [float(x) for x in t],
-            "low_v": [round(float(x), 4) for x in np.interp(t, full_t, low)],
-            "high_v": [round(float(x), 4) for x in np.interp(t, full_t, high)],
-            "level": float(level), "min_low_v": float(low.min()), "min_high_v": float(high.min())}
-
+__all__ = ["safety_verdict", "takeoff_attempt"]
 
 def takeoff_attempt(mission: Mission) -> dict[str, Any] | None:
     """The physics model's take-off and climb to 500 m for the mission's cell if it falls below the
@@ -107,7 +62,7 @@ def safety_verdict(plan: Mapping[str, Any] | None, band: Mapping[str, Any] | Non
     physics model decides alone.
 
     :param plan: the plan, or None.
-    :param band: its :func:`prediction_band`, or None.
+    :param band: the plan's ``band`` (:class:`~uam_studio.planning.planner.PlanResult`), or None.
     :param takeoff: the cell's :func:`takeoff_attempt`, or None if it takes off.
     :param eod_v: the cut-off (V).
     :return: ``{"level", "headline", "text", "physics_margin_v", "predicted_margin_v",

@@ -107,8 +107,7 @@ class RouteSimulation:
 
         A sortie ends with each landing at the vertiport (a landing recharges); sortie ``k`` is
         samples ``cuts[k]:cuts[k + 1]``. The Dynaformer predicts a route sortie by sortie on these
-        cuts (:func:`~uam_studio.planning.planner.plan_mission`,
-        :func:`~uam_studio.planning.safety.prediction_band`).
+        cuts (:func:`~uam_studio.planning.planner.plan_mission`, its prediction and band).
         """
         cuts = [0]
         for leg in self.legs:
