@@ -13,14 +13,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from uam_studio.battery.fit import HealthEstimate, fit_health
+from uam_studio.battery.fit import MIN_CONTEXT_S, HealthEstimate, fit_health
 from uam_studio.battery.health_prior import HealthPrior, combine, fleet_prior
 from uam_studio.errors import InputError
 from uam_studio.planning.legs import DT_S
 
 __all__ = ["MIN_FIT_SAMPLES", "ChargeReadings", "HealthBelief"]
 
-MIN_FIT_SAMPLES = 20  # s of readings (at 1 Hz) before a fit
+MIN_FIT_SAMPLES = int(MIN_CONTEXT_S)  # readings (1 Hz) before a fit: the fit's shortest context
 
 
 @dataclass
