@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from uam_studio.battery import simulate
+from uam_studio.errors import InputError
 from uam_studio.planning.legs import N_MAX, VERTIPORT_SLOT, LegTable
 from uam_studio.planning.missions.check import check_plan
 from uam_studio.planning.missions.generate import held_out_missions, random_mission
@@ -21,7 +22,7 @@ from uam_studio.planning.missions.mission import (
 )
 from uam_studio.planning.solvers.greedy import greedy_plan
 from uam_studio.planning.solvers.oracle import feasible_sorties, min_sortie_cover, oracle_plan
-from uam_studio.planning.solvers.setup import fly_batch
+from uam_studio.planning.solvers.setup import fly_batch, prepare_mission
 
 V = VERTIPORT_SLOT
 
@@ -166,11 +167,20 @@ def test_hard_missions_give_messages_not_errors(planner):
     p = planner(_mission([ok], Battery(6000.0, 0.45)))
     assert p.route == () and "the battery cannot finish takeoff" in p.messages[0]
 
-    many = [Destination(f"P{k}", 10.0 + 8 * k, 0.0, 1) for k in range(MAX_DESTINATIONS + 2)]  # in code only
-    p = planner(_mission(many, Battery(5500.0, 0.25), "multi_charge"))
-    assert "at most 20 destinations; not planned: P20, P21" in p.messages[0] and p.stats["safe"]
-    assert set(p.reached) <= {f"P{k}" for k in range(MAX_DESTINATIONS)} and p.reached
-    assert any("P19" in m for m in p.messages[1:])  # planned (out of reach), unlike P20 and P21
+    many = [Destination(f"P{k}", 10.0 + 8 * k, 0.0, 1) for k in range(MAX_DESTINATIONS + 2)]
+    with pytest.raises(InputError, match=r"^destinations: 22 destinations; allowed 1 to 20$"):
+        _mission(many, Battery(5500.0, 0.25), "multi_charge")  # a Mission holds at most 20
+    twenty = _mission(many[:MAX_DESTINATIONS], Battery(5500.0, 0.25), "multi_charge")
+    p = planner(twenty)
+    assert p.stats["safe"] and p.reached and set(p.reached) <= {f"P{k}" for k in range(MAX_DESTINATIONS)}
+    assert any("P19" in m for m in p.messages)  # planned (out of reach)
+    d = mission_to_dict(twenty)
+    d["destinations"] += [dict(d["destinations"][0], name=f"P{k}") for k in (20, 21)]
+    p = planner(d)  # more than a mission holds, as a dict: a message naming the limit, not an error
+    assert p.route == () and p.messages[0] == "invalid mission: destinations: 22 destinations; allowed 1 to 20"
+    dqn = prepare_mission(_mission(many[:N_MAX + 2]), None, "dqn")  # a planner's own, smaller cap
+    assert "the planner handles at most 8 destinations; not planned: P8, P9" in dqn.messages[0]
+    assert len(dqn.mission.destinations) == N_MAX and len(dqn.full_mission.destinations) == N_MAX + 2
 
     bad = mission_to_dict(_mission([ok]))
     bad["destinations"].append(dict(bad["destinations"][0]))  # duplicate name

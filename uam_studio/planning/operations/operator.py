@@ -46,9 +46,9 @@ from uam_studio.planning.missions.mission import (
     check_destination_count,
 )
 from uam_studio.planning.operations.decision import Decision
+from uam_studio.planning.operations.defaults import DEFAULT_FORECAST_SIGMA_KT
 from uam_studio.planning.operations.health_belief import HealthBelief
 from uam_studio.planning.operations.wind_belief import WindBelief, wind_from_duration
-from uam_studio.planning.operations.world import DEFAULT_FORECAST_SIGMA_KT
 from uam_studio.planning.solvers.oracle import (
     Sortie,
     best_single_sortie,

@@ -20,11 +20,13 @@ from uam_studio.flight import TAKEOFF_CONTEXT_S, leg_profile
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.legs import DT_S
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
+from uam_studio.planning.operations.defaults import (
+    DEFAULT_FORECAST_SIGMA_KT,
+    DEFAULT_SENSOR_NOISE_MA,
+    DEFAULT_SENSOR_NOISE_MV,
+)
 
 TAKEOFF_CHECK_S = TAKEOFF_CONTEXT_S  # s of take-off the operator reads before its first plan
-DEFAULT_FORECAST_SIGMA_KT = 13.0  # kt, std of the forecast error of each destination's wind
-DEFAULT_SENSOR_NOISE_MV = 5.0  # mV, std of the voltage sensor's Gaussian noise
-DEFAULT_SENSOR_NOISE_MA = 20.0  # mA, std of the current sensor's Gaussian noise
 MAX_SIGMA_KT = 60.0
 MAX_NOISE_MV = 100.0
 MAX_NOISE_MA = 1000.0
