@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from uam_studio.cli import main
+from uam_studio.errors import InputError
 from uam_studio.planning.planner import MAX_POINTS, plan_mission
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -294,6 +295,36 @@ def test_prediction_is_per_sortie_with_takeoff_context():
     # the stub recharges each sortie: its lowest value (kept by the thinning) is the sortie's end
     lowest = min(4.1 - c[2].sum() / 8000.0 for c in stub.calls)
     assert min(res["predicted"]["voltage_v"]) == pytest.approx(lowest, abs=1e-4)
+
+
+class _StubWithBand(_StubPredictor):
+    """A predictor with a band: ``fail`` set, its band raises that exception."""
+
+    def __init__(self, fail: Exception | None = None) -> None:
+        super().__init__()
+        self.fail = fail
+
+    def voltage_band(self, ci, cv, cur, dt_s=1.0, level=0.9):
+        if self.fail is not None:
+            raise self.fail
+        v = self.predict(ci, cv, cur, dt_s)
+        return v - 0.05, v, v + 0.05
+
+
+@pytest.mark.parametrize("fail", [None, KeyError("no such weights key"), ValueError("bad profile")])
+def test_band_in_the_same_pass_and_a_failing_band_keeps_the_plan(fail):
+    d = _example()
+    res = plan_mission(d, "greedy", predictor=_StubWithBand(fail))
+    _check_result(res, d)
+    assert res["predicted"] is not None and res["safe"]
+    if fail is None:
+        assert res["band"]["low_v"] == pytest.approx([v - 0.05 for v in res["predicted"]["voltage_v"]], abs=2e-4)
+        assert plan_mission(d, "greedy", predictor=_StubWithBand(), band_level=None)["band"] is None
+    else:  # the band is an extra: the plan and its prediction stand, one line says why there is no band
+        assert res["band"] is None
+        assert any(m.startswith(f"Dynaformer band unavailable ({type(fail).__name__}") for m in res["messages"])
+    with pytest.raises(InputError, match=r"^band_level: "):
+        plan_mission(d, "greedy", predictor=_StubWithBand(), band_level=1.5)
 
 
 @pytest.mark.parametrize("scenario", ["single_flight", "single_charge", "multi_charge"])

@@ -126,8 +126,8 @@ def _predict(check: PlanCheck, predictor: Any, messages: list[str], band_level: 
                 lows.append(np.asarray(lo, dtype=float).reshape(-1)[: b - a])
                 highs.append(np.asarray(hi, dtype=float).reshape(-1)[: b - a])
             band = (np.concatenate(lows), np.concatenate(highs)) if lows else None
-        except (InputError, ValueError, RuntimeError) as err:
-            messages.append(f"Dynaformer band unavailable ({' '.join(str(err).split())})")
+        except Exception as err:  # the band is an extra: the plan and its prediction stand without it
+            messages.append(f"Dynaformer band unavailable ({type(err).__name__}: {' '.join(str(err).split())})")
     return (np.concatenate(parts) if parts else np.zeros(0)), band
 
 
