@@ -110,9 +110,11 @@ def _predict(check: PlanCheck, predictor: Any, messages: list[str], band_level: 
     cuts = sim.sortie_cuts()
     parts, lows, highs = [], [], []
     band_fn = getattr(predictor, "voltage_band", None) if band_level is not None else None
-    try:
+    fit = getattr(predictor, "health_estimate", None)
+    try:  # every sortie reads the same take-off: its health is fitted once, for the prediction and the band
+        kw = {"estimate": fit(ci, cv, dt_s=sim.dt_s)} if fit is not None else {}
         for a, b in zip(cuts[:-1], cuts[1:]):
-            v = np.asarray(predictor.predict(ci, cv, sim.current_a[a:b], dt_s=sim.dt_s), dtype=float)
+            v = np.asarray(predictor.predict(ci, cv, sim.current_a[a:b], dt_s=sim.dt_s, **kw), dtype=float)
             parts.append(v.reshape(-1)[: b - a])
     except (InputError, ValueError, RuntimeError) as err:
         messages.append(f"Dynaformer prediction failed ({' '.join(str(err).split())}); "
@@ -122,7 +124,7 @@ def _predict(check: PlanCheck, predictor: Any, messages: list[str], band_level: 
     if band_fn is not None:
         try:
             for a, b in zip(cuts[:-1], cuts[1:]):
-                lo, _, hi = band_fn(ci, cv, sim.current_a[a:b], dt_s=sim.dt_s, level=band_level)
+                lo, _, hi = band_fn(ci, cv, sim.current_a[a:b], dt_s=sim.dt_s, level=band_level, **kw)
                 lows.append(np.asarray(lo, dtype=float).reshape(-1)[: b - a])
                 highs.append(np.asarray(hi, dtype=float).reshape(-1)[: b - a])
             band = (np.concatenate(lows), np.concatenate(highs)) if lows else None
