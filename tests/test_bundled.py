@@ -15,7 +15,8 @@ from uam_studio.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
 NAMES = ["dynaformer.pt", "dqn_single_flight.zip", "dqn_single_charge.zip", "dqn_multi_charge.zip",
-         "DQN_CARD.md", "DYNAFORMER_CARD.md", "attention_planner.pt", "ATTENTION_CARD.md"]
+         "DQN_CARD.md", "DYNAFORMER_CARD.md", "attention_planner.pt", "ATTENTION_CARD.md", "dynaformer_vtc6.pt",
+         "DYNAFORMER_VTC6_CARD.md"]
 
 
 @pytest.fixture(autouse=True)

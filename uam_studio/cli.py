@@ -256,8 +256,9 @@ def _run_fly(args: argparse.Namespace) -> int:
 _OPTION_MODELS = {
     "steps": ("dynaformer", "dqn"),
     "device": ("dynaformer", "attention"),
-    **dict.fromkeys(("n_train", "no_resume"), ("dynaformer",)),
-    **dict.fromkeys(("scenario", "mission", "alpha", "beta", "gamma", "safe_return", "init_from"), ("dqn",)),
+    **dict.fromkeys(("n_train", "no_resume", "cell"), ("dynaformer",)),
+    "init_from": ("dqn", "dynaformer"),
+    **dict.fromkeys(("scenario", "mission", "alpha", "beta", "gamma", "safe_return"), ("dqn",)),
     **dict.fromkeys(("oracle_missions", "search_missions", "epochs"), ("attention",)),
 }
 
@@ -276,6 +277,9 @@ def _add_train_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--n-train", type=int, default=None, help="synthetic training discharges (default 24000)")
     g.add_argument("--no-resume", action="store_true", default=None,
                    help="start from scratch even if a checkpoint exists")
+    g.add_argument("--cell", default=None, choices=["nasa18650", "vtc6"],
+                   help="the cell type to train for: nasa18650 (the paper's, default) or vtc6 (the VTC6 identified "
+                        "on the CMU eVTOL dataset, loads flown by power); see uam_studio/dynaformer/cells.py")
     g = p.add_argument_group("dqn only")
     g.add_argument("--scenario", default=None,
                    help="single_flight, single_charge or multi_charge; default: the mission's, else single_charge")
@@ -288,9 +292,10 @@ def _add_train_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--safe-return", action="store_true", default=None,
                    help="a leg that would leave no way home ends the episode with -gamma (the planner's "
                         "safety rule, learnt in training); default off, the paper's setting")
-    g.add_argument("--init-from", default=None, metavar="AGENT",
-                   help="fine-tune this agent zip (e.g. pretrained/dqn_single_charge.zip) instead of "
-                        "starting from random weights; exploration starts at epsilon 0.2")
+    g.add_argument("--init-from", default=None, metavar="FILE",
+                   help="dqn and dynaformer: fine-tune this file (an agent zip, e.g. pretrained/dqn_single_charge.zip, "
+                        "exploration starting at epsilon 0.2; or Dynaformer weights, e.g. pretrained/dynaformer.pt, "
+                        "the take-off health refitted) instead of starting from random weights")
 
 
     g = p.add_argument_group("attention only (the default planner; writes attention_planner.pt and card.json)")
@@ -372,7 +377,8 @@ def _run_train_dynaformer(args: argparse.Namespace) -> int:
 
     out = args.out or "runs/dynaformer"
     _refuse_bundled(out)
-    cfg = TrainConfig(seed=args.seed, device=args.device or "auto")
+    cfg = TrainConfig(seed=args.seed, device=args.device or "auto", cell=args.cell or "nasa18650",
+                      init=args.init_from)
     pick_device(cfg.device)
     if args.steps is not None:
         if args.steps < 1:

@@ -68,8 +68,18 @@ _W_BOX = (Q_REF_C / FIT_Q_RANGE[1], Q_REF_C / FIT_Q_RANGE[0])
 _LO = np.array([_W_BOX[0], FIT_R0_RANGE[0], 0.0])
 _HI = np.array([_W_BOX[1], FIT_R0_RANGE[1], PREROLL_MAX_S])
 _PRIOR_PREC = 1.0 / (_HI - _LO) ** 2  # weak prior: std = box width, in (w, R0, pre-roll)
-_START_W = (0.65, 0.8, 1.0, 1.2, 1.45)  # q_max 10000, 8125, 6500, 5417, 4483 C
-_START_R0 = (0.1, 0.3)  # ohm
+_START_W = (0.65, 0.8, 1.0, 1.2, 1.45)  # q_max 10000, 8125, 6500, 5417, 4483 C (the NASA cell's fleet)
+_START_R0 = (0.1, 0.3)  # ohm (the NASA cell's fleet, R0 up to 0.45 ohm)
+_START_FLEET = (6500.0, 0.45)  # C, ohm: the fleet the start grid is written for (the paper's box: its centre, top)
+
+
+def _start_grid(cell: CellParameters, ws=_START_W) -> tuple[np.ndarray, tuple[float, float]]:
+    """The coarse start's w values and R0 pair (ohm) for the cell type: the NASA grid scaled to the type's
+    fleet (q_max by its centre, R0 by its top), so a cell of another size or resistance starts among its
+    own kind (R0 of 0.1-0.3 ohm puts a VTC6 at 15 A below the cut-off, and then no start fits)."""
+    q_scale = sum(cell.fleet_q_range) / 2 / _START_FLEET[0]
+    r_scale = cell.fleet_r0_range[1] / _START_FLEET[1]
+    return np.asarray(ws) / q_scale, (_START_R0[0] * r_scale, _START_R0[1] * r_scale)
 REST_CURRENT_A = 0.1  # A: a log whose first sample draws less starts at rest
 PREROLL_CANDIDATES_S = (0, 1, 2, 3, 4, 6, 8, 10, 13, 16, 20, 25, 30, 40, 50, 60)  # s: the pre-roll's start
 PREROLL_WINDOW_S = 60.0  # s of the context that the pre-roll search reads
@@ -251,15 +261,16 @@ def _start(cur: np.ndarray, volt: np.ndarray, dt: float, state, cell,
     solved in closed form (the voltage is linear in R0 up to the weak thermal coupling), best kept.
     ``obs`` [B, T]: the samples that count (default all)."""
     b = cur.shape[0]
-    nw, nr = len(ws), len(_START_R0)
-    grid = np.array([(w, r) for w in ws for r in _START_R0])  # [nw * nr, 2]
+    ws, start_r0 = _start_grid(cell, ws)
+    nw, nr = len(ws), len(start_r0)
+    grid = np.array([(w, r) for w in ws for r in start_r0])  # [nw * nr, 2]
     pts = np.tile(grid, (b, 1))
     v, ok = _simulate_pts(np.repeat(cur, nw * nr, axis=0), pts, None, dt, _rep_state(state, nw * nr), cell)
     v = v.reshape(b, nw, nr, -1)
     ok = ok.reshape(b, nw, nr, -1).all(axis=2)
     if obs is not None:
         ok = ok & obs[:, None, :]
-    ra, rb = _START_R0
+    ra, rb = start_r0
     slope = (v[:, :, 1] - v[:, :, 0]) / (rb - ra)  # dV/dR0 [b, nw, T]
     err = (volt[:, None, :] - v[:, :, 0]) * ok
     s = slope * ok
@@ -360,7 +371,7 @@ def _prepend_preroll(cur: np.ndarray, volt: np.ndarray, steps: np.ndarray, i0: n
 
 def _search_preroll(cur: np.ndarray, volt: np.ndarray, dt: float, cell: CellParameters):
     """Start of the pre-roll fit per row: the whole-step pre-roll among :data:`PREROLL_CANDIDATES_S`
-    with the least coarse residual (q_max 8125 or 5417 C, R0 in closed form) on the first
+    with the least coarse residual (q_max 8125 or 5417 C for the NASA fleet, R0 in closed form) on the first
     :data:`PREROLL_WINDOW_S` s, and the coarse (w, r0) there. Returns (steps [B], (w, r0) [B, 2])."""
     b = cur.shape[0]
     w = min(cur.shape[1], int(math.ceil(PREROLL_WINDOW_S / dt)))

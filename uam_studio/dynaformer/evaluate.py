@@ -20,6 +20,7 @@ import numpy as np
 from ..battery import rest_voltage, simulate
 from ..battery.eod import first_below
 from ..battery.fit import eod_intervals, fit_health, fit_health_batch
+from ..battery.parameters import DEFAULT_CELL, CellParameters
 from .data import make_dataset
 from .predictor import DynaformerPredictor
 
@@ -92,10 +93,10 @@ def evaluate(pred: DynaformerPredictor, n: int = 400, seed: int = 12345,
     out: dict = {"weights": pred.source, "sets": {}, "health": []}
     datasets = {}
     for k, (name, kw) in enumerate(SETS.items()):
-        ds = make_dataset(n, seed=seed + 1000 * (k + 1), **kw)
+        ds = make_dataset(n, seed=seed + 1000 * (k + 1), cell=pred.cell_type.key, **kw)
         datasets[name] = ds
         out["sets"][name] = eod_metrics(ds, predict_set(pred, ds))
-        phys = eod_metrics(ds, physics_fit_eod(ds))
+        phys = eod_metrics(ds, physics_fit_eod(ds, cell=pred.cell))
         out["sets"][name]["physics_fit"] = {k: phys[k] for k in ("median_rte", "median_rte_after_context", "rmse_mv")}
     flight = datasets["interpolation_flight"]
     for ctx in contexts:
@@ -127,11 +128,13 @@ def format_report(m: dict) -> str:
 
 
 # ----------------------------------------------------------------------------- physics-fit reference
-def physics_fit_eod(ds, context_s: int = 20, noise_v: float = 0.0, seed: int = 0, batch: int = 64) -> np.ndarray:
+def physics_fit_eod(ds, context_s: int = 20, noise_v: float = 0.0, seed: int = 0, batch: int = 64,
+                    cell: CellParameters = DEFAULT_CELL) -> np.ndarray:
     """The physics fit's predicted voltage [N, T] for a DischargeSet: (q_max, R0) fitted by maximum
     likelihood (:func:`uam_studio.battery.fit.fit_health_batch`) on the same noisy ``context_s``
     contexts as :func:`predict_set` (same seed, batch and draws), then the physics model along the
-    whole profile. The context is returned as observed, as the Dynaformer does."""
+    whole profile (both on ``cell``, the set's type). The context is returned as observed, as the
+    Dynaformer does."""
     rng = np.random.default_rng(seed)
     n = ds.current_a.shape[1]
     ci = ds.current_a[:, :context_s].astype(float)
@@ -141,9 +144,9 @@ def physics_fit_eod(ds, context_s: int = 20, noise_v: float = 0.0, seed: int = 0
         idx = order[s:s + batch]
         cv[idx] += rng.normal(size=(idx.size, context_s)) * noise_v
     cv = np.clip(cv, 0.0, 5.0)
-    ests = fit_health_batch(ci, cv)
+    ests = fit_health_batch(ci, cv, cell=cell)
     res = simulate(ds.current_a.astype(float), 1.0, np.array([e.q_max for e in ests]),
-                   np.array([e.r0 for e in ests]), eod_v=2.5)
+                   np.array([e.r0 for e in ests]), eod_v=2.5, cell=cell)
     out = np.asarray(res.voltage_v, np.float64).reshape(len(ds), n)
     out[:, :context_s] = cv
     return out
@@ -170,14 +173,14 @@ def _rel_err(pred_t: np.ndarray, true_t: np.ndarray, length: np.ndarray) -> np.n
     return np.abs(p - true_t) / true_t
 
 
-def _shift_to_rest(ds, seed: int):
+def _shift_to_rest(ds, seed: int, cell: CellParameters = DEFAULT_CELL):
     """Copies of the set's arrays whose logs start 5-30 s earlier at rest (0 A, the full cell's rest
     voltage): current [N, T'], voltage [N, T'], length [N], lead [N] (s)."""
     rng = np.random.default_rng(seed)
     lead = rng.integers(REST_LEAD_S[0], REST_LEAD_S[1] + 1, len(ds))
     t = ds.current_a.shape[1] + REST_LEAD_S[1]
     cur = np.zeros((len(ds), t), np.float64)
-    volt = np.full((len(ds), t), float(rest_voltage()))
+    volt = np.full((len(ds), t), float(rest_voltage(cell=cell)))
     for i, k in enumerate(lead):
         cur[i, k:k + ds.current_a.shape[1]] = ds.current_a[i]
         volt[i, k:k + ds.voltage_v.shape[1]] = ds.voltage_v[i]
@@ -212,14 +215,14 @@ def noise_table(pred: DynaformerPredictor, n: int = 200, seed: int = 12345,
     - latency (ms, median over ``latency_cases`` single-flight calls): Dynaformer fit + prediction,
       Dynaformer interval, physics fit + EOD interval.
     """
-    ds = make_dataset(n, seed=seed + 1000, band="train", flight_fraction=1.0)
+    ds = make_dataset(n, seed=seed + 1000, band="train", flight_fraction=1.0, cell=pred.cell_type.key)
     rows: list[dict] = []
     for align in alignments:
         if align == "aligned":
             cur, volt, length = ds.current_a.astype(np.float64), ds.voltage_v.astype(np.float64), ds.length
             lead = np.zeros(len(ds), int)
         elif align == "rest":
-            cur, volt, length, lead = _shift_to_rest(ds, seed + 7)
+            cur, volt, length, lead = _shift_to_rest(ds, seed + 7, pred.cell)
         else:
             raise ValueError(f"unknown alignment {align!r}")
         volt = np.where(np.arange(volt.shape[1])[None, :] < length[:, None], volt, 5.0)
@@ -254,7 +257,7 @@ def _noise_cell(pred, cur, volt, length, true_t, ctx_len, r0, q_max, sv, si, rng
         cv = np.clip(volt[grp, :c] + noise_v[grp, :c], 0.0, 5.0)
         t_max = int(length[grp].max())
         prof = np.where(np.arange(t_max)[None, :] < length[grp, None], cur[grp, :t_max], 0.0)
-        ests = fit_health_batch(ci, cv)
+        ests = fit_health_batch(ci, cv, cell=pred.cell)
         for s in range(0, grp.size, batch):
             sl, g = slice(s, s + batch), grp[s:s + batch]
             d_lo[g], d_med[g], d_hi[g] = pred.eod_interval_s(ci[sl], cv[sl], prof[sl], level=level,
@@ -262,7 +265,7 @@ def _noise_cell(pred, cur, volt, length, true_t, ctx_len, r0, q_max, sv, si, rng
             take[g] = _eod_times(pred.predict(ci[sl], cv[sl], prof[sl], health_source="model"), length[g])
             for k, p in compare.items():
                 other[k][g] = _eod_times(p.predict(ci[sl], cv[sl], prof[sl], health_source="model"), length[g])
-        p_lo[grp], p_med[grp], p_hi[grp] = eod_intervals(ests, prof, 1.0, level)
+        p_lo[grp], p_med[grp], p_hi[grp] = eod_intervals(ests, prof, 1.0, level, cell=pred.cell)
         pcs[grp] = pred.health(ci, cv, estimate=ests)
         cases += [(ci[j], cv[j], prof[j, :length[grp[j]]]) for j in range(min(grp.size, latency_cases - len(cases)))]
     # A cut-off the profile never reaches is inf; inside the profile it is on the profile's grid.
@@ -275,7 +278,7 @@ def _noise_cell(pred, cur, volt, length, true_t, ctx_len, r0, q_max, sv, si, rng
         t1 = time.perf_counter()
         pred.eod_interval_s(ci, cv, p_i, level=level)
         t2 = time.perf_counter()
-        eod_intervals([fit_health(ci, cv)], p_i, 1.0, level)
+        eod_intervals([fit_health(ci, cv, cell=pred.cell)], p_i, 1.0, level, cell=pred.cell)
         t3 = time.perf_counter()
         lat["dyn_predict"].append(t1 - t0)
         lat["dyn_interval"].append(t2 - t1)

@@ -38,6 +38,7 @@ import torch
 from torch import nn
 
 from ..flight import TAKEOFF_CONTEXT_S
+from .cells import dynaformer_cell
 from .data import TRAIN_R_RANGE
 
 V_CENTER, V_SCALE = 3.6, 0.5  # V: voltage normalisation
@@ -60,9 +61,28 @@ class DynaformerConfig:
     max_context: int = 1024  # samples; longer contexts are strided down to this
     health: str = "takeoff"  # "takeoff" (TakeoffHealth) or "transformer" (the patch encoder)
     health_window: int = TAKEOFF_CONTEXT_S  # samples (s) of the take-off that TakeoffHealth reads
+    # The cell type the weights are trained for (uam_studio.dynaformer.cells) and its scales: current
+    # (A), and the take-off latent's R0 centre and half-width (ohm) and q_max reference (C) and scale.
+    cell: str = "nasa18650"
+    i_scale: float = I_SCALE
+    r0_mid: float = sum(TRAIN_R_RANGE) / 2
+    r0_half: float = (TRAIN_R_RANGE[1] - TRAIN_R_RANGE[0]) / 2
+    u_ref_c: float = 6500.0
+    u_scale: float = 0.23
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+    @classmethod
+    def for_cell(cls, cell: str, **fields) -> DynaformerConfig:
+        """The default architecture with the scales of the cell type ``cell``
+        (:mod:`uam_studio.dynaformer.cells`); ``fields`` override the rest.
+
+        :raises InputError: (field ``cell``) an unknown type.
+        """
+        kind = dynaformer_cell(cell)
+        return cls(cell=kind.key, i_scale=kind.i_scale, r0_mid=kind.r0_mid, r0_half=kind.r0_half,
+                   u_ref_c=kind.u_ref_c, **fields)
 
 
 def sinusoidal(pos: torch.Tensor, dim: int, max_period: float = 20000.0) -> torch.Tensor:
@@ -73,21 +93,24 @@ def sinusoidal(pos: torch.Tensor, dim: int, max_period: float = 20000.0) -> torc
     return torch.cat([torch.sin(ang), torch.cos(ang)], dim=-1)
 
 
-R0_MID = sum(TRAIN_R_RANGE) / 2  # ohm: the training range's centre
-R0_HALF = (TRAIN_R_RANGE[1] - TRAIN_R_RANGE[0]) / 2  # ohm: and half-width
-U_REF_C, U_SCALE = 6500.0, 0.23  # C, -: health u = (6500 C / q_max - 1) / 0.23, about [-1, 1] in range
+# The NASA cell's latent scales (the config's defaults): R0's training centre and half-width (ohm);
+# health u = (6500 C / q_max - 1) / 0.23, about [-1, 1] in the paper's range.
+R0_MID, R0_HALF = DynaformerConfig.r0_mid, DynaformerConfig.r0_half
 TAKEOFF_POINTS = 20  # samples of the window that the features use
 
 
-def takeoff_targets(r0_ohm, q_max_c):
-    """TakeoffHealth's regression targets [..., 2]: R0 (ohm) and 6500 C / q_max (q_max in C), each scaled to about [-1, 1]."""
-    return torch.stack([(torch.as_tensor(r0_ohm, dtype=torch.float64) - R0_MID) / R0_HALF,
-                        (U_REF_C / torch.as_tensor(q_max_c, dtype=torch.float64) - 1.0) / U_SCALE], -1)
+def takeoff_targets(r0_ohm, q_max_c, cfg: DynaformerConfig | None = None):
+    """TakeoffHealth's regression targets [..., 2]: R0 (ohm) and u_ref / q_max (q_max in C), each scaled
+    to about [-1, 1] over the training box by ``cfg``'s scales (default: the NASA cell's, 6500 C)."""
+    cfg = cfg or DynaformerConfig()
+    return torch.stack([(torch.as_tensor(r0_ohm, dtype=torch.float64) - cfg.r0_mid) / cfg.r0_half,
+                        (cfg.u_ref_c / torch.as_tensor(q_max_c, dtype=torch.float64) - 1.0) / cfg.u_scale], -1)
 
 
-def takeoff_to_health(h: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """(R0 in ohm, q_max in C) from TakeoffHealth's output [..., 2]."""
-    return h[..., 0] * R0_HALF + R0_MID, U_REF_C / (h[..., 1] * U_SCALE + 1.0)
+def takeoff_to_health(h: torch.Tensor, cfg: DynaformerConfig | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """(R0 in ohm, q_max in C) from TakeoffHealth's output [..., 2] (``cfg``'s scales)."""
+    cfg = cfg or DynaformerConfig()
+    return h[..., 0] * cfg.r0_half + cfg.r0_mid, cfg.u_ref_c / (h[..., 1] * cfg.u_scale + 1.0)
 
 
 class TakeoffHealth(nn.Module):
@@ -146,6 +169,7 @@ class Dynaformer(nn.Module):
     def __init__(self, cfg: DynaformerConfig | None = None) -> None:
         super().__init__()
         cfg = cfg or DynaformerConfig()
+        dynaformer_cell(cfg.cell)  # an unknown cell type is refused here (InputError)
         if cfg.health not in ("takeoff", "transformer"):
             raise ValueError(f"health must be 'takeoff' or 'transformer', got {cfg.health!r}")
         self.cfg = cfg
@@ -195,7 +219,7 @@ class Dynaformer(nn.Module):
         v = torch.where(m > 0, v, v0)
         step = torch.diff(v, dim=1, prepend=v[:, :1]) * m
         start_s = torch.arange(n_tok, device=ctx_i.device, dtype=torch.float32) * p
-        feats = torch.cat([(i / I_SCALE).view(b, n_tok, p), ((v - V_CENTER) / V_SCALE).view(b, n_tok, p),
+        feats = torch.cat([(i / self.cfg.i_scale).view(b, n_tok, p), ((v - V_CENTER) / V_SCALE).view(b, n_tok, p),
                            (dv * 10.0).view(b, n_tok, p),
                            (step * 100.0).view(b, n_tok, p), m.view(b, n_tok, p),
                            (start_s / 600.0).expand(b, n_tok).unsqueeze(-1)], dim=-1)
@@ -214,9 +238,9 @@ class Dynaformer(nn.Module):
         chunks = current.view(b, n_tok, cfg.chunk)
         charge_before = torch.cumsum(chunks.sum(-1), dim=1) - chunks.sum(-1)  # C on the 1 s grid
         start_s = torch.arange(n_tok, device=current.device, dtype=torch.float32) * cfg.chunk
-        feats = torch.cat([chunks / I_SCALE, (charge_before / Q_SCALE).unsqueeze(-1),
+        feats = torch.cat([chunks / cfg.i_scale, (charge_before / Q_SCALE).unsqueeze(-1),
                            (start_s / T_SCALE).expand(b, n_tok).unsqueeze(-1),
-                           chunks.mean(-1, keepdim=True) / I_SCALE], dim=-1)
+                           chunks.mean(-1, keepdim=True) / cfg.i_scale], dim=-1)
         q = self.dec_in(feats) + sinusoidal(start_s, cfg.d_model).unsqueeze(0) + self.latent_to_query(latent)[:, None]
         memory = self.latent_to_memory(latent).view(b, cfg.memory_tokens, cfg.d_model)
         causal = nn.Transformer.generate_square_subsequent_mask(n_tok, device=current.device)

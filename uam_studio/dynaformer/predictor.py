@@ -40,15 +40,23 @@ from ..battery.fit import (
 from ..bundled import bundled_path
 from ..errors import InputError, check_range
 from .artifact import WeightsError, load_artifact
+from .cells import dynaformer_cell
 from .model import takeoff_targets
 
 MAX_PROFILE_S = 200_000.0  # s: longer profiles are refused (memory)
 
 
-def bundled_weights_path() -> Path:
-    """The bundled weights: ``$UAM_STUDIO_DYNAFORMER`` if set, else ``dynaformer.pt`` in the user
-    folder's ``pretrained/`` or in the package data (:func:`uam_studio.bundled.bundled_path`)."""
-    return bundled_path("dynaformer.pt")
+BUNDLED_WEIGHTS = {"nasa18650": "dynaformer.pt", "vtc6": "dynaformer_vtc6.pt"}
+"""Cell type (:mod:`uam_studio.dynaformer.cells`) -> its bundled weights file."""
+
+
+def bundled_weights_path(cell: str = "nasa18650") -> Path:
+    """The bundled weights for the cell type ``cell``: for the NASA cell ``$UAM_STUDIO_DYNAFORMER`` if
+    set, else ``dynaformer.pt`` in the user folder's ``pretrained/`` or in the package data
+    (:func:`uam_studio.bundled.bundled_path`); for the VTC6 ``dynaformer_vtc6.pt`` there."""
+    if cell not in BUNDLED_WEIGHTS:
+        raise InputError("cell", f"{cell!r}; allowed {', '.join(BUNDLED_WEIGHTS)}")
+    return bundled_path(BUNDLED_WEIGHTS[cell])
 
 
 def _as_2d(field: str, arr) -> tuple[np.ndarray, bool]:
@@ -89,17 +97,21 @@ DECODER_CAL_N = 400  # flights
 DECODER_ERROR_SHAPE = (0.01, 0.002)  # (V, -) per unit of lam
 CAL_PROBS = (0.5, 0.6, 0.7, 0.75, 0.8, 0.85, 0.9, 0.925, 0.95, 0.975, 0.99, 0.999)
 # Split-conformal quantiles of lam at CAL_PROBS for the bundled weights, keyed by the file's SHA-256
-# (``decoder_error_scores(load_pretrained())``: 400 flights, seed 424242). Other weights are
+# (``decoder_error_scores(load_pretrained(cell))``: 400 flights of the weights' cell type, seed 424242; 333
+# of the VTC6's end after their 20 s context). Other weights are
 # calibrated on first use (200 flights, a few seconds).
 BUNDLED_DECODER_LAMBDA: dict[str, tuple[float, ...]] = {
     "cfcb738ced4eb4fcae574d9e2a5d41f345dd4c83402510e9024a8197286c382b":  # pretrained/dynaformer.pt (715,909 bytes)
         (0.2195, 0.3189, 0.4386, 0.5187, 0.6423, 0.7908, 0.9728, 1.0764, 1.3455, 1.6256, 2.4252, 4.9844),
+    "7a2522b588ac307d8a464ea3e8d506d97086885c60ebbc8d5326d4f7f346a8e8":  # pretrained/dynaformer_vtc6.pt (716,101 bytes)
+        (0.1967, 0.3296, 0.4975, 0.6373, 0.7185, 0.8153, 1.0370, 1.1747, 1.5903, 2.3308, 3.4117, 5.0126),
 }
 
 
-def _clamped_latent(r0_ohm: np.ndarray, q_max_c: np.ndarray) -> torch.Tensor:
-    """The take-off decoder's latent [B, 2] for (R0 ohm, q_max C), clamped like TakeoffHealth's output."""
-    h = takeoff_targets(np.asarray(r0_ohm, float), np.asarray(q_max_c, float))
+def _clamped_latent(r0_ohm: np.ndarray, q_max_c: np.ndarray, cfg=None) -> torch.Tensor:
+    """The take-off decoder's latent [B, 2] for (R0 ohm, q_max C), clamped like TakeoffHealth's output
+    (``cfg``: the weights' :class:`~uam_studio.dynaformer.model.DynaformerConfig`, for its scales)."""
+    h = takeoff_targets(np.asarray(r0_ohm, float), np.asarray(q_max_c, float), cfg)
     return torch.stack([h[:, 0].clamp(-1.5, 1.5), h[:, 1].clamp(-2.5, 4.0)], 1).float()
 
 
@@ -142,6 +154,8 @@ class DynaformerPredictor:
         self.pca = pca
         self.meta = meta
         self.source = source
+        self.cell_type = dynaformer_cell(model.cfg.cell)  # the cell the weights were trained for
+        self.cell = self.cell_type.params  # its parameter set: the fit, the re-observed take-off, the rest
         self.chunk = model.cfg.chunk
         self.max_context = model.cfg.max_context
         self._decoder_quantiles: tuple[float, ...] | None = None
@@ -210,7 +224,7 @@ class DynaformerPredictor:
                              f"{ci.shape[1] * dt:g} s ({ci.shape[1]} samples at {dt:g} s)")
         if noise_v is not None:
             check_range("noise_v", noise_v, 0.0, 1.0, " V")
-        return fit_health_batch(ci, cv, dt, noise_v)
+        return fit_health_batch(ci, cv, dt, noise_v, cell=self.cell)
 
     def _latent(self, source: str, context_current_a, context_voltage_v, dt: float, batch: int | None,
                 noise_v, estimate):
@@ -218,7 +232,7 @@ class DynaformerPredictor:
         if source == "fit":
             ci, cv, single = self._raw_context(context_current_a, context_voltage_v, batch)
             ests = self._estimates(ci, cv, dt, noise_v, estimate)
-            lat = _clamped_latent(np.array([e.r0 for e in ests]), np.array([e.q_max for e in ests]))
+            lat = _clamped_latent(np.array([e.r0 for e in ests]), np.array([e.q_max for e in ests]), self.model.cfg)
             return lat, ests, cv, single
         ci_t, cv_t, single = self._context(context_current_a, context_voltage_v, dt, batch)
         _, cv, _ = self._raw_context(context_current_a, context_voltage_v, batch)
@@ -252,7 +266,7 @@ class DynaformerPredictor:
             latent = self._reobserved_latent(points, g)
         v = self.model.decode(latent, torch.as_tensor(g)).numpy()[:, :n].astype(np.float64)
         if skip_rest and k0.any():
-            out = np.full((b, n), float(rest_voltage()))
+            out = np.full((b, n), float(rest_voltage(self.cell_type.cell.q_max, self.cell)))
             for r in range(b):
                 out[r, k0[r]:] = v[r, :n - k0[r]]
             v = out
@@ -269,10 +283,10 @@ class DynaformerPredictor:
         samples first (no change to a noise-free take-off; about half the noise's effect)."""
         w = self.model.cfg.health_window
         if grid.shape[1] < w:
-            return _clamped_latent(points[:, 1], points[:, 0])
+            return _clamped_latent(points[:, 1], points[:, 0], self.model.cfg)
         first = median_filter(np.asarray(grid[:, :w], np.float64), size=(1, 9), mode="nearest")
         volt = simulate(first, 1.0, np.clip(points[:, 0], 1.0, None), np.clip(points[:, 1], 0.0, None),
-                        eod_v=2.5).voltage_v  # held below 2.5 V, as in the training data
+                        eod_v=2.5, cell=self.cell).voltage_v  # held below 2.5 V, as in the training data
         return self.model.takeoff(torch.as_tensor(first, dtype=torch.float32),
                                   torch.as_tensor(volt, dtype=torch.float32))
 
@@ -430,7 +444,7 @@ class DynaformerPredictor:
                                                                dt_s, level, noise_v, estimate, health_source)
         eod = check_range("eod_v", eod_v, 2.5, 4.0, " V")
         b = cur.shape[0]
-        ends = interval_ends(ests, np.ascontiguousarray(cur), dt, lv, eod)  # [b, 2, 2] (q_max, r0)
+        ends = interval_ends(ests, np.ascontiguousarray(cur), dt, lv, eod, cell=self.cell)  # [b, 2, 2] (q_max, r0)
         pts = np.concatenate([np.array([[e.q_max, e.r0] for e in ests])[:, None], ends], axis=1)  # [b, 3, 2]
         grid = _to_grid(cur, dt, hold=True)
         v = self._decode(None, np.repeat(grid, 3, axis=0), skip_rest=True, estimates=[e for e in ests for _ in range(3)],
@@ -518,7 +532,7 @@ def decoder_error_scores(pred: DynaformerPredictor, n: int = DECODER_CAL_N, seed
     from .data import make_dataset
 
     a, b = DECODER_ERROR_SHAPE
-    ds = make_dataset(n, seed=seed, flight_fraction=1.0)
+    ds = make_dataset(n, seed=seed, flight_fraction=1.0, cell=pred.model.cfg.cell)
     t = np.arange(ds.voltage_v.shape[1])[None, :]
     true_t, _ = crossing_times(np.where(t < ds.length[:, None], ds.voltage_v, 5.0), 1.0, eod_v)
     keep = np.where(np.isfinite(true_t) & (true_t > 20))[0]
@@ -549,10 +563,11 @@ def load_predictor(path=None) -> DynaformerPredictor:
     return DynaformerPredictor(model, pca, meta, str(p))
 
 
-@lru_cache(maxsize=1)
-def load_pretrained() -> DynaformerPredictor:
-    """The bundled, pretrained Dynaformer (loaded once per process)."""
-    return load_predictor(None)
+@lru_cache(maxsize=2)
+def load_pretrained(cell: str = "nasa18650") -> DynaformerPredictor:
+    """The bundled, pretrained Dynaformer for the cell type ``cell`` (``"nasa18650"``, the paper's cell,
+    or ``"vtc6"``, fine-tuned on the identified VTC6), loaded once per process."""
+    return load_predictor(bundled_weights_path(cell))
 
 
 def load_with_fallback(path) -> tuple[DynaformerPredictor, str | None]:

@@ -61,11 +61,13 @@ class TrainConfig:
     batch: int = 32
     lr: float = 1e-3
     seed: int = 0
-    max_len: int = 10240  # samples on the 1 s grid
+    max_len: int | None = None  # samples on the 1 s grid; default the cell type's (10240 for the NASA cell)
     checkpoint_every: int = 500
     device: str = "auto"
     threads: int = 0  # 0: torch default
     takeoff_ridge: float = 1e-8  # ridge of the take-off health fit, x n_cells, on standardised features
+    cell: str = "nasa18650"  # the cell type trained for (uam_studio.dynaformer.cells)
+    init: str | None = None  # weights file to fine-tune from (its decoder; the take-off fit is redone)
 
 
 def pick_device(name: str) -> torch.device:
@@ -153,7 +155,7 @@ class BucketSampler:
         return self.rng.choice(b, self.batch, replace=False)
 
 
-def _cached_dataset(path: Path, n: int, seed: int, max_len: int) -> DischargeSet:
+def _cached_dataset(path: Path, n: int, seed: int, max_len: int | None, cell: str = "nasa18650") -> DischargeSet:
     """make_dataset, cached as .npz in the run folder (git-ignored ``runs/``), written atomically.
 
     A cache that cannot be read (truncated or corrupt, e.g. by a kill under an older version) or
@@ -168,7 +170,7 @@ def _cached_dataset(path: Path, n: int, seed: int, max_len: int) -> DischargeSet
             if len(ds) == n:
                 return ds
             print(f"warning: {path}: holds {len(ds)} discharges, not {n}; regenerating it", file=sys.stderr)
-    ds = make_dataset(n, seed=seed, max_len=max_len)
+    ds = make_dataset(n, seed=seed, max_len=max_len, cell=cell)
     ds.save(path)
     return ds
 
@@ -206,7 +208,7 @@ def fit_takeoff_health(model: Dynaformer, ctx_ds: DischargeSet, ridge: float = 1
     x = torch.cat([est.features(torch.as_tensor(ctx_ds.current_a[ok[s:s + 8192], :w], device=dev),
                                 torch.as_tensor(ctx_ds.voltage_v[ok[s:s + 8192], :w], device=dev))
                    for s in range(0, ok.size, 8192)])
-    y = takeoff_targets(ctx_ds.r0[ok], ctx_ds.q_max[ok]).to(dev)
+    y = takeoff_targets(ctx_ds.r0[ok], ctx_ds.q_max[ok], model.cfg).to(dev)
     mean, scale = x.mean(0), x.std(0) + 1e-12
     x = (x - mean) / scale
     bias = y.mean(0)
@@ -291,6 +293,25 @@ def _resume(path: Path, ck: dict, model: Dynaformer, opt: torch.optim.Optimizer,
                                        f"{_RESUME_HINT}") from None
 
 
+def _load_init(model: Dynaformer, path: str) -> None:
+    """Start ``model`` from the weights file ``path`` (read without unpickling); the architecture must match.
+
+    :raises InputError: (field ``init``) a file that does not load, or of another architecture.
+    """
+    from .artifact import WeightsError, load_artifact
+
+    try:
+        init, _, _ = load_artifact(path)
+    except WeightsError as err:
+        raise InputError("init", str(err)) from None
+    arch = ("d_model", "n_heads", "enc_layers", "dec_layers", "ff_dim", "chunk", "latent_dim", "memory_tokens",
+            "health", "health_window")
+    other = [k for k in arch if getattr(init.cfg, k) != getattr(model.cfg, k)]
+    if other:
+        raise InputError("init", f"{path}: another architecture ({', '.join(other)} differ)")
+    model.load_state_dict(init.state_dict())
+
+
 def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerConfig | None = None,
           callback=None) -> Path:
     """Train from scratch (or resume from ``out_dir/checkpoint.pt``, see :func:`load_checkpoint`); write
@@ -302,7 +323,9 @@ def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerC
     :return: path of the exported weights.
     :raises InputError: (field ``checkpoint``) a checkpoint that is unreadable, unsafe or from another run.
     """
-    model_cfg = model_cfg or DynaformerConfig()
+    model_cfg = model_cfg or DynaformerConfig.for_cell(cfg.cell)
+    if model_cfg.cell != cfg.cell:
+        raise InputError("cell", f"the model config is for {model_cfg.cell!r}, the training run for {cfg.cell!r}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     remove_stale_temps(out)
@@ -313,11 +336,15 @@ def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerC
     ck = load_checkpoint(ckpt_path, device) if resume and ckpt_path.exists() else None  # before the data: fail fast
     torch.manual_seed(cfg.seed)
     t_start = time.perf_counter()
-    ds = _cached_dataset(out / f"train_data_seed{cfg.seed}_n{cfg.n_train}.npz", cfg.n_train, cfg.seed, cfg.max_len)
-    ctx_ds = (_cached_dataset(out / f"context_data_seed{cfg.seed}_n{cfg.n_context}.npz", cfg.n_context,
-                              cfg.seed + 7919, CONTEXT_SET_LEN) if cfg.n_context else None)
+    tag = "" if cfg.cell == "nasa18650" else f"{cfg.cell}_"
+    ds = _cached_dataset(out / f"train_data_{tag}seed{cfg.seed}_n{cfg.n_train}.npz", cfg.n_train, cfg.seed,
+                         cfg.max_len, cfg.cell)
+    ctx_ds = (_cached_dataset(out / f"context_data_{tag}seed{cfg.seed}_n{cfg.n_context}.npz", cfg.n_context,
+                              cfg.seed + 7919, CONTEXT_SET_LEN, cfg.cell) if cfg.n_context else None)
     t_data = time.perf_counter() - t_start
     model = Dynaformer(model_cfg).to(device)
+    if cfg.init is not None and ck is None:
+        _load_init(model, cfg.init)
     decoder_params = [p for name, p in model.named_parameters() if name.split(".")[0] not in ENCODER_PARTS]
     opt = torch.optim.AdamW(decoder_params, lr=cfg.lr, weight_decay=1e-4)
     warm = 300

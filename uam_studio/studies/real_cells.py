@@ -11,7 +11,9 @@ models on a real VTC6? Every row is scored on measurements; the held-out status 
 - health: q_max/R0 fitted to the first 20/60/120 s of the mission (the VTC6 set, with the VTC6 fleet's
   prior, as by default), the landing's lowest voltage predicted by power with its 90% interval (draws
   of the fit's uncertainty); and the same without the prior (the likelihood alone);
-- Dynaformer: the bundled model (trained on the NASA cell, 0.05-3 A) on the same contexts;
+- Dynaformer: the bundled model (trained on the NASA cell, 0.05-3 A), and the one fine-tuned on the
+  identified VTC6's synthetic data (``dynaformer_vtc6.pt``), on the same contexts along the measured
+  current; beside each, the reference in the same run: the same physics fit flown along the same current;
 - capacity: q_max fitted to each C/5 reference discharge of the four resampled lives (the whole discharge,
   and only its part above 3.4 V), the capacity to 2.5 V it gives against the dataset's integrated capacity;
 - safety: for cut-offs from 3.0 to 3.3 V, would the health fit's 90% lower bound have called the
@@ -57,13 +59,15 @@ class RealCellReport:
     health: list[dict] = field(default_factory=list)
     health_likelihood: list[dict] = field(default_factory=list)
     dynaformer: list[dict] = field(default_factory=list)
+    dynaformer_vtc6: list[dict] = field(default_factory=list)
     capacity: list[dict] = field(default_factory=list)
     safety: list[dict] = field(default_factory=list)
     measured_landing_min_v: float = math.nan
 
     def as_dict(self) -> dict:
         return {"measured_landing_min_v": self.measured_landing_min_v, "physics": self.physics,
-                "health": self.health, "health_likelihood": self.health_likelihood, "dynaformer": self.dynaformer, "capacity": self.capacity,
+                "health": self.health, "health_likelihood": self.health_likelihood, "dynaformer": self.dynaformer,
+                "dynaformer_vtc6": self.dynaformer_vtc6, "capacity": self.capacity,
                 "safety": self.safety}
 
 
@@ -115,23 +119,30 @@ def health_rows(cell: Cell, mission: MissionLog, rng: np.random.Generator, prior
     return rows
 
 
-def dynaformer_rows(mission: MissionLog) -> list[dict]:
-    """The bundled Dynaformer (NASA cell) on the mission's contexts; its refusal where it refuses."""
+def dynaformer_rows(mission: MissionLog, cell: str = "nasa18650") -> list[dict]:
+    """A bundled Dynaformer (``cell``: ``"nasa18650"`` or ``"vtc6"``) on the mission's contexts along its
+    measured current (A), with its default health (the physics fit of the context on the weights' cell);
+    ``physics_error_mv``: that fit flown on the physics model along the same current (the reference).
+    A refusal or a missing weights file is a row with its one-line ``error``."""
+    from uam_studio.battery.fit import voltage_band as physics_band
     from uam_studio.dynaformer import load_pretrained
 
     log = mission.log
     truth = float(_landing_min(log.voltage_v, mission))
     rows = []
     try:
-        pred = load_pretrained()
+        pred = load_pretrained(cell)
     except Exception as exc:  # a missing or broken weights file is reported in the table, not raised
         return [{"context_s": c, "error": str(exc).splitlines()[0]} for c in CONTEXTS_S]
     for ctx in CONTEXTS_S:
         try:
-            lo, med, hi = pred.voltage_band(log.current_a[:ctx], log.voltage_v[:ctx], log.current_a)
+            est = pred.health_estimate(log.current_a[:ctx], log.voltage_v[:ctx])
+            lo, med, hi = pred.voltage_band(log.current_a[:ctx], log.voltage_v[:ctx], log.current_a, estimate=est)
             med_min, lo_min, hi_min = (float(_landing_min(np.asarray(x), mission)) for x in (med, lo, hi))
-            rows.append({"context_s": ctx, "predicted_v": med_min, "low_v": lo_min, "high_v": hi_min,
-                         "error_mv": 1000 * (med_min - truth), "inside": bool(lo_min <= truth <= hi_min)})
+            phys = float(_landing_min(np.asarray(physics_band(est, log.current_a, cell=pred.cell)[1]), mission))
+            rows.append({"context_s": ctx, "q_max_c": est.q_max, "r0_ohm": est.r0, "predicted_v": med_min,
+                         "low_v": lo_min, "high_v": hi_min, "error_mv": 1000 * (med_min - truth),
+                         "inside": bool(lo_min <= truth <= hi_min), "physics_error_mv": 1000 * (phys - truth)})
         except InputError as exc:
             rows.append({"context_s": ctx, "error": str(exc)})
     return rows
@@ -196,6 +207,7 @@ def real_cell_report(data: str | Path | None = None, refit: bool = True, capacit
     report.health = health_rows(VTC6, mission, np.random.default_rng(seed))
     report.health_likelihood = health_rows(VTC6, mission, np.random.default_rng(seed), prior=False)
     report.dynaformer = dynaformer_rows(mission)
+    report.dynaformer_vtc6 = dynaformer_rows(mission, "vtc6")
     if capacity:
         report.capacity = capacity_rows(folder, VTC6)
     report.safety = safety_rows(report.health, report.measured_landing_min_v)
@@ -231,13 +243,19 @@ def format_report(report: RealCellReport) -> str:
         for r in rows:
             out.append(f"{r['context_s']:>6d} s {r['q_max_c']:8.0f} {r['r0_ohm']:8.4f} {r['predicted_v']:11.3f} "
                        f"{r['low_v']:8.3f}-{r['high_v']:.3f} {r['error_mv']:+9.1f} {'yes' if r['inside'] else 'NO'}")
-    out += ["", "Dynaformer as bundled (trained on the NASA cell), same contexts"]
-    for r in report.dynaformer:
-        if "error" in r:
-            out.append(f"{r['context_s']:>6d} s  refused: {r['error']}")
-        else:
-            out.append(f"{r['context_s']:>6d} s  predicted {r['predicted_v']:.3f} V, 90% {r['low_v']:.3f}-"
-                       f"{r['high_v']:.3f} V, error {r['error_mv']:+.1f} mV, inside: {'yes' if r['inside'] else 'NO'}")
+    for title, rows in (("Dynaformer as bundled (trained on the NASA cell, 0.05-3 A)", report.dynaformer),
+                        ("Dynaformer fine-tuned on the VTC6 set's synthetic data (dynaformer_vtc6.pt)",
+                         report.dynaformer_vtc6)):
+        out += ["", f"{title}, same contexts, along the measured current; physics: its own fit (the weights' "
+                "cell) flown along the same current"]
+        for r in rows:
+            if "error" in r:
+                out.append(f"{r['context_s']:>6d} s  refused: {r['error']}")
+            else:
+                out.append(f"{r['context_s']:>6d} s  q_max {r['q_max_c']:6.0f} C, R0 {r['r0_ohm']:.4f} ohm: predicted "
+                           f"{r['predicted_v']:.3f} V, 90% {r['low_v']:.3f}-{r['high_v']:.3f} V, error "
+                           f"{r['error_mv']:+.1f} mV, inside: {'yes' if r['inside'] else 'NO'}; physics "
+                           f"{r['physics_error_mv']:+.1f} mV")
     if report.capacity:
         out += ["", "capacity: q_max fitted to each C/5 reference discharge (the whole discharge; only the part "
                 f"above {CAPACITY_FIT_ABOVE_V} V), the capacity to 2.5 V it gives against the integrated one",

@@ -1,0 +1,88 @@
+"""The cell types a Dynaformer is trained for: one place for each type's parameter set, health box,
+loads and the network's input scales.
+
+- ``"nasa18650"``: the paper's NASA 18650 (Daigle & Kulkarni 2013), the bundled ``dynaformer.pt``:
+  q_max 5000-8000 C, R0 0.017-0.45 ohm; loads: our aircraft's flight legs per cell (0.5-3 A) and
+  constant or piecewise-constant currents of 0.05-3 A.
+- ``"vtc6"``: the Sony-Murata VTC6 identified on the CMU eVTOL dataset
+  (:data:`uam_studio.battery.parameters.VTC6`), the bundled ``dynaformer_vtc6.pt``: q_max 8000-12500 C
+  and R0 0.012-0.06 ohm (the VTC6 fleet prior's box, :data:`~uam_studio.battery.parameters.VTC6_FLEET_Q_RANGE`,
+  with a margin); loads: the dataset's mission shape flown by power per cell (take-off and landing
+  40-65 W for 45-120 s, cruise 8-30 W for 100-1500 s, 1-4 legs with rests between) and constant or
+  piecewise-constant currents of 0.5-18 A.
+
+A weights file names its type in ``DynaformerConfig.cell``; the predictor fits health, re-observes
+the take-off and fills rests with that type's parameter set.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..battery.parameters import (
+    NASA_18650,
+    PAPER_Q_RANGE,
+    PAPER_R0_RANGE,
+    VTC6,
+    Cell,
+)
+from ..errors import InputError
+
+
+@dataclass(frozen=True)
+class DynaformerCell:
+    """One cell type a Dynaformer can be trained for.
+
+    ``q_range`` (C) and ``r0_range`` (ohm): the training health box; ``extra_q_bands`` (C) and
+    ``extra_r_band`` (ohm): the extrapolation bands of the held-out sets. ``loads``: ``"flight"`` (our
+    aircraft's legs by current) or ``"power"`` (the CMU mission shape by power). ``generic_a``: the
+    range of the generic constant loads (A). ``i_scale`` (A), ``u_ref_c`` (C), ``u_scale``,
+    ``r0_mid``/``r0_half`` (ohm): the network's input and latent scales (see
+    :class:`uam_studio.dynaformer.model.DynaformerConfig`). ``max_len``: training samples (s).
+    """
+
+    key: str
+    cell: Cell
+    q_range: tuple[float, float]
+    r0_range: tuple[float, float]
+    extra_q_bands: tuple[tuple[float, float], tuple[float, float]]
+    extra_r_band: tuple[float, float]
+    loads: str
+    generic_a: tuple[float, float]
+    i_scale: float
+    max_len: int
+
+    @property
+    def params(self):
+        """The type's :class:`~uam_studio.battery.parameters.CellParameters`."""
+        return self.cell.params
+
+    @property
+    def r0_mid(self) -> float:
+        return sum(self.r0_range) / 2
+
+    @property
+    def r0_half(self) -> float:
+        return (self.r0_range[1] - self.r0_range[0]) / 2
+
+    @property
+    def u_ref_c(self) -> float:
+        return sum(self.q_range) / 2
+
+
+NASA_TRAINING = DynaformerCell("nasa18650", NASA_18650, PAPER_Q_RANGE, PAPER_R0_RANGE,
+                               ((4000.0, 5000.0), (8000.0, 9000.0)), (0.45, 0.5), "flight", (0.05, 3.0), 3.0, 10240)
+VTC6_TRAINING = DynaformerCell("vtc6", VTC6, (8000.0, 12500.0), (0.012, 0.06),
+                               ((6500.0, 8000.0), (12500.0, 14000.0)), (0.06, 0.08), "power", (0.5, 18.0), 15.0, 5120)
+DYNAFORMER_CELLS: dict[str, DynaformerCell] = {c.key: c for c in (NASA_TRAINING, VTC6_TRAINING)}
+
+
+def dynaformer_cell(key: str) -> DynaformerCell:
+    """The cell type named ``key``.
+
+    :raises InputError: (field ``cell``) for another name.
+    """
+    try:
+        return DYNAFORMER_CELLS[key]
+    except (KeyError, TypeError):
+        raise InputError("cell", f"{key!r}; allowed {', '.join(DYNAFORMER_CELLS)}") from None
