@@ -17,7 +17,7 @@ from uam_studio.planning import held_out_missions
 out = {}
 n = int(sys.argv[2]) if len(sys.argv) > 2 else 200
 n_oracle = int(sys.argv[3]) if len(sys.argv) > 3 else 20
-for scenario in ("single_charge", "multi_charge"):
+for scenario in ("single_flight", "single_charge", "multi_charge"):
     ms = held_out_missions(n, 20261121, scenario=scenario)
     for pol in ("attention", "dqn", "greedy"):
         try:

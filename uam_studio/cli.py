@@ -399,12 +399,13 @@ def _run_train_dqn(args: argparse.Namespace) -> int:
 
     from uam_studio.planning import SCENARIOS, load_mission
     from uam_studio.planning.agents.retrain import retrain_dqn, training_setup
+    from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO
 
     if args.scenario is not None and args.scenario not in SCENARIOS:
         raise _CliExit(f"--scenario: {args.scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}",
                        EXIT_INPUT)
     mission = load_mission(args.mission) if args.mission is not None else None
-    scenario = args.scenario or (mission.scenario if mission is not None else "single_charge")
+    scenario = args.scenario or (mission.scenario if mission is not None else DEFAULT_SCENARIO)
     out = Path(args.out or f"runs/dqn_{scenario}")
     agent = out if out.suffix == ".zip" else out / "agent.zip"
     _refuse_bundled(agent)

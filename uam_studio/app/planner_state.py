@@ -71,6 +71,7 @@ from uam_studio.planning.missions.mission import (
     mission_from_json,
     mission_to_dict,
 )
+from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO
 from uam_studio.planning.safety import safety_verdict
 
 __all__ = ["EXAMPLE_MISSION", "PlannerState", "mission_digest"]
@@ -84,7 +85,7 @@ EXAMPLE_MISSION: dict[str, Any] = {
         {"name": "Fremont", "x_km": 38.0, "y_km": -32.0, "priority": 3, "wind_kts": -5.0},
         {"name": "Napa", "x_km": 18.0, "y_km": 55.0, "priority": 2, "wind_kts": 20.0, "dwell_s": 300.0},
     ],
-    "scenario": "single_charge",
+    "scenario": DEFAULT_SCENARIO,
     "battery": {"q_max": 7600.0, "r0": 0.117215},
     "eod_v": 3.0,
 }
@@ -134,7 +135,7 @@ class PlannerState(param.Parameterized):
     vertiport_x_km = param.Number(default=0.0, bounds=COORD_RANGE_KM)
     vertiport_y_km = param.Number(default=0.0, bounds=COORD_RANGE_KM)
     return_wind = param.Number(default=0.0, bounds=WIND_RANGE_KTS, doc="wind (kt) on legs back to the vertiport")
-    scenario = param.Selector(default="single_charge", objects=list(SCENARIOS))
+    scenario = param.Selector(default=DEFAULT_SCENARIO, objects=list(SCENARIOS))
     q_max = param.Number(default=DEFAULT_Q_MAX, bounds=APP_Q_RANGE, doc="mobile lithium charge q_max (C)")
     r0 = param.Number(default=DEFAULT_R0, bounds=APP_R0_RANGE, doc="ohmic resistance R0 (ohm)")
     eod_v = param.Number(default=3.0, bounds=APP_EOD_RANGE, doc="end-of-discharge cut-off (V)")

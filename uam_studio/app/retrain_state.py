@@ -33,6 +33,7 @@ from uam_studio.planning.agents.attention.retrain import (
     MISSIONS_RANGE,
 )
 from uam_studio.planning.missions.mission import SCENARIOS, Mission
+from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO
 
 __all__ = ["CURVE_COLUMNS", "EPOCH_COLUMNS", "MODELS", "RUNNER_ENV", "RetrainState"]
 
@@ -73,7 +74,7 @@ class RetrainState(param.Parameterized):
     source = param.Selector(default="map", objects=["map", "random"],
                             doc="DQN: train on the current map or on random missions; attention: score each "
                                 "epoch on the current map, or not at all (it always trains on random missions)")
-    scenario = param.Selector(default="single_charge", objects=list(SCENARIOS))
+    scenario = param.Selector(default=DEFAULT_SCENARIO, objects=list(SCENARIOS))
     alpha = param.Number(default=1.0, bounds=(0.0, 100.0), doc="reward per destination x priority")
     beta = param.Number(default=1.0, bounds=(0.0, 100.0), doc="penalty per charging stop")
     gamma = param.Number(default=5.0, bounds=(0.0, 100.0), doc="penalty for an end of discharge")

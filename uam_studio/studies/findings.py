@@ -28,6 +28,7 @@ from uam_studio.flight import leg_feasible, leg_profile
 from uam_studio.planning.env.environment import REWARD_DEFAULTS
 from uam_studio.planning.legs import ALTITUDES_M
 from uam_studio.planning.missions.mission import Mission
+from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO
 
 __all__ = [
     "altitude_by_distance",
@@ -128,7 +129,7 @@ def fixed_altitude_reach(
 def reward_sweep(
     name: str,
     values: Sequence[float],
-    scenario: str = "single_charge",
+    scenario: str = DEFAULT_SCENARIO,
     steps: int = 60_000,
     eval_missions: Sequence[Mission] | None = None,
     n_eval: int = 100,

@@ -14,6 +14,7 @@ import numpy as np
 
 from uam_studio.planning.missions.generate import held_out_missions
 from uam_studio.planning.missions.mission import Mission
+from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO
 from uam_studio.planning.operations import FlightRecord, fly_mission
 
 
@@ -85,7 +86,7 @@ def summarize(records: Iterable[FlightRecord]) -> FlightSummary:
 
 
 def sweep(sigmas_kt: Sequence[float] = (0.0, 7.0, 13.0, 26.0), noises_mv: Sequence[float] = (0.0, 5.0, 10.0),
-          n: int = 8, seed: int = 9090, scenario: str = "single_charge", n_dest: tuple[int, int] = (5, 8),
+          n: int = 8, seed: int = 9090, scenario: str = DEFAULT_SCENARIO, n_dest: tuple[int, int] = (5, 8),
           first_seed: int = 50_000, **kwargs: Any) -> list[dict[str, Any]]:
     """The operator against hindsight and the blind plan over forecast error x sensor noise.
 

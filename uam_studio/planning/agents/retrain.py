@@ -36,6 +36,7 @@ from uam_studio.errors import InputError, check_range
 from uam_studio.planning.agents.run_result import RetrainResult
 from uam_studio.planning.env.environment import REWARD_DEFAULTS
 from uam_studio.planning.missions.mission import SCENARIOS, Mission, mission_to_dict
+from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO, check_scenario
 
 __all__ = [
     "DQN_REWARD_DEFAULTS",
@@ -174,9 +175,9 @@ def training_setup(
     from uam_studio.planning.agents.training import DQNTrainConfig, fine_tuning
     from uam_studio.planning.env import make_env
 
-    if scenario is not None and scenario not in SCENARIOS:
-        raise InputError("scenario", f"{scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}")
-    scenario = scenario or (mission.scenario if mission is not None else "single_charge")
+    if scenario is not None:
+        check_scenario(scenario)
+    scenario = scenario or (mission.scenario if mission is not None else DEFAULT_SCENARIO)
     given = {"alpha": alpha, "beta": beta, "gamma": gamma}
     weights = {k: check_range(k, DQN_REWARD_DEFAULTS[k] if v is None else v, 0.0, 1e6) for k, v in given.items()}
     cfg = DQNTrainConfig(scenario=scenario, seed=int(seed), safe_return=bool(safe_return), **weights)

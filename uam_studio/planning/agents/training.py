@@ -36,6 +36,7 @@ from uam_studio.planning.agents.agent_file import load_agent
 from uam_studio.planning.agents.dqn import MaskedDQN, MaskedDQNPolicy
 from uam_studio.planning.agents.vec_env import GroupedSubprocVecEnv
 from uam_studio.planning.env.environment import REWARD_DEFAULTS
+from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO
 
 __all__ = [
     "DQNTrainConfig",
@@ -60,7 +61,7 @@ class DQNTrainConfig:
     they are recorded in the model card. ``gamma_discount`` is the RL discount factor.
     """
 
-    scenario: str = "single_charge"
+    scenario: str = DEFAULT_SCENARIO
     steps: int = 50_000  # total env transitions (all envs together); ~5,000 episodes of ~10 steps
     alpha: float = REWARD_DEFAULTS["alpha"]
     beta: float = REWARD_DEFAULTS["beta"]

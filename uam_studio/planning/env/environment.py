@@ -51,6 +51,7 @@ from uam_studio.planning.missions.generate import (
     random_mission,
 )
 from uam_studio.planning.missions.mission import SCENARIOS, Mission
+from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO, check_scenario, scenario_rules
 
 MAX_EPISODE_STEPS = 2 * N_MAX + 2
 REWARD_DEFAULTS = {"alpha": 1.0, "beta": 1.0, "gamma": 5.0}  # the paper's figures; the one home of these
@@ -223,10 +224,7 @@ class UAMPlanningEnv(gym.Env):
         self.render_mode = render_mode
         if mission is not None and not isinstance(mission, Mission):
             raise InputError("mission", f"expected a Mission or None, got {type(mission).__name__}")
-        scenario = scenario or (mission.scenario if mission is not None else "single_charge")
-        if scenario not in SCENARIOS:
-            raise InputError("scenario", f"{scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}")
-        self.scenario = scenario
+        self.scenario = check_scenario(scenario or (mission.scenario if mission is not None else DEFAULT_SCENARIO))
         if isinstance(backend, BatteryBackend):
             self.backend = backend
         elif backend == "physics":
@@ -286,7 +284,7 @@ class UAMPlanningEnv(gym.Env):
             raise InputError("mission.destinations", f"has {n} destinations; the environment has {N_MAX} slots")
         legs = LegTable(mission)
         if not self._servable(legs).any():
-            what = "destinations[0]" if self.scenario == "single_flight" else "every destination"
+            what = "destinations[0]" if scenario_rules(self.scenario).one_leg else "every destination"
             raise InputError("mission.destinations", f"{what} is too close to the vertiport to fly to "
                                                      f"(a leg needs >= {MIN_LEG_KM[0]:.1f} km)")
         return legs
@@ -294,7 +292,7 @@ class UAMPlanningEnv(gym.Env):
     def _servable(self, legs: LegTable) -> np.ndarray:
         """Slots the aircraft may ever fly to: from the vertiport (and back) at 500 m at least."""
         out = legs.feasible[VERTIPORT_SLOT, :N_MAX, 0].copy()
-        if self.scenario == "single_flight":
+        if scenario_rules(self.scenario).one_leg:
             out[1:] = False
         return out
 
@@ -407,7 +405,7 @@ class UAMPlanningEnv(gym.Env):
         if target == VERTIPORT_SLOT:
             self._cycles += 1
             reward = -self.beta
-            if self.scenario == "multi_charge":
+            if scenario_rules(self.scenario).recharges:
                 self.backend.recharge()
                 self._charge = 0.0
                 self._voltage = self._v_rest
@@ -421,7 +419,7 @@ class UAMPlanningEnv(gym.Env):
             prio = int(legs.priority[target])
             self._reached_priority += prio
             reward = self.alpha * prio
-            terminated = self.scenario == "single_flight"
+            terminated = scenario_rules(self.scenario).one_leg
         return self._finish(reward, terminated)
 
     def _finish(self, reward: float, terminated: bool):
@@ -438,7 +436,7 @@ class UAMPlanningEnv(gym.Env):
         node = self._node
         ok_target = np.zeros(N_TARGETS, dtype=bool)
         ok_target[:N_MAX] = self._servable_slots & ~self._visited
-        ok_target[VERTIPORT_SLOT] = node != VERTIPORT_SLOT and self.scenario != "single_flight"
+        ok_target[VERTIPORT_SLOT] = node != VERTIPORT_SLOT and not scenario_rules(self.scenario).one_leg
         self._mask = (self._legs.feasible[node] & ok_target[:, None]).reshape(-1)
 
     def _observe(self) -> np.ndarray:
@@ -528,7 +526,7 @@ class UAMPlanningEnv(gym.Env):
 
     def _home_reachable(self, backend: BatteryBackend, node: int) -> bool:
         """Could ``backend`` (left unchanged) fly from ``node`` home at the least-charge level?"""
-        if node == VERTIPORT_SLOT or self.scenario == "single_flight":  # single flight: no way back
+        if node == VERTIPORT_SLOT or scenario_rules(self.scenario).one_leg:  # single flight: no way back
             return True
         home = self._legs.cheapest_level(node, VERTIPORT_SLOT)
         if home is None:
@@ -549,9 +547,9 @@ class UAMPlanningEnv(gym.Env):
             level = legs.cheapest_level(node, k)
             if level is not None and self.lookahead_safe(k * N_ALTITUDES + level):
                 return k * N_ALTITUDES + level
-            if self.scenario == "single_flight":
+            if scenario_rules(self.scenario).one_leg:
                 return None
-        if node == VERTIPORT_SLOT or self.scenario == "single_flight":
+        if node == VERTIPORT_SLOT or scenario_rules(self.scenario).one_leg:
             return None
         level = legs.cheapest_level(node, VERTIPORT_SLOT)
         return None if level is None else VERTIPORT_SLOT * N_ALTITUDES + level
@@ -581,7 +579,7 @@ class UAMPlanningEnv(gym.Env):
         if self._invalid:
             msgs.append("the policy chose an invalid action")
         missed = [d.name for d, seen in zip(self.mission.destinations, self._visited) if not seen]
-        if missed and self.scenario != "single_flight":
+        if missed and not scenario_rules(self.scenario).one_leg:
             msgs.append(f"not visited: {', '.join(missed)}")
         stats = {"return": self._return, "steps": self._steps, "backend": self.backend.name,
                  "scenario": self.scenario, "health": [float(h) for h in self._health]}

@@ -37,6 +37,7 @@ from uam_studio.planning.missions.mission import (
     Mission,
     Vertiport,
 )
+from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO, check_scenario, scenario_rules
 
 DEFAULT_Q_RANGE = PAPER_Q_RANGE
 DEFAULT_R0_RANGE = (0.017, 0.35)  # ohm; the paper's is 0.017-0.45, see the module docstring
@@ -64,7 +65,7 @@ def _pair(field: str, value, lo: float, hi: float) -> tuple[float, float]:
 def random_mission(
     rng: np.random.Generator,
     n_dest=(1, PAPER_DESTINATIONS),
-    scenario: str = "single_charge",
+    scenario: str = DEFAULT_SCENARIO,
     r0_range=DEFAULT_R0_RANGE,
     q_range=DEFAULT_Q_RANGE,
     radius_km=DEFAULT_RADIUS_KM,
@@ -83,13 +84,12 @@ def random_mission(
     :param radius_km: uniform range of each destination's distance from the vertiport (km).
     :param eod_v: end-of-discharge cut-off (V).
     """
-    if scenario not in SCENARIOS:
-        raise InputError("scenario", f"{scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}")
+    check_scenario(scenario)
     lo, hi = _n_range(n_dest)
     r_lo, r_hi = _pair("radius_km", radius_km, MIN_SEPARATION_KM, 190.0)
     q_lo, q_hi = _pair("q_range", q_range, 1.0, 20000.0)
     r0_lo, r0_hi = _pair("r0_range", r0_range, 0.0, 5.0)
-    n = 1 if scenario == "single_flight" else int(rng.integers(lo, hi + 1))
+    n = 1 if scenario_rules(scenario).one_leg else int(rng.integers(lo, hi + 1))
     pts: list[tuple[float, float]] = []
     for _ in range(_MAX_TRIES):
         if len(pts) == n:
@@ -115,7 +115,7 @@ def held_out_missions(
     n: int,
     seed: int,
     n_dest=(6, PAPER_DESTINATIONS),
-    scenario: str = "single_charge",
+    scenario: str = DEFAULT_SCENARIO,
     r0_range=DEFAULT_R0_RANGE,
     q_range=DEFAULT_Q_RANGE,
     radius_km=HELD_OUT_RADIUS_KM,
@@ -145,7 +145,7 @@ def any_valid_mission(rng: np.random.Generator, max_dest: int = MAX_DESTINATIONS
     For robustness checks (benchmarks/bench_properties.py; tests/test_properties.py draws the same way
     with hypothesis)."""
     scenario = str(rng.choice(scenarios))
-    n = 1 if scenario == "single_flight" else int(rng.integers(1, max_dest + 1))
+    n = 1 if scenario_rules(scenario).one_leg else int(rng.integers(1, max_dest + 1))
     pts: list[tuple[float, float]] = []
     half = ANY_SQUARE_KM
     for _ in range(n):

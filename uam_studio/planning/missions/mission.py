@@ -51,9 +51,12 @@ from uam_studio.battery import DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0, EOD_RAN
 from uam_studio.errors import InputError, check_range, short_repr
 from uam_studio.flight.profile import MAX_DWELL_S
 from uam_studio.flight.tables import WIND_RANGE_KTS
+from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO, check_scenario
+from uam_studio.planning.missions.scenario import (
+    SCENARIOS as SCENARIOS,  # re-exported: the mission format names them
+)
 
 VERTIPORT = "vertiport"
-SCENARIOS = ("single_flight", "single_charge", "multi_charge")
 COORD_RANGE_KM = (-200.0, 200.0)
 PRIORITY_RANGE = (1, 3)
 MAX_NAME_LEN = 64
@@ -206,7 +209,7 @@ class Mission:
     name: str
     vertiport: Vertiport
     destinations: tuple[Destination, ...] = field(default_factory=tuple)
-    scenario: str = "single_charge"
+    scenario: str = DEFAULT_SCENARIO
     battery: Battery = field(default_factory=Battery)
     eod_v: float = DEFAULT_EOD_V
 
@@ -228,10 +231,7 @@ class Mission:
                 )
             seen[d.name] = i
         object.__setattr__(self, "destinations", dests)
-        if self.scenario not in SCENARIOS:
-            raise InputError(
-                "scenario", f"{short_repr(self.scenario)} is not a scenario; allowed: {', '.join(SCENARIOS)}"
-            )
+        check_scenario(self.scenario)
         if not isinstance(self.battery, Battery):
             raise InputError("battery", f"expected a Battery, got {type(self.battery).__name__}")
         object.__setattr__(self, "eod_v", _number("eod_v", self.eod_v, *EOD_RANGE, " V"))
@@ -300,9 +300,7 @@ def mission_from_dict(d: Any) -> Mission:
     if len(raw) > MAX_DESTINATIONS:  # before reading them: the same check as Mission's
         check_destination_count(len(raw))
     destinations = tuple(_destination_from_dict(i, x) for i, x in enumerate(raw))
-    scenario = d["scenario"]
-    if not isinstance(scenario, str) or scenario not in SCENARIOS:
-        raise InputError("scenario", f"{short_repr(scenario)} is not a scenario; allowed: {', '.join(SCENARIOS)}")
+    scenario = check_scenario(d["scenario"])
     _check_keys("battery", d["battery"], ("q_max", "r0"))
     with _under("battery"):
         battery = Battery(d["battery"]["q_max"], d["battery"]["r0"])

@@ -45,6 +45,7 @@ from uam_studio.planning.missions.mission import (
     Mission,
     check_destination_count,
 )
+from uam_studio.planning.missions.scenario import scenario_rules
 from uam_studio.planning.operations.decision import Decision
 from uam_studio.planning.operations.defaults import DEFAULT_FORECAST_SIGMA_KT
 from uam_studio.planning.operations.health_belief import HealthBelief
@@ -317,7 +318,7 @@ class Operator:
         def names(s: Sortie) -> tuple[list[str], list[float]]:
             return [self.names[k] for k in s.nodes] + [VERTIPORT], [ALTITUDES_M[a] for a in s.alts]
 
-        if self.scenario == "single_flight":
+        if scenario_rules(self.scenario).one_leg:
             if here != VERTIPORT_SLOT or visited:
                 return [], [], "single flight done"
             levels = [a for a in range(len(ALTITUDES_M)) if moves[0, a]] or \
@@ -327,7 +328,7 @@ class Operator:
             best, _, vmin = safest_level(legs, VERTIPORT_SLOT, 0, levels, state, q, r0, self.eod_v)
             return [self.names[0]], [ALTITUDES_M[best]], f"highest expected minimum voltage ({vmin.max():.3f} V)"
 
-        if here == VERTIPORT_SLOT and self.scenario == "single_charge" and self.sorties >= 1:
+        if here == VERTIPORT_SLOT and scenario_rules(self.scenario).one_sortie and self.sorties >= 1:
             return [], [], "back home: the charge is used"
         unvisited_ok = np.array([k < n and not visited >> k & 1 for k in range(N_MAX)])
         if here == VERTIPORT_SLOT:
@@ -341,7 +342,7 @@ class Operator:
                 return [], [], "no unvisited destination can be reached safely"
         elif not cont:
             return None, [], ""
-        if self.scenario == "single_charge":
+        if scenario_rules(self.scenario).one_sortie:
             best = best_single_sortie(cont, legs)
             route, alts = names(best)
             return route, alts, f"expected priority {mask_priority(legs, best.mask)} this charge"
@@ -379,7 +380,7 @@ class Operator:
         from uam_studio.planning.agents.attention.decode import continue_route  # torch, at first use
 
         n = len(self.names)
-        if self.scenario == "single_flight" or (here == VERTIPORT_SLOT and self.scenario == "single_charge"
+        if scenario_rules(self.scenario).one_leg or (here == VERTIPORT_SLOT and scenario_rules(self.scenario).one_sortie
                                                 and self.sorties >= 1):
             return self._plan(legs, here, state, visited, moves)
         done = np.array([bool(visited >> k & 1) for k in range(n)])
@@ -391,7 +392,7 @@ class Operator:
         nodes, levels = res
         route = [VERTIPORT if k == legs.home else self.names[k] for k in nodes]
         alts = [ALTITUDES_M[a] for a in levels]
-        if self.scenario == "single_charge":
+        if scenario_rules(self.scenario).one_sortie:
             prio = int(sum(legs.priority[k] for k in nodes if k != legs.home))
             return route, alts, f"expected priority {prio} more this charge"
         return route, alts, f"expected {max(0, route.count(VERTIPORT) - 1)} more charges after this one"

@@ -20,6 +20,7 @@ from uam_studio.battery import full_charge
 from uam_studio.planning.legs import ALTITUDES_M
 from uam_studio.planning.missions.check import Plan, make_plan
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
+from uam_studio.planning.missions.scenario import scenario_rules
 from uam_studio.planning.solvers.setup import fly_batch, prepare_mission, single_flight_note, too_close
 
 
@@ -47,7 +48,7 @@ def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
         reason = too_close(legs, k)
         if reason is not None:
             msgs.append(reason)
-    if scenario == "single_flight":
+    if scenario_rules(scenario).one_leg:
         msgs.extend(filter(None, [single_flight_note(mission)]))
         a = legs.cheapest_level(home, 0)
         if a is not None and fly(home, 0, a, fresh)[0]:
@@ -83,7 +84,7 @@ def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
         route.append(VERTIPORT)
         alts.append(ALTITUDES_M[legs.cheapest_level(at, home)])
         at, x = home, fresh
-        if scenario == "single_charge":
+        if scenario_rules(scenario).one_sortie:
             break
     left = [dests[k].name for k in range(n) if servable[k] and not visited[k]]
     if left:

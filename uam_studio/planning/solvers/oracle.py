@@ -87,6 +87,7 @@ from uam_studio.planning.legs import (
 )
 from uam_studio.planning.missions.check import Plan, make_plan
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
+from uam_studio.planning.missions.scenario import scenario_rules
 from uam_studio.planning.solvers.reference import reference_from_setup
 from uam_studio.planning.solvers.setup import (
     fly_batch,
@@ -325,9 +326,9 @@ def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iter
     mission, full_mission, scenario, msgs, stats, legs = (setup.mission, setup.full_mission, setup.scenario,
                                                           setup.messages, setup.stats, setup.legs)
     dests = mission.destinations
-    if scenario != "single_flight" and len(dests) > EXACT_MAX:
+    if not scenario_rules(scenario).one_leg and len(dests) > EXACT_MAX:
         return reference_from_setup(setup, "oracle", alt_indices, t0)
-    if scenario == "single_flight":
+    if scenario_rules(scenario).one_leg:
         return single_flight_plan(setup, "oracle", alt_indices, t0)
     stats["exact"] = True
 
@@ -349,7 +350,7 @@ def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iter
     def names(s: Sortie) -> tuple[list[str], list[float]]:
         return ([legs.names[k] for k in s.nodes] + [VERTIPORT], [ALTITUDES_M[a] for a in s.alts])
 
-    if scenario == "single_charge":
+    if scenario_rules(scenario).one_sortie:
         best = best_single_sortie(found, legs)
         left = [legs.names[k] for k in range(len(dests)) if coverable >> k & 1 and not best.mask >> k & 1]
         if left:

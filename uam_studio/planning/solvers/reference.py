@@ -51,6 +51,7 @@ from uam_studio.battery import full_charge, simulate
 from uam_studio.planning.legs import ALTITUDES_M, DT_S, N_ALTITUDES, LegTable, takeoff_current
 from uam_studio.planning.missions.check import Plan, make_plan
 from uam_studio.planning.missions.mission import MAX_DESTINATIONS, VERTIPORT, Mission
+from uam_studio.planning.missions.scenario import scenario_rules
 from uam_studio.planning.solvers.greedy import greedy_plan
 from uam_studio.planning.solvers.setup import (
     PlanSetup,
@@ -316,7 +317,7 @@ def reference_from_setup(setup: PlanSetup, policy: str, alt_indices: Iterable[in
                                               "return to the vertiport with this battery")
     if not reachable:
         return done([], [])
-    multi = scenario == "multi_charge"
+    multi = scenario_rules(scenario).recharges
     prio = legs.priority
 
     def score(sorties: list[list[int]], times: np.ndarray) -> tuple:
@@ -425,7 +426,7 @@ def reference_plan(mission: Mission, scenario: str | None = None,
     setup = prepare_mission(mission, scenario, policy)
     if setup.early is not None:
         return setup.early
-    if setup.scenario == "single_flight":  # one leg: exact at any size
+    if scenario_rules(setup.scenario).one_leg:  # one leg: exact at any size
         return single_flight_plan(setup, policy, alt_indices, t0)
     return reference_from_setup(setup, policy, alt_indices, t0, time_limit_s)
 

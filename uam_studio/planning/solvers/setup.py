@@ -20,7 +20,8 @@ from uam_studio.battery.solver import integrate_current
 from uam_studio.errors import InputError
 from uam_studio.planning.legs import ALTITUDES_M, DT_S, MIN_LEG_KM, N_MAX, LegTable, takeoff_current
 from uam_studio.planning.missions.check import Plan, make_plan
-from uam_studio.planning.missions.mission import MAX_DESTINATIONS, SCENARIOS, Mission, as_mission
+from uam_studio.planning.missions.mission import MAX_DESTINATIONS, Mission, as_mission
+from uam_studio.planning.missions.scenario import check_scenario
 
 _ROW_BATCH = 512  # trajectories integrated together (small blocks stay in cache: faster)
 _CHUNK_S = 128  # samples per integration pass
@@ -171,9 +172,10 @@ def prepare_mission(mission: Any, scenario: str | None, policy: str) -> PlanSetu
     if mission is None:
         return PlanSetup(None, None, scenario, msgs, {}, early=Plan(policy, messages=msgs))
     scenario = scenario or mission.scenario
-    if scenario not in SCENARIOS:
-        msg = f"scenario: {scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}"
-        return PlanSetup(mission, mission, scenario, msgs, {}, early=Plan(policy, messages=[msg]))
+    try:
+        check_scenario(scenario)
+    except InputError as err:
+        return PlanSetup(mission, mission, scenario, msgs, {}, early=Plan(policy, messages=[str(err)]))
     stats: dict[str, Any] = {"scenario": scenario}
     dests = mission.destinations
     if not dests:

@@ -50,6 +50,7 @@ from uam_studio.planning.agents.attention.model import AttentionConfig, Attentio
 from uam_studio.planning.legs import ALTITUDES_M, LegTable
 from uam_studio.planning.missions.check import Plan, make_plan
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
+from uam_studio.planning.missions.scenario import scenario_rules
 from uam_studio.planning.solvers.setup import (
     fly_batch,
     prepare_mission,
@@ -69,7 +70,7 @@ def default_search(scenario: str, n_dest: int) -> tuple[int, int]:
     multi_charge maps of more than :data:`MULTI_WIDE_MAX_DEST` destinations (about n + sorties steps
     of physics checks against about n / 3 in single charge: the narrower search keeps a
     20-destination plan fast; benchmarks/RESULTS.md has the measurements)."""
-    if scenario == "multi_charge" and n_dest > MULTI_WIDE_MAX_DEST:
+    if scenario_rules(scenario).recharges and n_dest > MULTI_WIDE_MAX_DEST:
         return 8, 2
     return 16, 4
 
@@ -150,7 +151,7 @@ class _Search:
     def __init__(self, net: AttentionPolicy, tok: MissionTokens, legs: LegTable, scenario: str,
                  beam_width: int, safety_filter: bool, expand: int | None = None) -> None:
         self.net, self.tok, self.legs = net, tok, legs
-        self.multi = scenario == "multi_charge"
+        self.multi = scenario_rules(scenario).recharges
         self.width = beam_width
         self.filter = safety_filter
         m = legs.mission
@@ -388,7 +389,7 @@ def attention_plan(mission: Mission | dict, net: AttentionPolicy | None = None, 
         stats["time_s"] = round(time.perf_counter() - t0, 4)
         return make_plan(full, "attention", route, alts, msgs, stats)
 
-    if scenario == "single_flight":
+    if scenario_rules(scenario).one_leg:
         return done(*_single_flight(legs, safety_filter, msgs, stats))
     for k in range(n):
         reason = too_close(legs, k)

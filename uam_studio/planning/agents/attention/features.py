@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from uam_studio.planning.legs import LegTable
+from uam_studio.planning.missions.scenario import scenario_rules
 
 TOKEN_FEATURES = 13
 CONTEXT_FEATURES = 4
@@ -111,9 +112,9 @@ def mission_tokens(legs: LegTable, scenario: str) -> MissionTokens:
     f[n, 8] = 1.0
     f[:, 9] = q / Q_SCALE
     f[:, 10] = float(m.battery.r0) / R0_SCALE
-    f[:, 11] = 1.0 if scenario == "multi_charge" else 0.0
+    f[:, 11] = 1.0 if scenario_rules(scenario).recharges else 0.0
     f[:, 12] = n / 20.0
-    return MissionTokens(legs, f.astype(np.float32), idx, charge, dist, prio, q, scenario == "multi_charge")
+    return MissionTokens(legs, f.astype(np.float32), idx, charge, dist, prio, q, scenario_rules(scenario).recharges)
 
 
 def step_features(tok: MissionTokens, at: int, visited: np.ndarray, used_c: float,

@@ -48,6 +48,7 @@ from uam_studio.planning.agents.attention.model import AttentionConfig, Attentio
 from uam_studio.planning.legs import N_MAX, LegTable
 from uam_studio.planning.missions.generate import random_mission
 from uam_studio.planning.missions.mission import Mission
+from uam_studio.planning.missions.scenario import scenario_rules
 from uam_studio.planning.solvers.oracle import (
     best_single_sortie,
     coverable_mask,
@@ -172,7 +173,7 @@ def _decisions(tok, scenario: str, sorties: list[list[int]], k: int) -> list[Dec
                 visited[t] = True
             at = t
         n_sorties += 1
-        if scenario == "single_charge":
+        if scenario_rules(scenario).one_sortie:
             return out
     ctx, cand, mask = step_features(tok, n, visited, 0.0, n_sorties)
     if mask[:n].any():  # destinations left that the table allows: the oracle could not fit them
