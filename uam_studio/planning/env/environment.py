@@ -32,6 +32,14 @@ from uam_studio.planning.env.backends import (
     observe_takeoff,
     takeoff_context_current,
 )
+from uam_studio.planning.env.observation import (
+    FEATURE_BOUND,
+    FEATURE_NAMES,
+    N_FEATURES,
+    OBS_DIM,
+    observe,
+    static_features,
+)
 from uam_studio.planning.legs import (
     ALTITUDES_M,
     DT_S,
@@ -50,39 +58,11 @@ from uam_studio.planning.missions.generate import (
     DEFAULT_RADIUS_KM,
     random_mission,
 )
-from uam_studio.planning.missions.mission import SCENARIOS, Mission
+from uam_studio.planning.missions.mission import Mission
 from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO, check_scenario, scenario_rules
 
 MAX_EPISODE_STEPS = 2 * N_MAX + 2
 REWARD_DEFAULTS = {"alpha": 1.0, "beta": 1.0, "gamma": 5.0}  # the paper's figures; the one home of these
-FEATURE_BOUND = 10.0
-
-# ----------------------------------------------------------------------------- observation layout
-
-_SLOT_FEATURES = ("present", "dx", "dy", "dist", "priority", "visited", "wind")
-FEATURE_NAMES: tuple[str, ...] = (
-    ("health_pc1", "health_pc2", "voltage", "x", "y", "n_reached", "charge_used")
-    + tuple(f"slot{k}_{f}" for k in range(N_MAX) for f in _SLOT_FEATURES)
-    + ("vertiport_dx", "vertiport_dy", "vertiport_dist", "vertiport_wind")
-    + tuple(f"scenario_{s}" for s in SCENARIOS)
-    + ("eod_v",)
-    + tuple(f"slot{k}_round_trip_charge" for k in range(N_MAX))
-    + ("home_charge",)
-)
-N_FEATURES = len(FEATURE_NAMES)  # 80
-OBS_DIM = N_FEATURES + N_ACTIONS  # 116
-_SLOT0 = 7
-_VP = _SLOT0 + 7 * N_MAX
-_SCEN = _VP + 4
-_EOD = _SCEN + 3
-_TRIP = _EOD + 1  # per-slot round-trip charge, then the charge to get home
-_SLOT_IDX = _SLOT0 + 7 * np.arange(N_MAX)  # start of each slot's block
-
-V_CENTER, V_SCALE = 3.6, 0.5
-POS_SCALE_KM = 100.0
-CHARGE_SCALE_C = 8000.0
-WIND_SCALE_KT = WIND_RANGE_KTS[1]
-
 
 # ----------------------------------------------------------------------------- environment
 
@@ -224,7 +204,7 @@ class UAMPlanningEnv(gym.Env):
         self.render_mode = render_mode
         if mission is not None and not isinstance(mission, Mission):
             raise InputError("mission", f"expected a Mission or None, got {type(mission).__name__}")
-        self.scenario = check_scenario(scenario or (mission.scenario if mission is not None else DEFAULT_SCENARIO))
+        self.scenario = scenario = check_scenario(scenario or (mission.scenario if mission is not None else DEFAULT_SCENARIO))
         if isinstance(backend, BatteryBackend):
             self.backend = backend
         elif backend == "physics":
@@ -352,24 +332,7 @@ class UAMPlanningEnv(gym.Env):
         self._leg_min_v: float | None = None
         self._done = False
 
-        # static part of the observation
-        base = np.zeros(N_FEATURES)
-        base[0:2] = health
-        present = legs.present[:N_MAX]
-        base[_SLOT_IDX] = present
-        base[_SLOT_IDX + 4] = legs.priority[:N_MAX] / 3.0
-        base[_SLOT_IDX + 6] = legs.wind[:N_MAX] / WIND_SCALE_KT
-        base[_VP + 3] = legs.wind[VERTIPORT_SLOT] / WIND_SCALE_KT
-        base[_SCEN + SCENARIOS.index(self.scenario)] = 1.0
-        base[_EOD] = (eod - 3.0) / 0.5
-        self._base = base
-        # relative position blocks, per node the aircraft can be at: [from, to, (dx, dy, dist)]
-        rel = np.zeros((N_TARGETS, N_TARGETS, 3))
-        rel[:, :, 0] = (legs.pos[None, :, 0] - legs.pos[:, None, 0]) / POS_SCALE_KM
-        rel[:, :, 1] = (legs.pos[None, :, 1] - legs.pos[:, None, 1]) / POS_SCALE_KM
-        rel[:, :, 2] = legs.dist / POS_SCALE_KM
-        rel[:, :N_MAX] *= legs.present[None, :N_MAX, None]
-        self._rel = rel
+        self._base, self._rel = static_features(legs, health, self.scenario, eod)
         self._update_mask()
         return self._observe(), self._info()
 
@@ -440,29 +403,8 @@ class UAMPlanningEnv(gym.Env):
         self._mask = (self._legs.feasible[node] & ok_target[:, None]).reshape(-1)
 
     def _observe(self) -> np.ndarray:
-        f = self._base.copy()
-        legs = self._legs
-        node = self._node
-        f[2] = (self._voltage - V_CENTER) / V_SCALE
-        f[3:5] = (legs.pos[node] - legs.pos[VERTIPORT_SLOT]) / POS_SCALE_KM
-        f[5] = len(self._reached) / N_MAX
-        f[6] = self._charge / CHARGE_SCALE_C
-        rel = self._rel[node]
-        f[_SLOT_IDX + 1] = rel[:N_MAX, 0]
-        f[_SLOT_IDX + 2] = rel[:N_MAX, 1]
-        f[_SLOT_IDX + 3] = rel[:N_MAX, 2]
-        f[_SLOT_IDX + 5] = self._visited
-        f[_VP:_VP + 3] = rel[VERTIPORT_SLOT]
-        vp = VERTIPORT_SLOT
-        for k in np.flatnonzero(self._servable_slots & ~self._visited):
-            trip = legs.cheapest_charge(node, k) + legs.cheapest_charge(k, vp) if k != node else 0.0
-            f[_TRIP + k] = trip / CHARGE_SCALE_C if np.isfinite(trip) else FEATURE_BOUND
-        f[_TRIP + N_MAX] = 0.0 if node == vp else legs.cheapest_charge(node, vp) / CHARGE_SCALE_C
-        obs = self._obs
-        np.clip(f, -FEATURE_BOUND, FEATURE_BOUND, out=f)
-        obs[:N_FEATURES] = f
-        obs[N_FEATURES:] = self._mask
-        return obs.copy()
+        return observe(self._base, self._rel, self._legs, self._node, self._voltage, len(self._reached),
+                       self._charge, self._visited, self._servable_slots, self._mask, self._obs)
 
     def _info(self) -> dict[str, Any]:
         return {

@@ -9,22 +9,20 @@
   the leg there *and* the leg from there home without falling below the cut-off, from the battery
   state the route has reached. So the vertiport can always be reached and every plan is safe. The
   filter flies only the candidates the search would take (each beam's best ``expand`` by the
-  network, more only when none of those is safe; moves from a full charge at the vertiport are
-  flown once per plan). At the vertiport the network may stop only when no
-  destination is safe (a fresh cell that fits nothing more).
+  network, more only when none of those is safe; moves from a full charge at the vertiport are flown
+  once per plan). At the vertiport it may stop only when no destination is safe (a fresh cell).
 - **Search** (:func:`default_search`): beam search. Each beam proposes its ``expand`` best safe
   moves by the network; children in the same situation (same visited set, node and sorties) are
   merged into the one with the most charge left; the ``beam_width`` best children go on, ranked by
   the network's log-probability (multi_charge: fewer sorties first, which at one step is the same as
   more destinations, then log-probability). Every finished route is kept and the best by the
-  scenario's objective is returned: single_charge the most priority (ties: less flight time);
-  multi_charge the most destinations, then the fewest sorties, then less time. The network is the
-  only policy: no hand-written rule proposes moves.
+  scenario's objective is returned: single_charge the most priority (ties: less flight time); multi_charge
+  the most destinations, then the fewest sorties, then less time. No hand-written rule proposes moves.
 - **Raw agent** (``safety_filter=False, beam_width=1``): the network's first choice at each step,
   nothing flown during planning (the plan is checked by the caller, and an unsafe plan scores 0).
 
-single_flight has nothing to choose but the level of its one leg: with the filter, the level with
-the highest minimum voltage on the physics model; raw, the lowest-charge level.
+single_flight has nothing to choose but the level of its one leg: with the filter, the level with the
+highest minimum voltage on the physics model; raw, the lowest-charge level.
 """
 
 from __future__ import annotations
@@ -74,8 +72,8 @@ def default_search(scenario: str, n_dest: int) -> tuple[int, int]:
         return 8, 2
     return 16, 4
 
-__all__ = ["FORMAT", "continue_route", "default_search", "WEIGHTS_NAME", "attention_plan", "bundled_weights_path", "load_policy",
-           "load_policy_cached"]
+__all__ = ["FORMAT", "WEIGHTS_NAME", "attention_plan", "bundled_weights_path", "continue_route", "default_search",
+           "load_policy", "load_policy_cached"]
 
 
 # ----------------------------------------------------------------------------- weights
