@@ -177,11 +177,14 @@ def test_train_into_pretrained_is_refused(capsys):
     assert main(["train", "dynaformer", "--alpha", "2"]) == 2
     assert main(["train", "dqn", "--n-train", "100"]) == 2
     capsys.readouterr()
-    assert main(["train", "dynaformer", "--init-from", "a.zip"]) == 2
+    assert main(["train", "dqn", "--cell", "vtc6"]) == 2  # a Dynaformer option
+    assert main(["train", "dynaformer", "--init-from", "a.zip", "--out", "unused_run"]) == 2  # before any data
     assert main(["train", "dqn", "--steps", "10", "--init-from", "missing.zip", "--out", "unused.zip"]) == 2
     err = capsys.readouterr().err.splitlines()
-    assert len(err) == 2 and "--init-from" in err[0] and "init_agent" in err[1] and "not found" in err[1]
-    assert not Path("unused.zip").exists()
+    assert len(err) == 3 and "--cell" in err[0], err
+    assert err[1].startswith("error: init: ") and "a.zip: file not found" in err[1], err
+    assert "init_agent" in err[2] and "not found" in err[2]
+    assert not Path("unused.zip").exists() and not Path("unused_run").exists()
 
 
 def test_plan_argument_errors(capsys):

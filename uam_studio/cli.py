@@ -373,13 +373,16 @@ def _run_train_attention(args: argparse.Namespace) -> int:
 
 
 def _run_train_dynaformer(args: argparse.Namespace) -> int:
-    from .dynaformer.train import TrainConfig, pick_device, train
+    from .dynaformer.model import DynaformerConfig
+    from .dynaformer.train import TrainConfig, pick_device, read_init, train
 
     out = args.out or "runs/dynaformer"
     _refuse_bundled(out)
     cfg = TrainConfig(seed=args.seed, device=args.device or "auto", cell=args.cell or "nasa18650",
                       init=args.init_from)
     pick_device(cfg.device)
+    if cfg.init is not None:  # a weights file that does not load is refused before the run folder is made
+        read_init(cfg.init, DynaformerConfig.for_cell(cfg.cell))
     if args.steps is not None:
         if args.steps < 1:
             raise _CliExit("--steps: must be >= 1", EXIT_INPUT)

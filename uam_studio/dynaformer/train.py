@@ -293,8 +293,9 @@ def _resume(path: Path, ck: dict, model: Dynaformer, opt: torch.optim.Optimizer,
                                        f"{_RESUME_HINT}") from None
 
 
-def _load_init(model: Dynaformer, path: str) -> None:
-    """Start ``model`` from the weights file ``path`` (read without unpickling); the architecture must match.
+def read_init(path: str, model_cfg: DynaformerConfig) -> dict:
+    """The state dict to start from: the weights file ``path`` (read without unpickling), whose
+    architecture must be ``model_cfg``'s.
 
     :raises InputError: (field ``init``) a file that does not load, or of another architecture.
     """
@@ -306,10 +307,10 @@ def _load_init(model: Dynaformer, path: str) -> None:
         raise InputError("init", str(err)) from None
     arch = ("d_model", "n_heads", "enc_layers", "dec_layers", "ff_dim", "chunk", "latent_dim", "memory_tokens",
             "health", "health_window")
-    other = [k for k in arch if getattr(init.cfg, k) != getattr(model.cfg, k)]
+    other = [k for k in arch if getattr(init.cfg, k) != getattr(model_cfg, k)]
     if other:
         raise InputError("init", f"{path}: another architecture ({', '.join(other)} differ)")
-    model.load_state_dict(init.state_dict())
+    return init.state_dict()
 
 
 def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerConfig | None = None,
@@ -327,6 +328,8 @@ def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerC
     if model_cfg.cell != cfg.cell:
         raise InputError("cell", f"the model config is for {model_cfg.cell!r}, the training run for {cfg.cell!r}")
     out = Path(out_dir)
+    resuming = resume and (out / "checkpoint.pt").exists()
+    init_state = read_init(cfg.init, model_cfg) if cfg.init is not None and not resuming else None  # fail fast
     out.mkdir(parents=True, exist_ok=True)
     remove_stale_temps(out)
     if cfg.threads:
@@ -343,8 +346,8 @@ def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerC
                               cfg.seed + 7919, CONTEXT_SET_LEN, cfg.cell) if cfg.n_context else None)
     t_data = time.perf_counter() - t_start
     model = Dynaformer(model_cfg).to(device)
-    if cfg.init is not None and ck is None:
-        _load_init(model, cfg.init)
+    if init_state is not None:
+        model.load_state_dict(init_state)
     decoder_params = [p for name, p in model.named_parameters() if name.split(".")[0] not in ENCODER_PARTS]
     opt = torch.optim.AdamW(decoder_params, lr=cfg.lr, weight_decay=1e-4)
     warm = 300
