@@ -38,11 +38,9 @@ import torch
 from torch import nn
 
 from ..flight import TAKEOFF_CONTEXT_S
-from .cells import dynaformer_cell
-from .data import TRAIN_R_RANGE
+from .cells import NASA_TRAINING, dynaformer_cell
 
 V_CENTER, V_SCALE = 3.6, 0.5  # V: voltage normalisation
-I_SCALE = 3.0  # A
 Q_SCALE = 8000.0  # C: cumulative charge normalisation
 T_SCALE = 10000.0  # s
 
@@ -63,11 +61,11 @@ class DynaformerConfig:
     health_window: int = TAKEOFF_CONTEXT_S  # samples (s) of the take-off that TakeoffHealth reads
     # The cell type the weights are trained for (uam_studio.dynaformer.cells) and its scales: current
     # (A), and the take-off latent's R0 centre and half-width (ohm) and q_max reference (C) and scale.
-    cell: str = "nasa18650"
-    i_scale: float = I_SCALE
-    r0_mid: float = sum(TRAIN_R_RANGE) / 2
-    r0_half: float = (TRAIN_R_RANGE[1] - TRAIN_R_RANGE[0]) / 2
-    u_ref_c: float = 6500.0
+    cell: str = NASA_TRAINING.key
+    i_scale: float = NASA_TRAINING.i_scale
+    r0_mid: float = NASA_TRAINING.r0_mid
+    r0_half: float = NASA_TRAINING.r0_half
+    u_ref_c: float = NASA_TRAINING.u_ref_c
     u_scale: float = 0.23
 
     def to_dict(self) -> dict:
