@@ -273,6 +273,10 @@ def _add_train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default=None,
                    help="dynaformer and attention: auto (CUDA when available, default), cpu or cuda")
+    p.add_argument("--init-from", default=None, metavar="FILE",
+                   help="dqn and dynaformer: fine-tune this file (an agent zip, e.g. pretrained/dqn_single_charge.zip, "
+                        "exploration starting at epsilon 0.2; or Dynaformer weights, e.g. pretrained/dynaformer.pt, "
+                        "the take-off health refitted) instead of starting from random weights")
     g = p.add_argument_group("dynaformer only")
     g.add_argument("--n-train", type=int, default=None, help="synthetic training discharges (default 24000)")
     g.add_argument("--no-resume", action="store_true", default=None,
@@ -292,10 +296,6 @@ def _add_train_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--safe-return", action="store_true", default=None,
                    help="a leg that would leave no way home ends the episode with -gamma (the planner's "
                         "safety rule, learnt in training); default off, the paper's setting")
-    g.add_argument("--init-from", default=None, metavar="FILE",
-                   help="dqn and dynaformer: fine-tune this file (an agent zip, e.g. pretrained/dqn_single_charge.zip, "
-                        "exploration starting at epsilon 0.2; or Dynaformer weights, e.g. pretrained/dynaformer.pt, "
-                        "the take-off health refitted) instead of starting from random weights")
 
 
     g = p.add_argument_group("attention only (the default planner; writes attention_planner.pt and card.json)")
