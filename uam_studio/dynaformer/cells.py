@@ -39,6 +39,7 @@ class DynaformerCell:
     range of the generic constant loads (A). ``i_scale`` (A), ``u_ref_c`` (C), ``u_scale``,
     ``r0_mid``/``r0_half`` (ohm): the network's input and latent scales (see
     :class:`uam_studio.dynaformer.model.DynaformerConfig`). ``max_len``: training samples (s).
+    ``weights_file``: the name of its bundled weights (:func:`uam_studio.bundled.bundled_path`).
     """
 
     key: str
@@ -51,6 +52,7 @@ class DynaformerCell:
     generic_a: tuple[float, float]
     i_scale: float
     max_len: int
+    weights_file: str  # the bundled weights trained for this type (in pretrained/)
 
     @property
     def params(self):
@@ -71,9 +73,11 @@ class DynaformerCell:
 
 
 NASA_TRAINING = DynaformerCell("nasa18650", NASA_18650, PAPER_Q_RANGE, PAPER_R0_RANGE,
-                               ((4000.0, 5000.0), (8000.0, 9000.0)), (0.45, 0.5), "flight", (0.05, 3.0), 3.0, 10240)
+                               ((4000.0, 5000.0), (8000.0, 9000.0)), (0.45, 0.5), "flight", (0.05, 3.0), 3.0, 10240,
+                               "dynaformer.pt")
 VTC6_TRAINING = DynaformerCell("vtc6", VTC6, (8000.0, 12500.0), (0.012, 0.06),
-                               ((6500.0, 8000.0), (12500.0, 14000.0)), (0.06, 0.08), "power", (0.5, 18.0), 15.0, 5120)
+                               ((6500.0, 8000.0), (12500.0, 14000.0)), (0.06, 0.08), "power", (0.5, 18.0), 15.0, 5120,
+                               "dynaformer_vtc6.pt")
 DYNAFORMER_CELLS: dict[str, DynaformerCell] = {c.key: c for c in (NASA_TRAINING, VTC6_TRAINING)}
 
 

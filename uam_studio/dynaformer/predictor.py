@@ -46,17 +46,11 @@ from .model import takeoff_targets
 MAX_PROFILE_S = 200_000.0  # s: longer profiles are refused (memory)
 
 
-BUNDLED_WEIGHTS = {"nasa18650": "dynaformer.pt", "vtc6": "dynaformer_vtc6.pt"}
-"""Cell type (:mod:`uam_studio.dynaformer.cells`) -> its bundled weights file."""
-
-
 def bundled_weights_path(cell: str = "nasa18650") -> Path:
     """The bundled weights for the cell type ``cell``: for the NASA cell ``$UAM_STUDIO_DYNAFORMER`` if
     set, else ``dynaformer.pt`` in the user folder's ``pretrained/`` or in the package data
     (:func:`uam_studio.bundled.bundled_path`); for the VTC6 ``dynaformer_vtc6.pt`` there."""
-    if cell not in BUNDLED_WEIGHTS:
-        raise InputError("cell", f"{cell!r}; allowed {', '.join(BUNDLED_WEIGHTS)}")
-    return bundled_path(BUNDLED_WEIGHTS[cell])
+    return bundled_path(dynaformer_cell(cell).weights_file)
 
 
 def _as_2d(field: str, arr) -> tuple[np.ndarray, bool]:
