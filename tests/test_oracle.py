@@ -9,6 +9,7 @@ import pytest
 
 from uam_studio.battery import simulate
 from uam_studio.errors import InputError
+from uam_studio.planning.episode import Episode, fly_batch
 from uam_studio.planning.legs import N_MAX, VERTIPORT_SLOT, LegTable
 from uam_studio.planning.missions.check import check_plan
 from uam_studio.planning.missions.generate import held_out_missions, random_mission
@@ -22,7 +23,7 @@ from uam_studio.planning.missions.mission import (
 )
 from uam_studio.planning.solvers.greedy import greedy_plan
 from uam_studio.planning.solvers.oracle import feasible_sorties, min_sortie_cover, oracle_plan
-from uam_studio.planning.solvers.setup import fly_batch, prepare_mission
+from uam_studio.planning.solvers.setup import prepare_mission
 
 V = VERTIPORT_SLOT
 
@@ -66,10 +67,10 @@ def test_oracle_equals_brute_force(seed, n, levels):
     legs = LegTable(m)
     brute = brute_force_sets(legs, levels)
     stats = {}
-    found = feasible_sorties(legs, levels, dominance=True, stats=stats)
+    found = feasible_sorties(Episode.of(legs), levels, dominance=True, stats=stats)
     assert set(found) == brute  # same feasible visit sets: the dominance assumption held
     assert 0 < len(brute) < 2 ** n - 1, "instance should be neither trivial nor hopeless"
-    assert set(feasible_sorties(legs, levels, dominance=False)) == brute
+    assert set(feasible_sorties(Episode.of(legs), levels, dominance=False)) == brute
     prio = [d.priority for d in m.destinations]
     best_brute = max(sum(p for k, p in enumerate(prio) if s >> k & 1) for s in brute)
     plan = oracle_plan(m, "single_charge", alt_indices=levels)
@@ -91,8 +92,8 @@ def test_dominance_pruning_changes_nothing_on_five_destinations(seed):
                        radius_km=(12.0, 35.0))
     legs = LegTable(m)
     stats = {}
-    pruned = feasible_sorties(legs, dominance=True, stats=stats)
-    full = feasible_sorties(legs, dominance=False)
+    pruned = feasible_sorties(Episode.of(legs), dominance=True, stats=stats)
+    full = feasible_sorties(Episode.of(legs), dominance=False)
     assert set(pruned) == set(full) and stats["pruned_dominated"] > 0
     assert 0 < len(full) < 2 ** 5 - 1
 
@@ -114,7 +115,7 @@ def test_fly_batch_matches_simulate_leg_by_leg():
     q, r0 = m.battery.q_max, m.battery.r0
     mid = simulate(legs.current(V, 0, 0), 1.0, q, r0).final_state
     currents = [legs.current(0, 1, 0), legs.current(0, V, 1), legs.current(0, 2, 0)]
-    ok, x_end, vmin = fly_batch(currents, np.repeat(mid.as_array(), 3, axis=0), q, r0, m.eod_v)
+    ok, x_end, vmin = fly_batch(currents, np.repeat(mid.as_array(), 3, axis=0), m.cell)
     for k, c in enumerate(currents):
         ref = simulate(c, 1.0, q, r0, m.eod_v, initial_state=mid)
         assert ok[k] == (not ref.eod_reached)

@@ -7,6 +7,7 @@ import dataclasses
 
 import pytest
 
+from uam_studio.planning.episode import Episode
 from uam_studio.planning.legs import ALTITUDES_M, LegTable
 from uam_studio.planning.missions.check import check_plan
 from uam_studio.planning.missions.generate import held_out_missions
@@ -86,7 +87,7 @@ def test_single_flight_stays_exact_at_any_size():
 
 def test_exact_search_on_a_bigger_leg_table_finds_the_same_sorties():
     m = _mission(5, "single_charge", seed=9306)
-    small, big = feasible_sorties(LegTable(m)), feasible_sorties(LegTable(m, slots=12))
+    small, big = feasible_sorties(Episode.of(LegTable(m))), feasible_sorties(Episode.of(LegTable(m, slots=12)))
     assert small.keys() == big.keys() and max(bin(mask).count("1") for mask in small) >= 2
     for mask, s in small.items():
         assert (big[mask].nodes, big[mask].alts, big[mask].time_s) == (s.nodes, s.alts, s.time_s)

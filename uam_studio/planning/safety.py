@@ -30,8 +30,7 @@ def takeoff_attempt(mission: Mission) -> dict[str, Any] | None:
     :return: ``{"time_s", "voltage_v", "eod_s"}`` (s, V, s): the samples up to the first one below
         the cut-off.
     """
-    b = mission.battery
-    sim = fly_takeoff(float(b.q_max), float(b.r0), float(mission.eod_v))
+    sim = fly_takeoff(mission.cell)
     if not bool(sim.eod_reached):
         return None
     n = min(int(np.count_nonzero(sim.valid)) + 1, sim.voltage_v.size)

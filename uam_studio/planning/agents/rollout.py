@@ -25,7 +25,6 @@ from uam_studio.planning.env import UAMPlanningEnv
 from uam_studio.planning.legs import N_ALTITUDES, N_MAX, VERTIPORT_SLOT
 from uam_studio.planning.missions.check import Plan
 from uam_studio.planning.missions.mission import Mission, check_destination_count
-from uam_studio.planning.missions.scenario import scenario_rules
 from uam_studio.planning.solvers.setup import prepare_mission, single_flight_note, too_close
 
 __all__ = ["ROLLOUT_BASES", "bundled_agent_path", "dqn_route", "load_agent_cached", "rollout_agent"]
@@ -53,17 +52,15 @@ def dqn_route(mission: Mission, agent_path: str | os.PathLike[str] | None, predi
         messages.extend(setup.early.messages)
         return [], []
     messages.extend(setup.messages)
-    mission, legs, scenario = setup.mission, setup.legs, setup.scenario
+    mission, episode, scenario = setup.mission, setup.episode, setup.scenario
     dests = mission.destinations
-    for k in range(len(dests) if not scenario_rules(scenario).one_leg else 1):
-        reason = too_close(legs, k)
+    for k in range(len(dests) if not episode.rules.one_leg else 1):
+        reason = too_close(episode.legs, k)
         if reason is not None:
             messages.append(reason)
-    servable = legs.feasible[VERTIPORT_SLOT, :len(dests), 0]
-    if scenario_rules(scenario).one_leg:
+    if episode.rules.one_leg:
         messages.extend(filter(None, [single_flight_note(mission)]))
-        servable = servable[:1]
-    if not servable.any():
+    if not episode.servable.any():
         return [], []
 
     path = bundled_agent_path(scenario) if agent_path is None else Path(agent_path)

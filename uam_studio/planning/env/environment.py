@@ -40,6 +40,7 @@ from uam_studio.planning.env.observation import (
     observe,
     static_features,
 )
+from uam_studio.planning.episode import Episode
 from uam_studio.planning.legs import (
     ALTITUDES_M,
     DT_S,
@@ -47,7 +48,6 @@ from uam_studio.planning.legs import (
     N_ACTIONS,
     N_ALTITUDES,
     N_MAX,
-    N_TARGETS,
     VERTIPORT_SLOT,
     LegTable,
 )
@@ -59,7 +59,7 @@ from uam_studio.planning.missions.generate import (
     random_mission,
 )
 from uam_studio.planning.missions.mission import Mission
-from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO, check_scenario, scenario_rules
+from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO, check_scenario
 
 MAX_EPISODE_STEPS = 2 * N_MAX + 2
 REWARD_DEFAULTS = {"alpha": 1.0, "beta": 1.0, "gamma": 5.0}  # the paper's figures; the one home of these
@@ -263,18 +263,12 @@ class UAMPlanningEnv(gym.Env):
         if n > N_MAX:
             raise InputError("mission.destinations", f"has {n} destinations; the environment has {N_MAX} slots")
         legs = LegTable(mission)
-        if not self._servable(legs).any():
-            what = "destinations[0]" if scenario_rules(self.scenario).one_leg else "every destination"
+        episode = Episode.of(legs, self.scenario)
+        if not episode.servable.any():
+            what = "destinations[0]" if episode.rules.one_leg else "every destination"
             raise InputError("mission.destinations", f"{what} is too close to the vertiport to fly to "
                                                      f"(a leg needs >= {MIN_LEG_KM[0]:.1f} km)")
         return legs
-
-    def _servable(self, legs: LegTable) -> np.ndarray:
-        """Slots the aircraft may ever fly to: from the vertiport (and back) at 500 m at least."""
-        out = legs.feasible[VERTIPORT_SLOT, :N_MAX, 0].copy()
-        if scenario_rules(self.scenario).one_leg:
-            out[1:] = False
-        return out
 
     # ------------------------------------------------------------------ gym API
 
@@ -302,7 +296,7 @@ class UAMPlanningEnv(gym.Env):
             mission = random_mission(rng, self.n_dest, self.scenario, self.r0_range, self.q_range, self.radius_km)
         self.mission = mission
         legs = self._legs = legs if legs is not None else LegTable(mission)
-        self._servable_slots = self._servable(legs)
+        self._episode = Episode.of(legs, self.scenario)  # the rules (the env's battery is its backend)
         q, r0, eod = mission.battery.q_max, mission.battery.r0, mission.eod_v
         ci, cv = observe_takeoff(q, r0)
         if self.health_fn is not None:
@@ -368,13 +362,11 @@ class UAMPlanningEnv(gym.Env):
         if target == VERTIPORT_SLOT:
             self._cycles += 1
             reward = -self.beta
-            if scenario_rules(self.scenario).recharges:
+            if self._episode.rules.recharges:
                 self.backend.recharge()
                 self._charge = 0.0
                 self._voltage = self._v_rest
-                terminated = bool(self._visited[self._servable_slots].all())
-            else:
-                terminated = True
+            terminated = self._episode.ends_after(target, self._visited)
         else:
             self._visited[target] = True
             name = legs.names[target]
@@ -382,7 +374,7 @@ class UAMPlanningEnv(gym.Env):
             prio = int(legs.priority[target])
             self._reached_priority += prio
             reward = self.alpha * prio
-            terminated = scenario_rules(self.scenario).one_leg
+            terminated = self._episode.ends_after(target, self._visited)
         return self._finish(reward, terminated)
 
     def _finish(self, reward: float, terminated: bool):
@@ -396,15 +388,11 @@ class UAMPlanningEnv(gym.Env):
         return self._observe(), float(reward), bool(terminated), bool(truncated), self._info()
 
     def _update_mask(self) -> None:
-        node = self._node
-        ok_target = np.zeros(N_TARGETS, dtype=bool)
-        ok_target[:N_MAX] = self._servable_slots & ~self._visited
-        ok_target[VERTIPORT_SLOT] = node != VERTIPORT_SLOT and not scenario_rules(self.scenario).one_leg
-        self._mask = (self._legs.feasible[node] & ok_target[:, None]).reshape(-1)
+        self._mask = self._episode.moves(self._node, self._visited)[0].reshape(-1)
 
     def _observe(self) -> np.ndarray:
         return observe(self._base, self._rel, self._legs, self._node, self._voltage, len(self._reached),
-                       self._charge, self._visited, self._servable_slots, self._mask, self._obs)
+                       self._charge, self._visited, self._episode.servable, self._mask, self._obs)
 
     def _info(self) -> dict[str, Any]:
         return {
@@ -468,7 +456,7 @@ class UAMPlanningEnv(gym.Env):
 
     def _home_reachable(self, backend: BatteryBackend, node: int) -> bool:
         """Could ``backend`` (left unchanged) fly from ``node`` home at the least-charge level?"""
-        if node == VERTIPORT_SLOT or scenario_rules(self.scenario).one_leg:  # single flight: no way back
+        if node == VERTIPORT_SLOT or self._episode.rules.one_leg:  # single flight: no way back
             return True
         home = self._legs.cheapest_level(node, VERTIPORT_SLOT)
         if home is None:
@@ -484,14 +472,14 @@ class UAMPlanningEnv(gym.Env):
         if self._done:
             return None
         legs, node = self._legs, self._node
-        todo = [int(k) for k in np.flatnonzero(self._servable_slots & ~self._visited)]
+        todo = [int(k) for k in np.flatnonzero(self._episode.targets(node, self._visited)[0, :N_MAX])]
         for k in legs.greedy_order(node, todo):
             level = legs.cheapest_level(node, k)
             if level is not None and self.lookahead_safe(k * N_ALTITUDES + level):
                 return k * N_ALTITUDES + level
-            if scenario_rules(self.scenario).one_leg:
+            if self._episode.rules.one_leg:
                 return None
-        if node == VERTIPORT_SLOT or scenario_rules(self.scenario).one_leg:
+        if node == VERTIPORT_SLOT or self._episode.rules.one_leg:
             return None
         level = legs.cheapest_level(node, VERTIPORT_SLOT)
         return None if level is None else VERTIPORT_SLOT * N_ALTITUDES + level
@@ -521,7 +509,7 @@ class UAMPlanningEnv(gym.Env):
         if self._invalid:
             msgs.append("the policy chose an invalid action")
         missed = [d.name for d, seen in zip(self.mission.destinations, self._visited) if not seen]
-        if missed and not scenario_rules(self.scenario).one_leg:
+        if missed and not self._episode.rules.one_leg:
             msgs.append(f"not visited: {', '.join(missed)}")
         stats = {"return": self._return, "steps": self._steps, "backend": self.backend.name,
                  "scenario": self.scenario, "health": [float(h) for h in self._health]}

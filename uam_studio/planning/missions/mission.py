@@ -48,6 +48,7 @@ from typing import Any
 
 from uam_studio.atomic_io import atomic_write_text, remove_stale_temps
 from uam_studio.battery import DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0, EOD_RANGE, Q_MAX_RANGE, R0_RANGE
+from uam_studio.battery.parameters import DEFAULT_CELL, Cell
 from uam_studio.errors import InputError, check_range, short_repr
 from uam_studio.flight.profile import MAX_DWELL_S
 from uam_studio.flight.tables import WIND_RANGE_KTS
@@ -260,6 +261,12 @@ class Mission:
     def leg_wind(self, to_name: str) -> float:
         """Wind (kt, negative = tailwind) on a leg flown to ``to_name``."""
         return self.node(to_name).wind_kts
+
+    @property
+    def cell(self) -> Cell:
+        """The cell the mission is flown with: the default parameter set (the paper's 18650) at the
+        mission's health (``battery.q_max`` C, ``battery.r0`` ohm), flown to ``eod_v`` (V)."""
+        return Cell(f"{self.name} cell", DEFAULT_CELL, self.battery.q_max, self.battery.r0, self.eod_v)
 
     def with_battery(self, q_max: float | None = None, r0: float | None = None) -> Mission:
         """A copy with ``q_max`` (C) and/or ``r0`` (ohm) replaced (validated)."""

@@ -37,15 +37,15 @@ from uam_studio.battery.health_prior import Q_REF_C
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight import leg_profile
 from uam_studio.flight.tables import WIND_RANGE_KTS
+from uam_studio.planning.episode import Episode
 from uam_studio.planning.legs import ALTITUDES_M, DT_S, N_MAX, N_TARGETS, VERTIPORT_SLOT, LegTable
 from uam_studio.planning.missions.mission import (
-    SCENARIOS,
     VERTIPORT,
     Battery,
     Mission,
     check_destination_count,
 )
-from uam_studio.planning.missions.scenario import scenario_rules
+from uam_studio.planning.missions.scenario import check_scenario
 from uam_studio.planning.operations.decision import Decision
 from uam_studio.planning.operations.defaults import DEFAULT_FORECAST_SIGMA_KT
 from uam_studio.planning.operations.health_belief import HealthBelief
@@ -57,7 +57,7 @@ from uam_studio.planning.solvers.oracle import (
     mask_priority,
     sortie_cover_table,
 )
-from uam_studio.planning.solvers.setup import fly_batch, safest_level
+from uam_studio.planning.solvers.setup import safest_level
 
 HEALTH_Z = 1.64  # std of the health estimate the belief cell is taken at (one-sided 95%)
 WIND_Z = 1.64  # one-sided joint bound (std) on the next leg's and the way home's winds
@@ -91,8 +91,7 @@ class Operator:
                                        f"{', '.join(IN_FLIGHT_PLANNERS)}")
         self.planner = planner
         scenario = scenario or mission.scenario
-        if scenario not in SCENARIOS:
-            raise InputError("scenario", f"{scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}")
+        check_scenario(scenario)
         check_destination_count(len(mission.destinations), N_MAX, "fly")  # the exact search of planner "oracle": 8 at most
         self.forecast_mission = mission
         self.scenario = scenario
@@ -169,6 +168,11 @@ class Operator:
         belief = dataclasses.replace(m, vertiport=vp, destinations=dests, battery=Battery(q_plan, r_plan))
         return belief, q_plan, r_plan
 
+    def _episode(self, belief: Mission) -> Episode:
+        """The episode of a believed mission (:meth:`_belief`): its forecast legs, its believed cell
+        (q_max C, R0 ohm) flown to the mission's cut-off (V), the flight's scenario."""
+        return Episode.of(LegTable(belief), self.scenario)
+
     def _state(self, q_plan: float, r_plan: float) -> BatteryState:
         """Battery state of a believed cell after the readings since the last full charge."""
         cur, _ = self.health_belief.segment.arrays()
@@ -183,50 +187,49 @@ class Operator:
         wind = float(np.clip(wind_kts, *WIND_RANGE_KTS))
         return np.asarray(leg_profile(m.distance_km(frm, to), altitude_m, wind, DT_S, dwell).current_a)
 
-    def _safe_moves(self, legs: LegTable, here: int, state: np.ndarray, visited: int, q: float, r0: float
-                    ) -> np.ndarray:
+    def _safe_moves(self, episode: Episode, here: int, state: np.ndarray, visited: int) -> np.ndarray:
         """bool [N_TARGETS, N_ALTITUDES]: next legs after which the aircraft can still get home.
 
-        Both legs are flown on the cautious cell (``q``, ``r0``) from ``state``. Their winds are the
+        Both legs are flown on the cautious belief's episode (its cell) from ``state``. Their winds are the
         point of a joint one-sided ``wind_z`` bound: the two legs' wind errors are independent
         Gaussians (std from :meth:`WindBelief.predict`), each leg's charge grows with its wind in
         proportion to its length, and the bound puts each leg's wind at
         ``mean + wind_z * sd^2 * d / sqrt(sum(sd^2 d^2))``. A wind already measured has a small std,
         so all the margin then goes to the unknown one.
         """
+        legs = episode.legs
         n_alt = len(ALTITUDES_M)
         safe = np.zeros((N_TARGETS, n_alt), dtype=bool)
         frm = self.names[here] if here != VERTIPORT_SLOT else VERTIPORT
         home_mean, home_sd = self.winds.predict(VERTIPORT)
+        done = np.array([bool(visited >> k & 1) for k in range(legs.slots)])
+        # the episode's open moves among every unvisited destination (a sortie may pass one that is too
+        # close to the vertiport to fly to directly, as the exact search does)
+        open_moves = episode.moves(here, done, among=legs.present[:legs.slots])[0]
         firsts, returns = [], []
-        for j in range(len(self.names)):
-            if visited >> j & 1:
-                continue
+        for j in np.flatnonzero(open_moves[:legs.slots].any(axis=1)):
             to = self.names[j]
             mean, sd = self.winds.predict(to)
             d1, d2 = legs.dist[here, j], legs.dist[j, VERTIPORT_SLOT]
             norm = math.sqrt((sd * d1) ** 2 + (home_sd * d2) ** 2) or 1.0
             w1 = mean + self.wind_z * sd ** 2 * d1 / norm
             w2 = home_mean + self.wind_z * home_sd ** 2 * d2 / norm
-            for a in range(n_alt):
-                if legs.feasible[here, j, a]:
-                    firsts.append((j, a, self._leg_current(frm, to, ALTITUDES_M[a], w1)))
-                    returns.append([(b, self._leg_current(to, VERTIPORT, ALTITUDES_M[b], w2))
-                                    for b in range(n_alt) if legs.feasible[j, VERTIPORT_SLOT, b]])
-        if here != VERTIPORT_SLOT:
+            for a in np.flatnonzero(open_moves[j]):
+                firsts.append((int(j), int(a), self._leg_current(frm, to, ALTITUDES_M[a], w1)))
+                returns.append([(b, self._leg_current(to, VERTIPORT, ALTITUDES_M[b], w2))
+                                for b in range(n_alt) if legs.feasible[j, VERTIPORT_SLOT, b]])
+        if open_moves[VERTIPORT_SLOT].any():
             w = home_mean + self.wind_z * home_sd
-            for a in range(n_alt):
-                if legs.feasible[here, VERTIPORT_SLOT, a]:
-                    firsts.append((VERTIPORT_SLOT, a, self._leg_current(frm, VERTIPORT, ALTITUDES_M[a], w)))
-                    returns.append([])
+            for a in np.flatnonzero(open_moves[VERTIPORT_SLOT]):
+                firsts.append((VERTIPORT_SLOT, int(a), self._leg_current(frm, VERTIPORT, ALTITUDES_M[a], w)))
+                returns.append([])
         if not firsts:
             return safe
-        ok, x_end, _ = fly_batch([c for _, _, c in firsts], np.repeat(state[None, :], len(firsts), 0), q, r0,
-                                 self.eod_v)
+        ok, x_end, _ = episode.fly_currents([c for _, _, c in firsts], state)
         back = [(k, c) for k, rets in enumerate(returns) if ok[k] for _, c in rets]
         home_ok = np.zeros(len(firsts), dtype=bool)
         if back:
-            ok2, _, _ = fly_batch([c for _, c in back], x_end[[k for k, _ in back]], q, r0, self.eod_v)
+            ok2, _, _ = episode.fly_currents([c for _, c in back], x_end[[k for k, _ in back]])
             for (k, _), good in zip(back, ok2):
                 home_ok[k] |= bool(good)
         for k, (j, a, _) in enumerate(firsts):
@@ -267,13 +270,13 @@ class Operator:
         visited = 0
         for n in self.visited:
             visited |= 1 << slot[n]
-        moves = self._safe_moves(LegTable(cautious), here, self._state(q_plan, r_plan).as_array()[0], visited,
-                                 q_plan, r_plan)
+        moves = self._safe_moves(self._episode(cautious), here, self._state(q_plan, r_plan).as_array()[0], visited)
         state = self._state(q_exp, r_exp).as_array()[0]
         plan = self._plan if self.planner == "oracle" else self._plan_learned
-        route, alts, why = plan(LegTable(expected), here, state, visited, moves)
+        believed = self._episode(expected)
+        route, alts, why = plan(believed, here, state, visited, moves)
         if route is None:
-            route, alts, why = self._best_effort_home(LegTable(expected), here, state)
+            route, alts, why = self._best_effort_home(believed, here, state)
         shift, shift_sd = self.winds.shift()
         kind = "plan" if not self.decisions else "replan"
         learned = []
@@ -308,46 +311,46 @@ class Operator:
         """The clock (s) at which the leg just decided took off (the first leg: 0, before the check)."""
         self._leg_start_s = float(time_s)
 
-    def _plan(self, legs: LegTable, here: int, state: np.ndarray, visited: int, moves: np.ndarray
+    def _plan(self, episode: Episode, here: int, state: np.ndarray, visited: int, moves: np.ndarray
               ) -> tuple[list[str] | None, list[float], str]:
-        """The best plan on ``legs`` (expected belief) whose first leg is in ``moves``; None: only the
-        way home is left and it is not safe on the cautious belief."""
+        """The best plan of ``episode`` (the expected belief) whose first leg is in ``moves``; None: only
+        the way home is left and it is not safe on the cautious belief."""
         n = len(self.names)
-        q, r0 = legs.mission.battery.q_max, legs.mission.battery.r0
+        legs, rules = episode.legs, episode.rules
 
         def names(s: Sortie) -> tuple[list[str], list[float]]:
             return [self.names[k] for k in s.nodes] + [VERTIPORT], [ALTITUDES_M[a] for a in s.alts]
 
-        if scenario_rules(self.scenario).one_leg:
+        if rules.one_leg:
             if here != VERTIPORT_SLOT or visited:
                 return [], [], "single flight done"
             levels = [a for a in range(len(ALTITUDES_M)) if moves[0, a]] or \
                 [a for a in range(len(ALTITUDES_M)) if legs.feasible[VERTIPORT_SLOT, 0, a]]
             if not levels:
                 return [], [], f"{self.names[0]} cannot be reached at any level"
-            best, _, vmin = safest_level(legs, VERTIPORT_SLOT, 0, levels, state, q, r0, self.eod_v)
+            best, _, vmin = safest_level(episode, VERTIPORT_SLOT, 0, levels, state)
             return [self.names[0]], [ALTITUDES_M[best]], f"highest expected minimum voltage ({vmin.max():.3f} V)"
 
-        if here == VERTIPORT_SLOT and scenario_rules(self.scenario).one_sortie and self.sorties >= 1:
+        if here == VERTIPORT_SLOT and rules.one_sortie and self.sorties >= 1:
             return [], [], "back home: the charge is used"
         unvisited_ok = np.array([k < n and not visited >> k & 1 for k in range(N_MAX)])
         if here == VERTIPORT_SLOT:
             start = None
         else:
             start = (here, state, visited)
-        cont = feasible_sorties(legs, allowed=unvisited_ok, start=start, first_moves=moves)
+        cont = feasible_sorties(episode, allowed=unvisited_ok, start=start, first_moves=moves)
         if here == VERTIPORT_SLOT:
             cont = {m: s for m, s in cont.items() if m}
             if not cont:
                 return [], [], "no unvisited destination can be reached safely"
         elif not cont:
             return None, [], ""
-        if scenario_rules(self.scenario).one_sortie:
+        if rules.one_sortie:
             best = best_single_sortie(cont, legs)
             route, alts = names(best)
             return route, alts, f"expected priority {mask_priority(legs, best.mask)} this charge"
         # multi charge: this sortie's rest, then the fewest fresh sorties for what is left
-        fresh = feasible_sorties(legs, allowed=unvisited_ok)
+        fresh = feasible_sorties(episode, allowed=unvisited_ok)
         fresh = {m: s for m, s in fresh.items() if m}
         universe = 0
         for m in list(fresh) + [m & ~visited for m in cont]:
@@ -374,17 +377,17 @@ class Operator:
             rest ^= later.mask
         return route, alts, f"expected {best_key[0]} more charges after this one"
 
-    def _plan_learned(self, legs: LegTable, here: int, state: np.ndarray, visited: int, moves: np.ndarray
+    def _plan_learned(self, episode: Episode, here: int, state: np.ndarray, visited: int, moves: np.ndarray
                       ) -> tuple[list[str] | None, list[float], str]:
         """:meth:`_plan` with the attention planner continued from here (the same contract)."""
         from uam_studio.planning.agents.attention.decode import continue_route  # torch, at first use
 
         n = len(self.names)
-        if scenario_rules(self.scenario).one_leg or (here == VERTIPORT_SLOT and scenario_rules(self.scenario).one_sortie
-                                                and self.sorties >= 1):
-            return self._plan(legs, here, state, visited, moves)
+        legs, rules = episode.legs, episode.rules
+        if rules.one_leg or (here == VERTIPORT_SLOT and rules.one_sortie and self.sorties >= 1):
+            return self._plan(episode, here, state, visited, moves)
         done = np.array([bool(visited >> k & 1) for k in range(n)])
-        res = continue_route(legs, self.scenario, here, state, done, self.sorties, moves)
+        res = continue_route(episode, here, state, done, self.sorties, moves)
         if res is None:
             if here == VERTIPORT_SLOT:
                 return [], [], "no unvisited destination can be reached safely"
@@ -392,20 +395,22 @@ class Operator:
         nodes, levels = res
         route = [VERTIPORT if k == legs.home else self.names[k] for k in nodes]
         alts = [ALTITUDES_M[a] for a in levels]
-        if scenario_rules(self.scenario).one_sortie:
+        if rules.one_sortie:
             prio = int(sum(legs.priority[k] for k in nodes if k != legs.home))
             return route, alts, f"expected priority {prio} more this charge"
         return route, alts, f"expected {max(0, route.count(VERTIPORT) - 1)} more charges after this one"
 
-    def _best_effort_home(self, legs: LegTable, here: int, state: np.ndarray) -> tuple[list[str], list[float], str]:
+    def _best_effort_home(self, episode: Episode, here: int, state: np.ndarray
+                          ) -> tuple[list[str], list[float], str]:
         """Home when no way is safe on the cautious belief: the level that is safe on the expected belief
-        with the highest minimum voltage, else the one that gets furthest before the cut-off."""
-        q, r0 = legs.mission.battery.q_max, legs.mission.battery.r0
+        (``episode``) with the highest minimum voltage, else the one that gets furthest before the cut-off."""
+        legs, cell = episode.legs, episode.cell
         levels = [a for a in range(len(ALTITUDES_M)) if legs.feasible[here, VERTIPORT_SLOT, a]] or [0]
         best, best_key = levels[0], None
         for a in levels:
             cur = legs.current(here, VERTIPORT_SLOT, a)
-            res = simulate(cur, DT_S, q, r0, self.eod_v, initial_state=BatteryState.from_array(state[None, :]))
+            res = simulate(cur, DT_S, cell.q_max, cell.r0, cell.eod_v, initial_state=BatteryState.from_array(state[None, :]),
+                           cell=cell.params)
             key = (0.0, float(res.min_voltage_v)) if not res.eod_reached else (-1.0 + float(res.eod_s) / cur.size, 0.0)
             if best_key is None or key > best_key:
                 best, best_key = a, key

@@ -16,12 +16,10 @@ import time
 
 import numpy as np
 
-from uam_studio.battery import full_charge
 from uam_studio.planning.legs import ALTITUDES_M
 from uam_studio.planning.missions.check import Plan, make_plan
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
-from uam_studio.planning.missions.scenario import scenario_rules
-from uam_studio.planning.solvers.setup import fly_batch, prepare_mission, single_flight_note, too_close
+from uam_studio.planning.solvers.setup import prepare_mission, single_flight_note, too_close
 
 
 def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
@@ -30,39 +28,37 @@ def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
     setup = prepare_mission(mission, scenario, "greedy")
     if setup.early is not None:
         return setup.early
-    mission, full_mission, scenario, msgs, stats, legs = (setup.mission, setup.full_mission, setup.scenario,
-                                                          setup.messages, setup.stats, setup.legs)
-    dests = mission.destinations
-    q, r0, eod = mission.battery.q_max, mission.battery.r0, mission.eod_v
-    fresh = full_charge(q).as_array()
+    mission, full_mission, msgs, stats, ep = (setup.mission, setup.full_mission, setup.messages, setup.stats,
+                                              setup.episode)
+    legs, dests = ep.legs, mission.destinations
 
     def fly(i: int, j: int, a: int, x: np.ndarray) -> tuple[bool, np.ndarray]:
-        ok, x_end, _ = fly_batch([legs.current(i, j, a)], x, q, r0, eod)
-        return bool(ok[0]), x_end
+        ok, x_end, _ = ep.fly([(i, j, a)], x)
+        return bool(ok[0]), x_end[0]
 
     route: list[str] = []
     alts: list[float] = []
     n = len(dests)
-    home = legs.home  # the vertiport's node index (legs.slots: max(N_MAX, n))
+    home = ep.home
     for k in range(n):
         reason = too_close(legs, k)
         if reason is not None:
             msgs.append(reason)
-    if scenario_rules(scenario).one_leg:
+    if ep.rules.one_leg:
         msgs.extend(filter(None, [single_flight_note(mission)]))
         a = legs.cheapest_level(home, 0)
-        if a is not None and fly(home, 0, a, fresh)[0]:
+        if a is not None and fly(home, 0, a, ep.fresh())[0]:
             route, alts = [dests[0].name], [ALTITUDES_M[a]]
         elif a is not None:
             msgs.append(f"cannot reach {dests[0].name} at its lowest-charge level ({ALTITUDES_M[a]:g} m)")
         stats["time_s"] = round(time.perf_counter() - t0, 4)
         return make_plan(full_mission, "greedy", route, alts, msgs, stats)
 
-    servable = legs.feasible[home, :legs.slots].any(axis=1)
-    visited = np.zeros(legs.slots, dtype=bool)
-    at, x = home, fresh
+    servable = ep.servable
+    visited = np.zeros(ep.slots, dtype=bool)
+    at, x = home, ep.fresh()
     while True:
-        cands = legs.greedy_order(at, [k for k in range(n) if servable[k] and not visited[k]])
+        cands = legs.greedy_order(at, [int(k) for k in np.flatnonzero(ep.targets(at, visited)[0, :ep.slots])])
         moved = False
         for k in cands:
             a = legs.cheapest_level(at, k)
@@ -75,7 +71,7 @@ def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
             route.append(dests[k].name)
             alts.append(ALTITUDES_M[a])
             visited[k] = True
-            at, x, moved = k, x1, True
+            at, x, moved = k, ep.arrive(k, x1), True
             break
         if moved:
             continue
@@ -83,8 +79,8 @@ def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
             break
         route.append(VERTIPORT)
         alts.append(ALTITUDES_M[legs.cheapest_level(at, home)])
-        at, x = home, fresh
-        if scenario_rules(scenario).one_sortie:
+        at, x = home, ep.arrive(home, x)
+        if ep.ends_after(home, visited):
             break
     left = [dests[k].name for k in range(n) if servable[k] and not visited[k]]
     if left:

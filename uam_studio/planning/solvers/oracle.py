@@ -77,7 +77,8 @@ from typing import Any
 
 import numpy as np
 
-from uam_studio.battery import full_charge
+from uam_studio.errors import InputError
+from uam_studio.planning.episode import Episode
 from uam_studio.planning.legs import (
     ALTITUDES_M,
     DT_S,
@@ -87,10 +88,8 @@ from uam_studio.planning.legs import (
 )
 from uam_studio.planning.missions.check import Plan, make_plan
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
-from uam_studio.planning.missions.scenario import scenario_rules
 from uam_studio.planning.solvers.reference import reference_from_setup
 from uam_studio.planning.solvers.setup import (
-    fly_batch,
     prepare_mission,
     single_flight_plan,
     too_close,
@@ -141,7 +140,7 @@ def _dominated(keys: np.ndarray, good: np.ndarray) -> np.ndarray:
 
 
 def feasible_sorties(
-    legs: LegTable,
+    episode: Episode,
     alt_indices: Iterable[int] = range(N_ALTITUDES),
     dominance: bool = True,
     allowed: np.ndarray | None = None,
@@ -151,34 +150,37 @@ def feasible_sorties(
 ) -> dict[int, Sortie]:
     """Every set of destinations one charge can visit and bring the aircraft home, with its best sortie.
 
-    :param legs: the mission's :class:`LegTable` (battery: ``legs.mission.battery``, cut-off ``eod_v``).
+    :param episode: the mission's :class:`~uam_studio.planning.episode.Episode` (its leg table, the cell
+        flown, and rules with a way home: not ``single_flight``). Every present destination is
+        considered, those too close to the vertiport to fly to directly included (a sortie may reach
+        them through another destination).
     :param alt_indices: levels allowed (indices into ``ALTITUDES_M``).
     :param dominance: prune dominated labels (see the module docstring); False enumerates every
         order and level (for testing; exponential).
-    :param allowed: bool [legs.slots], destination slots that may be visited (default: all present).
+    :param allowed: bool [slots], destination slots that may be visited (default: all present).
     :param stats: filled with ``labels``, ``legs_flown``, ``pruned_eod``, ``pruned_dominated``.
     :param start: ``(node slot, battery state [8], visited mask)`` to continue a sortie already under
         way (default: the vertiport, a full charge, nothing visited). The sorties found then continue
         from that node and state; their ``mask`` includes the visited bits and ``time_s`` counts from
         the start.
-    :param first_moves: bool [legs.slots + 1, N_ALTITUDES], the (target, level) pairs the first leg
-        may take (default: all; target ``legs.home`` is the vertiport).
+    :param first_moves: bool [slots + 1, N_ALTITUDES], the (target, level) pairs the first leg
+        may take (default: all; target ``episode.home`` is the vertiport).
     :return: ``{mask: Sortie}``, bit k of ``mask`` for slot k.
     """
-    m = legs.mission
-    q, r0, eod = m.battery.q_max, m.battery.r0, m.eod_v
+    if episode.rules.one_leg:
+        raise InputError("episode", f"{episode.rules.name} has no way home: no sortie to search")
+    legs = episode.legs
     alts = np.array(sorted(set(int(a) for a in alt_indices)), dtype=int)
     slots, home = legs.slots, legs.home
     n_targets = slots + 1
     ok_slot = legs.present[:slots].copy() if allowed is None else np.asarray(allowed, bool) & legs.present[:slots]
-    feas = legs.feasible[:, :, alts]  # [from, to, level]
     bit = 1 << np.arange(slots, dtype=np.int64)
     good_sign = DOMINANCE_SIGN
 
     if start is None:
         mask = np.zeros(1, dtype=np.int64)
         node = np.full(1, home)
-        state = full_charge(q).as_array()
+        state = episode.fresh()[None, :]
     else:
         mask = np.full(1, int(start[2]), dtype=np.int64)
         node = np.full(1, int(start[0]))
@@ -191,11 +193,8 @@ def feasible_sorties(
 
     first_leg = True
     while mask.size:
-        unvisited = (mask[:, None] & bit[None, :]) == 0
-        target_ok = np.zeros((mask.size, n_targets), dtype=bool)
-        target_ok[:, :slots] = unvisited & ok_slot[None, :]
-        target_ok[:, home] = node != home
-        cand = target_ok[:, :, None] & feas[node]
+        visited = (mask[:, None] & bit[None, :]) != 0
+        cand = episode.moves(node, visited, among=ok_slot)[:, :, alts]
         if first_moves is not None and first_leg:
             cand &= np.asarray(first_moves, dtype=bool)[None, :, alts]
         first_leg = False
@@ -204,7 +203,7 @@ def feasible_sorties(
             break
         levels = alts[ai]
         currents = [legs.current(int(node[a]), int(b), int(c)) for a, b, c in zip(li, ti, levels)]
-        ok, x_end, v_leg = fly_batch(currents, state[li], q, r0, eod)
+        ok, x_end, v_leg = episode.fly_currents(currents, state[li])
         st["legs_flown"] += li.size
         st["pruned_eod"] += int((~ok).sum())
         dur = np.fromiter((c.size for c in currents), dtype=float, count=li.size) * DT_S
@@ -323,12 +322,12 @@ def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iter
     setup = prepare_mission(mission, scenario, "oracle")
     if setup.early is not None:  # nothing to plan: the empty answer is exact
         return dataclasses.replace(setup.early, stats={**setup.early.stats, "exact": True})
-    mission, full_mission, scenario, msgs, stats, legs = (setup.mission, setup.full_mission, setup.scenario,
-                                                          setup.messages, setup.stats, setup.legs)
-    dests = mission.destinations
-    if not scenario_rules(scenario).one_leg and len(dests) > EXACT_MAX:
+    mission, full_mission, msgs, stats, legs = (setup.mission, setup.full_mission, setup.messages, setup.stats,
+                                                setup.legs)
+    rules, dests = setup.episode.rules, mission.destinations
+    if not rules.one_leg and len(dests) > EXACT_MAX:
         return reference_from_setup(setup, "oracle", alt_indices, t0)
-    if scenario_rules(scenario).one_leg:
+    if rules.one_leg:
         return single_flight_plan(setup, "oracle", alt_indices, t0)
     stats["exact"] = True
 
@@ -336,7 +335,7 @@ def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iter
         stats["time_s"] = round(time.perf_counter() - t0, 4)
         return make_plan(full_mission, "oracle", route, alts, msgs, stats)
 
-    found = feasible_sorties(legs, alt_indices, dominance, stats=stats)
+    found = feasible_sorties(setup.episode, alt_indices, dominance, stats=stats)
     stats["feasible_sets"] = len(found)
     coverable = coverable_mask(found)
     for k in range(len(dests)):
@@ -350,7 +349,7 @@ def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iter
     def names(s: Sortie) -> tuple[list[str], list[float]]:
         return ([legs.names[k] for k in s.nodes] + [VERTIPORT], [ALTITUDES_M[a] for a in s.alts])
 
-    if scenario_rules(scenario).one_sortie:
+    if rules.one_sortie:
         best = best_single_sortie(found, legs)
         left = [legs.names[k] for k in range(len(dests)) if coverable >> k & 1 and not best.mask >> k & 1]
         if left:

@@ -27,7 +27,7 @@ the currents and on r0). :func:`reference_plan` therefore *finds* the budgets: t
 come from the physics model at the mission's cruise current (the charge to the cut-off, and the most
 charge after which a take-off stays above it); then a bisection on a factor of both: each solver
 answer is flown sortie by sortie on the physics model
-(:func:`~uam_studio.planning.solvers.setup.fly_batch`, the numbers of
+(:func:`~uam_studio.planning.episode.fly_batch`, the numbers of
 :func:`~uam_studio.planning.missions.check.check_plan`); if every sortie stays above the cut-off
 the budgets grow, else they shrink (and the unsafe answer is repaired: a destination dropped, or a
 sortie split, wherever the physics says it becomes safe). Every other solve starts from the best
@@ -47,15 +47,14 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from uam_studio.battery import full_charge, simulate
+from uam_studio.battery import simulate
+from uam_studio.planning.episode import Episode
 from uam_studio.planning.legs import ALTITUDES_M, DT_S, N_ALTITUDES, LegTable, takeoff_current
 from uam_studio.planning.missions.check import Plan, make_plan
 from uam_studio.planning.missions.mission import MAX_DESTINATIONS, VERTIPORT, Mission
-from uam_studio.planning.missions.scenario import scenario_rules
 from uam_studio.planning.solvers.greedy import greedy_plan
 from uam_studio.planning.solvers.setup import (
     PlanSetup,
-    fly_batch,
     prepare_mission,
     single_flight_plan,
     too_close,
@@ -100,34 +99,33 @@ def _sortie_current(legs: LegTable, level: np.ndarray, nodes: list[int]) -> np.n
     return np.concatenate([legs.current(i, j, int(level[i, j])) for i, j in zip(path[:-1], path[1:])])
 
 
-def _fly_sorties(legs: LegTable, level: np.ndarray, sorties: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:
+def _fly_sorties(ep: Episode, level: np.ndarray, sorties: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:
     """``(ok, time_s)`` of each sortie flown from a fresh cell on the physics model. A sortie with a leg
     that no allowed level can fly (two destinations closer than any climb and descent) is not flown:
     not ok, time inf."""
-    m = legs.mission
+    legs = ep.legs
     paths = [[legs.home, *s, legs.home] for s in sorties]
     flyable = np.array([all(level[i, j] >= 0 for i, j in zip(p[:-1], p[1:])) for p in paths], dtype=bool)
     ok = np.zeros(len(sorties), dtype=bool)
     times = np.full(len(sorties), np.inf)
     currents = [_sortie_current(legs, level, s) for s, f in zip(sorties, flyable) if f]
     if currents:
-        x0 = np.repeat(full_charge(m.battery.q_max).as_array(), len(currents), axis=0)
-        ok[flyable], _, _ = fly_batch(currents, x0, m.battery.q_max, m.battery.r0, m.eod_v)
+        ok[flyable], _, _ = ep.fly_currents(currents, ep.fresh())
         times[flyable] = [c.size * DT_S for c in currents]
     return ok, times
 
 
-def _first_budgets(legs: LegTable, level: np.ndarray, nodes: list[int]) -> tuple[float, float]:
+def _first_budgets(ep: Episode, level: np.ndarray, nodes: list[int]) -> tuple[float, float]:
     """First estimates (C) of the two budgets: the charge a fresh cell gives before its cut-off at the
     mission's cruise current, and the most charge it may have given before it takes off again (the
     take-off and climb draw about 2.9 A: with a large r0 they reach the cut-off first)."""
-    m = legs.mission
-    q, r0, eod = m.battery.q_max, m.battery.r0, m.eod_v
+    legs = ep.legs
+    cell = ep.cell
     one = np.concatenate([_sortie_current(legs, level, [k]) for k in nodes])
     mid = one[(one > 0.5) & (one < 2.5)]  # the cruise samples dominate (take-off and climb: ~2.9 A)
     cruise = float(np.median(mid)) if mid.size else float(one[one > 0].mean())
-    steps = int(2.0 * q / cruise / DT_S)
-    res = simulate(np.full(steps, cruise), DT_S, q, r0, eod)
+    steps = int(2.0 * cell.q_max / cruise / DT_S)
+    res = simulate(np.full(steps, cruise), DT_S, cell.q_max, cell.r0, cell.eod_v, cell=cell.params)
     total = cruise * (float(res.eod_s) if res.eod_reached else steps * DT_S)
     climb = takeoff_current()
     before = np.linspace(0.0, total, 41)[1:]  # charge given before the take-off (C)
@@ -136,24 +134,25 @@ def _first_budgets(legs: LegTable, level: np.ndarray, nodes: list[int]) -> tuple
     for b, k in enumerate(pre):
         rows[b, :k] = cruise
         rows[b, k:k + climb.size] = climb
-    ok = ~np.asarray(simulate(rows, DT_S, q, r0, eod).eod_reached)
+    ok = ~np.asarray(simulate(rows, DT_S, cell.q_max, cell.r0, cell.eod_v, cell=cell.params).eod_reached)
     takeoff = float(before[ok].max()) if ok.any() else 0.0
     return total, takeoff
 
 
-def _repair(legs: LegTable, level: np.ndarray, sorties: list[list[int]], flown: np.ndarray,
+def _repair(ep: Episode, level: np.ndarray, sorties: list[list[int]], flown: np.ndarray,
             multi: bool) -> tuple[list[list[int]], np.ndarray]:
     """A safe plan near an unsafe solver answer, and its sortie times (s), or ``([], [])``.
 
     single_charge: the sortie without the one destination whose removal leaves the most priority
     (then the least time) and is safe. multi_charge: each unsafe sortie split in two where both parts
     are safe (least time), else into its single destinations (each safe on its own)."""
+    legs = ep.legs
     prio = legs.priority
     if not multi:
         s = sorties[0]
         cands = [s[:i] + s[i + 1:] for i in range(len(s))]
         cands = [c for c in cands if c]
-        ok, times = _fly_sorties(legs, level, cands)
+        ok, times = _fly_sorties(ep, level, cands)
         good = [k for k in range(len(cands)) if ok[k]]
         if not good:
             return [], np.zeros(0)
@@ -165,23 +164,24 @@ def _repair(legs: LegTable, level: np.ndarray, sorties: list[list[int]], flown: 
             out.append(s)
             continue
         halves = [p for i in range(1, len(s)) for p in (s[:i], s[i:])]
-        ok, times = _fly_sorties(legs, level, halves)
+        ok, times = _fly_sorties(ep, level, halves)
         both = [i for i in range(0, len(halves), 2) if ok[i] and ok[i + 1]]
         if both:
             i = min(both, key=lambda i: times[i] + times[i + 1])
             out += [halves[i], halves[i + 1]]
         else:
             out += [[k] for k in s]
-    return out, _fly_sorties(legs, level, out)[1]
+    return out, _fly_sorties(ep, level, out)[1]
 
 
-def _polish(legs: LegTable, level: np.ndarray, sorties: list[list[int]], reachable: list[int],
+def _polish(ep: Episode, level: np.ndarray, sorties: list[list[int]], reachable: list[int],
             multi: bool) -> list[list[int]]:
     """Local search on the physics model around the solver's best safe plan (the charge budget is only
     a proxy of the cut-off). single_charge: add an unvisited destination, or swap one in for a
     visited one of lower priority, wherever the route stays safe (most priority gained, then least
     time), until nothing improves. multi_charge: empty the smallest sorties into the others where every
     changed sortie stays safe (one sortie fewer each time), until none can be."""
+    legs = ep.legs
     prio = legs.priority
     if not multi:
         route = list(sorties[0])
@@ -192,7 +192,7 @@ def _polish(legs: LegTable, level: np.ndarray, sorties: list[list[int]], reachab
                       for k in out if prio[k] > prio[route[j]] for p in range(len(r) + 1)]
             if not cands:
                 return [route]
-            ok, times = _fly_sorties(legs, level, cands)
+            ok, times = _fly_sorties(ep, level, cands)
             good = [i for i in range(len(cands)) if ok[i]]
             if not good:
                 return [route]
@@ -207,7 +207,7 @@ def _polish(legs: LegTable, level: np.ndarray, sorties: list[list[int]], reachab
         for k in s:
             cands = [(r, p) for r in range(len(rest)) for p in range(len(rest[r]) + 1)]
             trial = [rest[r][:p] + [k] + rest[r][p:] for r, p in cands]
-            ok, times = _fly_sorties(legs, level, trial)
+            ok, times = _fly_sorties(ep, level, trial)
             good = [i for i in range(len(trial)) if ok[i]]
             if not good:
                 placed = False
@@ -290,9 +290,10 @@ def reference_from_setup(setup: PlanSetup, policy: str, alt_indices: Iterable[in
                          time_limit_s: float = REFERENCE_TIME_S) -> Plan:
     """The reference plan of a prepared mission (``setup.early`` is None; not single_flight), labelled
     ``policy``; ``t0`` (:func:`time.perf_counter`) is when planning began (``stats["time_s"]``)."""
-    mission, full_mission, scenario, msgs, stats, legs = (setup.mission, setup.full_mission, setup.scenario,
-                                                          setup.messages, setup.stats, setup.legs)
-    assert mission is not None and full_mission is not None and legs is not None
+    mission, full_mission, msgs, stats, ep = (setup.mission, setup.full_mission, setup.messages, setup.stats,
+                                              setup.episode)
+    assert mission is not None and full_mission is not None and ep is not None
+    legs = ep.legs
     dests = mission.destinations
     n = len(dests)
     alts = tuple(sorted({int(a) for a in alt_indices}))
@@ -309,7 +310,7 @@ def reference_from_setup(setup: PlanSetup, policy: str, alt_indices: Iterable[in
 
     # the destinations a fresh cell can reach and leave again on its own
     cand = [k for k in range(n) if level[home, k] >= 0 and level[k, home] >= 0]
-    ok, t_alone = _fly_sorties(legs, level, [[k] for k in cand])
+    ok, t_alone = _fly_sorties(ep, level, [[k] for k in cand])
     reachable = [k for k, good in zip(cand, ok) if good]
     for k in range(n):
         if k not in reachable:
@@ -317,7 +318,7 @@ def reference_from_setup(setup: PlanSetup, policy: str, alt_indices: Iterable[in
                                               "return to the vertiport with this battery")
     if not reachable:
         return done([], [])
-    multi = scenario_rules(scenario).recharges
+    multi = ep.rules.recharges
     prio = legs.priority
 
     def score(sorties: list[list[int]], times: np.ndarray) -> tuple:
@@ -342,7 +343,7 @@ def reference_from_setup(setup: PlanSetup, policy: str, alt_indices: Iterable[in
     if alts == tuple(range(N_ALTITUDES)):  # the greedy plan flies the same legs: a start never to fall below
         node = {legs.name(k): k for k in reachable}
         sorties, cur = [], []
-        for name in greedy_plan(mission, scenario).route:
+        for name in greedy_plan(mission, ep.rules.name).route:
             if name == VERTIPORT:
                 sorties, cur = sorties + [cur], []
             else:
@@ -350,11 +351,11 @@ def reference_from_setup(setup: PlanSetup, policy: str, alt_indices: Iterable[in
         if sorties and not cur and all(k >= 0 for s in sorties for k in s):
             if multi:  # and the destinations greedy left out alone
                 sorties += [[k] for k in reachable if all(k not in s for s in sorties)]
-            flown, times = _fly_sorties(legs, level, sorties)
+            flown, times = _fly_sorties(ep, level, sorties)
             if flown.all():
                 consider(sorties, times, 0.0)
 
-    total, takeoff = _first_budgets(legs, level, reachable)
+    total, takeoff = _first_budgets(ep, level, reachable)
     lo, hi = 0.0, 2.0  # scale of both budgets: safe at lo so far, unsafe at hi
     scale = 1.0
     steps = 0
@@ -371,13 +372,13 @@ def reference_from_setup(setup: PlanSetup, policy: str, alt_indices: Iterable[in
             served = {k for s in sorties for k in s}
             if multi:  # destinations the solver dropped fly alone (safe on their own)
                 sorties = sorties + [[k] for k in reachable if k not in served]
-            flown, times = _fly_sorties(legs, level, sorties)
+            flown, times = _fly_sorties(ep, level, sorties)
             safe = bool(flown.all())
             if safe:
                 last_safe = sorties
                 consider(sorties, times, scale * total)
             else:
-                consider(*_repair(legs, level, sorties, flown, multi), scale * total)
+                consider(*_repair(ep, level, sorties, flown, multi), scale * total)
         if safe:
             lo = scale
         else:
@@ -385,7 +386,7 @@ def reference_from_setup(setup: PlanSetup, policy: str, alt_indices: Iterable[in
         if hi - lo < 0.002:
             break
         scale = (lo + hi) / 2.0
-    best = _polish(legs, level, best, reachable, multi)
+    best = _polish(ep, level, best, reachable, multi)
     stats["budget_c"] = round(best_budget, 1)
     stats["solves"] = steps
     if multi:
@@ -426,7 +427,7 @@ def reference_plan(mission: Mission, scenario: str | None = None,
     setup = prepare_mission(mission, scenario, policy)
     if setup.early is not None:
         return setup.early
-    if scenario_rules(setup.scenario).one_leg:  # one leg: exact at any size
+    if setup.episode.rules.one_leg:  # one leg: exact at any size
         return single_flight_plan(setup, policy, alt_indices, t0)
     return reference_from_setup(setup, policy, alt_indices, t0, time_limit_s)
 

@@ -5,7 +5,7 @@
 (:mod:`~uam_studio.planning.agents.attention.model`); every leg is flown at its lowest-charge level.
 
 - **Safety filter** (default on): a destination is a candidate only if the physics battery model
-  (:func:`~uam_studio.planning.solvers.setup.fly_batch`, the mission's q_max, R0 and cut-off) flies
+  (:meth:`~uam_studio.planning.episode.Episode.fly`, the mission's q_max, R0 and cut-off) flies
   the leg there *and* the leg from there home without falling below the cut-off, from the battery
   state the route has reached. So the vertiport can always be reached and every plan is safe. The
   filter flies only the candidates the search would take (each beam's best ``expand`` by the
@@ -39,18 +39,17 @@ from typing import Any
 import numpy as np
 import torch
 
-from uam_studio.battery import full_charge
 from uam_studio.bundled import bundled_path
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.attention import WEIGHTS_NAME
 from uam_studio.planning.agents.attention.features import MissionTokens, mission_tokens, step_features
 from uam_studio.planning.agents.attention.model import AttentionConfig, AttentionPolicy
-from uam_studio.planning.legs import ALTITUDES_M, LegTable
+from uam_studio.planning.episode import Episode
+from uam_studio.planning.legs import ALTITUDES_M
 from uam_studio.planning.missions.check import Plan, make_plan
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
 from uam_studio.planning.missions.scenario import scenario_rules
 from uam_studio.planning.solvers.setup import (
-    fly_batch,
     prepare_mission,
     safest_single_flight,
     single_flight_note,
@@ -146,15 +145,13 @@ class _Beam:
 class _Search:
     """One decode of one mission (see the module docstring)."""
 
-    def __init__(self, net: AttentionPolicy, tok: MissionTokens, legs: LegTable, scenario: str,
+    def __init__(self, net: AttentionPolicy, tok: MissionTokens, episode: Episode,
                  beam_width: int, safety_filter: bool, expand: int | None = None) -> None:
-        self.net, self.tok, self.legs = net, tok, legs
-        self.multi = scenario_rules(scenario).recharges
+        self.net, self.tok, self.episode, self.legs = net, tok, episode, episode.legs
+        self.multi = episode.rules.recharges
         self.width = beam_width
         self.filter = safety_filter
-        m = legs.mission
-        self.q, self.r0, self.eod = m.battery.q_max, m.battery.r0, m.eod_v
-        self.fresh = full_charge(self.q).as_array()[0]
+        self.fresh = episode.fresh()
         self.legs_flown = 0
         self.from_home: dict[int, np.ndarray | None] = {}  # token -> state there from a full charge (None: unsafe)
         self.expand = expand or beam_width  # destinations checked per beam and step (more only when none is safe)
@@ -227,8 +224,7 @@ class _Search:
                 keys.append((i, t))
             if not rows:
                 break
-            ok, _, _, x_there = fly_batch(rows, np.stack(x0), self.q, self.r0, self.eod, split=np.array(split),
-                                          chunk_s=256)
+            ok, _, _, x_there = self.episode.fly_currents(rows, np.stack(x0), split=np.array(split), chunk_s=256)
             self.legs_flown += 2 * len(rows)
             for k, (i, t) in enumerate(keys):
                 if beams[i].x is self.fresh:
@@ -325,11 +321,12 @@ class _Search:
                      b.time_s + self.current(b.at, n).size)
 
 
-def _single_flight(legs: LegTable, safety_filter: bool, msgs: list[str], stats: dict[str, Any]
+def _single_flight(episode: Episode, safety_filter: bool, msgs: list[str], stats: dict[str, Any]
                    ) -> tuple[list[str], list[float]]:
     """The one leg: with the filter, the exact safest level (the oracle's); raw, the lowest-charge level."""
     if safety_filter:
-        return safest_single_flight(legs, range(len(ALTITUDES_M)), msgs, stats)
+        return safest_single_flight(episode, range(len(ALTITUDES_M)), msgs, stats)
+    legs = episode.legs
     dest = legs.mission.destinations[0]
     msgs.extend(filter(None, [single_flight_note(legs.mission)]))
     a = legs.cheapest_level(legs.home, 0)
@@ -377,7 +374,8 @@ def attention_plan(mission: Mission | dict, net: AttentionPolicy | None = None, 
     mission, full, scenario, msgs, stats = setup.mission, setup.full_mission, setup.scenario, setup.messages, setup.stats
     assert mission is not None and scenario is not None
     n = len(mission.destinations)
-    legs = setup.legs  # max(N_MAX, n) slots
+    episode = setup.episode
+    legs = episode.legs  # max(N_MAX, n) slots
     width, per_beam = default_search(scenario, n)
     width = int(beam_width) if beam_width is not None else width
     per_beam = min(width, int(expand) if expand is not None else per_beam)
@@ -387,8 +385,8 @@ def attention_plan(mission: Mission | dict, net: AttentionPolicy | None = None, 
         stats["time_s"] = round(time.perf_counter() - t0, 4)
         return make_plan(full, "attention", route, alts, msgs, stats)
 
-    if scenario_rules(scenario).one_leg:
-        return done(*_single_flight(legs, safety_filter, msgs, stats))
+    if episode.rules.one_leg:
+        return done(*_single_flight(episode, safety_filter, msgs, stats))
     for k in range(n):
         reason = too_close(legs, k)
         if reason is not None:
@@ -396,7 +394,7 @@ def attention_plan(mission: Mission | dict, net: AttentionPolicy | None = None, 
     net = net if net is not None else load_policy_cached()
     tok = mission_tokens(legs, scenario)
     with _one_thread():
-        search = _Search(net, tok, legs, scenario, width, safety_filter, per_beam)
+        search = _Search(net, tok, episode, width, safety_filter, per_beam)
         best, finished = search.run()
     assert best is not None  # from the vertiport on a full charge, stopping is always allowed
     stats.update(legs_flown=search.legs_flown, routes_finished=len(finished))
@@ -411,13 +409,13 @@ def attention_plan(mission: Mission | dict, net: AttentionPolicy | None = None, 
     return done(names, alts)
 
 
-def continue_route(legs: LegTable, scenario: str, here: int, state: np.ndarray, visited: np.ndarray,
+def continue_route(episode: Episode, here: int, state: np.ndarray, visited: np.ndarray,
                    sorties: int, first_moves: np.ndarray | None = None, net: AttentionPolicy | None = None
                    ) -> tuple[list[int], list[int]] | None:
     """The rest of a route under way, planned as :func:`attention_plan` plans (default search, filter
-    on ``legs``' cell): from node ``here`` of ``legs`` (``legs.home`` for the vertiport) with battery
-    state ``state`` [8], the destinations ``visited`` (bool [legs.n]) done and ``sorties`` sorties
-    finished.
+    on the episode's cell): from node ``here`` of the episode's legs (``legs.home`` for the vertiport)
+    with battery state ``state`` [8], the destinations ``visited`` (bool [legs.n]) done and ``sorties``
+    sorties finished.
 
     :param first_moves: bool [legs.slots + 1, N_ALTITUDES], the (node, level) pairs the first leg may
         take (its lowest-charge level must be one); default all.
@@ -425,12 +423,12 @@ def continue_route(legs: LegTable, scenario: str, here: int, state: np.ndarray, 
         leg's level index; None if no first move is allowed and safe.
     """
     net = net if net is not None else load_policy_cached()
+    legs, scenario = episode.legs, episode.rules.name
     tok = mission_tokens(legs, scenario)
     n = tok.n
     token = n if here == legs.home else int(here)
     width, per_beam = default_search(scenario, n)
-    q = float(legs.mission.battery.q_max)
-    full = full_charge(q).as_array()[0]
+    full = episode.fresh()
     x = np.asarray(state, dtype=float).reshape(-1)
     used = max(0.0, float((full[4] + full[5]) - (x[4] + x[5])))  # charge drawn from the negative electrode (C)
     allowed = None
@@ -442,7 +440,7 @@ def continue_route(legs: LegTable, scenario: str, here: int, state: np.ndarray, 
             lv = legs.cheapest_level(int(tok.leg_index[token]), int(tok.leg_index[t]))
             allowed[t] = lv is not None and bool(first_moves[int(tok.leg_index[t]), lv])
     with _one_thread():
-        search = _Search(net, tok, legs, scenario, width, True, per_beam)
+        search = _Search(net, tok, episode, width, True, per_beam)
         start = _Beam(token, np.asarray(visited, dtype=bool)[:n].copy(), x, used, int(sorties))
         best, _ = search.run(start, allowed)
     if best is None or not best.tokens:

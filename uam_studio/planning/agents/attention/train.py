@@ -45,6 +45,7 @@ from uam_studio.planning.agents.attention import WEIGHTS_NAME
 from uam_studio.planning.agents.attention.decode import FORMAT, _Search
 from uam_studio.planning.agents.attention.features import mission_tokens, step_features
 from uam_studio.planning.agents.attention.model import AttentionConfig, AttentionPolicy
+from uam_studio.planning.episode import Episode
 from uam_studio.planning.legs import N_MAX, LegTable
 from uam_studio.planning.missions.generate import random_mission
 from uam_studio.planning.missions.mission import Mission
@@ -185,7 +186,7 @@ def oracle_examples(mission: Mission) -> dict[str, list[list[int]]]:
     """The exact oracle's plans of ``mission`` (at most 8 destinations) for single_charge and
     multi_charge, as destination indices per sortie: ``{scenario: sorties}``."""
     legs = LegTable(mission)
-    found = feasible_sorties(legs)
+    found = feasible_sorties(Episode.of(legs, "single_charge"))  # the sorties of one charge
     single = [list(best_single_sortie(found, legs).nodes)] if found else []
     cover = sorted(min_sortie_cover(found, coverable_mask(found)), key=lambda s: (-len(s.nodes), s.time_s))
     return {"single_charge": single, "multi_charge": [list(s.nodes) for s in cover]}
@@ -204,9 +205,9 @@ def _search_job(args: tuple[int, int, tuple[int, int], str, int]) -> tuple[Missi
     seed, k, dest, scenario, beam = args
     assert _SEARCH_NET is not None
     m = random_mission(np.random.default_rng([seed, 1, k]), dest, scenario, name=f"search {seed}/{k}")
-    legs = LegTable(m, max(N_MAX, len(m.destinations)))
-    tok = mission_tokens(legs, scenario)
-    best, _ = _Search(_SEARCH_NET, tok, legs, scenario, beam, True, min(beam, 4)).run()
+    episode = Episode.of(LegTable(m, max(N_MAX, len(m.destinations))), scenario)
+    tok = mission_tokens(episode.legs, scenario)
+    best, _ = _Search(_SEARCH_NET, tok, episode, beam, True, min(beam, 4)).run()
     sorties: list[list[int]] = [[]]
     for t in best.tokens:
         if t == tok.n:
