@@ -52,8 +52,8 @@ def fly_batch(
     :param chunk_s: samples per integration pass (shorter: rows that fail stop sooner; longer: fewer
         passes for a few long rows).
     :return: ``(ok [B], x_end [B, 8], v_min [B])``: no sample below the cut-off; state after the
-        last sample (the start state where not ok); lowest voltage (V), the failing sample
-        included. Same numbers as :func:`uam_studio.battery.simulate` leg by leg (same solver).
+        last sample (the start state where not ok); lowest voltage (V) up to the first sample below
+        the cut-off, that sample included (0 where it is NaN). Same numbers as :func:`uam_studio.battery.simulate` leg by leg (same solver).
         With ``split``, a fourth array ``x_split [B, 8]``: the state after ``split`` samples (the
         start state where the row failed before them).
     """
@@ -91,7 +91,8 @@ def fly_batch(
                 real = np.arange(width)[None, :] < n_real[:, None]
                 below = below_eod(v, eod_v) & real
                 hit = below.any(axis=1)
-                v_min[rows[alive]] = np.minimum(v_min[rows[alive]], np.where(real, v, np.inf).min(axis=1))
+                flown = real & (np.cumsum(below, axis=1) - below == 0)  # up to the first sample below, it included
+                v_min[rows[alive]] = np.minimum(v_min[rows[alive]], np.where(flown, v, np.inf).min(axis=1))
                 last = n_real - 1
                 idx = np.arange(alive.size)
                 picked = np.stack([seq[n][idx, last] for n in _STATE_ORDER], axis=-1)
