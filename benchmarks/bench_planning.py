@@ -35,10 +35,10 @@ class NaiveEulerBattery(BatteryBackend):
 
     name = "naive"
 
-    def reset(self, q_max, r0, eod_v, context_current_a=None, context_voltage_v=None) -> None:
-        self.q_max, self.eod_v = float(q_max), float(eod_v)
+    def reset(self, cell, context_current_a=None, context_voltage_v=None) -> None:
+        self.q_max, self.eod_v = float(cell.q_max), float(cell.eod_v)
         self.q_total = np.array([DEFAULT_CELL.q_total(self.q_max)])
-        self.r0 = np.array([float(r0)])
+        self.r0 = np.array([float(cell.r0)])
         self.recharge()
 
     def recharge(self) -> None:

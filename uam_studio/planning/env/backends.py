@@ -18,7 +18,7 @@ import numpy as np
 
 from uam_studio.battery import DEFAULT_CELL, EOD_RANGE, STATE_NAMES, BatteryState, full_charge, simulate
 from uam_studio.battery.eod import first_below
-from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
+from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE, Cell
 from uam_studio.battery.solver import integrate_current
 from uam_studio.errors import InputError
 from uam_studio.flight import TAKEOFF_CONTEXT_S
@@ -59,9 +59,9 @@ def takeoff_health(predictor: Any, q_max: float, r0: float) -> tuple[float, floa
 def _takeoff_voltage(q_max: float, r0: float) -> np.ndarray:
     # The environment's own leg solver (no per-call input checks): the same numbers as simulate(),
     # which it falls back to for a cell that ends below the lowest cut-off within the window.
-    cell = PhysicsBattery()
-    cell.reset(q_max, r0, EOD_RANGE[0])
-    out = cell.fly_leg(takeoff_context_current())
+    battery = PhysicsBattery()
+    battery.reset(Cell("take-off check", DEFAULT_CELL, q_max, r0, EOD_RANGE[0]))
+    out = battery.fly_leg(takeoff_context_current())
     if out.eod:
         v = np.array(simulate(takeoff_context_current(), DT_S, q_max, r0, eod_v=EOD_RANGE[0]).voltage_v)
     else:
@@ -126,12 +126,10 @@ class BatteryBackend(ABC):
     name = "backend"
 
     @abstractmethod
-    def reset(self, q_max: float, r0: float, eod_v: float, context_current_a: np.ndarray,
-              context_voltage_v: np.ndarray) -> None:
-        """Start an episode with a fresh cell of health (q_max C, r0 ohm) and cut-off eod_v (V).
-
-        The context is the episode's 20 s take-off observation.
-        """
+    def reset(self, cell: Cell, context_current_a: np.ndarray | None = None,
+              context_voltage_v: np.ndarray | None = None) -> None:
+        """Start an episode with a fresh ``cell`` (its parameter set, health q_max C and R0 ohm, and
+        cut-off V). The context is the episode's 20 s take-off observation (A, V)."""
 
     @abstractmethod
     def fly_leg(self, current_a: np.ndarray) -> LegOutcome:
@@ -151,19 +149,19 @@ class PhysicsBattery(BatteryBackend):
 
     name = "physics"
 
-    def reset(self, q_max, r0, eod_v, context_current_a=None, context_voltage_v=None) -> None:
-        self.q_max, self.r0, self.eod_v = float(q_max), float(r0), float(eod_v)
-        self._q_total = np.array([DEFAULT_CELL.q_total(self.q_max)])
-        self._r0 = np.array([self.r0])
+    def reset(self, cell: Cell, context_current_a=None, context_voltage_v=None) -> None:
+        self.cell, self.eod_v = cell, float(cell.eod_v)
+        self._q_total = np.array([cell.params.q_total(float(cell.q_max))])
+        self._r0 = np.array([float(cell.r0)])
         self.recharge()
 
     def recharge(self) -> None:
-        self.state = full_charge(self.q_max)
+        self.state = full_charge(self.cell.q_max, self.cell.params)
 
     def fly_leg(self, current_a: np.ndarray) -> LegOutcome:
         cur = np.asarray(current_a, dtype=float)[None, :]
         with np.errstate(all="ignore"):
-            v, seq = integrate_current(cur, self.state, self._q_total, self._r0, DT_S, DEFAULT_CELL)
+            v, seq = integrate_current(cur, self.state, self._q_total, self._r0, DT_S, self.cell.params)
         v = v[0]
         k = int(first_below(v, self.eod_v))
         if k >= 0:
@@ -192,8 +190,8 @@ class DynaformerBattery(BatteryBackend):
         self.predictor = predictor
         self._sortie = np.zeros(0)
 
-    def reset(self, q_max, r0, eod_v, context_current_a=None, context_voltage_v=None) -> None:
-        self.eod_v = float(eod_v)
+    def reset(self, cell: Cell, context_current_a=None, context_voltage_v=None) -> None:
+        self.eod_v = float(cell.eod_v)
         self.context = (np.asarray(context_current_a, dtype=float), np.asarray(context_voltage_v, dtype=float))
         self.recharge()
 

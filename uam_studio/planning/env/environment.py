@@ -305,7 +305,7 @@ class UAMPlanningEnv(gym.Env):
         else:
             health = fallback_health(ci, cv)
         self._health = health
-        self.backend.reset(q, r0, eod, ci, cv)
+        self.backend.reset(mission.cell, ci, cv)
         self._v_rest = float(rest_voltage(q))
 
         # episode state
