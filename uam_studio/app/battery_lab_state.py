@@ -17,17 +17,18 @@ import param
 
 from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE, LatestWorker, one_line
 from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0
-from uam_studio.battery.parameters import NASA_18650, VTC6, Cell
+from uam_studio.battery.parameters import NASA_18650, PAPER_Q_RANGE, PAPER_R0_RANGE, VTC6, Cell
 from uam_studio.errors import InputError
 from uam_studio.flight.tables import ALTITUDE_RANGE_M, WIND_RANGE_KTS
+from uam_studio.planning.legs import ALTITUDES_M
 
 __all__ = ["CELLS", "HEALTH_BOX", "VARY", "BatteryLabState", "family_values"]
 
 VARY = {
-    "altitude": ("altitude_m", (500.0, 1000.0, 2000.0, 3000.0), "m"),
-    "wind": ("wind_kts", (-39.0, -13.0, 0.0, 13.0, 39.0), "kt"),
-    "R0": ("r0", (0.017, 0.1, 0.2, 0.3, 0.45), "ohm"),
-    "q_max": ("q_max", (5000.0, 6000.0, 7000.0, 8000.0), "C"),
+    "altitude": ("altitude_m", ALTITUDES_M, "m"),  # the paper's four levels
+    "wind": ("wind_kts", tuple(WIND_RANGE_KTS[1] * f for f in (-1.0, -1 / 3, 0.0, 1 / 3, 1.0)), "kt"),
+    "R0": ("r0", (PAPER_R0_RANGE[0], 0.1, 0.2, 0.3, PAPER_R0_RANGE[1]), "ohm"),  # across the paper's range
+    "q_max": ("q_max", (PAPER_Q_RANGE[0], 6000.0, 7000.0, PAPER_Q_RANGE[1]), "C"),
 }
 NASA_NAME, VTC6_NAME = "NASA 18650 (the paper's cell)", "Sony VTC6 (identified on real cells)"
 CELLS: dict[str, Cell] = {NASA_NAME: NASA_18650, VTC6_NAME: VTC6}

@@ -55,7 +55,7 @@ from uam_studio.app.services import (
     policy_options,
     registry,
 )
-from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0
+from uam_studio.battery import DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.legs import N_MAX
@@ -86,8 +86,8 @@ EXAMPLE_MISSION: dict[str, Any] = {
         {"name": "Napa", "x_km": 18.0, "y_km": 55.0, "priority": 2, "wind_kts": 20.0, "dwell_s": 300.0},
     ],
     "scenario": DEFAULT_SCENARIO,
-    "battery": {"q_max": 7600.0, "r0": 0.117215},
-    "eod_v": 3.0,
+    "battery": {"q_max": DEFAULT_Q_MAX, "r0": DEFAULT_R0},
+    "eod_v": DEFAULT_EOD_V,
 }
 """The bundled example (``assets/example_mission.json``), the app's starting mission."""
 

@@ -46,7 +46,7 @@ from ..errors import InputError, check_range
 from ..flight.context import TAKEOFF_CONTEXT_S
 from .eod import first_below
 from .health_prior import Q_REF_C, HealthPrior, combine, fleet_prior
-from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, CellParameters
+from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, PAPER_Q_RANGE, PAPER_R0_RANGE, CellParameters
 from .simulate import CURRENT_LIMIT_A, DT_RANGE, EOD_RANGE, simulate
 from .solver import integrate_current
 from .state import STATE_NAMES, BatteryState, full_charge
@@ -70,7 +70,7 @@ _HI = np.array([_W_BOX[1], FIT_R0_RANGE[1], PREROLL_MAX_S])
 _PRIOR_PREC = 1.0 / (_HI - _LO) ** 2  # weak prior: std = box width, in (w, R0, pre-roll)
 _START_W = (0.65, 0.8, 1.0, 1.2, 1.45)  # q_max 10000, 8125, 6500, 5417, 4483 C (the NASA cell's fleet)
 _START_R0 = (0.1, 0.3)  # ohm (the NASA cell's fleet, R0 up to 0.45 ohm)
-_START_FLEET = (6500.0, 0.45)  # C, ohm: the fleet the start grid is written for (the paper's box: its centre, top)
+_START_FLEET = (sum(PAPER_Q_RANGE) / 2, PAPER_R0_RANGE[1])  # C, ohm: the fleet the start grid is written for (the paper's box: its centre, top)
 
 
 def _start_grid(cell: CellParameters, ws=_START_W) -> tuple[np.ndarray, tuple[float, float]]:

@@ -73,7 +73,8 @@ class DynaformerCell:
 
 
 NASA_TRAINING = DynaformerCell("nasa18650", NASA_18650, PAPER_Q_RANGE, PAPER_R0_RANGE,
-                               ((4000.0, 5000.0), (8000.0, 9000.0)), (0.45, 0.5), "flight", (0.05, 3.0), 3.0, 10240,
+                               ((4000.0, PAPER_Q_RANGE[0]), (PAPER_Q_RANGE[1], 9000.0)), (PAPER_R0_RANGE[1], 0.5),
+                               "flight", (0.05, 3.0), 3.0, 10240,
                                "dynaformer.pt")
 VTC6_TRAINING = DynaformerCell("vtc6", VTC6, (8000.0, 12500.0), (0.012, 0.06),
                                ((6500.0, 8000.0), (12500.0, 14000.0)), (0.06, 0.08), "power", (0.5, 18.0), 15.0, 5120,

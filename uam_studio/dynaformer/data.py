@@ -25,6 +25,7 @@ from ..atomic_io import atomic_save
 from ..battery import PAPER_Q_RANGE, PAPER_R0_RANGE, simulate
 from ..battery.simulate import simulate_constant_power
 from ..flight import leg_profile, min_leg_distance_km
+from ..flight.tables import WIND_RANGE_KTS
 from .cells import NASA_TRAINING, DynaformerCell, dynaformer_cell
 
 GRID_DT_S = 1.0
@@ -92,7 +93,7 @@ def flight_profile(rng: np.random.Generator, max_len: int) -> np.ndarray:
         alt = float(rng.uniform(500.0, 3000.0))
         lo = max(min_leg_distance_km(alt) + 0.1, 8.0)
         dist = float(rng.uniform(lo, max(lo + 1.0, 65.0)))
-        wind = float(rng.uniform(-39.0, 39.0))
+        wind = float(rng.uniform(*WIND_RANGE_KTS))
         dwell = float(rng.uniform(0.0, 900.0)) if rng.random() < 0.5 else 0.0
         parts.append(leg_profile(dist, alt, wind, dt_s=GRID_DT_S, dwell_s=dwell).current_a)
         if sum(p.size for p in parts) >= max_len:

@@ -20,11 +20,11 @@ import numpy as np
 from ..battery import rest_voltage, simulate
 from ..battery.eod import first_below
 from ..battery.fit import eod_intervals, fit_health, fit_health_batch
-from ..battery.parameters import DEFAULT_CELL, CellParameters
+from ..battery.parameters import DEFAULT_CELL, DEFAULT_EOD_V, CellParameters
 from .data import make_dataset
 from .predictor import DynaformerPredictor
 
-EOD_V = 3.0
+EOD_V = DEFAULT_EOD_V  # V
 SETS = {
     "interpolation_flight": dict(band="train", flight_fraction=1.0),
     "interpolation_generic": dict(band="train", flight_fraction=0.0),

@@ -25,6 +25,7 @@ import numpy as np
 from uam_studio.battery import DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0, simulate
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_feasible, leg_profile
+from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.env.environment import REWARD_DEFAULTS
 from uam_studio.planning.legs import ALTITUDES_M
 from uam_studio.planning.missions.mission import Mission
@@ -92,7 +93,7 @@ def with_wind(mission: Mission, wind_kts: float) -> Mission:
 def fixed_altitude_reach(
     missions: Iterable[Mission],
     altitudes_m: Sequence[float] = (1000.0, 3000.0),
-    wind_kts: float | None = 39.0,
+    wind_kts: float | None = WIND_RANGE_KTS[1],
 ) -> list[dict[str, Any]]:
     """How much each single fixed altitude can reach, with the exact oracle restricted to it.
 

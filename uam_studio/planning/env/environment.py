@@ -100,7 +100,7 @@ class UAMPlanningEnv(gym.Env):
     |       | priority / 3, visited, wind on legs to it / 39 kt (negative = tailwind); zeros for empty slots |
     | 63-66 | vertiport: dx, dy, distance (/ 100 km), wind on legs to it / 39 kt |
     | 67-69 | scenario one-hot (single_flight, single_charge, multi_charge) |
-    | 70    | EOD cut-off, ``(eod_v - 3.0) / 0.5`` |
+    | 70    | EOD cut-off, ``(eod_v - 3.0) / 0.5`` (3.0 V: the default cut-off) |
     | 71-78 | per slot: charge of the round trip aircraft -> slot -> vertiport at the lowest feasible |
     |       | levels / 8000 C (0 for visited or empty slots): what the paper's tables say, no battery |
     | 79    | charge to fly home from here / 8000 C (0 at the vertiport) |

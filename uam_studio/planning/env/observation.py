@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from uam_studio.battery.parameters import DEFAULT_EOD_V
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.legs import N_ACTIONS, N_MAX, N_TARGETS, VERTIPORT_SLOT, LegTable
 from uam_studio.planning.missions.scenario import SCENARIOS
@@ -51,7 +52,7 @@ def static_features(legs: LegTable, health: np.ndarray, scenario: str, eod_v: fl
     base[_SLOT_IDX + 6] = legs.wind[:N_MAX] / WIND_SCALE_KT
     base[_VP + 3] = legs.wind[VERTIPORT_SLOT] / WIND_SCALE_KT
     base[_SCEN + SCENARIOS.index(scenario)] = 1.0
-    base[_EOD] = (eod_v - 3.0) / 0.5
+    base[_EOD] = (eod_v - DEFAULT_EOD_V) / 0.5
     rel = np.zeros((N_TARGETS, N_TARGETS, 3))
     rel[:, :, 0] = (legs.pos[None, :, 0] - legs.pos[:, None, 0]) / POS_SCALE_KM
     rel[:, :, 1] = (legs.pos[None, :, 1] - legs.pos[:, None, 1]) / POS_SCALE_KM

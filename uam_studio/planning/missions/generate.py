@@ -40,7 +40,7 @@ from uam_studio.planning.missions.mission import (
 from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO, check_scenario, scenario_rules
 
 DEFAULT_Q_RANGE = PAPER_Q_RANGE
-DEFAULT_R0_RANGE = (0.017, 0.35)  # ohm; the paper's is 0.017-0.45, see the module docstring
+DEFAULT_R0_RANGE = (PAPER_R0_RANGE[0], 0.35)  # ohm; the paper's is 0.017-0.45, see the module docstring
 DEFAULT_RADIUS_KM = (8.0, 60.0)
 HELD_OUT_RADIUS_KM = (8.0, 45.0)
 MIN_SEPARATION_KM = 7.0  # > 6.11 km, the shortest leg at 500 m
@@ -163,4 +163,4 @@ def any_valid_mission(rng: np.random.Generator, max_dest: int = MAX_DESTINATIONS
                               float(rng.choice(_DWELLS_S))) for k, (x, y) in enumerate(pts))
     battery = Battery(round(float(rng.uniform(*PAPER_Q_RANGE)), 1), round(float(rng.uniform(*PAPER_R0_RANGE)), 5))
     return Mission("any valid mission", Vertiport(0.0, 0.0, round(float(rng.uniform(w_lo, w_hi)), 1)), dests,
-                   scenario, battery, 3.0)
+                   scenario, battery, DEFAULT_EOD_V)

@@ -30,6 +30,7 @@ import numpy as np
 from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0, simulate
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_profile
+from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.legs import DT_S, N_MAX, takeoff_current
 from uam_studio.planning.missions.mission import VERTIPORT, Battery, Mission, check_destination_count
 from uam_studio.planning.operations.decision import Decision
@@ -307,7 +308,7 @@ def _predict_leg(op: Operator, d: Decision, first: bool) -> np.ndarray:
     """The operator's predicted voltage (V) for the leg it chose: its median health, predicted wind."""
     m = op.forecast_mission
     wind, _ = op.winds.predict(d.next_to)
-    wind = float(np.clip(wind, -39.0, 39.0))
+    wind = float(np.clip(wind, *WIND_RANGE_KTS))
     dwell = m.node(d.next_to).dwell_s if d.next_to != VERTIPORT else 0.0
     prof = leg_profile(m.distance_km(d.node, d.next_to), d.next_altitude_m, wind, DT_S, dwell)
     cur, _ = op.health_belief.segment.arrays()

@@ -41,7 +41,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.legs import LegTable
+from uam_studio.planning.missions.generate import DEFAULT_R0_RANGE
 from uam_studio.planning.missions.scenario import scenario_rules
 
 TOKEN_FEATURES = 13
@@ -49,8 +51,8 @@ CONTEXT_FEATURES = 4
 CANDIDATE_FEATURES = 6
 KM_SCALE = 50.0  # km
 Q_SCALE = 8000.0  # C
-R0_SCALE = 0.35  # ohm
-WIND_SCALE = 39.0  # kt
+R0_SCALE = DEFAULT_R0_RANGE[1]  # ohm: the training generator's highest R0
+WIND_SCALE = WIND_RANGE_KTS[1]  # kt
 DWELL_SCALE = 300.0  # s
 SORTIE_SCALE = 5.0
 NO_LEG = 1.0  # charge feature (C / q_max) of a leg no level can fly
