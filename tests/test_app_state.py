@@ -76,6 +76,21 @@ def test_slider_change_replans_with_the_new_cell():
     assert s.plan["route"] and s.plan["min_voltage_v"] is not None
 
 
+def test_the_state_holds_one_mission_built_once_per_accepted_edit():
+    s = _state()
+    m = s.mission
+    assert s.mission is m and s.mission is m  # every read is the same value, none rebuilt
+    assert s.plan_request.mission == m  # (the plan cache may answer with an equal request of another state)
+    assert not s.apply(q_max=1.0) and s.mission is m  # a refused edit keeps it
+    assert s.apply(q_max=6000.0, r0=0.2)
+    assert s.mission is not m and s.mission.battery.q_max == 6000.0 and s.mission.battery.r0 == 0.2
+    assert s.plan_request.mission == s.mission  # the replan read the new one
+    assert s.load_json(s.to_json().replace('"Bay shuttle"', '"Another"'), "x.json")
+    assert s.mission.name == "Another" and s.mission_name == "Another"
+    s.reset_example()
+    assert s.mission == mission_from_dict(EXAMPLE_MISSION)
+
+
 @pytest.mark.parametrize("change, field, allowed", [
     ({"r0": 0.9}, "r0", "[0.017, 0.45]"),
     ({"q_max": 100.0}, "q_max", "[5000, 8000]"),

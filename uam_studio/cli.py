@@ -15,11 +15,15 @@ the CMU eVTOL dataset's real cells) and ``identify`` (a real cell's parameter se
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import os
+import socket
 import sys
+import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import NoReturn
 
 from uam_studio import __version__
@@ -316,8 +320,6 @@ def _refuse_bundled(out) -> None:
 
 def _check_out_folder(folder) -> None:
     """Create the run folder ``folder`` if needed and check a file can be written in it, before any work."""
-    import tempfile
-    from pathlib import Path
 
     folder = Path(folder)
     try:
@@ -351,8 +353,6 @@ def _run_train(args: argparse.Namespace) -> int:
 
 
 def _run_train_attention(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     from .dynaformer.train import pick_device
     from .planning.agents.attention.train import AttentionTrainConfig, train_attention
 
@@ -398,8 +398,6 @@ def _run_train_dynaformer(args: argparse.Namespace) -> int:
 
 
 def _run_train_dqn(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     from uam_studio.planning import SCENARIOS, load_mission
     from uam_studio.planning.agents.retrain import retrain_dqn, training_setup
     from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO
@@ -453,8 +451,6 @@ def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _run_evaluate(args: argparse.Namespace) -> int:
-    import json
-
     from .dynaformer.evaluate import evaluate, format_noise_table, format_report, noise_table
     from .dynaformer.predictor import load_predictor
 
@@ -519,9 +515,6 @@ def _add_serve_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _run_serve(args: argparse.Namespace) -> int:
-    import errno
-    import socket
-
     if not 0 <= args.port <= 65535:
         raise _CliExit(f"--port: {args.port} is out of range; allowed [0, 65535]", EXIT_INPUT)
     try:

@@ -12,7 +12,9 @@
 from __future__ import annotations
 
 import collections
+import multiprocessing
 import os
+import queue
 import threading
 import time
 import traceback
@@ -156,7 +158,6 @@ def store_row(req: PlanRequest, row: dict[str, Any]) -> None:
 
 def _runner_main(requests: Any, results: Any, parent_pid: int, nice: int) -> None:
     """The comparison child process: :func:`compare_row` for each request, until the parent is gone."""
-    import queue
 
     if nice:
         try:
@@ -243,7 +244,6 @@ class ComparisonRunner:
     def _ensure_process(self) -> None:
         if self._proc is not None and self._proc.is_alive():
             return
-        import multiprocessing
 
         ctx = multiprocessing.get_context("spawn")  # no fork of a threaded server
         self._requests, self._results = ctx.Queue(), ctx.Queue()
@@ -285,8 +285,6 @@ class ComparisonRunner:
     def _run(self, req: PlanRequest) -> dict[str, Any]:
         if self.mode == "thread":
             return compare_row(req.mission, req.policy)
-        import queue
-
         with self._cv:
             self._ensure_process()
             proc, requests, results = self._proc, self._requests, self._results

@@ -158,8 +158,9 @@ class PlannerState(param.Parameterized):
     error = param.String(default="", doc="why the last edit was rejected (one line), '' if it was accepted")
     notice = param.String(default="", doc="a short note about the last accepted action")
 
-    INPUTS = ("mission_name", "destinations", "vertiport_x_km", "vertiport_y_km", "return_wind", "scenario",
-              "q_max", "r0", "eod_v", "policy")
+    MISSION_INPUTS = ("mission_name", "destinations", "vertiport_x_km", "vertiport_y_km", "return_wind", "scenario",
+                      "q_max", "r0", "eod_v")
+    INPUTS = (*MISSION_INPUTS, "policy")
 
     def __init__(self, mission: Mission | dict | None = None, background: bool = False,
                  dispatch: Callable[[Callable[[], None]], None] | None = None, auto: bool = True,
@@ -189,6 +190,9 @@ class PlannerState(param.Parameterized):
         m = mission if mission is not None else EXAMPLE_MISSION
         m = m if isinstance(m, Mission) else mission_from_dict(m)
         self._set_mission(m)
+        self._mission = self._build()
+        # first of all watchers: every reader (the replan below, the views) sees the mission of the new inputs
+        self.param.watch(self._sync_mission, list(self.MISSION_INPUTS))
         reg = registry()
         self._update_policy_options(reg.agents)
         self._agents_watcher = reg.param.watch(self._on_agents, "agents")
@@ -202,8 +206,11 @@ class PlannerState(param.Parameterized):
 
     @property
     def mission(self) -> Mission:
-        """The current (always valid) mission."""
-        return self._build()
+        """The current (always valid) mission: one value, built once per accepted edit of its inputs."""
+        return self._mission
+
+    def _sync_mission(self, *events: param.parameterized.Event) -> None:
+        self._mission = self._build()
 
     def _build(self, **changes: Any) -> Mission:
         v = {k: changes.get(k, getattr(self, k)) for k in self.INPUTS}

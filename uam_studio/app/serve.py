@@ -11,8 +11,15 @@ cannot drive the app, not even through DNS rebinding (a name of its own that res
 from __future__ import annotations
 
 import logging
+import os
+import socket
+import subprocess
+import sys
 import threading
+import time
+import urllib.request
 from collections.abc import Iterable, Sequence
+from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
@@ -195,22 +202,12 @@ class ServedApp:
     """
 
     def __init__(self, home, timeout_s: float = 300.0, **env: str) -> None:
-        from pathlib import Path
-
         self.home = Path(home)
         self.timeout_s = timeout_s
         self.extra_env = env
         self.log_path = self.home / "serve.log"
 
     def __enter__(self) -> ServedApp:
-        import os
-        import socket
-        import subprocess
-        import sys
-        import time
-        import urllib.request
-        from pathlib import Path
-
         with socket.socket() as s:
             s.bind(("127.0.0.1", 0))
             self.port = s.getsockname()[1]
@@ -240,8 +237,6 @@ class ServedApp:
         return self
 
     def __exit__(self, *exc) -> None:
-        import subprocess
-
         self.proc.terminate()
         try:
             self.proc.wait(20)

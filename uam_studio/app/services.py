@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import functools
+import multiprocessing
 import threading
 import time
 import traceback
@@ -251,8 +252,6 @@ class PlanningActivity:
         """The ``multiprocessing`` Event (``spawn`` context), created on first use."""
         with self._lock:
             if self._event is None:
-                import multiprocessing
-
                 self._event = multiprocessing.get_context("spawn").Event()
                 if self._active:
                     self._event.set()

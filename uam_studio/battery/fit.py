@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from statistics import NormalDist
 
 import numpy as np
 
@@ -534,7 +535,6 @@ def _start_states(estimates: list[HealthEstimate], points: np.ndarray, per: int,
 
 def two_sided_z(level: float) -> float:
     """Two-sided standard-normal quantile: P(|Z| <= z) = level."""
-    from statistics import NormalDist
 
     return NormalDist().inv_cdf(0.5 + level / 2.0)
 

@@ -13,7 +13,7 @@ parameter set that :data:`~uam_studio.battery.parameters.VTC6` holds.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -136,7 +136,6 @@ def replay_mission(mission: MissionLog, cell: Cell, by_power: bool = True) -> Si
 
 def cell_literal(cell: Cell, name: str = "VTC6") -> str:
     """Python source of ``cell`` as parameters.py holds it (what ``uam-studio identify vtc6`` prints)."""
-    from dataclasses import fields
 
     p = cell.params
     changed = [f.name for f in fields(p) if getattr(p, f.name) != getattr(DEFAULT_CELL, f.name)]

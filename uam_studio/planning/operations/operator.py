@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 
 import numpy as np
 
@@ -257,7 +258,6 @@ class Operator:
         be one after which the aircraft can still get home on the cautious belief (``health_z``,
         ``wind_z``). Only that first leg is committed: the rest is re-planned at the next arrival.
         """
-        import time
 
         t0 = time.perf_counter()
         health = self.health()

@@ -12,7 +12,7 @@ Method
    (visited set, current node, battery state, time, minimum voltage, path). Level k holds the
    labels after k destinations; all children of a level (every unvisited destination and the
    return home, at every feasible level) are flown in one batched integration of the battery
-   model (:func:`fly_batch`). Labels are pruned when
+   model (:func:`~uam_studio.planning.episode.fly_batch`). Labels are pruned when
 
    a. the voltage fell below the cut-off on the leg (exact: the aircraft is lost), or
    b. another label at the same (visited set, node) *dominates* them: at least as much charge
