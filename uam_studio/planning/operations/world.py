@@ -117,12 +117,10 @@ class World:
         self.base_winds = {name: float(np.clip(mission.node(name).wind_kts + e, lo, hi))
                            for name, e in zip(mission.node_names, errors)}
         self._noise = np.random.default_rng([int(seed), 0x5E45])
-        self.q_max = mission.battery.q_max
-        self.r0 = mission.battery.r0
-        self.eod_v = mission.eod_v
+        self.cell = mission.cell  # the true cell: parameter set, q_max (C), R0 (ohm), cut-off (V)
         self.time_s = 0.0
         self.node = VERTIPORT
-        self.state: BatteryState = full_charge(self.q_max)
+        self.state: BatteryState = full_charge(self.cell.q_max, self.cell.params)
         self.legs: list[WorldLeg] = []
         self.breached = False
         self._checked_s = 0  # samples of the current leg already flown by the take-off check
@@ -143,7 +141,8 @@ class World:
         return Readings(t0 + DT_S * np.arange(1, n + 1), cur, volt, landed)
 
     def _fly(self, current: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, bool]:
-        res = simulate(current, DT_S, self.q_max, self.r0, self.eod_v, initial_state=self.state)
+        c = self.cell
+        res = simulate(current, DT_S, c.q_max, c.r0, c.eod_v, initial_state=self.state, cell=c.params)
         k = current.size if not res.eod_reached else int(np.argmax(~res.valid)) + 1
         self.state = res.final_state
         self.last_true_voltage_v = np.asarray(res.voltage_v[:k], dtype=float)
@@ -191,7 +190,7 @@ class World:
         if not breached:
             self.node = to
             if to == VERTIPORT:
-                self.state = full_charge(self.q_max)
+                self.state = full_charge(self.cell.q_max, self.cell.params)
         return self._sense(flown, volt, t0, landed=not breached)
 
 
