@@ -255,8 +255,8 @@ class UAMPlanningEnv(gym.Env):
 
     # ------------------------------------------------------------------ mission checks
 
-    def _check_mission(self, mission: Mission) -> LegTable:
-        """Refuse a mission the env cannot fly (one-line error naming the field); return its leg table."""
+    def _check_mission(self, mission: Mission) -> Episode:
+        """Refuse a mission the env cannot fly (one-line error naming the field); return its episode."""
         n = len(mission.destinations)
         if n == 0:
             raise InputError("mission.destinations", "is empty; the environment needs 1 to 8 destinations")
@@ -268,7 +268,7 @@ class UAMPlanningEnv(gym.Env):
             what = "destinations[0]" if episode.rules.one_leg else "every destination"
             raise InputError("mission.destinations", f"{what} is too close to the vertiport to fly to "
                                                      f"(a leg needs >= {MIN_LEG_KM[0]:.1f} km)")
-        return legs
+        return episode
 
     # ------------------------------------------------------------------ gym API
 
@@ -276,11 +276,11 @@ class UAMPlanningEnv(gym.Env):
         super().reset(seed=seed)
         rng = self.np_random
         mission = (options or {}).get("mission")
-        legs = None
+        episode = None
         if mission is not None:
             if not isinstance(mission, Mission):
                 raise InputError("options.mission", f"expected a Mission, got {type(mission).__name__}")
-            legs = self._check_mission(mission)
+            episode = self._check_mission(mission)
         elif self._fixed is not None:
             mission = self._fixed
             if self.randomize_battery:
@@ -295,8 +295,9 @@ class UAMPlanningEnv(gym.Env):
         else:
             mission = random_mission(rng, self.n_dest, self.scenario, self.r0_range, self.q_range, self.radius_km)
         self.mission = mission
-        legs = self._legs = legs if legs is not None else LegTable(mission)
-        self._episode = Episode.of(legs, self.scenario)  # the rules (the env's battery is its backend)
+        # the rules (the env's battery is its backend)
+        self._episode = episode if episode is not None else Episode.of(LegTable(mission), self.scenario)
+        legs = self._legs = self._episode.legs
         q, r0, eod = mission.battery.q_max, mission.battery.r0, mission.eod_v
         ci, cv = observe_takeoff(q, r0)
         if self.health_fn is not None:
