@@ -8,7 +8,7 @@ import numpy as np
 
 from ..errors import InputError, check_range
 from .eod import first_below
-from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0, CellParameters
+from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0, Cell, CellParameters
 from .solver import integrate_current, output_voltage, step
 from .state import STATE_NAMES, BatteryState, full_charge
 
@@ -214,6 +214,13 @@ def simulate(
         voltage, k_eod, final = _integrate_until_eod(current, x0, q_total, r, eod, dt, cell)
     time_s = dt * np.arange(1, current.shape[1] + 1)
     return _finish(time_s, voltage, k_eod, final, current, squeeze)
+
+
+def simulate_cell(current_a, cell: Cell, dt_s: float = 1.0,
+                  initial_state: BatteryState | None = None) -> SimulationResult:
+    """:func:`simulate` of one :class:`~uam_studio.battery.parameters.Cell`: its parameter set, its health
+    (q_max C, R0 ohm) and its cut-off (V), under ``current_a`` (A, steps of ``dt_s`` s)."""
+    return simulate(current_a, dt_s, cell.q_max, cell.r0, cell.eod_v, initial_state=initial_state, cell=cell.params)
 
 
 def simulate_constant_power(

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from uam_studio.battery import BatteryState, full_charge
+from uam_studio.battery import STATE_NAMES, BatteryState, full_charge
 from uam_studio.battery.eod import below_eod
 from uam_studio.battery.parameters import Cell
 from uam_studio.battery.solver import integrate_current
@@ -35,7 +35,6 @@ from uam_studio.planning.missions.scenario import Scenario, scenario_rules
 
 _ROW_BATCH = 512  # trajectories integrated together (small blocks stay in cache: faster)
 _CHUNK_S = 128  # samples per integration pass
-_STATE_ORDER = ("tb", "vo", "vsn", "vsp", "qnb", "qns", "qpb", "qps")  # uam_studio.battery.STATE_NAMES
 
 
 def fly_batch(
@@ -95,14 +94,14 @@ def fly_batch(
                 v_min[rows[alive]] = np.minimum(v_min[rows[alive]], np.where(flown, v, np.inf).min(axis=1))
                 last = n_real - 1
                 idx = np.arange(alive.size)
-                picked = np.stack([seq[n][idx, last] for n in _STATE_ORDER], axis=-1)
+                picked = np.stack([seq[n][idx, last] for n in STATE_NAMES], axis=-1)
                 keep = ~hit
                 if x_split is not None:
                     at = np.asarray(split)[rows[alive]] - 1 - start  # the split's sample in this chunk
                     k = np.flatnonzero((at >= 0) & (at < width))
                     k = k[np.cumsum(below[k], axis=1)[np.arange(k.size), at[k]] == 0]  # not failed by then
                     if k.size:
-                        x_split[rows[alive[k]]] = np.stack([seq[n][k, at[k]] for n in _STATE_ORDER], axis=-1)
+                        x_split[rows[alive[k]]] = np.stack([seq[n][k, at[k]] for n in STATE_NAMES], axis=-1)
                 state[alive[keep]] = picked[keep]
                 ok[rows[alive[hit]]] = False
                 alive = alive[keep]

@@ -35,6 +35,7 @@ import numpy as np
 
 from uam_studio.battery import BatteryState, full_charge, simulate
 from uam_studio.battery.health_prior import Q_REF_C
+from uam_studio.battery.simulate import simulate_cell
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight import leg_profile
 from uam_studio.flight.tables import WIND_RANGE_KTS
@@ -404,13 +405,12 @@ class Operator:
                           ) -> tuple[list[str], list[float], str]:
         """Home when no way is safe on the cautious belief: the level that is safe on the expected belief
         (``episode``) with the highest minimum voltage, else the one that gets furthest before the cut-off."""
-        legs, cell = episode.legs, episode.cell
+        legs = episode.legs
         levels = [a for a in range(len(ALTITUDES_M)) if legs.feasible[here, VERTIPORT_SLOT, a]] or [0]
         best, best_key = levels[0], None
         for a in levels:
             cur = legs.current(here, VERTIPORT_SLOT, a)
-            res = simulate(cur, DT_S, cell.q_max, cell.r0, cell.eod_v, initial_state=BatteryState.from_array(state[None, :]),
-                           cell=cell.params)
+            res = simulate_cell(cur, episode.cell, DT_S, initial_state=BatteryState.from_array(state[None, :]))
             key = (0.0, float(res.min_voltage_v)) if not res.eod_reached else (-1.0 + float(res.eod_s) / cur.size, 0.0)
             if best_key is None or key > best_key:
                 best, best_key = a, key

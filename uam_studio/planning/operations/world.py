@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from uam_studio.battery import BatteryState, full_charge, simulate
+from uam_studio.battery import BatteryState, full_charge
+from uam_studio.battery.simulate import simulate_cell
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight import TAKEOFF_CONTEXT_S, leg_profile
 from uam_studio.flight.tables import WIND_RANGE_KTS
@@ -141,8 +142,7 @@ class World:
         return Readings(t0 + DT_S * np.arange(1, n + 1), cur, volt, landed)
 
     def _fly(self, current: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, bool]:
-        c = self.cell
-        res = simulate(current, DT_S, c.q_max, c.r0, c.eod_v, initial_state=self.state, cell=c.params)
+        res = simulate_cell(current, self.cell, DT_S, initial_state=self.state)
         k = current.size if not res.eod_reached else int(np.argmax(~res.valid)) + 1
         self.state = res.final_state
         self.last_true_voltage_v = np.asarray(res.voltage_v[:k], dtype=float)

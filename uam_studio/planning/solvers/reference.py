@@ -47,7 +47,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from uam_studio.battery import simulate
+from uam_studio.battery.simulate import simulate_cell
 from uam_studio.planning.episode import Episode
 from uam_studio.planning.legs import ALTITUDES_M, DT_S, N_ALTITUDES, LegTable, takeoff_current
 from uam_studio.planning.missions.check import Plan, make_plan
@@ -125,7 +125,7 @@ def _first_budgets(ep: Episode, level: np.ndarray, nodes: list[int]) -> tuple[fl
     mid = one[(one > 0.5) & (one < 2.5)]  # the cruise samples dominate (take-off and climb: ~2.9 A)
     cruise = float(np.median(mid)) if mid.size else float(one[one > 0].mean())
     steps = int(2.0 * cell.q_max / cruise / DT_S)
-    res = simulate(np.full(steps, cruise), DT_S, cell.q_max, cell.r0, cell.eod_v, cell=cell.params)
+    res = simulate_cell(np.full(steps, cruise), cell, DT_S)
     total = cruise * (float(res.eod_s) if res.eod_reached else steps * DT_S)
     climb = takeoff_current()
     before = np.linspace(0.0, total, 41)[1:]  # charge given before the take-off (C)
@@ -134,7 +134,7 @@ def _first_budgets(ep: Episode, level: np.ndarray, nodes: list[int]) -> tuple[fl
     for b, k in enumerate(pre):
         rows[b, :k] = cruise
         rows[b, k:k + climb.size] = climb
-    ok = ~np.asarray(simulate(rows, DT_S, cell.q_max, cell.r0, cell.eod_v, cell=cell.params).eod_reached)
+    ok = ~np.asarray(simulate_cell(rows, cell, DT_S).eod_reached)
     takeoff = float(before[ok].max()) if ok.any() else 0.0
     return total, takeoff
 

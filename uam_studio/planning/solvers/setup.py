@@ -14,8 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from uam_studio.battery import SimulationResult, simulate
+from uam_studio.battery import SimulationResult
 from uam_studio.battery.parameters import Cell
+from uam_studio.battery.simulate import simulate_cell
 from uam_studio.errors import InputError
 from uam_studio.planning.episode import Episode
 from uam_studio.planning.legs import ALTITUDES_M, DT_S, MIN_LEG_KM, N_MAX, LegTable, takeoff_current
@@ -36,7 +37,7 @@ def _as_mission(mission: Any) -> tuple[Mission | None, list[str]]:
 def fly_takeoff(cell: Cell) -> SimulationResult:
     """A fresh ``cell`` (its parameter set, q_max C, R0 ohm and cut-off V) on the take-off and climb
     to 500 m (the least demanding start of any leg): the physics model's run."""
-    return simulate(takeoff_current(), DT_S, cell.q_max, cell.r0, cell.eod_v, cell=cell.params)
+    return simulate_cell(takeoff_current(), cell, DT_S)
 
 
 def takeoff_failure(cell: Cell) -> str | None:
