@@ -25,8 +25,9 @@ from uam_studio.battery.cmu_data import (
     reference_discharges,
     resampled_missions,
 )
+from uam_studio.battery.identify import FitSegment, identify_cell
 from uam_studio.battery.parameters import NASA_18650, VTC6
-from uam_studio.battery.real_cells import replay_mission
+from uam_studio.battery.real_cells import START_Q_MAX, START_R0, identify_vtc6, replay_mission, vtc6_start
 from uam_studio.cli import main
 
 DATA = os.environ.get("UAM_STUDIO_CMU_DATA", "")
@@ -192,6 +193,25 @@ def test_nasa_default_cell_unchanged_by_the_new_fields():
     assert VTC6.params.temperature_dependent
 
 
+def test_identification_recovers_a_known_cell():
+    """The fit, from the bundled procedure's start, on logs the VTC6 model made itself (a C/5 discharge
+    seen every 30 s, a 1 Hz mission flown by power): it finds the cell's capacity and resistance and
+    reproduces both logs to a few mV; its cost is the objective it reports."""
+    cell = VTC6.params
+    c5 = np.r_[np.zeros(10), np.full(5 * 3600, 0.6)]
+    ref = simulate(c5, 1.0, VTC6.q_max, VTC6.r0, eod_v=2.5, cell=cell)
+    n = int(ref.valid.sum())
+    seen = np.r_[9, np.arange(39, n, 30)]
+    power = np.r_[np.full(75, 54.0), np.full(800, 16.0), np.full(105, 54.0), np.zeros(60)]
+    flown = simulate_constant_power(power, 1.0, VTC6.q_max, VTC6.r0, eod_v=2.5, cell=cell)
+    segments = [FitSegment("c5", c5[:n], 1.0, seen, ref.voltage_v[seen], cell.t_ambient_k),
+                FitSegment("mission", flown.current_a, 1.0, np.arange(len(power)), flown.voltage_v, cell.t_ambient_k)]
+    fit = identify_cell(segments, vtc6_start(), START_Q_MAX, START_R0)
+    assert fit.q_max == pytest.approx(VTC6.q_max, rel=0.02) and fit.r0 == pytest.approx(VTC6.r0, rel=0.05)
+    assert max(fit.rms_v.values()) < 0.003
+    assert fit.cost == pytest.approx(0.5 * sum(v ** 2 for v in fit.rms_v.values()), rel=0.01)
+
+
 # --------------------------------------------------------------------------- the real files
 
 
@@ -223,6 +243,16 @@ def test_vtc6_flies_the_real_mission():
     assert abs(res.voltage_v[landing].min() - mission.log.voltage_v[landing].min()) < 0.040
     nasa = replay_mission(mission, NASA_18650)
     assert not nasa.valid.all()  # the NASA cell cannot take 54 W: it reaches the cut-off in seconds
+
+
+@real
+def test_identify_vtc6_reproduces_the_bundled_set():
+    """The bundled VTC6 set is what its one documented command (``uam-studio identify vtc6``) fits."""
+    fitted = identify_vtc6(DATA)
+    assert fitted.q_max == pytest.approx(VTC6.q_max, rel=1e-3) and fitted.r0 == pytest.approx(VTC6.r0, rel=1e-2)
+    mission = mission_cycle(load_cell_log(Path(DATA) / "VAH01_20.csv"))
+    rmse = [np.sqrt(np.mean((replay_mission(mission, c).voltage_v - mission.log.voltage_v) ** 2)) for c in (fitted, VTC6)]
+    assert rmse[0] == pytest.approx(rmse[1], abs=3e-4)
 
 
 @real

@@ -73,6 +73,7 @@ class IdentifiedCell:
     r0: float
     rms_v: dict  # segment name -> RMS voltage residual (V)
     removed_c: dict  # segment name -> fitted charge out of full at its start (C), where fitted
+    cost: float = float("nan")  # the fit's objective at the solution: half the sum of squared residuals (V^2)
 
 
 def _ocv_basis(xps: np.ndarray, n_ap: int) -> np.ndarray:
@@ -180,4 +181,4 @@ def identify_cell(segments: list[FitSegment], start: CellParameters, q_max0: flo
         x0 = rested_state(np.array([q_max]), removed.get(seg.name, seg.removed_c), c)
         res = simulate(seg.current_a, seg.dt_s, q_max, r0, eod_v=2.5, initial_state=x0, cell=c)
         rms[seg.name] = float(np.sqrt(np.mean((res.voltage_v[seg.observed] - seg.voltage_v) ** 2)))
-    return IdentifiedCell(cell, float(q_max), float(r0), rms, removed)
+    return IdentifiedCell(cell, float(q_max), float(r0), rms, removed, float(sol.cost))

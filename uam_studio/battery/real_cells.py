@@ -37,7 +37,7 @@ from .cmu_data import (
     resampled_missions,
 )
 from .identify import FitSegment, identify_cell
-from .parameters import DEFAULT_CELL, VTC6_FLEET_Q_RANGE, VTC6_FLEET_R0_RANGE, Cell
+from .parameters import DEFAULT_CELL, VTC6_FLEET_Q_RANGE, VTC6_FLEET_R0_RANGE, Cell, CellParameters
 from .simulate import SimulationResult, simulate, simulate_constant_power
 
 IDENTIFICATION_FILE = "VAH07.csv.mat"
@@ -114,12 +114,22 @@ def vtc6_fit_segments(folder: str | Path, n_missions: int = 4, hold_out: str = "
     return segs
 
 
+START_Q_MAX = 11000.0  # C: the fit's start, near the C/5 discharge's 10.9 kC
+START_R0 = 0.02  # ohm: the fit's start
+
+
+def vtc6_start() -> CellParameters:
+    """The parameter set the VTC6 fit starts from: the NASA set with guessed heat and Arrhenius terms."""
+    return replace(DEFAULT_CELL, r0_activation_k=2000.0, k_activation_k=2000.0, thermal_mass=45.0,
+                   thermal_tau_s=300.0, t_ambient_k=298.15, fleet_q_range=VTC6_FLEET_Q_RANGE,
+                   fleet_r0_range=VTC6_FLEET_R0_RANGE)
+
+
 def identify_vtc6(folder: str | Path, n_missions: int = 4, hold_out: str = "none", max_nfev: int = 300) -> Cell:
-    """Identify the VTC6 cell from the dataset in ``folder`` (see the module docstring); about a minute."""
-    start = replace(DEFAULT_CELL, r0_activation_k=2000.0, k_activation_k=2000.0, thermal_mass=45.0,
-                    thermal_tau_s=300.0, t_ambient_k=298.15, fleet_q_range=VTC6_FLEET_Q_RANGE,
-                    fleet_r0_range=VTC6_FLEET_R0_RANGE)
-    fit = identify_cell(vtc6_fit_segments(folder, n_missions, hold_out), start, 11000.0, 0.02, max_nfev=max_nfev)
+    """Identify the VTC6 cell from the dataset in ``folder`` (see the module docstring); about a minute.
+    One start (:func:`vtc6_start`, q_max START_Q_MAX C, R0 START_R0 ohm): the fit is local."""
+    fit = identify_cell(vtc6_fit_segments(folder, n_missions, hold_out), vtc6_start(), START_Q_MAX, START_R0,
+                        max_nfev=max_nfev)
     return Cell(f"Sony-Murata VTC6 (identified, held out: {hold_out})", fit.cell, fit.q_max, fit.r0)
 
 
