@@ -209,3 +209,22 @@ def test_health_fit_recovers_a_vtc6_at_high_current(q_max, r0, current, rest, lo
     est = fit_health(cur, volt, cell=VTC6.params, prior=False)
     assert abs(est.q_max - q_max) / q_max < 0.01, est
     assert abs(est.r0 - r0) < 1e-3, est
+
+
+@pytest.mark.skipif(not HAS_VTC6, reason="bundled VTC6 weights not present")
+def test_health_correlations_read_only_discharges_that_last_the_context():
+    """A context of 400 s is read from the discharges that last 400 s, never from a shorter one's padding
+    (a VTC6 set holds discharges of 35 s); too few such discharges give no correlation, not a number."""
+    from uam_studio.dynaformer import load_pretrained
+    from uam_studio.dynaformer.evaluate import health_correlations
+
+    pred = load_pretrained("vtc6")
+    ds = make_dataset(24, seed=13_345, cell="vtc6", flight_fraction=1.0)
+    lasting = ds.valid.sum(1)
+    assert lasting.min() < 400 <= lasting.max()
+    long = np.flatnonzero(lasting >= 400)
+    row = health_correlations(pred, ds, 400, 0.0)
+    assert row["n"] == long.size
+    assert row == health_correlations(pred, ds.subset(long), 400, 0.0)
+    shortest = health_correlations(pred, ds.subset(np.argsort(lasting)[:2]), 400, 0.0)
+    assert shortest["n"] < 3 and shortest["abs_r_r0"] is None

@@ -73,18 +73,28 @@ def eod_metrics(ds, v_pred: np.ndarray, context_s: int = 20) -> dict:
     }
 
 
+MIN_HEALTH_ROWS = 3  # discharges: fewer long enough for a context give no correlation
+
+
 def health_correlations(pred: DynaformerPredictor, ds, context_s: int, noise_v: float, seed: int = 0) -> dict:
-    """|Pearson r| between the PCs and (r0, q_max); the PC assignment with the larger sum is reported."""
+    """|Pearson r| between the PCs and (r0, q_max) from ``context_s`` (s) observed with voltage noise
+    ``noise_v`` (V); the PC assignment with the larger sum is reported. Only the ``n`` discharges whose
+    valid part lasts at least ``context_s`` take part (a shorter one has no such context); with fewer
+    than :data:`MIN_HEALTH_ROWS` the correlations are None."""
     rng = np.random.default_rng(seed)
-    n = min(context_s, int(ds.valid.sum(1).min()))
-    ci = ds.current_a[:, :n].astype(float)
-    cv = np.clip(ds.voltage_v[:, :n] + rng.normal(size=(len(ds), n)) * noise_v, 0.0, 5.0)
+    rows = np.flatnonzero(ds.valid.sum(1) >= context_s)
+    if rows.size < MIN_HEALTH_ROWS:
+        return {"n": int(rows.size), "r0_pc": None, "abs_r_r0": None, "q_max_pc": None, "abs_r_q_max": None}
+    ci = ds.current_a[rows, :context_s].astype(float)
+    cv = np.clip(ds.voltage_v[rows, :context_s] + rng.normal(size=(rows.size, context_s)) * noise_v, 0.0, 5.0)
     pcs = pred.health(ci, cv)
-    c = np.corrcoef(np.column_stack([pcs, ds.r0, ds.q_max]).T)
+    c = np.corrcoef(np.column_stack([pcs, ds.r0[rows], ds.q_max[rows]]).T)
     r_pc1_r0, r_pc1_q, r_pc2_r0, r_pc2_q = abs(c[0, 2]), abs(c[0, 3]), abs(c[1, 2]), abs(c[1, 3])
     if r_pc1_r0 + r_pc2_q >= r_pc2_r0 + r_pc1_q:
-        return {"r0_pc": 1, "abs_r_r0": float(r_pc1_r0), "q_max_pc": 2, "abs_r_q_max": float(r_pc2_q)}
-    return {"r0_pc": 2, "abs_r_r0": float(r_pc2_r0), "q_max_pc": 1, "abs_r_q_max": float(r_pc1_q)}
+        return {"n": int(rows.size), "r0_pc": 1, "abs_r_r0": float(r_pc1_r0), "q_max_pc": 2,
+                "abs_r_q_max": float(r_pc2_q)}
+    return {"n": int(rows.size), "r0_pc": 2, "abs_r_r0": float(r_pc2_r0), "q_max_pc": 1,
+            "abs_r_q_max": float(r_pc1_q)}
 
 
 def evaluate(pred: DynaformerPredictor, n: int = 400, seed: int = 12345,
@@ -120,10 +130,14 @@ def format_report(m: dict) -> str:
         lines.append(f"{name:22s} {s['n']:4d} {s['n_eod']:6d}  {med:>10s} {p90:>8s} {s['rmse_mv']:8.1f} "
                      f"{s['eod_agreement']:9.3f}  | {s.get('n_eod_after_context', 0):20d}  {later:>10s} "
                      f"| {p_med:>23s}  {p_later:>13s}")
-    lines.append("health (interpolation flight contexts): context s, noise mV -> |r| with r0, |r| with q_max")
+    lines.append("health (interpolation flight contexts): context s, noise mV, discharges at least that long "
+                 "-> |r| with r0, |r| with q_max")
     for h in m["health"]:
-        lines.append(f"  {h['context_s']:4d} s {h['noise_mv']:3d} mV   r0~PC{h['r0_pc']}: {h['abs_r_r0']:.3f}   "
-                     f"q_max~PC{h['q_max_pc']}: {h['abs_r_q_max']:.3f}")
+        head = f"  {h['context_s']:4d} s {h['noise_mv']:3d} mV  n {h['n']:4d}"
+        if h["abs_r_r0"] is None:
+            lines.append(f"{head}   too few discharges last the context")
+            continue
+        lines.append(f"{head}   r0~PC{h['r0_pc']}: {h['abs_r_r0']:.3f}   q_max~PC{h['q_max_pc']}: {h['abs_r_q_max']:.3f}")
     return "\n".join(lines)
 
 

@@ -125,7 +125,8 @@ def accuracy_table(predictor: Any, ds, contexts_s: Sequence[int] = (20, 60, 400)
     :return: one row per pair: ``context_s``, ``noise_mv``, ``median_rte``, ``median_rte_after_context``
         (EODs after the observed context only), ``p90_rte``, ``rmse_mv``,
         ``eod_agreement`` (see :func:`~uam_studio.dynaformer.evaluate.eod_metrics`), ``abs_r_r0`` and
-        ``abs_r_q_max`` (\\|Pearson r\\| of the health components with R0 and q_max), and the reference:
+        ``abs_r_q_max`` (\\|Pearson r\\| of the health components with R0 and q_max, over the ``n_health``
+        discharges that last the context; None with fewer than 3), and the reference:
         ``physics_median_rte_after_context``, the physics model's maximum-likelihood fit of the same
         contexts (:func:`~uam_studio.dynaformer.evaluate.physics_fit_eod`).
     """
@@ -139,6 +140,6 @@ def accuracy_table(predictor: Any, ds, contexts_s: Sequence[int] = (20, 60, 400)
             rows.append({"context_s": int(ctx), "noise_mv": float(noise),
                          **{k: m[k] for k in ("median_rte", "median_rte_after_context", "p90_rte", "rmse_mv",
                                               "eod_agreement")},
-                         "abs_r_r0": h["abs_r_r0"], "abs_r_q_max": h["abs_r_q_max"],
+                         "abs_r_r0": h["abs_r_r0"], "abs_r_q_max": h["abs_r_q_max"], "n_health": h["n"],
                          "physics_median_rte_after_context": phys["median_rte_after_context"]})
     return rows
