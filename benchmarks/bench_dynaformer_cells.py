@@ -14,31 +14,12 @@ from __future__ import annotations
 import argparse
 import time
 
-import numpy as np
-
-from uam_studio.battery.fit import crossing_times
 from uam_studio.dynaformer import load_predictor
 from uam_studio.dynaformer.data import make_dataset
+from uam_studio.dynaformer.evaluate import decoder_errors
 from uam_studio.dynaformer.predictor import bundled_weights_path
 
 SETS = (("missions", 1.0, 777_001), ("generic", 0.0, 777_002))
-
-
-def decoder_errors(cell: str, ds, batch: int = 50) -> tuple[float, float, float, int]:
-    """(RMSE mV, median RTE, p90 RTE, discharges reaching 3.0 V) of the bundled ``cell`` weights on ``ds``."""
-    pred = load_predictor(bundled_weights_path(cell))
-    pts = np.column_stack([ds.q_max, ds.r0])
-    cur = ds.current_a.astype(float)
-    t = np.arange(cur.shape[1])[None, :]
-    truth, _ = crossing_times(np.where(t < ds.length[:, None], ds.voltage_v, 5.0), 1.0, 3.0)
-    v = np.concatenate([pred._decode(None, cur[s:s + batch], skip_rest=True, points=pts[s:s + batch])
-                        for s in range(0, len(ds), batch)])
-    v = np.where(t < ds.length[:, None], v, 5.0)
-    rmse = 1000 * float(np.sqrt(np.mean((v[ds.valid] - ds.voltage_v[ds.valid]) ** 2)))
-    got, _ = crossing_times(v, 1.0, 3.0)
-    ok = np.isfinite(truth)
-    rte = np.abs(got[ok] - truth[ok]) / truth[ok]
-    return rmse, float(np.median(rte)), float(np.quantile(rte, 0.9)), int(ok.sum())
 
 
 def main() -> None:
@@ -49,14 +30,14 @@ def main() -> None:
     goals = []
     for name, flights, seed in SETS:
         ds = make_dataset(args.n, seed=seed, cell="vtc6", flight_fraction=flights)
-        rows = {cell: decoder_errors(cell, ds) for cell in ("vtc6", "nasa18650")}
-        for cell, (rmse, med, p90, n_eod) in rows.items():
-            print(f"{name:8s} weights {cell:9s}: RMSE {rmse:6.1f} mV, EOD 3.0 V in {n_eod} of {args.n}: "
-                  f"median RTE {med:.4f}, p90 {p90:.4f}")
-        ratio = rows["nasa18650"][0] / rows["vtc6"][0]
+        rows = {cell: decoder_errors(load_predictor(bundled_weights_path(cell)), ds) for cell in ("vtc6", "nasa18650")}
+        for cell, e in rows.items():
+            print(f"{name:8s} weights {cell:9s}: RMSE {e['rmse_mv']:6.1f} mV, EOD 3.0 V in {e['n_eod']} of {args.n}: "
+                  f"median RTE {e['median_rte']:.4f}, p90 {e['p90_rte']:.4f}")
+        ratio = rows["nasa18650"]["rmse_mv"] / rows["vtc6"]["rmse_mv"]
         print(f"{name:8s} reference / fine-tuned RMSE: {ratio:.0f}x")
         if name == "missions":
-            goals.append(rows["vtc6"][0] <= 20 and rows["vtc6"][1] <= 0.01)
+            goals.append(rows["vtc6"]["rmse_mv"] <= 20 and rows["vtc6"]["median_rte"] <= 0.01)
     print(f"({time.perf_counter() - t0:.0f} s) goal (missions: RMSE <= 20 mV, median RTE <= 1%): "
           f"{'met' if all(goals) else 'NOT met'}")
 

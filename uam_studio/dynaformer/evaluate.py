@@ -19,10 +19,10 @@ import numpy as np
 
 from ..battery import rest_voltage, simulate
 from ..battery.eod import first_below
-from ..battery.fit import eod_intervals, fit_health, fit_health_batch
+from ..battery.fit import crossing_times, eod_intervals, fit_health, fit_health_batch
 from ..battery.parameters import DEFAULT_CELL, DEFAULT_EOD_V, CellParameters
 from .data import make_dataset
-from .predictor import DynaformerPredictor
+from .predictor import DynaformerPredictor, decode_given_health
 
 EOD_V = DEFAULT_EOD_V  # V
 SETS = {
@@ -71,6 +71,22 @@ def eod_metrics(ds, v_pred: np.ndarray, context_s: int = 20) -> dict:
         "rmse_mv": float(1000 * np.sqrt(np.mean(err ** 2))),
         "eod_agreement": agree,
     }
+
+
+def decoder_errors(pred: DynaformerPredictor, ds, eod_v: float = EOD_V) -> dict:
+    """The decoder's own error on the set ``ds``, given each discharge's exact health
+    (:func:`~uam_studio.dynaformer.predictor.decode_given_health`): ``rmse_mv`` over the valid samples
+    (above the 2.5 V floor), and the EOD (first sample below ``eod_v``, V) of the ``n_eod`` discharges
+    that reach it: ``median_rte`` and ``p90_rte`` of |t_pred - t_true| / t_true."""
+    v = decode_given_health(pred, ds)
+    t = np.arange(ds.voltage_v.shape[1])[None, :]
+    truth, _ = crossing_times(np.where(t < ds.length[:, None], ds.voltage_v, 5.0), 1.0, eod_v)
+    got, _ = crossing_times(v, 1.0, eod_v)
+    ok = np.isfinite(truth)
+    rte = np.abs(got[ok] - truth[ok]) / truth[ok]
+    return {"rmse_mv": 1000 * float(np.sqrt(np.mean((v[ds.valid] - ds.voltage_v[ds.valid]) ** 2))),
+            "median_rte": float(np.median(rte)) if rte.size else None,
+            "p90_rte": float(np.quantile(rte, 0.9)) if rte.size else None, "n_eod": int(ok.sum())}
 
 
 MIN_HEALTH_ROWS = 3  # discharges: fewer long enough for a context give no correlation

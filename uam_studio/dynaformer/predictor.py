@@ -530,14 +530,12 @@ def decoder_error_scores(pred: DynaformerPredictor, n: int = DECODER_CAL_N, seed
     t = np.arange(ds.voltage_v.shape[1])[None, :]
     true_t, _ = crossing_times(np.where(t < ds.length[:, None], ds.voltage_v, 5.0), 1.0, eod_v)
     keep = np.where(np.isfinite(true_t) & (true_t > 20))[0]
-    points = np.column_stack([ds.q_max[keep], ds.r0[keep]])
-    cur = ds.current_a[keep].astype(np.float64)
     scores = []
     for s in range(0, keep.size, 64):
         rows = keep[s:s + 64]
-        v = pred._decode(None, cur[s:s + 64], skip_rest=True, points=points[s:s + 64])
-        v[:, :20] = ds.voltage_v[rows, :20]
-        v = np.where(t < ds.length[rows, None], v, 5.0)
+        part = ds.subset(rows)
+        v = decode_given_health(pred, part)
+        v[:, :20] = part.voltage_v[:, :20]
         med, _ = crossing_times(v, 1.0, eod_v)
         for r, i in enumerate(rows):
             k = int(true_t[i]) - 1  # index of the true first sample below
@@ -548,6 +546,20 @@ def decoder_error_scores(pred: DynaformerPredictor, n: int = DECODER_CAL_N, seed
             hi = min((eod_v - before) / a, rel / b) if before < eod_v else 0.0
             scores.append(max(lo, hi, 0.0))
     return np.asarray(scores)
+
+
+@torch.no_grad()
+def decode_given_health(pred: DynaformerPredictor, ds, batch: int = 64) -> np.ndarray:
+    """The decoder's voltage (V) [N, T] along each discharge of the set ``ds`` (its whole current, A),
+    given its exact health (q_max C, R0 ohm; latents as :meth:`DynaformerPredictor._reobserved_latent`
+    reads them), so only the decoder's own error remains; 5.0 V past each discharge's length (never
+    read as a crossing of a cut-off)."""
+    points = np.column_stack([ds.q_max, ds.r0])
+    cur = ds.current_a.astype(np.float64)
+    v = np.concatenate([pred._decode(None, cur[s:s + batch], skip_rest=True, points=points[s:s + batch])
+                        for s in range(0, len(ds), batch)])
+    t = np.arange(cur.shape[1])[None, :]
+    return np.where(t < ds.length[:, None], v, 5.0)
 
 
 def load_predictor(path=None) -> DynaformerPredictor:
