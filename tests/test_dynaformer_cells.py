@@ -215,3 +215,8 @@ def test_health_correlations_read_only_discharges_that_last_the_context():
     assert row == health_correlations(pred, ds.subset(long), 400, 0.0)
     shortest = health_correlations(pred, ds.subset(np.argsort(lasting)[:2]), 400, 0.0)
     assert shortest["n"] < 3 and shortest["abs_r_r0"] is None
+    from uam_studio.dynaformer.evaluate import format_report
+
+    text = format_report({"weights": "w", "sets": {}, "health": [{"context_s": 400, "noise_mv": 0, **shortest},
+                                                                 {"context_s": 400, "noise_mv": 0, **row}]})
+    assert "too few discharges last the context" in text and f"n {long.size:4d}" in text
