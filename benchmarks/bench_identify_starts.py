@@ -27,6 +27,7 @@ from uam_studio.battery.cmu_data import (
     LANDING,
     MISSION_FILE,
     REST_CURRENT_A,
+    MissionLog,
     data_folder,
     load_cell_log,
     mission_cycle,
@@ -60,18 +61,19 @@ def drawn_start(rng: np.random.Generator) -> tuple[CellParameters, float, float]
     return drawn, START_Q_MAX * 10 ** rng.uniform(-0.05, 0.05), START_R0 * 10 ** rng.uniform(-0.3, 0.3)
 
 
-def landing_polarization(folder) -> list[tuple[str, float, float, float, float]]:
-    """(log, charge out C, current A, temperature C, polarization mohm) of each landing sample."""
+def landing_polarization(folder, mission: MissionLog) -> list[tuple[str, float, float, float, float]]:
+    """(log, charge out C, current A, temperature C, polarization mohm) of landing samples: VAH01's
+    (``mission``, its 1 Hz log) and those of VAH07's first four missions."""
     life = load_cell_log(folder / IDENTIFICATION_FILE)
     ref = reference_discharges(life)[0]
     c5_v = life.voltage_v[ref.start:ref.stop]
     c5_out = np.r_[0.0, np.cumsum(life.current_a[ref.start:ref.stop]) * life.dt_s][:-1]
     rows = []
-    mission = mission_cycle(load_cell_log(folder / MISSION_FILE)).log
-    out = np.cumsum(mission.current_a)  # 1 s samples from a full cell
-    for k in np.flatnonzero(mission.segment == LANDING)[5::15]:
-        rows.append(("VAH01 (1 Hz)", out[k], mission.current_a[k], mission.temperature_c[k],
-                     1000 * (np.interp(out[k], c5_out, c5_v) - mission.voltage_v[k]) / mission.current_a[k]))
+    log = mission.log
+    out = np.cumsum(log.current_a)  # 1 s samples from a full cell
+    for k in np.flatnonzero(log.segment == LANDING)[5::15]:
+        rows.append(("VAH01 (1 Hz)", out[k], log.current_a[k], log.temperature_c[k],
+                     1000 * (np.interp(out[k], c5_out, c5_v) - log.voltage_v[k]) / log.current_a[k]))
     for j, m in enumerate(resampled_missions(life)[:4]):
         rest = m.index[0] - 1
         while rest > 0 and abs(life.current_a[rest]) >= REST_CURRENT_A:
@@ -122,7 +124,7 @@ def main() -> None:
     print(f"(fits {time.perf_counter() - t_all:.0f} s)")
     print("\nlanding polarization, model-free: (C/5 voltage at the same charge out - measured V) / current")
     print("log                   charge out C   current A   temperature C   polarization mohm")
-    for name, q, i, temp, pol in landing_polarization(folder):
+    for name, q, i, temp, pol in landing_polarization(folder, mission):
         print(f"{name:20s} {q:14.0f} {i:11.1f} {temp:15.1f} {pol:19.1f}")
 
 

@@ -203,7 +203,7 @@ def test_health_correlations_read_only_discharges_that_last_the_context():
     """A context of 400 s is read from the discharges that last 400 s, never from a shorter one's padding
     (a VTC6 set holds discharges of 35 s); too few such discharges give no correlation, not a number."""
     from uam_studio.dynaformer import load_pretrained
-    from uam_studio.dynaformer.evaluate import health_correlations
+    from uam_studio.dynaformer.evaluate import format_report, health_correlations
 
     pred = load_pretrained("vtc6")
     ds = make_dataset(24, seed=13_345, cell="vtc6", flight_fraction=1.0)
@@ -215,8 +215,6 @@ def test_health_correlations_read_only_discharges_that_last_the_context():
     assert row == health_correlations(pred, ds.subset(long), 400, 0.0)
     shortest = health_correlations(pred, ds.subset(np.argsort(lasting)[:2]), 400, 0.0)
     assert shortest["n"] < 3 and shortest["abs_r_r0"] is None
-    from uam_studio.dynaformer.evaluate import format_report
-
     text = format_report({"weights": "w", "sets": {}, "health": [{"context_s": 400, "noise_mv": 0, **shortest},
                                                                  {"context_s": 400, "noise_mv": 0, **row}]})
     assert "too few discharges last the context" in text and f"n {long.size:4d}" in text
