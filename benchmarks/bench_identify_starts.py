@@ -26,9 +26,9 @@ import numpy as np
 from uam_studio.battery.cmu_data import (
     LANDING,
     MISSION_FILE,
-    REST_CURRENT_A,
     MissionLog,
     data_folder,
+    last_rest,
     load_cell_log,
     mission_cycle,
     reference_discharges,
@@ -75,9 +75,7 @@ def landing_polarization(folder, mission: MissionLog) -> list[tuple[str, float, 
         rows.append(("VAH01 (1 Hz)", out[k], log.current_a[k], log.temperature_c[k],
                      1000 * (np.interp(out[k], c5_out, c5_v) - log.voltage_v[k]) / log.current_a[k]))
     for j, m in enumerate(resampled_missions(life)[:4]):
-        rest = m.index[0] - 1
-        while rest > 0 and abs(life.current_a[rest]) >= REST_CURRENT_A:
-            rest -= 1
+        rest = last_rest(life, m.index[0])
         out0 = np.interp(-life.voltage_v[rest], -c5_v, c5_out)  # charge out of the rested start (C)
         span = np.arange(rest, m.index[-1] + 1)
         out = out0 + np.r_[0.0, np.cumsum(life.current_a[span][:-1] * np.diff(life.time_s[span]))]

@@ -344,6 +344,14 @@ POWER_TOLERANCE = 0.05  # a resampled sample keeps its phase when I*V is within 
 REST_CURRENT_A = 0.05  # A
 
 
+def last_rest(log: CellLog, before: int) -> int:
+    """Index of the last sample before index ``before`` that draws under REST_CURRENT_A (A), at least 0."""
+    rest = before - 1
+    while rest > 0 and abs(log.current_a[rest]) >= REST_CURRENT_A:
+        rest -= 1
+    return rest
+
+
 @dataclass(frozen=True)
 class ResampledMission:
     """One mission cycle found in a resampled life: its estimated start ``t0_s`` (s, in the life's

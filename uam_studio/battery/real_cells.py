@@ -26,11 +26,11 @@ from .cmu_data import (
     MISSION_FILE,
     MISSION_POWER_W,
     REST_AFTER,
-    REST_CURRENT_A,
     TAKEOFF,
     CellLog,
     MissionLog,
     ResampledMission,
+    last_rest,
     load_cell_log,
     mission_cycle,
     reference_discharges,
@@ -54,9 +54,7 @@ def reference_segment(log: CellLog, number: int = 0, name: str = "c5", weight: f
     rest (the sample before the discharge), then the discharge."""
     ref = reference_discharges(log)[number]
     k = int(np.ceil(log.dt_s / FINE_DT_S))
-    rest = ref.start - 1  # the last sample at rest before it (the one before may be half loaded)
-    while rest > 0 and abs(log.current_a[rest]) >= REST_CURRENT_A:
-        rest -= 1
+    rest = last_rest(log, ref.start)  # the last sample at rest before it (the one before may be half loaded)
     n = ref.stop - ref.start
     current = np.concatenate([np.zeros(REST_STEPS), np.repeat(log.current_a[ref.start:ref.stop], k)])
     observed = np.concatenate([[REST_STEPS - 1], REST_STEPS + np.arange(1, n + 1) * k - 1])
@@ -146,7 +144,6 @@ def replay_mission(mission: MissionLog, cell: Cell, by_power: bool = True) -> Si
 
 def cell_literal(cell: Cell, name: str = "VTC6") -> str:
     """Python source of ``cell`` as parameters.py holds it (what ``uam-studio identify vtc6`` prints)."""
-
     p = cell.params
     changed = [f.name for f in fields(p) if getattr(p, f.name) != getattr(DEFAULT_CELL, f.name)]
     lines = [f"{name}_PARAMS = replace(", "    DEFAULT_CELL,"]
