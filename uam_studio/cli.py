@@ -320,7 +320,6 @@ def _refuse_bundled(out) -> None:
 
 def _check_out_folder(folder) -> None:
     """Create the run folder ``folder`` if needed and check a file can be written in it, before any work."""
-
     folder = Path(folder)
     try:
         folder.mkdir(parents=True, exist_ok=True)

@@ -158,7 +158,6 @@ def store_row(req: PlanRequest, row: dict[str, Any]) -> None:
 
 def _runner_main(requests: Any, results: Any, parent_pid: int, nice: int) -> None:
     """The comparison child process: :func:`compare_row` for each request, until the parent is gone."""
-
     if nice:
         try:
             os.nice(nice)

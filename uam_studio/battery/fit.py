@@ -535,7 +535,6 @@ def _start_states(estimates: list[HealthEstimate], points: np.ndarray, per: int,
 
 def two_sided_z(level: float) -> float:
     """Two-sided standard-normal quantile: P(|Z| <= z) = level."""
-
     return NormalDist().inv_cdf(0.5 + level / 2.0)
 
 

@@ -259,7 +259,6 @@ class Operator:
         be one after which the aircraft can still get home on the cautious belief (``health_z``,
         ``wind_z``). Only that first leg is committed: the rest is re-planned at the next arrival.
         """
-
         t0 = time.perf_counter()
         health = self.health()
         w, w_sd, r, r_sd = health
