@@ -15,9 +15,9 @@ import argparse
 import time
 
 from uam_studio.dynaformer import load_predictor
+from uam_studio.dynaformer.artifact import bundled_weights_path
 from uam_studio.dynaformer.data import make_dataset
 from uam_studio.dynaformer.evaluate import decoder_errors
-from uam_studio.dynaformer.predictor import bundled_weights_path
 
 SETS = (("missions", 1.0, 777_001), ("generic", 0.0, 777_002))
 

@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from uam_studio.app.battery_lab_state import BatteryLabState
-from uam_studio.app.planner_state import EXAMPLE_MISSION, PlannerState
+from uam_studio.app.planner_mission import EXAMPLE_MISSION
+from uam_studio.app.planner_state import PlannerState
 from uam_studio.app.retrain_state import RetrainState
 from uam_studio.app.services import population, registry
 from uam_studio.planning import load_mission, mission_from_dict
@@ -226,7 +227,7 @@ def test_missing_bundled_agent_is_a_visible_error(monkeypatch, tmp_path):
 
 
 def test_the_attention_planner_is_the_first_and_default_policy():
-    from uam_studio.app.planner import summary_html
+    from uam_studio.app.planner_summary import summary_html
 
     s = PlannerState()
     assert s.policy == "attention" and s.plan_error == ""
@@ -245,7 +246,7 @@ def _spread_rows(n: int) -> list[dict]:
 
 
 def test_twenty_destinations_plan_safely_with_the_default_policy():
-    from uam_studio.app.planner import summary_html
+    from uam_studio.app.planner_summary import summary_html
 
     s = PlannerState()
     assert s.set_destinations(_spread_rows(20)), s.error
@@ -261,7 +262,7 @@ def test_twenty_destinations_plan_safely_with_the_default_policy():
 
 
 def test_dqn_past_eight_destinations_is_a_one_line_error_naming_8():
-    from uam_studio.app.planner import summary_html
+    from uam_studio.app.planner_summary import summary_html
 
     s = PlannerState(policy="dqn")
     assert s.plan_error == "" and s.plan["policy"] == "dqn"
@@ -274,7 +275,7 @@ def test_dqn_past_eight_destinations_is_a_one_line_error_naming_8():
 
 
 def test_the_oracle_says_whether_its_plan_is_exact_or_the_reference_solvers():
-    from uam_studio.app.planner import summary_html
+    from uam_studio.app.planner_summary import summary_html
 
     s = PlannerState(policy="oracle")
     assert s.plan["exact"] is True and s.plan_label() == "Oracle (exact optimum)"
@@ -363,7 +364,7 @@ def test_retrain_state_trains_saves_and_the_planner_can_use_it(home):
     assert value in planner.policy_objects.values()
     assert planner.apply(policy=value), planner.error
     assert planner.plan_error == "" and planner.plan["policy"] == "dqn" and planner.plan["route"]
-    from uam_studio.app.planner import summary_html
+    from uam_studio.app.planner_summary import summary_html
 
     label = planner.policy_label(value)
     assert label.startswith("Retrained: ") and path.stem in label and str(path) not in label
@@ -629,7 +630,7 @@ def test_comparison_inline_names_the_planners_and_the_gap_to_the_oracle():
     assert rows["agent"]["status"] == "error" and "at most 8" in rows["agent"]["error"]
     assert rows["oracle"]["label"] == "Oracle (reference)" and rows["oracle"]["exact"] is False
     assert rows["oracle"]["gap"] == "reference"
-    from uam_studio.app.planner import comparison_html
+    from uam_studio.app.planner_summary import comparison_html
 
     assert "oracle: the reference solver's plan, not proven optimal" in comparison_html(s)
     assert rows["greedy"]["status"] == "done" and rows["greedy"]["gap"]
@@ -638,7 +639,7 @@ def test_comparison_inline_names_the_planners_and_the_gap_to_the_oracle():
 
 def test_comparison_marks_where_the_papers_dqn_cannot_run():
     from uam_studio.app.comparison import comparison_table
-    from uam_studio.app.planner import comparison_html
+    from uam_studio.app.planner_summary import comparison_html
 
     s = PlannerState(compare="inline")
     assert s.set_destinations(_spread_rows(9)), s.error

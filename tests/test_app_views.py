@@ -12,8 +12,10 @@ import pytest
 from bokeh.document import Document
 
 from uam_studio.app import create_app
-from uam_studio.app.planner import PlannerView, request_digest, route_legs, summary_html
+from uam_studio.app.map_geometry import route_legs
+from uam_studio.app.planner import PlannerView
 from uam_studio.app.planner_state import PlannerState
+from uam_studio.app.planner_summary import request_digest, summary_html
 from uam_studio.app.services import registry
 from uam_studio.cli import main
 
@@ -170,7 +172,7 @@ def test_verdict_is_amber_where_the_models_disagree():
 
 
 def test_comparison_panel_names_the_three_planners_with_their_numbers():
-    from uam_studio.app.planner import comparison_html
+    from uam_studio.app.planner_summary import comparison_html
 
     state = PlannerState(compare="inline")
     view = PlannerView(state)
@@ -202,7 +204,7 @@ def test_policy_select_starts_on_the_attention_planner():
 
 
 def test_map_route_has_a_cycle_legend_and_out_and_back_labels_do_not_overlap():
-    from uam_studio.app.planner import NAME_CHAR_KM, altitude_labels, leg_arrows
+    from uam_studio.app.map_geometry import NAME_CHAR_KM, altitude_labels, leg_arrows
 
     state = PlannerState(policy="greedy")
     view = PlannerView(state)
@@ -232,7 +234,7 @@ def test_map_route_has_a_cycle_legend_and_out_and_back_labels_do_not_overlap():
 
 def _label_overlaps(mission, plan: dict) -> list[tuple[str, str]]:
     """Pairs (leg label, what it covers) on the Planner's map of ``plan`` at its default zoom."""
-    from uam_studio.app.planner import altitude_labels, label_overlaps
+    from uam_studio.app.map_geometry import altitude_labels, label_overlaps
 
     rows = [{"name": d.name, "x_km": d.x_km, "y_km": d.y_km} for d in mission.destinations]
     legs = route_legs(plan, rows, (mission.vertiport.x_km, mission.vertiport.y_km))

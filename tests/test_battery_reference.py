@@ -1,4 +1,9 @@
-"""Agreement with NASA progpy's BatteryElectroChemEOD (runs when the `reference` extra is installed)."""
+"""Agreement with NASA progpy's BatteryElectroChemEOD (runs when the `reference` extra is installed).
+
+Each load profile is checked on three of the twelve (q_max, R0) grid points, every q_max once, and the
+four profiles together cover the whole grid once (``grid_points``). The whole grid under every profile is
+a benchmark: ``python benchmarks/bench_progpy_agreement.py``.
+"""
 
 import numpy as np
 import pytest
@@ -33,22 +38,19 @@ def flight_like():
     ])
 
 
-PROFILES = {
-    "const_0.5A": np.full(20000, 0.5),
-    "const_1.5A": np.full(9000, 1.5),
-    "const_3A": np.full(5000, 3.0),
-    "flight": flight_like(),
-}
+def grid_points(k: int) -> list[tuple[float, float]]:
+    """The (q_max C, R0 ohm) grid points checked under profile number ``k`` (0-3): those with
+    (q index + R0 index) % 4 == k, three points holding each q_max once."""
+    return [(q, r) for i, q in enumerate(Q_GRID) for j, r in enumerate(R_GRID) if (i + j) % 4 == k]
 
 
-@pytest.mark.reference
-@pytest.mark.parametrize("profile", list(PROFILES))
-def test_agrees_with_progpy_over_health_grid(profile):
-    cur = PROFILES[profile]
+def agreement(cur: np.ndarray, points: list[tuple[float, float]]) -> tuple[float, float]:
+    """Worst |voltage difference| (V) and worst |EOD difference| (s) against progpy over ``points``;
+    asserts that both models agree on whether EOD is reached."""
     worst_dv, worst_deod = 0.0, 0.0
-    qs, rs = np.meshgrid(Q_GRID, R_GRID, indexing="ij")
-    batch = simulate(np.broadcast_to(cur, (qs.size, cur.size)), q_max=qs.ravel(), r0=rs.ravel())
-    for b, (q, r) in enumerate(zip(qs.ravel(), rs.ravel())):
+    qs, rs = np.array(points).T
+    batch = simulate(np.broadcast_to(cur, (qs.size, cur.size)), q_max=qs, r0=rs)
+    for b, (q, r) in enumerate(points):
         v_ref, eod_ref = progpy_run(cur, q, r)
         valid = batch.valid[b]
         n = min(len(v_ref), int(valid.sum()))
@@ -58,6 +60,27 @@ def test_agrees_with_progpy_over_health_grid(profile):
         assert np.isnan(eod) == np.isnan(eod_ref), (q, r, eod, eod_ref)
         if not np.isnan(eod):
             worst_deod = max(worst_deod, abs(eod - eod_ref))
+    return worst_dv, worst_deod
+
+
+PROFILES = {
+    "const_0.5A": np.full(20000, 0.5),
+    "const_1.5A": np.full(9000, 1.5),
+    "const_3A": np.full(5000, 3.0),
+    "flight": flight_like(),
+}
+
+
+def test_grid_points_cover_the_grid_once():
+    seen = [p for k in range(len(PROFILES)) for p in grid_points(k)]
+    assert sorted(seen) == sorted((q, r) for q in Q_GRID for r in R_GRID)
+    assert all(sorted(q for q, _ in grid_points(k)) == list(Q_GRID) for k in range(len(PROFILES)))
+
+
+@pytest.mark.reference
+@pytest.mark.parametrize("k, profile", list(enumerate(PROFILES)))
+def test_agrees_with_progpy_over_health_grid(k, profile):
+    worst_dv, worst_deod = agreement(PROFILES[profile], grid_points(k))
     print(f"{profile}: max|dV| = {worst_dv:.3e} V, max|dEOD| = {worst_deod:.1f} s")
     assert worst_dv <= 1e-3
     assert worst_deod <= 1.0

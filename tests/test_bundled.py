@@ -72,7 +72,7 @@ def test_user_folder_comes_first(fake_package, home):
 
 
 def test_dynaformer_env_override_comes_before_everything(fake_package, home, tmp_path, monkeypatch):
-    from uam_studio.dynaformer.predictor import bundled_weights_path
+    from uam_studio.dynaformer.artifact import bundled_weights_path
 
     (fake_package / "dynaformer.pt").write_bytes(b"bundled")
     assert bundled_weights_path() == fake_package / "dynaformer.pt"

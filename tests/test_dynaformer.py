@@ -6,10 +6,9 @@ import torch
 
 from uam_studio.battery import simulate
 from uam_studio.dynaformer import WeightsError, load_predictor, load_with_fallback
-from uam_studio.dynaformer.artifact import save_artifact
+from uam_studio.dynaformer.artifact import bundled_weights_path, save_artifact
 from uam_studio.dynaformer.data import make_dataset
 from uam_studio.dynaformer.model import Dynaformer, DynaformerConfig
-from uam_studio.dynaformer.predictor import bundled_weights_path
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_current
 

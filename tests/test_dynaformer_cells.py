@@ -12,10 +12,10 @@ from hypothesis import strategies as st
 from uam_studio.battery import rest_voltage, simulate, simulate_constant_power
 from uam_studio.battery.parameters import DEFAULT_CELL, VTC6, VTC6_FLEET_Q_RANGE, VTC6_FLEET_R0_RANGE
 from uam_studio.dynaformer import load_predictor
+from uam_studio.dynaformer.artifact import bundled_weights_path
 from uam_studio.dynaformer.cells import DYNAFORMER_CELLS, VTC6_TRAINING, dynaformer_cell
 from uam_studio.dynaformer.data import make_dataset, power_mission_profile
 from uam_studio.dynaformer.model import Dynaformer, DynaformerConfig
-from uam_studio.dynaformer.predictor import bundled_weights_path
 from uam_studio.errors import InputError
 
 HAS_NASA = bundled_weights_path().is_file()
@@ -168,7 +168,7 @@ def test_flights_by_power_draw_more_current_as_the_voltage_sags():
 @pytest.mark.skipif(not HAS_VTC6, reason="bundled VTC6 weights not present")
 def test_stored_decoder_calibration_of_the_vtc6_weights_is_what_calibration_gives():
     """The stored split-conformal quantiles are recomputed from their documented seed and count."""
-    from uam_studio.dynaformer.predictor import (
+    from uam_studio.dynaformer.decoder_error import (
         BUNDLED_DECODER_LAMBDA,
         CAL_PROBS,
         _conformal_quantiles,

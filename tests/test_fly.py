@@ -34,11 +34,13 @@ def example():
 
 @pytest.fixture(scope="module")
 def flights():
-    """40 seeded flights (20 single charge, 20 multi charge, 5-8 destinations), forecast sigma 13 kt,
-    5 mV / 20 mA sensor noise, with their references; missions and seeds apart from the tuning ones."""
+    """12 seeded flights (6 single charge, 6 multi charge, 5-8 destinations), forecast sigma 13 kt,
+    5 mV / 20 mA sensor noise, with their references; missions and seeds apart from the tuning ones.
+    The first 6 of each scenario's 20 in ``python benchmarks/bench_fly.py quality --n 20``, which scores
+    all 40 (RESULTS.md)."""
     out = []
     for scenario, seed in (("single_charge", 31337), ("multi_charge", 31338)):
-        out += fly_many(study_missions(20, seed, scenario), first_seed=7000)
+        out += fly_many(study_missions(6, seed, scenario), first_seed=7000)
     return out
 
 
@@ -144,19 +146,20 @@ def test_operator_ignores_the_battery_it_is_handed(example):
 
 
 @pytest.mark.slow
-def test_forty_flights_no_breach_and_near_hindsight(flights):
+def test_twelve_flights_no_breach_and_near_hindsight(flights):
     single = summarize(f for f in flights if f.scenario == "single_charge")
     multi = summarize(f for f in flights if f.scenario == "multi_charge")
     assert single.breaches == multi.breaches == 0
-    assert single.ratio >= 0.8 and multi.ratio >= 0.93, (single, multi)  # measured 0.845 and 0.976 (RESULTS.md)
+    # measured on these 12: 0.906 and 0.959; on all 40 of bench_fly quality --n 20: 0.845 and 0.976
+    assert single.ratio >= 0.8 and multi.ratio >= 0.93, (single, multi)
     assert single.priority >= single.blind_priority and multi.priority >= multi.blind_priority
-    both = summarize(flights)  # the issue's set, single and multi charge together: measured 0.931
+    both = summarize(flights)  # measured 0.943 (40 flights: 0.931)
     assert both.breaches == 0 and both.ratio >= 0.90 and both.priority >= both.blind_priority, both
 
 
 @pytest.mark.slow
 @pytest.mark.reference
-def test_forty_flights_reflown_on_progpy_never_breach(flights):
+def test_twelve_flights_reflown_on_progpy_never_breach(flights):
     models = pytest.importorskip("progpy.models", reason="install the 'reference' extra (progpy)")
     for rec in flights:
         ends = [int(round(t)) for t, n in zip(rec.leg_end_s, rec.route) if n == VERTIPORT]

@@ -19,8 +19,9 @@ import panel as pn
 import param
 
 from uam_studio.app.fly_state import SPEEDS, FlyState
+from uam_studio.app.map_geometry import leg_label
 from uam_studio.app.session import ensure_bokeh_backend
-from uam_studio.app.style import NAME_OFFSET_PX, label_background, leg_label, no_scroll_zoom, pixel_offset
+from uam_studio.app.style import NAME_OFFSET_PX, label_background, no_scroll_zoom, pixel_offset
 from uam_studio.planning import VERTIPORT
 from uam_studio.planning.operations import record_csv
 

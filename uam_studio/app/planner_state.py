@@ -9,44 +9,32 @@ session. Each plan comes from :func:`~uam_studio.app.plans.compute_plan` (the li
 :func:`~uam_studio.planning.planner.plan_mission` with the Dynaformer's voltage band and the failed
 take-off of a cell that cannot take off); :meth:`PlannerState.verdict` is the library's
 :func:`~uam_studio.planning.safety.safety_verdict` of it, and :attr:`PlannerState.comparison` the
-agent / greedy / oracle comparison of its mission (:mod:`uam_studio.app.comparison`).
+agent / greedy / oracle comparison of its mission (:mod:`uam_studio.app.comparison`, kept by
+:class:`~uam_studio.app.planner_comparison.PlannerComparison`).
 
-:data:`EXAMPLE_MISSION` is the starting mission, :func:`mission_digest` what a plan depends on.
+The starting mission, the digest of what a plan depends on and the rows-to-destinations rules are in
+:mod:`~uam_studio.app.planner_mission`.
 """
 
 from __future__ import annotations
 
-import functools
 import json
-import math
 import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import param
 
-from uam_studio.app.comparison import (
-    COMPARE_DELAY_S,
-    COMPARE_LABELS,
-    COMPARE_MODES,
-    ORACLE_REFERENCE_LABEL,
-    PAPER_POLICY,
-    cached_row,
-    cancel_comparisons,
-    compare_row,
-    comparison_runner,
-    store_row,
-)
+from uam_studio.app.comparison import COMPARE_MODES
+from uam_studio.app.planner_comparison import PlannerComparison
+from uam_studio.app.planner_mission import EXAMPLE_MISSION, rows_to_destinations
 from uam_studio.app.plans import PlanRequest, compute_plan
 from uam_studio.app.services import (
     ACTIVITY,
-    AGENT_PREFIX,
     APP_EOD_RANGE,
     APP_Q_RANGE,
     APP_R0_RANGE,
-    LEARNED_POLICIES,
     POLICY_LABELS,
     LatestWorker,
     agent_policy,
@@ -55,10 +43,9 @@ from uam_studio.app.services import (
     policy_options,
     registry,
 )
-from uam_studio.battery import DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0
+from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight.tables import WIND_RANGE_KTS
-from uam_studio.planning.legs import N_MAX
 from uam_studio.planning.missions.mission import (
     COORD_RANGE_KM,
     MAX_DESTINATIONS,
@@ -74,50 +61,10 @@ from uam_studio.planning.missions.mission import (
 from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO
 from uam_studio.planning.safety import safety_verdict
 
-__all__ = ["EXAMPLE_MISSION", "PlannerState", "mission_digest"]
-
-EXAMPLE_MISSION: dict[str, Any] = {
-    "name": "Bay shuttle",
-    "vertiport": {"x_km": 0.0, "y_km": 0.0, "wind_kts": 8.0},
-    "destinations": [
-        {"name": "Richmond", "x_km": 14.0, "y_km": 16.0, "priority": 2, "wind_kts": 13.0, "dwell_s": 300.0},
-        {"name": "Hayward", "x_km": 27.0, "y_km": -18.0, "priority": 1, "wind_kts": -10.0, "dwell_s": 600.0},
-        {"name": "Fremont", "x_km": 38.0, "y_km": -32.0, "priority": 3, "wind_kts": -5.0},
-        {"name": "Napa", "x_km": 18.0, "y_km": 55.0, "priority": 2, "wind_kts": 20.0, "dwell_s": 300.0},
-    ],
-    "scenario": DEFAULT_SCENARIO,
-    "battery": {"q_max": DEFAULT_Q_MAX, "r0": DEFAULT_R0},
-    "eod_v": DEFAULT_EOD_V,
-}
-"""The bundled example (``assets/example_mission.json``), the app's starting mission."""
+__all__ = ["PlannerState"]
 
 
-def mission_digest(m: Mission) -> str:
-    """What a plan of ``m`` depends on, compactly: scenario, cell, EOD, return wind and
-    ``name:priority:wind`` of each destination (the app's ``data-inputs`` attributes)."""
-    dests = "|".join(f"{d.name}:{d.priority}:{d.wind_kts:g}" for d in m.destinations)
-    return (f"{m.scenario};q_max={m.battery.q_max:g};r0={m.battery.r0:g};eod={m.eod_v:g};"
-            f"return_wind={m.vertiport.wind_kts:g};{dests}")
-
-
-def _clean_float(value: Any, default: float) -> Any:
-    """NaN/None/'' -> default; numbers as float; anything else unchanged (the library names it)."""
-    if value is None or (isinstance(value, str) and not value.strip()):
-        return default
-    if isinstance(value, (bool, np.bool_)):
-        return value
-    if isinstance(value, (int, float, np.integer, np.floating)):
-        f = float(value)
-        return default if math.isnan(f) else f
-    if isinstance(value, str):
-        try:
-            return float(value)
-        except ValueError:
-            return value
-    return value
-
-
-class PlannerState(param.Parameterized):
+class PlannerState(PlannerComparison, param.Parameterized):
     """The mission being edited, the policy, and the latest plan.
 
     Inputs (validated; change them with :meth:`apply`, :meth:`set_destinations`, :meth:`load_json`
@@ -280,7 +227,7 @@ class PlannerState(param.Parameterized):
         the first free ``D<k>``, a missing or 0 priority 1 (PointDraw's empty value), wind and dwell 0.
         Coordinates are rounded to 0.1 km. Returns True if accepted (see :meth:`apply`)."""
         try:
-            dests = self._rows_to_destinations(rows)
+            dests = rows_to_destinations(rows)
         except InputError as err:
             self.error = one_line(err)
             return False
@@ -288,33 +235,6 @@ class PlannerState(param.Parameterized):
             self.error = ""
             return True
         return self.apply(destinations=dests)
-
-    def _rows_to_destinations(self, rows: list[dict[str, Any]]) -> list[Destination]:
-        used = {str(r.get("name")).strip() for r in rows if isinstance(r.get("name"), str)}
-        k, dests = 1, []
-        for i, r in enumerate(rows):
-            name = r.get("name")
-            if not isinstance(name, str) or not name.strip():
-                while f"D{k}" in used:
-                    k += 1
-                name = f"D{k}"
-                used.add(name)
-            prio = _clean_float(r.get("priority"), 1.0)
-            if isinstance(prio, float) and prio == 0.0:
-                prio = 1.0
-            x = _clean_float(r.get("x_km"), float("nan"))
-            y = _clean_float(r.get("y_km"), float("nan"))
-            if isinstance(x, float) and math.isfinite(x):
-                x = round(x, 1)
-            if isinstance(y, float) and math.isfinite(y):
-                y = round(y, 1)
-            try:
-                dests.append(Destination(name.strip(), x, y, prio, _clean_float(r.get("wind_kts"), 0.0),
-                                         _clean_float(r.get("dwell_s"), 0.0)))
-            except InputError as err:
-                label = f"destinations[{i}] ({name.strip()})"
-                raise InputError(f"{label}.{err.field}", str(err)[len(err.field) + 2:]) from None
-        return dests
 
     def destination_rows(self) -> list[dict[str, Any]]:
         """The destinations as rows (the table's and the map's data)."""
@@ -444,89 +364,6 @@ class PlannerState(param.Parameterized):
                 ACTIVITY.mark(id(self), False)  # the views are updated too: training may go on
         if latest:
             self._update_comparison()
-
-    # ------------------------------------------------------------------ comparison
-
-    def _compare_specs(self, req: PlanRequest) -> dict[str, tuple[str, str]]:
-        """Row name -> (policy value, label): the agent (the selected learned planner: the attention
-        planner, the paper's DQN or a retrained agent; with greedy or the oracle selected, the
-        default learned planner), the paper's DQN beside an attention agent, greedy and the oracle."""
-        from uam_studio.planning.solvers.oracle import EXACT_MAX
-
-        if req.policy in LEARNED_POLICIES or req.policy.startswith(AGENT_PREFIX):
-            agent = req.policy
-        else:
-            agent = default_policy(req.mission.scenario)
-            agent = agent if agent in LEARNED_POLICIES else "attention"
-        oracle = "Oracle (exact)" if len(req.mission.destinations) <= EXACT_MAX else ORACLE_REFERENCE_LABEL
-        label = COMPARE_LABELS.get(agent) or self.policy_label(agent)
-        specs = {"agent": (agent, label)}
-        if agent_policy(agent)[0] != PAPER_POLICY:  # a (retrained) DQN is the paper's method
-            specs["paper"] = (PAPER_POLICY, COMPARE_LABELS[PAPER_POLICY])
-        return {**specs, "greedy": ("greedy", "Greedy"), "oracle": ("oracle", oracle)}
-
-    def _update_comparison(self) -> None:
-        """Compare the shown plan's mission across planners: rows known to this process at once, the
-        others computed as :attr:`compare` says (their rows stay ``pending`` until then)."""
-        req = self.plan_request
-        if self.compare == "off" or req is None:
-            return
-        specs = self._compare_specs(req)
-        key = (req.mission, specs["agent"][0])
-        if key == self._compare_key:
-            return  # e.g. only the policy changed between greedy and the oracle: same rows
-        self._stop_comparison()
-        self._compare_key = key
-        rows: dict[str, dict[str, Any]] = {}
-        missing = []
-        for name, (value, label) in specs.items():
-            preq = PlanRequest(req.mission, value)
-            if name == "paper" and len(req.mission.destinations) > N_MAX:
-                rows[name] = {"label": label, "policy": value, "status": "unavailable",
-                              "error": f"the paper's DQN holds at most {N_MAX} destinations"}
-                continue
-            row = cached_row(preq)
-            rows[name] = {"label": label, "policy": value, **(row or {"status": "pending", "error": None})}
-            if row is None:
-                missing.append((name, preq))
-        self.comparison = {"scenario": req.mission.scenario, "inputs": mission_digest(req.mission),
-                           "rows": rows}
-        if not missing:
-            return
-        if self.compare == "inline":
-            for name, preq in missing:
-                row = compare_row(preq.mission, preq.policy)
-                store_row(preq, row)
-                self._comparison_result(key, name, row)
-            return
-        tasks = [(preq, functools.partial(self._on_row, key, name)) for name, preq in missing]
-        runner = comparison_runner(self.compare)
-        timer = threading.Timer(COMPARE_DELAY_S, runner.submit, args=(id(self), tasks))
-        timer.daemon = True
-        self._compare_timer = timer
-        timer.start()
-
-    def _stop_comparison(self) -> None:
-        if self._compare_timer is not None:
-            self._compare_timer.cancel()
-            self._compare_timer = None
-        if self.compare in ("process", "thread"):
-            cancel_comparisons(self.compare, id(self))
-
-    def _on_row(self, key: tuple, name: str, row: dict[str, Any]) -> None:
-        self.dispatch(functools.partial(self._comparison_result, key, name, row))
-
-    def _comparison_result(self, key: tuple, name: str, row: dict[str, Any]) -> None:
-        if key != self._compare_key or self.comparison is None:
-            return  # the mission changed meanwhile
-        rows = dict(self.comparison["rows"])
-        rows[name] = {**rows[name], **row}
-        self.comparison = {**self.comparison, "rows": rows}
-
-    def comparison_pending(self) -> bool:
-        """Some comparison row is still being computed."""
-        c = self.comparison
-        return c is not None and any(r.get("status") == "pending" for r in c["rows"].values())
 
     def wait_idle(self, timeout: float = 60.0) -> bool:
         """Block until the latest requested plan is applied (tests and benchmarks; not from the

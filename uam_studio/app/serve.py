@@ -170,7 +170,7 @@ def warm_up(compare: str | None = None) -> None:
     server), also start it and compare the example's planners, so the first session's comparison is
     ready too."""
     from uam_studio.app.comparison import cached_row, compare_mode, comparison_runner
-    from uam_studio.app.planner_state import EXAMPLE_MISSION
+    from uam_studio.app.planner_mission import EXAMPLE_MISSION
     from uam_studio.app.plans import PlanRequest, compute_plan
     from uam_studio.app.services import LEARNED_POLICIES, default_policy, population
     from uam_studio.planning.missions.mission import mission_from_dict

@@ -39,8 +39,3 @@ def pixel_offset(y_px: float) -> Any:
 def no_scroll_zoom(plot: Any, element: Any) -> None:
     """Bokeh hook: the mouse wheel scrolls the page, not the plot (the zoom stays in the toolbar)."""
     plot.state.toolbar.active_scroll = None
-
-
-def leg_label(number: int, altitude_m: float) -> str:
-    """A leg's map label: its number in flying order (1-based) and its cruise altitude (m), ``"#2 500 m"``."""
-    return f"#{number} {altitude_m:g} m"

@@ -3,18 +3,13 @@
 Public API: :func:`simulate` (current in A), :func:`simulate_constant_power`
 (power in W), :class:`SimulationResult`, :class:`BatteryState`, :func:`full_charge`; health from
 measured current and voltage (:mod:`uam_studio.battery.fit`): :func:`fit_health` ->
-:class:`HealthEstimate` (q_max in C, R0 in ohm, covariance), :func:`eod_interval_s`,
-:func:`voltage_band`.
+:class:`HealthEstimate` (q_max in C, R0 in ohm, covariance; :mod:`uam_studio.battery.health_estimate`),
+:func:`eod_interval_s`, :func:`voltage_band` (:mod:`uam_studio.battery.fit_intervals`).
 """
 
-from .fit import (
-    HealthEstimate,
-    eod_interval_s,
-    eod_intervals,
-    fit_health,
-    fit_health_batch,
-    voltage_band,
-)
+from .fit import fit_health, fit_health_batch
+from .fit_intervals import eod_interval_s, eod_intervals, voltage_band
+from .health_estimate import HealthEstimate
 from .parameters import (
     DEFAULT_CELL,
     DEFAULT_EOD_V,

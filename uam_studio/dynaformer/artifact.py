@@ -1,4 +1,5 @@
-"""Saving and loading Dynaformer weights (+ PCA) as one self-describing file, atomically."""
+"""Saving and loading Dynaformer weights (+ PCA) as one self-describing file, atomically, and where the
+bundled weights of each cell type are."""
 
 from __future__ import annotations
 
@@ -10,7 +11,9 @@ from typing import Any
 import torch
 
 from ..atomic_io import atomic_save
+from ..bundled import bundled_path
 from ..errors import InputError
+from .cells import dynaformer_cell
 from .model import Dynaformer, DynaformerConfig
 
 FORMAT = "uam_studio.dynaformer/3"  # 3: config names its health estimator (take-off or transformer)
@@ -75,3 +78,10 @@ def load_artifact(path) -> tuple[Dynaformer, dict, dict]:
         raise WeightsError(path, f"{len(bad)} tensors hold NaN or inf values (first: {bad[0]})")
     model.eval()
     return model, pca, dict(blob.get("meta", {}))
+
+
+def bundled_weights_path(cell: str = "nasa18650") -> Path:
+    """The bundled weights for the cell type ``cell``: for the NASA cell ``$UAM_STUDIO_DYNAFORMER`` if
+    set, else ``dynaformer.pt`` in the user folder's ``pretrained/`` or in the package data
+    (:func:`uam_studio.bundled.bundled_path`); for the VTC6 ``dynaformer_vtc6.pt`` there."""
+    return bundled_path(dynaformer_cell(cell).weights_file)

@@ -19,10 +19,12 @@ import numpy as np
 
 from ..battery import rest_voltage, simulate
 from ..battery.eod import first_below
-from ..battery.fit import crossing_times, eod_intervals, fit_health, fit_health_batch
+from ..battery.fit import fit_health, fit_health_batch
+from ..battery.fit_intervals import crossing_times, eod_intervals
 from ..battery.parameters import DEFAULT_CELL, DEFAULT_EOD_V, CellParameters
 from .data import make_dataset
-from .predictor import DynaformerPredictor, decode_given_health
+from .decoder_error import decode_given_health
+from .predictor import DynaformerPredictor
 
 EOD_V = DEFAULT_EOD_V  # V
 SETS = {
@@ -75,7 +77,7 @@ def eod_metrics(ds, v_pred: np.ndarray, context_s: int = 20) -> dict:
 
 def decoder_errors(pred: DynaformerPredictor, ds, eod_v: float = EOD_V) -> dict:
     """The decoder's own error on the set ``ds``, given each discharge's exact health
-    (:func:`~uam_studio.dynaformer.predictor.decode_given_health`): ``rmse_mv`` over the valid samples
+    (:func:`~uam_studio.dynaformer.decoder_error.decode_given_health`): ``rmse_mv`` over the valid samples
     (above the 2.5 V floor), and the EOD (first sample below ``eod_v``, V) of the ``n_eod`` discharges
     that reach it: ``median_rte`` and ``p90_rte`` of |t_pred - t_true| / t_true."""
     v = decode_given_health(pred, ds)

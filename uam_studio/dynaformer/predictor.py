@@ -15,7 +15,6 @@ the weights' own estimator instead (the take-off regression on the first 20 s).
 
 from __future__ import annotations
 
-import hashlib
 import math
 import threading
 from functools import lru_cache
@@ -27,107 +26,31 @@ from scipy.ndimage import median_filter
 
 from ..battery import DEFAULT_EOD_V, rest_voltage, simulate
 from ..battery.eod import first_below
-from ..battery.fit import (
-    MIN_CONTEXT_S,
-    HealthEstimate,
+from ..battery.fit import fit_health_batch
+from ..battery.fit_intervals import (
     band_from_sigma_points,
     crossing_times,
-    fit_health_batch,
     interval_ends,
     two_sided_z,
     with_preroll,
 )
-from ..bundled import bundled_path
+from ..battery.health_estimate import MIN_CONTEXT_S, HealthEstimate
 from ..errors import InputError, check_range
-from .artifact import WeightsError, load_artifact
+from .artifact import WeightsError, bundled_weights_path, load_artifact
 from .cells import dynaformer_cell
-from .model import takeoff_targets
-
-MAX_PROFILE_S = 200_000.0  # s: longer profiles are refused (memory)
-
-
-def bundled_weights_path(cell: str = "nasa18650") -> Path:
-    """The bundled weights for the cell type ``cell``: for the NASA cell ``$UAM_STUDIO_DYNAFORMER`` if
-    set, else ``dynaformer.pt`` in the user folder's ``pretrained/`` or in the package data
-    (:func:`uam_studio.bundled.bundled_path`); for the VTC6 ``dynaformer_vtc6.pt`` there."""
-    return bundled_path(dynaformer_cell(cell).weights_file)
-
-
-def _as_2d(field: str, arr) -> tuple[np.ndarray, bool]:
-    try:
-        a = np.asarray(arr, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InputError(field, "expected an array of numbers") from None
-    if a.ndim not in (1, 2):
-        raise InputError(field, f"expected shape [T] or [B, T], got {a.shape}")
-    if a.shape[-1] == 0:
-        raise InputError(field, "has no samples; at least 1 is needed")
-    if not np.all(np.isfinite(a)):
-        raise InputError(field, "contains NaN or inf; every sample must be finite")
-    return np.atleast_2d(a), a.ndim == 1
-
-
-def _to_grid(values: np.ndarray, dt_s: float, hold: bool) -> np.ndarray:
-    """Resample [B, T] samples at step dt_s onto the model's 1 s grid."""
-    if dt_s == 1.0:
-        return values
-    t = values.shape[1]
-    n = max(1, int(math.ceil(t * dt_s - 1e-9)))
-    centers = np.arange(n) + 0.5
-    if hold:  # piecewise-constant current: sample the step containing each 1 s midpoint
-        idx = np.minimum((centers / dt_s).astype(int), t - 1)
-        return values[:, idx]
-    src_t = dt_s * np.arange(1, t + 1)
-    return np.stack([np.interp(np.arange(1, n + 1), src_t, row) for row in values])
-
+from .decoder_error import (
+    BUNDLED_DECODER_LAMBDA,
+    CAL_PROBS,
+    DECODER_CAL_N,
+    DECODER_ERROR_SHAPE,
+    _conformal_quantiles,
+    _quantile_combine,
+    _sha256,
+    decoder_error_scores,
+)
+from .predictor_inputs import MAX_PROFILE_S, _as_2d, _clamped_latent, _leading_rest, _to_grid
 
 HEALTH_SOURCES = ("fit", "model")
-REST_CURRENT_A = 0.1  # A: leading samples below this, holding < REST_CHARGE_C in all, are rest
-REST_CHARGE_C = 1.0  # C
-DECODER_CAL_SEED = 424242  # seed of the decoder-error calibration flights (disjoint from training and evaluation)
-DECODER_CAL_N = 400  # flights
-# The decoder's own error is a band of two parts scaled together by one factor lam: lam * 0.01 V
-# about the decoded curve, and lam * 0.2% of the decoded EOD time (see :func:`decoder_error_scores`).
-DECODER_ERROR_SHAPE = (0.01, 0.002)  # (V, -) per unit of lam
-CAL_PROBS = (0.5, 0.6, 0.7, 0.75, 0.8, 0.85, 0.9, 0.925, 0.95, 0.975, 0.99, 0.999)
-# Split-conformal quantiles of lam at CAL_PROBS for the bundled weights, keyed by the file's SHA-256
-# (``decoder_error_scores(load_pretrained(cell))``: 400 flights of the weights' cell type, seed 424242; 333
-# of the VTC6's end after their 20 s context). Other weights are
-# calibrated on first use (200 flights, a few seconds).
-BUNDLED_DECODER_LAMBDA: dict[str, tuple[float, ...]] = {
-    "cfcb738ced4eb4fcae574d9e2a5d41f345dd4c83402510e9024a8197286c382b":  # pretrained/dynaformer.pt (715,909 bytes)
-        (0.2195, 0.3189, 0.4386, 0.5187, 0.6423, 0.7908, 0.9728, 1.0764, 1.3455, 1.6256, 2.4252, 4.9844),
-    "7a2522b588ac307d8a464ea3e8d506d97086885c60ebbc8d5326d4f7f346a8e8":  # pretrained/dynaformer_vtc6.pt (716,101 bytes)
-        (0.1967, 0.3296, 0.4975, 0.6373, 0.7185, 0.8153, 1.0370, 1.1747, 1.5903, 2.3308, 3.4117, 5.0126),
-}
-
-
-def _clamped_latent(r0_ohm: np.ndarray, q_max_c: np.ndarray, cfg=None) -> torch.Tensor:
-    """The take-off decoder's latent [B, 2] for (R0 ohm, q_max C), clamped like TakeoffHealth's output
-    (``cfg``: the weights' :class:`~uam_studio.dynaformer.model.DynaformerConfig`, for its scales)."""
-    h = takeoff_targets(np.asarray(r0_ohm, float), np.asarray(q_max_c, float), cfg)
-    return torch.stack([h[:, 0].clamp(-1.5, 1.5), h[:, 1].clamp(-2.5, 4.0)], 1).float()
-
-
-def _leading_rest(grid: np.ndarray) -> np.ndarray:
-    """Per row of a 1 s current grid [B, n] (A): leading samples at rest (|i| < REST_CURRENT_A, together
-    under REST_CHARGE_C). A full, rested cell is unchanged by them, so the decoder skips them."""
-    quiet = np.abs(grid) < REST_CURRENT_A
-    small = np.abs(np.cumsum(grid, axis=1)) < REST_CHARGE_C
-    ok = quiet & small
-    return np.where(ok.all(axis=1), grid.shape[1], np.argmin(ok, axis=1))
-
-
-def _quantile_combine(med: np.ndarray, health_end: np.ndarray, decoder_end: np.ndarray, side: int) -> np.ndarray:
-    """One end of an interval from a median and two independent spreads, added in quadrature
-    (side -1: low, +1: high). Infinite times (no cut-off in the profile) stay conservative."""
-    with np.errstate(invalid="ignore"):
-        a, b = np.abs(health_end - med), np.abs(decoder_end - med)
-        out = med + side * np.sqrt(a ** 2 + b ** 2)
-    finite = np.isfinite(med) & np.isfinite(health_end) & np.isfinite(decoder_end)
-    extreme = np.minimum(health_end, decoder_end) if side < 0 else np.maximum(health_end, decoder_end)
-    extreme = np.minimum(extreme, med) if side < 0 else np.maximum(extreme, med)
-    return np.where(finite, out, extreme)
 
 
 class DynaformerPredictor:
@@ -246,7 +169,7 @@ class DynaformerPredictor:
         """Decoded voltage (V) [B, n] for latents [B, d] and a 1 s current grid [B, n] (A). With
         ``skip_rest``, each row's leading rest (:func:`_leading_rest`) is cut before decoding and
         filled with the rested full cell's voltage. With ``estimates`` (one per row), each row's
-        pre-roll (:func:`uam_studio.battery.fit.with_preroll`) is decoded before it and dropped.
+        pre-roll (:func:`uam_studio.battery.fit_intervals.with_preroll`) is decoded before it and dropped.
         With ``points`` [B, 2] (q_max C, r0 ohm) instead of latents: :meth:`_reobserved_latent`."""
         n_out = grid.shape[1]
         grid, k_pre = with_preroll(estimates, grid, 1.0) if estimates is not None else (grid, 0)
@@ -428,7 +351,7 @@ class DynaformerPredictor:
 
         median: the Dynaformer at the fitted health. The health part of the spread: the health at the
         two ends of the physics model's first-order EOD interval
-        (:func:`uam_studio.battery.fit.interval_points`), decoded. The decoder's own error: the
+        (:func:`uam_studio.battery.fit_intervals.interval_points`), decoded. The decoder's own error: the
         band of :meth:`decoder_error` about the median. The two spreads add in quadrature. One physics
         call (5 trajectories per row) and one decoder call (3 per row).
 
@@ -466,7 +389,7 @@ class DynaformerPredictor:
                      health_source: str | None = None):
         """Pointwise ``level`` band (low, median, high) of the predicted voltage (V) on ``current_a``'s
         grid, a band to draw. median = :meth:`predict`. Spread: the 5 health sigma points
-        (:meth:`~uam_studio.battery.fit.HealthEstimate.sigma_points`) decoded, linearised per sample,
+        (:meth:`~uam_studio.battery.health_estimate.HealthEstimate.sigma_points`) decoded, linearised per sample,
         plus the decoder's own error (:meth:`decoder_error`: -+ h_v, and the median curve stretched
         in time by -+ h_t) in quadrature. The observed context is returned as observed in all three.
 
@@ -496,70 +419,6 @@ class DynaformerPredictor:
             med[r] = c
         out = [self._finish(np.clip(x, 0.0, 5.0), cur, dt, grid.shape[1], obs) for x in (low, med, high)]
         return tuple(o[0] for o in out) if single else tuple(out)
-
-
-def _conformal_quantiles(scores: np.ndarray, probs) -> np.ndarray:
-    """Split-conformal quantiles of ``scores``: the ceil((n + 1) p)-th smallest (the largest if beyond)."""
-    s = np.sort(np.asarray(scores, float))
-    k = np.minimum(np.ceil((s.size + 1) * np.asarray(probs)).astype(int), s.size) - 1
-    return s[k]
-
-
-def _sha256(path) -> str:
-    try:
-        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-    except OSError:
-        return ""
-
-
-@torch.no_grad()
-def decoder_error_scores(pred: DynaformerPredictor, n: int = DECODER_CAL_N, seed: int = DECODER_CAL_SEED,
-                         eod_v: float = DEFAULT_EOD_V) -> np.ndarray:
-    """The decoder's own EOD error on ``n`` synthetic flights (training ranges, ``seed``), given the
-    exact health (read as in :meth:`DynaformerPredictor._reobserved_latent`) and a 20 s observed
-    context: per flight whose true EOD falls after the context, the smallest lam >= 0 such that
-    [min(crossing of the curve - lam a, (1 - lam b) t_med), max(crossing of the curve + lam a,
-    (1 + lam b) t_med)] holds the true EOD ((a, b) =
-    :data:`DECODER_ERROR_SHAPE`; t_med: the decoded EOD). Closed form per side: the voltage part needs
-    lam a > (min of the curve up to the true EOD) - eod_v (low side) or >= eod_v - (min before it)
-    (high side); the time part lam b >= |t_med - t_true| / t_med on the side it is missing."""
-    from .data import make_dataset
-
-    a, b = DECODER_ERROR_SHAPE
-    ds = make_dataset(n, seed=seed, flight_fraction=1.0, cell=pred.model.cfg.cell)
-    t = np.arange(ds.voltage_v.shape[1])[None, :]
-    true_t, _ = crossing_times(np.where(t < ds.length[:, None], ds.voltage_v, 5.0), 1.0, eod_v)
-    keep = np.where(np.isfinite(true_t) & (true_t > 20))[0]
-    scores = []
-    for s in range(0, keep.size, 64):
-        rows = keep[s:s + 64]
-        part = ds.subset(rows)
-        v = decode_given_health(pred, part)
-        v[:, :20] = part.voltage_v[:, :20]
-        med, _ = crossing_times(v, 1.0, eod_v)
-        for r, i in enumerate(rows):
-            k = int(true_t[i]) - 1  # index of the true first sample below
-            t_true, t_med = float(true_t[i]), float(med[r])
-            up_to, before = v[r, :k + 1].min(), (v[r, :k].min() if k > 0 else np.inf)
-            rel = abs(t_med - t_true) / t_med if np.isfinite(t_med) else np.inf
-            lo = min((up_to - eod_v) / a, rel / b if t_med > t_true else np.inf) if up_to >= eod_v else 0.0
-            hi = min((eod_v - before) / a, rel / b) if before < eod_v else 0.0
-            scores.append(max(lo, hi, 0.0))
-    return np.asarray(scores)
-
-
-@torch.no_grad()
-def decode_given_health(pred: DynaformerPredictor, ds, batch: int = 64) -> np.ndarray:
-    """The decoder's voltage (V) [N, T] along each discharge of the set ``ds`` (its whole current, A),
-    given its exact health (q_max C, R0 ohm; latents as :meth:`DynaformerPredictor._reobserved_latent`
-    reads them), so only the decoder's own error remains; 5.0 V past each discharge's length (never
-    read as a crossing of a cut-off)."""
-    points = np.column_stack([ds.q_max, ds.r0])
-    cur = ds.current_a.astype(np.float64)
-    v = np.concatenate([pred._decode(None, cur[s:s + batch], skip_rest=True, points=points[s:s + batch])
-                        for s in range(0, len(ds), batch)])
-    t = np.arange(cur.shape[1])[None, :]
-    return np.where(t < ds.length[:, None], v, 5.0)
 
 
 def load_predictor(path=None) -> DynaformerPredictor:

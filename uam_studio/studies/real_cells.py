@@ -124,7 +124,7 @@ def dynaformer_rows(mission: MissionLog, cell: str = "nasa18650") -> list[dict]:
     measured current (A), with its default health (the physics fit of the context on the weights' cell);
     ``physics_error_mv``: that fit flown on the physics model along the same current (the reference).
     A refusal or a missing weights file is a row with its one-line ``error``."""
-    from uam_studio.battery.fit import voltage_band as physics_band
+    from uam_studio.battery.fit_intervals import voltage_band as physics_band
     from uam_studio.dynaformer import load_pretrained
 
     log = mission.log

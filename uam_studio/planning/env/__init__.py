@@ -1,5 +1,6 @@
-"""The Gymnasium environment (:mod:`.environment`: :class:`UAMPlanningEnv`, :func:`make_env`, the
-observation layout) and its battery backends with the take-off health observation (:mod:`.backends`).
+"""The Gymnasium environment (:mod:`.environment`: :class:`UAMPlanningEnv`, :func:`make_env`; the
+observation layout in :mod:`.observation`; the queries on an episode that leave it unchanged in
+:mod:`.queries`) and its battery backends with the take-off health observation (:mod:`.backends`).
 """
 
 from uam_studio.planning.env.backends import (

@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from uam_studio.battery.fit import MIN_CONTEXT_S, HealthEstimate, fit_health
+from uam_studio.battery.fit import fit_health
+from uam_studio.battery.health_estimate import MIN_CONTEXT_S, HealthEstimate
 from uam_studio.battery.health_prior import HealthPrior, combine, fleet_prior
 from uam_studio.errors import InputError
 from uam_studio.planning.legs import DT_S

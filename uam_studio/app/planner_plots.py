@@ -1,0 +1,229 @@
+"""The Planner tab's plots as holoviews elements: the map's places and route, the altitude per leg, the
+voltage against EOD and the health estimate, each built from its data (km, m, minutes, V) by
+:class:`PlannerPlots`, which :class:`~uam_studio.app.planner.PlannerView` extends.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import holoviews as hv
+import numpy as np
+import pandas as pd
+
+from uam_studio.app.map_geometry import FAILED_COLOR, altitude_labels, leg_arrows, route_legs
+from uam_studio.app.services import population
+from uam_studio.app.style import NAME_OFFSET_PX, label_background, no_scroll_zoom, pixel_offset
+from uam_studio.planning.missions.mission import VERTIPORT
+
+VOLTAGE_POINTS = 800  # samples per series drawn in the voltage plot (its lowest points always kept)
+WIDE_MIN_PX = 440  # narrowest width of the plan column and of the extra plots' column
+VOLTAGE_HEIGHT_PX = 340  # the voltage plot: over a third of the tab's height at 1366x768 and 1920x1080
+
+
+def _display_index(values: np.ndarray, limit: int) -> np.ndarray:
+    """At most about ``limit`` indices of ``values``, evenly spread, with the first, the last and the
+    lowest sample (what a plot needs to show the minimum against EOD)."""
+    n = values.size
+    if n <= limit:
+        return np.arange(n)
+    idx = np.linspace(0, n - 1, limit).round().astype(int)
+    return np.unique(np.append(idx, int(np.argmin(values))))
+
+
+def _route_legend(plot: Any, element: Any) -> None:
+    """Bokeh hook of the map's route segments: one legend entry per value of the legs' ``legend``
+    column (``cycle 1``, ``cycle 2``...; ``failed`` for the legs that would not make it), grouped by
+    BokehJS from the data (the hover tool puts the columns in the data source), so the legend
+    follows every new plan without a new figure."""
+    from bokeh.models import Legend, LegendItem
+
+    fig = plot.state
+    renderer = plot.handles.get("glyph_renderer")
+    if renderer is None:
+        return
+    legend = next((lg for lg in fig.legend if getattr(lg, "name", None) == "uam-route-legend"), None)
+    if legend is None:
+        legend = Legend(items=[], name="uam-route-legend", location="top_left", label_text_font_size="8pt",
+                        padding=4, spacing=0, background_fill_alpha=0.8)
+        fig.add_layout(legend)
+    if not any(renderer in item.renderers for item in legend.items):
+        # one column name per renderer: BokehJS reads a field label from its item's first renderer only
+        field = "failed" if "failed" in [d.name for d in element.vdims] else "legend"
+        legend.items.append(LegendItem(label={"field": field}, renderers=[renderer]))
+
+
+class PlannerPlots:
+    """The plots of :class:`~uam_studio.app.planner.PlannerView`: each plot's data from the view's
+    ``state`` (a :class:`~uam_studio.app.planner_state.PlannerState`) and its element from that data,
+    cloned from the styled templates the view keeps (``_route_tpl``, ``_voltage_tpl``)."""
+
+    def _route_data(self) -> dict[str, list]:
+        """:func:`route_legs` of the plan, plus ``nodes``: every place on the map (x, y km)."""
+        s = self.state
+        rows = s.destination_rows()
+        data = route_legs(s.plan, rows, (s.vertiport_x_km, s.vertiport_y_km))
+        data["nodes"] = [(float(s.vertiport_x_km), float(s.vertiport_y_km))] + \
+            [(float(r["x_km"]), float(r["y_km"])) for r in rows]
+        data["names"] = [VERTIPORT] + [f"{r['name']} {'*' * int(r['priority'])}" for r in rows]  # as drawn
+        return data
+
+    @staticmethod
+    def _points_element(data: pd.DataFrame) -> hv.Points:
+        return hv.Points(data, kdims=["x_km", "y_km"], vdims=["name", "priority", "wind_kts", "dwell_s"]).opts(
+            size=14, color="#444444", line_color="white", line_width=2, tools=["hover"],
+            active_tools=["point_draw"], hooks=[no_scroll_zoom],
+        )
+
+    def _names_element(self, data: pd.DataFrame) -> hv.Overlay:
+        s = self.state
+        rows = s.destination_rows()
+        names = hv.Labels({"x": [r["x_km"] for r in rows], "y": [r["y_km"] for r in rows],
+                           "text": [f"{r['name']} {'*' * int(r['priority'])}" for r in rows]},
+                          kdims=["x", "y"], vdims="text").opts(text_font_size="9pt", text_font_style="bold",
+                                                               text_color="#222222", text_baseline="bottom",
+                                                               hooks=[pixel_offset(-NAME_OFFSET_PX)])
+        vp = hv.Points([(s.vertiport_x_km, s.vertiport_y_km)], kdims=["x_km", "y_km"]).opts(
+            marker="square", size=16, color="#d62728")
+        vp_label = hv.Labels([(s.vertiport_x_km, s.vertiport_y_km, "vertiport")], kdims=["x", "y"],
+                             vdims="text").opts(text_font_size="9pt", text_color="#d62728", text_baseline="top",
+                                                hooks=[pixel_offset(NAME_OFFSET_PX)])
+        return names * vp * vp_label
+
+    @staticmethod
+    def _route_templates() -> dict[str, Any]:
+        """Styled empty elements of the route; each frame clones them with new data, keeping their
+        styles without an ``.opts`` call (which costs milliseconds) per frame."""
+        kd = ["x0", "y0", "x1", "y1"]
+        empty = {c: [] for c in ("x0", "y0", "x1", "y1", "color", "leg", "altitude_m")}
+        return {
+            "legs": hv.Segments({**empty, "legend": []}, kd, ["color", "leg", "altitude_m", "legend"]).opts(
+                color="color", line_width=4, alpha=0.85, tools=["hover"], hooks=[_route_legend]),
+            "lost": hv.Segments({**empty, "failed": []}, kd, ["color", "leg", "altitude_m", "failed"]).opts(
+                color=FAILED_COLOR, line_width=3, line_dash="dashed", tools=["hover"], hooks=[_route_legend]),
+            "labels": hv.Labels({"x": [], "y": [], "text": []}, ["x", "y"], "text").opts(
+                text_font_size="8pt", text_color="#333333", text_align="center", text_baseline="middle",
+                hooks=[label_background]),
+            "arrows": hv.Points({"x": [], "y": [], "angle": [], "color": []}, ["x", "y"], ["angle", "color"]).opts(
+                marker="triangle", angle="angle", color="color", size=13, line_color="white", line_width=1),
+        }
+
+    def _route_element(self, data: dict[str, list]) -> hv.Overlay:
+        done = np.asarray(data["completed"], dtype=bool)
+        cols = ("x0", "y0", "x1", "y1", "color", "leg", "altitude_m", "legend")
+
+        def pick(mask: np.ndarray) -> dict[str, Any]:
+            return {c: [v for v, k in zip(data[c], mask) if k] for c in cols}
+
+        failed = pick(~done)
+        failed["failed"] = failed.pop("legend")
+        tpl = self._route_tpl
+        return (tpl["legs"].clone(pick(done)) * tpl["lost"].clone(failed) * tpl["arrows"].clone(leg_arrows(data))
+                * tpl["labels"].clone(altitude_labels(data, data.get("nodes", []), data.get("names", []))))
+
+    @staticmethod
+    def _altitude_element(data: dict[str, list]) -> hv.Overlay:
+        # Numeric x (leg number) with tick labels: categorical axes do not survive empty -> full updates.
+        n = len(data["leg"])
+        idx = np.arange(1, n + 1, dtype=float)
+        alt = np.asarray(data["altitude_m"], dtype=float)
+        bars = hv.Rectangles({"x0": idx - 0.38, "y0": np.zeros(n), "x1": idx + 0.38, "y1": alt,
+                              "color": list(data["color"]), "leg": list(data["leg"]), "altitude_m": alt},
+                             kdims=["x0", "y0", "x1", "y1"], vdims=["color", "leg", "altitude_m"]).opts(
+            color="color", line_color="white", tools=["hover"])
+        labels = hv.Labels({"x": idx, "y": alt + 120, "text": [f"{a:g}" for a in alt]},
+                           kdims=["x", "y"], vdims="text").opts(text_font_size="8pt", text_color="#222222")
+        ticks = [(float(i), str(lbl)) for i, lbl in zip(idx, data["leg"])] if n else [(1.0, "")]
+        return (bars * labels).opts(
+            hv.opts.Rectangles(xticks=ticks, xrotation=30, xlim=(0.4, max(n, 1) + 0.6), ylim=(0, 3300),
+                               xlabel="", ylabel="altitude (m)", framewise=True),
+            hv.opts.Labels(framewise=True),
+        ).opts(width=WIDE_MIN_PX, height=240, title="Cruise altitude per leg (colour = charging cycle)")
+
+    def _voltage_data(self) -> dict[str, Any]:
+        """The voltage plot's series (minutes, V): physics (the plan's, or the failed take-off's),
+        Dynaformer, its band, and the EOD line; each leg's take-off (min) and name (``legs``); with
+        the axis ranges, which always include EOD.
+        Each series is drawn with at most :data:`VOLTAGE_POINTS` samples, its lowest ones kept."""
+        s = self.state
+        plan = s.plan or {}
+        eod = s.plan_request.mission.eod_v if s.plan_request is not None else s.eod_v
+        phys = s.takeoff or plan.get("physics") or {"time_s": [], "voltage_v": []}
+        pred = plan.get("predicted") or {"time_s": [], "voltage_v": []}
+        band = s.band or {"time_s": [], "low_v": [], "high_v": [], "level": 0.9}
+        t = np.asarray(phys["time_s"], float) / 60.0
+        v = np.asarray(phys["voltage_v"], float)
+        tp, vp = np.asarray(pred["time_s"], float) / 60.0, np.asarray(pred["voltage_v"], float)
+        tb = np.asarray(band["time_s"], float) / 60.0
+        lo, hi = np.asarray(band["low_v"], float), np.asarray(band["high_v"], float)
+        values = np.concatenate([v, vp, lo, hi, [eod]])
+        t_end = float(t[-1]) if t.size and t[-1] > 0 else 1.0
+        i, ip, ib = (_display_index(x, VOLTAGE_POINTS) for x in (v, vp, lo))
+        starts = [] if s.takeoff else list(plan.get("physics", {}).get("leg_start_s", []))
+        route = list(plan.get("route", []))
+        legs = ([round(float(t0) / 60.0, 3) for t0 in starts],
+                [f"#{k} {to}" for k, to in enumerate(route[:len(starts)], 1)])
+        y0, y1 = float(values.min()) - 0.05, float(values.max()) + 0.05
+        return {"physics": (t[i], v[i]), "predicted": (tp[ip], vp[ip]), "band": (tb[ib], lo[ib], hi[ib]),
+                "level": float(band["level"]), "eod": float(eod), "xlim": (0.0, t_end), "legs": legs,
+                "ylim": (y0, y1 + 0.08 * (y1 - y0))}  # headroom for the legs' names
+
+    @staticmethod
+    def _voltage_templates() -> dict[str, Any]:
+        """Styled empty elements of the voltage plot (cloned with each frame's data, as the route's);
+        each frame's axes follow its data, which include the EOD line (framewise)."""
+        kd, vd = "time (min)", "voltage (V)"
+        empty = ([0.0], [0.0])
+        band = hv.Area(([0.0], [0.0], [0.0]), kd, [vd, "high"], label="Dynaformer 90%").opts(
+            color="#ff7f0e", alpha=0.35, line_color="#ff7f0e", line_alpha=0.8, line_width=1, framewise=True)
+        leg_lines = hv.VLines([], kd).opts(color="#777777", line_dash="dotted", line_width=1)
+        leg_names = hv.Labels({"x": [], "y": [], "text": []}, ["x", "y"], "text").opts(
+            text_font_size="8pt", text_color="#444444", text_align="left", text_baseline="top", xoffset=0.0)
+        phys = hv.Curve(empty, kd, vd, label="physics").opts(color="#1f77b4", line_width=2, framewise=True)
+        pred = hv.Curve(empty, kd, vd, label="Dynaformer").opts(color="#ff7f0e", line_width=2, line_dash="dashed",
+                                                               framewise=True)
+        eod = hv.Curve(empty, kd, vd, label="EOD").opts(color=FAILED_COLOR, line_width=1.5, line_dash="dotted",
+                                                        framewise=True)
+        overlay = (band * phys * pred * eod * leg_lines * leg_names).opts(
+            responsive=True, height=VOLTAGE_HEIGHT_PX, legend_position="top", legend_cols=4, show_grid=True,
+            fontsize={"legend": "8pt", "title": "10pt"},
+            title="Voltage: physics (what happens) vs Dynaformer (predicted)")
+        return {"overlay": overlay, "band": band, "physics": phys, "predicted": pred, "eod": eod,
+                "leg_lines": leg_lines, "leg_names": leg_names}
+
+    def _voltage_element(self, data: dict[str, Any]) -> hv.Overlay:
+        tpl = self._voltage_tpl
+        x0, x1 = data["xlim"]
+        starts, names = data["legs"]
+        tb, lo, hi = data["band"]
+        # a series with no data gets no legend entry (a failed take-off has no prediction)
+        return tpl["overlay"].clone([
+            tpl["band"].clone((tb, lo, hi), label=f"Dynaformer {100 * data['level']:.0f}%" if len(tb) else ""),
+            tpl["physics"].clone(data["physics"], label="physics" if len(data["physics"][0]) else ""),
+            tpl["predicted"].clone(data["predicted"], label="Dynaformer" if len(data["predicted"][0]) else ""),
+            tpl["eod"].clone(([x0, x1], [data["eod"]] * 2), label=f"EOD {data['eod']:g} V"),
+            tpl["leg_lines"].clone(list(starts)),
+            tpl["leg_names"].clone({"x": [x + 0.004 * (x1 - x0) for x in starts], "y": [data["ylim"][1]] * len(starts),
+                                    "text": list(names)}),
+        ])
+
+    def _health_data(self) -> tuple[float, float] | None:
+        return self.state.health
+
+    @staticmethod
+    def _population_element() -> hv.Points:
+        pop = population()
+        if pop is None:
+            df = pd.DataFrame({"PC1": [], "PC2": [], "R0 (ohm)": [], "q_max (C)": []})
+        else:
+            df = pd.DataFrame({"PC1": pop.pc1, "PC2": pop.pc2, "R0 (ohm)": pop.r0, "q_max (C)": pop.q_max})
+        return hv.Points(df, ["PC1", "PC2"], ["R0 (ohm)", "q_max (C)"], label="training population").opts(
+            color="R0 (ohm)", cmap="viridis", colorbar=True, size=5, alpha=0.6, tools=["hover"],
+            width=WIDE_MIN_PX, height=280, title="Health estimate (Dynaformer PCs) vs population", show_grid=True,
+            legend_position="top", legend_cols=2, xlabel="PC1 (tracks R0)", ylabel="PC2 (tracks q_max)")
+
+    @staticmethod
+    def _health_element(data: tuple[float, float] | None) -> hv.Points:
+        pts = [] if data is None else [tuple(data)]
+        return hv.Points(pts, ["PC1", "PC2"], label="this cell").opts(
+            color="#d62728", marker="star", size=22, line_color="black")

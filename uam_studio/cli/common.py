@@ -1,0 +1,57 @@
+"""What every command of the CLI shares: exit codes, the one-line error, the parser class, the
+:class:`Command` record and the parsers of comma-separated values."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import NoReturn
+
+from uam_studio.errors import InputError
+
+EXIT_OK = 0
+EXIT_INPUT = 2
+EXIT_INTERRUPTED = 130
+EXIT_BROKEN_PIPE = 141
+
+
+class CliExit(Exception):
+    """Raised instead of printing usage and exiting, so :func:`~uam_studio.cli.main` reports one line."""
+
+    def __init__(self, message: str, code: int) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse that turns its errors into a single ``error: ...`` line (no usage dump)."""
+
+    def error(self, message: str) -> NoReturn:
+        raise CliExit(f"{message} (see '{self.prog} --help')", EXIT_INPUT)
+
+
+@dataclass(frozen=True)
+class Command:
+    help: str
+    add_arguments: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace], int]
+
+
+def parse_list(field: str, text: str) -> list[str]:
+    """Split ``"A, B,vertiport"`` into ``["A", "B", "vertiport"]``; empty entries are errors."""
+    items = [s.strip() for s in text.split(",")]
+    if not text.strip() or any(not s for s in items):
+        raise InputError(field, f"{text!r} has an empty entry; expected comma-separated values like A,B,vertiport")
+    return items
+
+
+def parse_floats(field: str, text: str) -> list[float]:
+    """Split ``"500,1000"`` into floats, naming the bad entry if one is not a number."""
+    out = []
+    for i, s in enumerate(parse_list(field, text)):
+        try:
+            out.append(float(s))
+        except ValueError:
+            raise InputError(f"{field}[{i}]", f"{s!r} is not a number") from None
+    return out

@@ -1,0 +1,76 @@
+"""``uam-studio fly``: fly a mission in a world the operator cannot see, re-planning from its sensors, and
+print the flight log."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from uam_studio.cli.common import EXIT_OK, Command
+
+
+def _add_fly_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("mission", metavar="MISSION.json", help="mission file: its battery is the true cell, its "
+                                                           "winds the forecast")
+    p.add_argument("--policy", choices=["attention", "oracle"], default="attention",
+                   help="the operator's planner, on what it believes: attention (the learned planner; default) "
+                        "or oracle (exact search, slower)")
+    p.add_argument("--seed", type=int, default=0, help="seeds the forecast errors and the sensor noise")
+    p.add_argument("--forecast-sigma", type=float, default=13.0, metavar="KT",
+                   help="std of the forecast error of each node's wind (kt, 0-60; default 13)")
+    p.add_argument("--sensor-noise-mv", type=float, default=5.0, metavar="MV",
+                   help="voltage sensor noise std (mV, 0-100; default 5)")
+    p.add_argument("--sensor-noise-ma", type=float, default=20.0, metavar="MA",
+                   help="current sensor noise std (mA, 0-1000; default 20)")
+    p.add_argument("--event", action="append", default=[], metavar="wind+KT@S",
+                   help="scripted wind change, e.g. wind+30@1200: 30 kt more headwind on legs taking off "
+                        "from t = 1200 s (repeatable)")
+    p.add_argument("--q-max", type=float, default=None, help="override the true cell's q_max (C)")
+    p.add_argument("--r0", type=float, default=None, help="override the true cell's r0 (ohm)")
+    p.add_argument("--json", action="store_true", help="print the flight record as JSON")
+    p.add_argument("--series", action="store_true", help="with --json: include the 1 Hz time series")
+
+
+def _run_fly(args: argparse.Namespace) -> int:
+    from uam_studio.planning import load_mission
+    from uam_studio.planning.operations import fly_mission, parse_event
+
+    events = [parse_event(e) for e in args.event]
+    mission = load_mission(args.mission).with_battery(args.q_max, args.r0)
+    rec = fly_mission(mission, args.policy, seed=args.seed, forecast_sigma_kt=args.forecast_sigma,
+                      sensor_noise_mv=args.sensor_noise_mv, sensor_noise_ma=args.sensor_noise_ma, events=events)
+    if args.json:
+        json.dump(rec.to_dict(series=args.series), sys.stdout, allow_nan=False)
+        sys.stdout.write("\n")
+        return EXIT_OK
+    print(f"{mission.name} ({rec.scenario}): seed {rec.seed}, forecast sigma {rec.forecast_sigma_kt:g} kt, "
+          f"sensor noise {rec.sensor_noise_mv:g} mV / {rec.sensor_noise_ma:g} mA, events: "
+          f"{', '.join(rec.wind_events) or 'none'}")
+    legs = iter(zip(rec.route, rec.altitudes_m, rec.actual_winds_kts, rec.forecast_winds_kts, rec.leg_end_s))
+    for d in rec.events:
+        print(f"t={d.time_s:>6.0f} s at {d.node}: {d.kind}: {d.reason}")
+        print(f"           knows q_max {d.q_max_c:.0f} +- {d.q_max_sd_c:.0f} C, R0 {d.r0_ohm:.3f} +- "
+              f"{d.r0_sd_ohm:.3f} ohm, wind shift {d.wind_shift_kts:+.1f} kt; plans "
+              f"{' -> '.join(d.route) or 'nothing more'}")
+        if d.next_to is not None:
+            to, alt, wind, forecast, end = next(legs)
+            print(f"           flies to {to} at {alt:g} m: wind {wind:+.0f} kt (forecast {forecast:+.0f}), "
+                  f"lands at {end:.0f} s")
+    reached = ", ".join(rec.reached) or "none"
+    verdict = "BREACHED the cut-off: priority 0" if rec.breached else f"priority {rec.reached_priority}"
+    print(f"flown: reached {reached}; {verdict}; {rec.charging_cycles} recharges; min {rec.min_voltage_v:.3f} V")
+    print(f"blind pre-flight plan: {' -> '.join(rec.static_route) or 'nothing'}: "
+          f"{'BREACHED, priority 0' if rec.static_breached else f'priority {rec.static_priority}'}")
+    exact = "" if rec.hindsight_exact else (" at each leg's time; the best of the exact plans for each period of "
+                                            "constant winds and the route flown")
+    print(f"hindsight oracle (true cell, actual winds{exact}): priority {rec.hindsight_priority}")
+    return EXIT_OK
+
+
+COMMAND = Command(
+    "fly a mission in a hidden world: the operator estimates health and wind from its sensors and "
+    "re-plans at every arrival",
+    _add_fly_arguments,
+    _run_fly,
+)

@@ -1,0 +1,27 @@
+"""``uam-studio identify``: a real cell's parameter set, identified from measured data and printed as Python."""
+
+from __future__ import annotations
+
+import argparse
+
+from uam_studio.cli.common import EXIT_OK, Command
+
+
+def _add_identify_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("cell", choices=["vtc6"], help="the cell to identify (the CMU eVTOL dataset's Sony-Murata VTC6)")
+    p.add_argument("--data", default=None, metavar="PATH",
+                   help="the CMU eVTOL dataset's folder (default: $UAM_STUDIO_CMU_DATA; DOI 10.1184/R1/14226830)")
+    p.add_argument("--hold-out", choices=["none", "landing", "cell"], default="none",
+                   help="none: the bundled set; landing: without VAH01's landing and rest; cell: without VAH01")
+
+
+def _run_identify(args: argparse.Namespace) -> int:
+    from ..battery.cmu_data import data_folder
+    from ..battery.real_cells import cell_literal, identify_vtc6
+
+    print(cell_literal(identify_vtc6(data_folder(args.data), hold_out=args.hold_out)))
+    return EXIT_OK
+
+
+COMMAND = Command("identify a real cell's parameter set from measured data (prints it as Python)",
+                  _add_identify_arguments, _run_identify)
