@@ -7,7 +7,11 @@
   ``notebooks/``) imports the ``uam_studio`` being tested even when the installed package points at
   another checkout.
 
-Kernels inherit both; ``tests/test_notebooks.py`` checks that a kernel sees them.
+* ``OMP_NUM_THREADS=1`` in each pytest-xdist worker (``-n auto`` in ``pyproject.toml``'s addopts): the
+  workers already use every core, and a worker's torch and BLAS (and the CLI, server and notebook
+  processes it starts, which inherit it) would otherwise each start a thread per core.
+
+Kernels inherit these; ``tests/test_notebooks.py`` checks that a kernel sees them.
 """
 
 import os
@@ -15,6 +19,8 @@ from pathlib import Path
 
 ROOT = str(Path(__file__).resolve().parent)
 os.environ.setdefault("UAM_FAST", "1")
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
 _paths = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
 if not _paths or _paths[0] != ROOT:
     os.environ["PYTHONPATH"] = os.pathsep.join([ROOT, *(p for p in _paths if p != ROOT)])

@@ -285,20 +285,20 @@ def test_attention_planner_retrains_with_live_curves_and_is_selectable(page, app
     _open(page, app_url)
     page.locator(".bk-tab", has_text="Retrain").click()
     page.locator(".uam-train-model button", has_text="Attention").click()
-    for css, value in ((".uam-train-missions", "12"), (".uam-train-epochs", "4")):
+    for css, value in ((".uam-train-missions", "10"), (".uam-train-epochs", "3")):
         box = page.locator(css).locator("input")
         box.fill(value)
         box.press("Tab")
     assert page.get_by_text("Steps (environment transitions)").first.is_hidden()  # the DQN's settings hidden
     page.locator(".uam-train-start button").click()
-    page.locator(".uam-train-status").get_by_text("training the attention planner: 4 epochs on 12").wait_for()
-    page.locator(".uam-train-status").get_by_text("done: 4 epochs").wait_for(timeout=180_000)
+    page.locator(".uam-train-status").get_by_text("training the attention planner: 3 epochs on 10").wait_for()
+    page.locator(".uam-train-status").get_by_text("done: 3 epochs").wait_for(timeout=180_000)
     # the two plots are separate document patches: each is waited for (a loaded machine delivers them apart)
-    page.wait_for_function(f"() => ({JS_CURVE_LENGTH})('Priority of its plan') === 4")
-    page.wait_for_function(f"() => ({JS_CURVE_LENGTH})('Imitation of the exact oracle') === 4", timeout=15_000)
+    page.wait_for_function(f"() => ({JS_CURVE_LENGTH})('Priority of its plan') === 3")
+    page.wait_for_function(f"() => ({JS_CURVE_LENGTH})('Imitation of the exact oracle') === 3", timeout=15_000)
     assert page.locator(".uam-curve-reached").first.is_hidden()  # the DQN's curves are not shown
     progress = page.locator(".uam-train-progress-text").inner_text()
-    assert progress.startswith("12 of 12 missions solved by the oracle, 4 of 4 epochs (100%)"), progress
+    assert progress.startswith("10 of 10 missions solved by the oracle, 3 of 3 epochs (100%)"), progress
     page.locator(".bk-tab", has_text="Planner").click()
     policy = page.locator(".bk-input-group", has=page.get_by_text("Policy", exact=True)).locator("select")
     policy.locator("option", has_text="Retrained: attention-map-").first.wait_for(state="attached")
