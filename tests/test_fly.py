@@ -159,9 +159,10 @@ def test_twelve_flights_no_breach_and_near_hindsight(flights):
 
 @pytest.mark.slow
 @pytest.mark.reference
-def test_twelve_flights_reflown_on_progpy_never_breach(flights):
+def test_six_flights_reflown_on_progpy_never_breach(flights):
+    """Every other flight of the 12 (3 single charge, 3 multi charge), re-flown on progpy's model."""
     models = pytest.importorskip("progpy.models", reason="install the 'reference' extra (progpy)")
-    for rec in flights:
+    for rec in flights[::2]:
         ends = [int(round(t)) for t, n in zip(rec.leg_end_s, rec.route) if n == VERTIPORT]
         start = 0
         for end in ends:
