@@ -87,3 +87,58 @@ def test_make_plan_reads_reached_and_cycles_from_physics():
     ok = make_plan(bay(7600.0, 0.05), "test", ["Napa", "vertiport", "Oakland", "vertiport"], [500.0] * 4)
     assert ok.reached == ("Napa", "Oakland") and ok.reached_priority == 4 and ok.charging_cycles == 2
     assert ok.to_dict()["route"] == ["Napa", "vertiport", "Oakland", "vertiport"]
+
+
+def test_each_override_alone_changes_the_flight():
+    """q_max, R0 and the cut-off each reach the physics on their own (none is dropped or swapped)."""
+    m = bay(7600.0, 0.05)
+    route, alts = ["Napa", "vertiport"], [500.0, 500.0]
+    base = check_plan(m, route, alts)
+    same = check_plan(m, route, alts, q_max=7600.0, r0=0.05, eod_v=m.eod_v)
+    assert same.min_voltage_v == base.min_voltage_v and same.safe is base.safe is True
+    weak_q = check_plan(m, route, alts, q_max=6000.0)
+    weak_r = check_plan(m, route, alts, r0=0.2)
+    assert weak_q.min_voltage_v < base.min_voltage_v - 0.01
+    assert weak_r.min_voltage_v < base.min_voltage_v - 0.05
+    assert weak_q.min_voltage_v != weak_r.min_voltage_v
+    high_cut = check_plan(m, route, alts, eod_v=3.7)
+    assert high_cut.safe is False and high_cut.margin_v == pytest.approx(high_cut.min_voltage_v - 3.7)
+    assert base.margin_v == pytest.approx(base.min_voltage_v - m.eod_v) and base.margin_v > 0
+
+
+def test_check_messages_count_legs_and_landings():
+    m = bay(7600.0, 0.05)
+    one = check_plan(m, ["Napa"], [500.0])
+    assert one.message.endswith("(1 leg, 0 landings at the vertiport)"), one.message
+    two = check_plan(m, ["Napa", "vertiport"], [500.0, 500.0])
+    assert two.message.endswith("(2 legs, 1 landing at the vertiport)"), two.message
+    assert two.message.startswith(f"safe: minimum {two.min_voltage_v:.2f} V, {two.margin_v:.2f} V above the "
+                                  f"{m.eod_v:.2f} V cut-off")
+    bad = check_plan(bay(5000.0, 0.4), ["Napa", "vertiport"], [500.0, 500.0])
+    assert bad.safe is False and bad.fail_leg == 0 and bad.fail_to == "Napa"
+    assert bad.message == f"unsafe: voltage falls below {m.eod_v:.2f} V at {bad.fail_time_s:.0f} s on leg 1 to Napa"
+
+
+def test_altitudes_without_a_route_are_refused():
+    with pytest.raises(InputError, match="route"):
+        check_plan(bay(), [], [500.0])
+
+
+def test_make_plan_stats_and_check():
+    m = bay(7600.0, 0.05)
+    p = make_plan(m, "greedy", ["Napa", "vertiport"], [500.0, 500.0], messages=["note"], stats={"x": 1})
+    c = p.check
+    assert p.policy == "greedy" and c is not None and c.safe is True
+    assert p.stats == {"x": 1, "flight_time_s": float(c.sim.time_s[-1]), "safe": True,
+                       "min_voltage_v": c.min_voltage_v, "margin_v": c.margin_v}
+    assert p.stats["flight_time_s"] > 600.0 and p.messages == ("note",)  # a safe plan adds no message
+    assert p.reached == ("Napa",) and p.reached_priority == 3 and p.charging_cycles == 1
+    empty = make_plan(m, "greedy", [], [])
+    assert empty.charging_cycles == 0 and empty.reached == () and empty.reached_priority == 0
+    assert empty.stats == {"safe": True, "min_voltage_v": None, "margin_v": None}
+
+
+def test_plan_holds_tuples_of_floats():
+    p = Plan("x", ["Napa", "vertiport"], [500, 1000], ["Napa"], 3, 1, ["a"])
+    assert p.route == ("Napa", "vertiport") and p.reached == ("Napa",) and p.messages == ("a",)
+    assert p.altitudes_m == (500.0, 1000.0) and all(type(a) is float for a in p.altitudes_m)

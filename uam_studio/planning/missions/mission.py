@@ -40,6 +40,7 @@ import dataclasses
 import json
 import math
 import os
+import stat
 import unicodedata
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
@@ -107,15 +108,20 @@ def _number(field_name: str, value: Any, lo: float, hi: float, unit: str = "") -
     return check_range(field_name, value, lo, hi, unit)
 
 
+# Unicode categories a name may not hold: controls, lone surrogates (not encodable: printing one
+# fails), and invisible format characters such as right-to-left overrides and zero-width spaces.
+_NOT_NAME_TEXT = {"Cc": "control character", "Cs": "lone surrogate", "Cf": "invisible format character"}
+
+
 def _name(field_name: str, value: Any) -> str:
     if not isinstance(value, str):
         raise InputError(field_name, f"expected a string, got {short_repr(value)}")
     if len(value) > MAX_NAME_LEN:
         raise InputError(field_name, f"is {len(value)} characters long; at most {MAX_NAME_LEN} allowed")
-    bad = next((c for c in value if unicodedata.category(c) == "Cc"), None)
+    bad = next((c for c in value if unicodedata.category(c) in _NOT_NAME_TEXT), None)
     if bad is not None:
-        raise InputError(field_name, f"{value!r} contains the control character {bad!r}; "
-                                     "names are printable text")
+        kind = _NOT_NAME_TEXT[unicodedata.category(bad)]
+        raise InputError(field_name, f"{ascii(value)} contains the {kind} {ascii(bad)}; names are printable text")
     if not value.strip():
         raise InputError(field_name, "must not be empty")
     if value != value.strip():
@@ -381,14 +387,27 @@ def mission_from_json(data: str | bytes, field: str = "file") -> Mission:
 def load_mission(path: str | os.PathLike[str]) -> Mission:
     """Read and validate a mission JSON file.
 
-    :raises InputError: field ``"file"`` if the file cannot be read, is larger than ``MAX_FILE_BYTES``
-        or is not valid JSON (with line and column), else the JSON path of the first bad field.
+    Only a regular file is read, and at most ``MAX_FILE_BYTES + 1`` bytes of it: a device
+    (``/dev/zero``), a named pipe (which would wait for a writer) or a socket is refused before it is
+    opened.
+
+    :raises InputError: field ``"file"`` if the file cannot be read, is not a regular file, is larger than
+        ``MAX_FILE_BYTES`` or is not valid JSON (with line and column), else the JSON path of the first bad
+        field.
     """
     p = Path(path)
     try:
-        if p.is_file() and p.stat().st_size > MAX_FILE_BYTES:
-            raise InputError("file", f"{str(p)!r} is {p.stat().st_size} bytes; at most {MAX_FILE_BYTES} allowed")
-        data = p.read_bytes()
+        mode = p.stat().st_mode
+        if stat.S_ISDIR(mode):
+            raise IsADirectoryError
+        if not stat.S_ISREG(mode):
+            raise InputError("file", f"{str(p)!r} is not a regular file (a device, pipe or socket); "
+                                     "expected a mission JSON file")
+        with p.open("rb") as f:
+            data = f.read(MAX_FILE_BYTES + 1)
+        if len(data) > MAX_FILE_BYTES:
+            size = max(p.stat().st_size, len(data))
+            raise InputError("file", f"{str(p)!r} is {size} bytes; at most {MAX_FILE_BYTES} allowed")
     except FileNotFoundError:
         raise InputError("file", f"{str(p)!r} does not exist") from None
     except IsADirectoryError:
