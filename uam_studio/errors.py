@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Any
+
+MAX_SEED = 2**32 - 1  # seeds are integers in [0, MAX_SEED]: what numpy's and gymnasium's seeding accept
 
 
 class InputError(ValueError):
@@ -45,3 +48,13 @@ def check_positive(field: str, value: Any, unit: str = "") -> float:
     if not math.isfinite(x) or x <= 0:
         raise InputError(field, f"{short_repr(value)} is out of range; allowed > 0{unit}")
     return x
+
+
+def check_seed(field: str, value: Any) -> int:
+    """Return ``value`` as int if it is an integer (not a bool) in [0, :data:`MAX_SEED`], else raise
+    :class:`InputError` naming ``field`` and the range."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise InputError(field, f"expected an integer in [0, {MAX_SEED}], got {short_repr(value)}")
+    if not 0 <= int(value) <= MAX_SEED:
+        raise InputError(field, f"{short_repr(value)} is out of range; a seed is an integer in [0, {MAX_SEED}]")
+    return int(value)

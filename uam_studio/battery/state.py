@@ -6,6 +6,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from uam_studio.errors import InputError
+
 from .parameters import DEFAULT_CELL, CellParameters
 
 STATE_NAMES = ("tb", "vo", "vsn", "vsp", "qnb", "qns", "qpb", "qps")
@@ -52,8 +54,15 @@ def full_charge(q_max, cell: CellParameters = DEFAULT_CELL) -> BatteryState:
     """State of a rested, fully charged cell for each ``q_max`` (C), shape [B].
 
     This is also what "recharging" at the vertiport resets the cell to.
+
+    :raises InputError: (field ``q_max``) for no cell, or a q_max that is not finite and > 0.
     """
     q_max = np.atleast_1d(np.asarray(q_max, dtype=float))
+    if q_max.size == 0:
+        raise InputError("q_max", "is empty; give the capacity (C) of at least one cell")
+    if not np.all(np.isfinite(q_max) & (q_max > 0.0)):
+        bad = q_max[~(np.isfinite(q_max) & (q_max > 0.0))][0]
+        raise InputError("q_max", f"{bad:g} is out of range; a cell's q_max is a finite number > 0 C")
     q_total = cell.q_total(q_max)
     f_s = cell.vol_s_fraction
     zeros = np.zeros_like(q_max)

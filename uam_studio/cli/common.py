@@ -8,7 +8,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NoReturn
 
-from uam_studio.errors import InputError
+from uam_studio.errors import MAX_SEED, InputError, check_seed
 
 EXIT_OK = 0
 EXIT_INPUT = 2
@@ -55,3 +55,16 @@ def parse_floats(field: str, text: str) -> list[float]:
         except ValueError:
             raise InputError(f"{field}[{i}]", f"{s!r} is not a number") from None
     return out
+
+
+def seed_arg(text: str) -> int:
+    """argparse type of ``--seed``: an integer in [0, ``MAX_SEED``], checked before anything runs."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text[:40]!r} is not an integer; a seed is an integer in "
+                                         f"[0, {MAX_SEED}]") from None
+    try:
+        return check_seed("--seed", value)
+    except InputError as err:
+        raise argparse.ArgumentTypeError(str(err)[len("--seed: "):]) from None

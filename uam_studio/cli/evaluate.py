@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from uam_studio.cli.common import EXIT_INPUT, EXIT_OK, CliExit, Command
+from uam_studio.cli.common import EXIT_INPUT, EXIT_OK, CliExit, Command, seed_arg
 
 
 def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
@@ -27,7 +27,7 @@ def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--compare", default=None, metavar="WEIGHTS",
                    help="--table noise: one more column, another weights file with its own health estimator "
                         "(e.g. a transformer-encoder model)")
-    p.add_argument("--seed", type=int, default=12345)
+    p.add_argument("--seed", type=seed_arg, default=12345)
     p.add_argument("--json", action="store_true", help="print the metrics as JSON")
 
 

@@ -7,7 +7,7 @@ import argparse
 import json
 import sys
 
-from uam_studio.cli.common import EXIT_OK, Command
+from uam_studio.cli.common import EXIT_OK, Command, seed_arg
 
 
 def _add_fly_arguments(p: argparse.ArgumentParser) -> None:
@@ -16,7 +16,7 @@ def _add_fly_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--policy", choices=["attention", "oracle"], default="attention",
                    help="the operator's planner, on what it believes: attention (the learned planner; default) "
                         "or oracle (exact search, slower)")
-    p.add_argument("--seed", type=int, default=0, help="seeds the forecast errors and the sensor noise")
+    p.add_argument("--seed", type=seed_arg, default=0, help="seeds the forecast errors and the sensor noise")
     p.add_argument("--forecast-sigma", type=float, default=13.0, metavar="KT",
                    help="std of the forecast error of each node's wind (kt, 0-60; default 13)")
     p.add_argument("--sensor-noise-mv", type=float, default=5.0, metavar="MV",

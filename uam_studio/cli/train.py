@@ -7,7 +7,7 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from uam_studio.cli.common import EXIT_INPUT, EXIT_OK, CliExit, Command
+from uam_studio.cli.common import EXIT_INPUT, EXIT_OK, CliExit, Command, seed_arg
 
 # which models each train option belongs to (the others refuse it)
 _OPTION_MODELS = {
@@ -27,7 +27,7 @@ def _add_train_arguments(p: argparse.ArgumentParser) -> None:
                         "agent.zip and card.json; a path ending in .zip names the agent file itself)")
     p.add_argument("--steps", type=int, default=None,
                    help="optimiser steps (dynaformer, default 60000) or env transitions (dqn, default 50000)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--device", default=None,
                    help="dynaformer and attention: auto (CUDA when available, default), cpu or cuda")
     p.add_argument("--init-from", default=None, metavar="FILE",

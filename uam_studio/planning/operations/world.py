@@ -16,7 +16,7 @@ import numpy as np
 
 from uam_studio.battery import BatteryState, full_charge
 from uam_studio.battery.simulate import simulate_cell
-from uam_studio.errors import InputError, check_range
+from uam_studio.errors import InputError, check_range, check_seed, short_repr
 from uam_studio.flight import TAKEOFF_CONTEXT_S, leg_profile
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.legs import DT_S
@@ -31,7 +31,8 @@ TAKEOFF_CHECK_S = TAKEOFF_CONTEXT_S  # s of take-off the operator reads before i
 MAX_SIGMA_KT = 60.0
 MAX_NOISE_MV = 100.0
 MAX_NOISE_MA = 1000.0
-_EVENT = re.compile(r"^wind([+-]\d+(?:\.\d+)?)@(\d+(?:\.\d+)?)$")
+_EVENT = re.compile(r"^wind([+-]\d+(?:\.\d+)?)@(\d+(?:\.\d+)?)$", re.ASCII)  # ASCII digits only
+MAX_EVENTS = 20  # scripted wind changes in one flight
 
 
 @dataclass(frozen=True)
@@ -111,13 +112,21 @@ class World:
         self.forecast_sigma_kt = check_range("forecast_sigma_kt", forecast_sigma_kt, 0.0, MAX_SIGMA_KT, " kt")
         self.sensor_noise_mv = check_range("sensor_noise_mv", sensor_noise_mv, 0.0, MAX_NOISE_MV, " mV")
         self.sensor_noise_ma = check_range("sensor_noise_ma", sensor_noise_ma, 0.0, MAX_NOISE_MA, " mA")
+        events = tuple(events)
+        if len(events) > MAX_EVENTS:
+            raise InputError("event", f"{len(events)} events; at most {MAX_EVENTS} allowed in one flight")
+        bad = [e for e in events if not isinstance(e, WindEvent)]
+        if bad:
+            raise InputError("event", f"expected WindEvent items (parse_event('wind+30@1200') makes one), "
+                                      f"got {short_repr(bad[0])}")
         self.events = tuple(sorted(events, key=lambda e: e.start_s))
-        rng = np.random.default_rng([int(seed), 0x5EED])
+        seed = check_seed("seed", seed)
+        rng = np.random.default_rng([seed, 0x5EED])
         lo, hi = WIND_RANGE_KTS
         errors = rng.normal(0.0, self.forecast_sigma_kt, size=len(mission.node_names))
         self.base_winds = {name: float(np.clip(mission.node(name).wind_kts + e, lo, hi))
                            for name, e in zip(mission.node_names, errors)}
-        self._noise = np.random.default_rng([int(seed), 0x5E45])
+        self._noise = np.random.default_rng([seed, 0x5E45])
         self.cell = mission.cell  # the true cell: parameter set, q_max (C), R0 (ohm), cut-off (V)
         self.time_s = 0.0
         self.node = VERTIPORT

@@ -1,0 +1,132 @@
+"""Hostile input to the library and the CLI: seeds, events and cell capacities anywhere in (and outside)
+their documented ranges give one line naming the field and its range, never a traceback, NaN or hang.
+
+The CLI cases run in-process through ``uam_studio.cli.main`` (the same parser and checks as the
+console script); the mission-file cases are in ``tests/test_mission_files.py``."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from uam_studio.battery import full_charge, simulate
+from uam_studio.cli import main
+from uam_studio.errors import MAX_SEED, InputError, check_seed
+from uam_studio.planning import load_mission
+from uam_studio.planning.operations import fly_mission
+from uam_studio.planning.operations.world import MAX_EVENTS, World, parse_event
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "assets" / "example_mission.json"
+
+
+@pytest.fixture(scope="module")
+def example():
+    return load_mission(EXAMPLE)
+
+
+# --------------------------------------------------------------------------- seeds
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(st.one_of(st.integers(min_value=-2**70, max_value=2**70), st.floats(allow_nan=True), st.booleans(),
+                 st.text(max_size=5), st.none()))
+def test_check_seed_accepts_exactly_the_integers_in_range(value):
+    ok = isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= MAX_SEED
+    if ok:
+        assert check_seed("seed", value) == value
+    else:
+        with pytest.raises(InputError) as err:
+            check_seed("seed", value)
+        assert err.value.field == "seed" and f"[0, {MAX_SEED}]" in str(err.value)
+        assert len(str(err.value).splitlines()) == 1
+
+
+@pytest.mark.parametrize("argv", [
+    ["fly", str(EXAMPLE), "--seed", "-1"],
+    ["fly", str(EXAMPLE), "--seed", str(MAX_SEED + 1)],
+    ["fly", str(EXAMPLE), "--seed", "1.5"],
+    ["train", "dqn", "--seed", "-1"],
+    ["train", "attention", "--seed", "-1"],
+    ["evaluate", "dynaformer", "--seed", "-1"],
+])
+def test_cli_seeds_are_checked_before_anything_runs(argv, tmp_path, capsys):
+    out = tmp_path / "run"
+    if argv[0] == "train":
+        argv = [*argv, "--out", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: argument --seed: ") and f"[0, {MAX_SEED}]" in err, err
+    assert len(err.strip().splitlines()) == 1
+    assert not out.exists()  # nothing written
+
+
+def test_library_seed_is_named(example):
+    with pytest.raises(InputError, match=rf"^seed: -1 is out of range; a seed is an integer in \[0, {MAX_SEED}\]$"):
+        fly_mission(example, seed=-1)
+    with pytest.raises(InputError, match="^seed: expected an integer"):
+        World(example, seed=1.5)
+
+
+# --------------------------------------------------------------------------- events
+
+
+@pytest.mark.parametrize("events", [["wind+30@1200"], [None], [parse_event("wind+5@10"), "wind+5@20"]])
+def test_events_that_are_not_wind_events_are_named(example, events):
+    with pytest.raises(InputError) as err:
+        fly_mission(example, events=events)
+    assert err.value.field == "event" and "WindEvent" in str(err.value)
+
+
+def test_events_are_capped(example, capsys):
+    many = [parse_event(f"wind+1@{60 * k}") for k in range(MAX_EVENTS + 1)]
+    with pytest.raises(InputError, match=rf"^event: {MAX_EVENTS + 1} events; at most {MAX_EVENTS} allowed"):
+        World(example, events=many)
+    World(example, events=many[:MAX_EVENTS])  # the cap itself is allowed
+    argv = ["fly", str(EXAMPLE)] + [a for k in range(MAX_EVENTS + 1) for a in ("--event", f"wind+1@{60 * k}")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: event: {MAX_EVENTS + 1} events; at most {MAX_EVENTS}"), err
+
+
+@pytest.mark.parametrize("text", ["wind+\u0663\u0660@1200", "wind+30@\u0661\u0662\u0660\u0660", "wind+３０@1200"])
+def test_event_digits_are_ascii(text):
+    with pytest.raises(InputError, match="^event: .* is not an event"):
+        parse_event(text)
+
+
+@settings(max_examples=150, deadline=None, derandomize=True)
+@given(st.text(max_size=30))
+def test_any_event_text_parses_or_is_one_line(text):
+    try:
+        ev = parse_event(text)
+    except InputError as err:
+        assert err.field == "event" and len(str(err).splitlines()) == 1
+        return
+    assert math.isfinite(ev.start_s) and math.isfinite(ev.delta_kts) and ev.start_s >= 0
+
+
+# --------------------------------------------------------------------------- cell capacity
+
+
+@settings(max_examples=100, deadline=None, derandomize=True)
+@given(st.floats(allow_nan=True, allow_infinity=True))
+def test_full_charge_refuses_what_is_not_a_capacity(q):
+    if math.isfinite(q) and q > 0:
+        state = full_charge(q)
+        assert all(np.all(np.isfinite(getattr(state, f))) for f in ("tb", "qnb", "qns", "qpb", "qps"))
+    else:
+        with pytest.raises(InputError, match=r"^q_max: .* is out of range; a cell's q_max is a finite number > 0 C$"):
+            full_charge(q)
+
+
+def test_no_cell_is_an_error_not_an_empty_result():
+    with pytest.raises(InputError, match="^q_max: is empty"):
+        simulate(np.ones(10), q_max=np.array([]))
+    with pytest.raises(InputError, match=r"^q_max: .*nan.* is out of range"):
+        simulate(np.ones(10), q_max=np.array([7000.0, np.nan]))
