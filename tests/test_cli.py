@@ -93,8 +93,8 @@ def test_json_output(runs):
     code, stdout, stderr, _ = runs["json"]
     assert code == 0 and stderr == ""
     d = json.loads(stdout)
-    assert list(d) == ["time_s", "current_a", "voltage_v", "eod_s", "legs"]
-    assert d["eod_s"] is None  # the README route is safe
+    assert list(d) == ["time_s", "current_a", "voltage_v", "eod_s", "safe", "complete", "legs"]
+    assert d["eod_s"] is None and d["safe"] and d["complete"]  # the README route is safe and returns
     n = len(d["time_s"])
     assert n > 1000 and len(d["current_a"]) == n and len(d["voltage_v"]) == n
     assert all(isinstance(x, float) for x in d["voltage_v"][:50])

@@ -350,8 +350,8 @@ def test_overrides_and_dt(mission):
 def test_to_dict_is_plain_json(mission):
     sim = simulate_route(mission, ["A", "vertiport"], [500.0, 1000.0])
     d = sim.to_dict()
-    assert list(d) == ["time_s", "current_a", "voltage_v", "eod_s", "legs"]
-    assert d["eod_s"] is None
+    assert list(d) == ["time_s", "current_a", "voltage_v", "eod_s", "safe", "complete", "legs"]
+    assert d["eod_s"] is None and d["safe"] is True and d["complete"] is True
     for key in ("time_s", "current_a", "voltage_v"):
         assert isinstance(d[key], list) and len(d[key]) == len(sim.time_s)
         assert all(type(x) is float for x in d[key])
@@ -404,3 +404,10 @@ def test_simulation_parameter_validation(mission, kwargs, field):
     with pytest.raises(InputError) as info:
         simulate_route(mission, route, [500.0] * len(route), **kwargs)
     assert info.value.field == field
+
+
+def test_a_route_that_does_not_return_is_not_complete(mission):
+    part = simulate_route(mission, ["A"], [500.0])
+    assert part.safe and not part.complete and part.to_dict()["complete"] is False
+    assert simulate_route(mission, ["A", "vertiport", "A"], [500.0] * 3).complete is False
+    assert simulate_route(mission, ["A", "vertiport"], [500.0] * 2).complete is True

@@ -45,7 +45,10 @@ def _run_simulate(args: argparse.Namespace) -> int:
         print(f"{i:>3}  {g.from_node:<{name_w}}  {g.to:<{name_w}}  {g.distance_km:>6.1f}  {g.altitude_m:>6g}  "
               f"{fmt(g.start_s, '.0f'):>8}  {fmt(g.end_s, '.0f'):>8}  {fmt(g.min_voltage_v, '.3f'):>6}")
     recharges = f"{sim.charging_cycles} recharge{'' if sim.charging_cycles == 1 else 's'}"
-    if sim.safe:
+    if sim.safe and not sim.complete:
+        print(f"EOD: not reached ({recharges}, min {sim.min_voltage_v:.3f} V); NOT A COMPLETE PLAN: the route "
+              f"ends at {sim.legs[-1].to}, not back at the vertiport")
+    elif sim.safe:
         print(f"EOD: not reached; safe ({recharges}, min {sim.min_voltage_v:.3f} V)")
     else:
         lost = sum(not g.reached for g in sim.legs)

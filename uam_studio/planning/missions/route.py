@@ -87,6 +87,12 @@ class RouteSimulation:
         return self.eod_s is None
 
     @property
+    def complete(self) -> bool:
+        """True if the route ends back at the vertiport. A route that ends elsewhere is a part of a plan:
+        ``safe`` then says only that the legs given were flown above the cut-off."""
+        return bool(self.legs) and self.legs[-1].to == VERTIPORT
+
+    @property
     def min_voltage_v(self) -> float:
         """Lowest voltage (V) over the route (the EOD sample included)."""
         return float(self.voltage_v.min())
@@ -123,6 +129,8 @@ class RouteSimulation:
             "current_a": _rounded(self.current_a),
             "voltage_v": _rounded(self.voltage_v),
             "eod_s": _round_opt(self.eod_s),
+            "safe": self.safe,
+            "complete": self.complete,
             "legs": [
                 {
                     "to": leg.to,
