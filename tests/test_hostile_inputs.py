@@ -130,3 +130,13 @@ def test_no_cell_is_an_error_not_an_empty_result():
         simulate(np.ones(10), q_max=np.array([]))
     with pytest.raises(InputError, match=r"^q_max: .*nan.* is out of range"):
         simulate(np.ones(10), q_max=np.array([7000.0, np.nan]))
+
+
+@pytest.mark.parametrize("option", [["--alpha", "nan"], ["--gamma", "-1"], ["--steps", "100000000000000000000"],
+                                    ["--beta", "inf"]])
+def test_train_dqn_checks_every_option_before_making_the_folder(option, tmp_path, capsys):
+    out = tmp_path / "deep" / "run"
+    assert main(["train", "dqn", *option, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "deep").exists()

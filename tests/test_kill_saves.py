@@ -333,3 +333,74 @@ def test_kills_at_random_moments_never_strand_the_folder(kind, tmp_path, monkeyp
         assert temps_seen > 0
     _next_run(kind, folder)
     assert _temps(folder) == []
+
+
+class _Killed(BaseException):
+    """Stands in for SIGKILL at an injected moment (nothing in the library catches a BaseException)."""
+
+
+def _check_attention(folder: Path) -> None:
+    import torch
+
+    weights, card = folder / "attention_planner.pt", folder / "card.json"
+    if weights.exists():
+        stored = torch.load(weights, map_location="cpu", weights_only=True)["card"]
+        if card.exists():  # describes these weights, never an earlier run's
+            assert json.loads(card.read_text()) == stored
+    else:
+        assert not card.exists()
+
+
+def _train_attention(folder: Path, seed: int) -> None:
+    from uam_studio.planning.agents.attention.model import AttentionConfig
+    from uam_studio.planning.agents.attention.train import AttentionTrainConfig, train_attention
+
+    cfg = AttentionTrainConfig(oracle_missions=4, oracle_dest=(2, 3), search_missions=0, epochs=1, workers=1,
+                               seed=seed, network=AttentionConfig(d_model=16, heads=2, layers=1, ff=16))
+    train_attention(cfg, folder, log=lambda s: None)
+
+
+def _train_dqn(folder: Path, seed: int) -> None:
+    from uam_studio.cli import main
+
+    assert main(["train", "dqn", "--steps", str(DQN_STEPS), "--out", str(folder), "--seed", str(seed)]) == 0
+
+
+def _train_dynaformer(folder: Path, seed: int) -> None:
+    _next_dynaformer_run(folder, 64, 512 + 64 * seed)  # another max_len: a new run, other weights
+
+
+@pytest.mark.parametrize("kind, weights, card", [
+    ("attention", "attention_planner.pt", "card.json"),
+    ("dqn", "agent.zip", "card.json"),
+    ("dynaformer", "dynaformer.pt", "train_meta.json"),
+])
+def test_a_kill_between_the_weights_and_the_card_leaves_no_card_of_other_weights(kind, weights, card, tmp_path,
+                                                                                 monkeypatch):
+    """Every trainer's second run dies (injected) right after its weights replace the first run's and
+    before its card is written: the card on disk never describes weights other than those beside it."""
+    monkeypatch.setenv("TQDM_DISABLE", "1")
+    train = {"attention": _train_attention, "dqn": _train_dqn, "dynaformer": _train_dynaformer}[kind]
+    check = {"attention": _check_attention, "dqn": _check_dqn, "dynaformer": _check_dynaformer}[kind]
+    folder = tmp_path / "run"
+    train(folder, 1)
+    first = (folder / weights).read_bytes()
+    assert (folder / card).is_file()
+    check(folder)
+    real_replace = os.replace
+
+    def dies_before_the_card(src, dst):
+        if Path(dst).name == card and Path(dst).parent == folder:
+            raise _Killed
+        real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", dies_before_the_card)
+    with pytest.raises(_Killed):
+        train(folder, 2)
+    monkeypatch.undo()
+    assert (folder / weights).read_bytes() != first  # the kill came after the new weights were in place
+    assert not (folder / card).exists()  # the first run's card went before those weights replaced its own
+    check(folder)
+    train(folder, 3)  # the next run writes both again
+    assert (folder / card).is_file()
+    check(folder)

@@ -164,10 +164,11 @@ def _run_train_dqn(args: argparse.Namespace) -> int:
         raise CliExit(f"--out: {agent} exists and is not a file", EXIT_INPUT)
     if args.steps is not None and args.steps < 1:
         raise CliExit("--steps: must be >= 1", EXIT_INPUT)
-    _check_out_folder(agent.parent)
-    # Shared with the app's Retrain tab: validation, env, card and atomic save live in the library.
+    # Shared with the app's Retrain tab: validation, env, card and atomic save live in the library. Every
+    # option is checked there before the run folder is made.
     cfg, env_fn = training_setup(scenario, mission, args.alpha, args.beta, args.gamma, args.steps, args.seed,
                                  safe_return=bool(args.safe_return), init_agent=args.init_from)
+    _check_out_folder(agent.parent)
     card_path = agent.with_name("card.json") if agent.name == "agent.zip" else agent.with_suffix(".card.json")
     res = retrain_dqn(cfg, env_fn, agent, mission=mission, progress_bar=True, source="cli", card_path=card_path)
     card, final = res.card, res.card["final_stats"]

@@ -38,7 +38,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from uam_studio.atomic_io import atomic_save, atomic_write_text
+from uam_studio.atomic_io import atomic_save, remove_stale_temps
 from uam_studio.bundled import is_bundled
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.attention import WEIGHTS_NAME
@@ -407,10 +407,12 @@ def train_attention(cfg: AttentionTrainConfig, out: str | os.PathLike[str],
             "stopped_early": watch.stopped, **(card_extra or {}),
             "torch": torch.__version__, "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     out.mkdir(parents=True, exist_ok=True)
+    remove_stale_temps(out)
     path = out / WEIGHTS_NAME
     payload = {"format": FORMAT, "config": cfg.network.to_dict(), "state_dict": net.state_dict(),
                "card": json.loads(json.dumps(card))}
-    atomic_save(path, lambda f: torch.save(payload, f))
-    atomic_write_text(out / "card.json", json.dumps(card, indent=2) + "\n")
+    # card.json is a sidecar of the same save: the old card is deleted before the weights are replaced,
+    # so a card on disk always describes the weights beside it
+    atomic_save(path, lambda f: torch.save(payload, f), sidecars={out / "card.json": json.dumps(card, indent=2) + "\n"})
     log(f"saved {path} ({path.stat().st_size / 1024:.0f} KB) in {stats['train_s']:.0f} s")
     return path
