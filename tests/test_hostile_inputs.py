@@ -140,3 +140,12 @@ def test_train_dqn_checks_every_option_before_making_the_folder(option, tmp_path
     err = capsys.readouterr().err
     assert err.startswith("error: ") and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "deep").exists()
+
+
+def test_a_cell_at_the_edge_of_the_health_box_flies(example):
+    """R0 = 0 is a valid mission (the file format's range starts at 0): the operator's estimate may land a
+    little outside the fit's box, and it plans with the estimate kept inside it, instead of failing on
+    its own internal number."""
+    rec = fly_mission(example.with_battery(7600.0, 0.0), seed=0, references=False)
+    assert rec.route and rec.route[-1] == "vertiport" and not rec.breached
+    assert all(0.0 <= e.r0_ohm for e in rec.events)

@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from uam_studio.battery.fit import fit_health
-from uam_studio.battery.health_estimate import MIN_CONTEXT_S, HealthEstimate
-from uam_studio.battery.health_prior import HealthPrior, combine, fleet_prior
+from uam_studio.battery.health_estimate import FIT_Q_RANGE, FIT_R0_RANGE, MIN_CONTEXT_S, HealthEstimate
+from uam_studio.battery.health_prior import Q_REF_C, HealthPrior, combine, fleet_prior
 from uam_studio.errors import InputError
 from uam_studio.planning.legs import DT_S
 
@@ -86,7 +86,11 @@ class HealthBelief:
         if not fits:
             raise InputError("readings", f"at least {MIN_FIT_SAMPLES} s of readings are needed before planning")
         mean, cov = combine([(self.prior.mean, self.prior.cov)] + [(np.array([e.w, e.r0]), e.cov_w) for e in fits])
-        return float(mean[0]), float(math.sqrt(cov[0, 0])), float(mean[1]), float(math.sqrt(cov[1, 1]))
+        # the Gaussian combination can put the mean a little outside the fit's box (a cell at its edge,
+        # R0 = 0 say): the estimate the operator plans with stays inside it
+        w = float(np.clip(mean[0], Q_REF_C / FIT_Q_RANGE[1], Q_REF_C / FIT_Q_RANGE[0]))
+        r0 = float(np.clip(mean[1], *FIT_R0_RANGE))
+        return w, float(math.sqrt(cov[0, 0])), r0, float(math.sqrt(cov[1, 1]))
 
     def prior_health(self) -> tuple[float, float, float, float]:
         """(w, its std, r0 ohm, its std) of the prior alone."""
