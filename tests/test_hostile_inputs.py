@@ -149,3 +149,12 @@ def test_a_cell_at_the_edge_of_the_health_box_flies(example):
     rec = fly_mission(example.with_battery(7600.0, 0.0), seed=0, references=False)
     assert rec.route and rec.route[-1] == "vertiport" and not rec.breached
     assert all(0.0 <= e.r0_ohm for e in rec.events)
+
+
+def test_a_very_long_route_names_the_route(example):
+    from uam_studio.planning import simulate_route
+    from uam_studio.planning.missions.route import MAX_ROUTE_LEGS
+
+    route = ["Richmond", "vertiport"] * 5000
+    with pytest.raises(InputError, match=rf"^route: 10000 legs; at most {MAX_ROUTE_LEGS} allowed in one route$"):
+        simulate_route(example, route, [500.0] * len(route))

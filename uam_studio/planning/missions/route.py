@@ -37,6 +37,7 @@ from uam_studio.planning.missions.mission import VERTIPORT, Mission
 
 DT_RANGE_S = (1e-3, 60.0)  # accepted by both leg_profile and simulate
 MAX_SAMPLES = 5_000_000  # whole route; guards against a tiny dt_s on a long route
+MAX_ROUTE_LEGS = 200  # legs in one simulated route: 20 destinations with a recharge after each need 40
 _ZERO_KM = 1e-9
 
 
@@ -227,8 +228,8 @@ def simulate_route(
     ``q_max`` (C), ``r0`` (ohm), ``eod_v`` (V) default to the mission's; ``dt_s`` (s) is
     the sample step. The whole route is validated before anything is simulated.
 
-    :raises InputError: ``route`` for an unknown name, an empty route, or a zero-length
-        or over-long leg; ``altitudes`` for a count mismatch; ``altitudes[i]`` for an
+    :raises InputError: ``route`` for an unknown name, an empty route, more than
+        :data:`MAX_ROUTE_LEGS` legs, or a zero-length or over-long leg; ``altitudes`` for a count mismatch; ``altitudes[i]`` for an
         altitude out of range or too high for the leg's length; ``q_max``, ``r0``,
         ``eod_v``, ``dt_s`` for out-of-range values.
     """
@@ -238,6 +239,8 @@ def simulate_route(
     r = check_range("r0", mission.battery.r0 if r0 is None else r0, *R0_RANGE, " ohm")
     eod = check_range("eod_v", mission.eod_v if eod_v is None else eod_v, *EOD_RANGE, " V")
     dt = check_range("dt_s", dt_s, *DT_RANGE_S, " s")
+    if len(route) > MAX_ROUTE_LEGS:
+        raise InputError("route", f"{len(route)} legs; at most {MAX_ROUTE_LEGS} allowed in one route")
     legs = _plan_legs(mission, route, altitudes_m)
 
     # Sample count, from coarse profiles (cheap), before allocating anything large.
