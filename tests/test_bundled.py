@@ -14,9 +14,10 @@ import uam_studio.bundled as bundled
 from uam_studio.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
+ROOT_PRETRAINED = ROOT / "pretrained"
 NAMES = ["dynaformer.pt", "dqn_single_flight.zip", "dqn_single_charge.zip", "dqn_multi_charge.zip",
          "DQN_CARD.md", "DYNAFORMER_CARD.md", "attention_planner.pt", "ATTENTION_CARD.md", "dynaformer_vtc6.pt",
-         "DYNAFORMER_VTC6_CARD.md"]
+         "DYNAFORMER_VTC6_CARD.md", "SHA256SUMS"]
 
 
 @pytest.fixture(autouse=True)
@@ -111,4 +112,53 @@ def test_pyproject_ships_every_package_and_the_models():
     found = {".".join(p.parent.relative_to(ROOT).parts) for p in (ROOT / "uam_studio").rglob("__init__.py")}
     assert set(cfg["packages"]) == found | {"uam_studio.pretrained"}
     assert cfg["package-dir"] == {"uam_studio.pretrained": "pretrained"}
-    assert set(cfg["package-data"]["uam_studio.pretrained"]) == {"*.pt", "*.zip", "*.md"}
+    assert set(cfg["package-data"]["uam_studio.pretrained"]) == {"*.pt", "*.zip", "*.md", bundled.MANIFEST}
+
+
+def test_the_manifest_holds_every_bundled_weights_file():
+    folder = ROOT_PRETRAINED
+    listed = {}
+    for line in (folder / bundled.MANIFEST).read_text().splitlines():
+        digest, _, name = line.partition("  ")
+        listed[name] = digest
+    files = {p.name for p in folder.iterdir() if p.suffix in (".pt", ".zip")}
+    assert set(listed) == files
+    for name, digest in listed.items():
+        assert bundled.sha256_file(folder / name) == digest, f"{name}: update pretrained/SHA256SUMS"
+
+
+@pytest.mark.parametrize("name", ["dynaformer.pt", "attention_planner.pt", "dqn_single_charge.zip"])
+def test_a_damaged_bundled_file_is_refused_naming_it(name, tmp_path, monkeypatch):
+    """64 flipped bytes in the package's copy: an error naming the file, not weights that load."""
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    (pkg / bundled.MANIFEST).write_bytes((ROOT_PRETRAINED / bundled.MANIFEST).read_bytes())
+    data = bytearray((ROOT_PRETRAINED / name).read_bytes())
+    for i in range(1000, 1000 + 64 * 97, 97):
+        data[i] ^= 0xFF
+    (pkg / name).write_bytes(bytes(data))
+    monkeypatch.setenv(bundled.HOME_ENV, str(tmp_path / "home"))
+    monkeypatch.delenv("UAM_STUDIO_DYNAFORMER", raising=False)
+    monkeypatch.setattr(bundled, "package_dir", lambda: pkg)
+    with pytest.raises(InputError) as err:
+        bundled.bundled_path(name)
+    assert err.value.field == name and "is damaged" in str(err.value) and str(pkg / name) in str(err.value)
+    (pkg / name).write_bytes((ROOT_PRETRAINED / name).read_bytes())  # the intact file passes
+    assert bundled.bundled_path(name) == pkg / name
+
+
+def test_a_damaged_bundled_dynaformer_is_one_line_in_the_cli(tmp_path, monkeypatch, capsys):
+    from uam_studio.cli import main
+
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    (pkg / bundled.MANIFEST).write_bytes((ROOT_PRETRAINED / bundled.MANIFEST).read_bytes())
+    data = bytearray((ROOT_PRETRAINED / "dynaformer.pt").read_bytes())
+    data[5000] ^= 0x01
+    (pkg / "dynaformer.pt").write_bytes(bytes(data))
+    monkeypatch.setenv(bundled.HOME_ENV, str(tmp_path / "home"))
+    monkeypatch.delenv("UAM_STUDIO_DYNAFORMER", raising=False)
+    monkeypatch.setattr(bundled, "package_dir", lambda: pkg)
+    assert main(["evaluate", "dynaformer", "--n", "10"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: dynaformer.pt: ") and "is damaged" in err and len(err.strip().splitlines()) == 1

@@ -15,10 +15,17 @@ An editable install (``pip install -e .``) cannot import a data-only package map
 folder (setuptools' editable finder skips it, pypa/setuptools#4943); where ``uam_studio.pretrained``
 cannot be imported and the code runs from a checkout (:data:`SOURCE_ROOT` holds ``pyproject.toml``),
 step 3 uses the checkout's ``pretrained/``.
+
+The package's own copies are checked against ``pretrained/SHA256SUMS`` (``sha256sum`` format, one line
+a weights file) when :func:`bundled_path` returns them: a damaged file is an :class:`InputError` naming
+it, never weights that load and predict wrong. A user's replacement (steps 1 and 2) is their own file
+and is not checked.
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import os
 from importlib import resources
 from pathlib import Path
@@ -30,11 +37,13 @@ FOLDER = "pretrained"
 SOURCE_ROOT = Path(__file__).resolve().parents[1]
 """The folder holding the ``uam_studio`` package: the repository checkout in an editable install."""
 HOME_ENV = "UAM_STUDIO_HOME"
+MANIFEST = "SHA256SUMS"
+"""The bundled weights files' SHA-256 digests, in the package's ``pretrained/``."""
 ENV_OVERRIDES = {"dynaformer.pt": "UAM_STUDIO_DYNAFORMER"}
 """Bundled file name -> the environment variable that replaces it with another file."""
 
-__all__ = ["ENV_OVERRIDES", "HOME_ENV", "PACKAGE", "agents_dir", "bundled_path", "candidates", "is_bundled",
-           "package_dir", "require_bundled", "user_home"]
+__all__ = ["ENV_OVERRIDES", "HOME_ENV", "MANIFEST", "PACKAGE", "agents_dir", "bundled_path", "candidates",
+           "is_bundled", "package_dir", "require_bundled", "sha256_file", "user_home"]
 
 
 def user_home() -> Path:
@@ -82,7 +91,38 @@ def bundled_path(name: str) -> Path:
     """The bundled file ``name`` (e.g. ``"dynaformer.pt"``): the first of :func:`candidates` that is a
     file, else the last candidate (which does not exist; :func:`require_bundled` says so)."""
     found = candidates(name)
-    return next((p for p in found if p.is_file()), found[-1])
+    path = next((p for p in found if p.is_file()), found[-1])
+    folder = package_dir()
+    if folder is not None and path.parent == folder and path.is_file():
+        st = path.stat()
+        _check_digest(str(path), st.st_mtime_ns, st.st_size)
+    return path
+
+
+def sha256_file(path: str | os.PathLike[str]) -> str:
+    """The SHA-256 digest (hex) of the file at ``path``."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+@functools.lru_cache(maxsize=64)
+def _check_digest(path: str, mtime_ns: int, size: int) -> None:
+    """Raise :class:`InputError` if the package's file ``path`` is listed in its folder's
+    :data:`MANIFEST` with another digest (cached by modification time and size)."""
+    p = Path(path)
+    manifest = p.parent / MANIFEST
+    expected = {}
+    if manifest.is_file():
+        for line in manifest.read_text().splitlines():
+            digest, _, fname = line.strip().partition("  ")
+            expected[fname] = digest
+    want = expected.get(p.name)
+    if want is not None and sha256_file(p) != want:
+        raise InputError(p.name, f"{p} is damaged: its SHA-256 is not the bundled file's ({want[:16]}...); "
+                                 "reinstall uam_studio")
 
 
 def require_bundled(name: str, field: str, what: str, hint: str = "") -> Path:
