@@ -25,7 +25,7 @@ def _reason(exc: Exception) -> str:
         m = re.search(r"WeightsUnpickler error: (.*?)(?: Please use| Check the documentation|$)", text)
         detail = re.sub(r"\x1b\[[0-9;]*m", "", m.group(1) if m else "").strip().rstrip(".")
         return f"not plain tensor data ({detail[:80] or 'unsupported content'}); not loaded"
-    return f"{type(exc).__name__}: {text[:80]}"
+    return f"damaged, truncated or not a torch weights file ({type(exc).__name__}: {text[:60]})"
 
 
 def load_tensors(source: str | os.PathLike[str] | IO[bytes], map_location: Any = "cpu") -> Any:
