@@ -10,7 +10,7 @@ from uam_studio.battery import (
     simulate,
     simulate_constant_power,
 )
-from uam_studio.battery.parameters import DEFAULT_CELL
+from uam_studio.battery.parameters import DEFAULT_CELL, VTC6_PARAMS
 from uam_studio.battery.solver import output_voltage, step
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_current
@@ -142,3 +142,30 @@ def test_state_round_trip():
     s = full_charge([5000.0, 7000.0])
     assert isinstance(s[1], BatteryState) and s[1].batch_size == 1
     np.testing.assert_array_equal(BatteryState.from_array(s.as_array()).qns, s.qns)
+
+
+def test_temperature_factors_follow_arrhenius_with_the_right_signs():
+    """R0 falls and the rate constants rise as the cell warms (VTC6 set); the published NASA set has none."""
+    assert DEFAULT_CELL.r0_factor(330.0) == 1.0 and DEFAULT_CELL.rate_factor(330.0) == 1.0
+    assert not DEFAULT_CELL.temperature_dependent and VTC6_PARAMS.temperature_dependent
+    p = VTC6_PARAMS
+    t_ref = p.t_reference_k
+    assert p.r0_factor(t_ref) == pytest.approx(1.0) and p.rate_factor(t_ref) == pytest.approx(1.0)
+    for t in (t_ref - 15.0, t_ref + 10.0, t_ref + 30.0):
+        x = 1.0 / t - 1.0 / t_ref  # < 0 above the reference temperature
+        assert np.log(p.r0_factor(t)) == pytest.approx(p.r0_activation_k * x, rel=1e-12)
+        assert np.log(p.rate_factor(t)) == pytest.approx(-p.k_activation_k * x, rel=1e-12)
+    warm = t_ref + 20.0
+    assert p.r0_factor(warm) < 1.0 < p.rate_factor(warm)
+    assert p.r0_factor(t_ref - 20.0) > 1.0 > p.rate_factor(t_ref - 20.0)
+
+
+def test_constant_power_starts_from_the_given_state_and_draws_more_current_as_the_voltage_sags():
+    power = np.full(600, 8.0)  # W per cell
+    fresh = simulate_constant_power(power, q_max=7000.0, r0=0.1)
+    used = simulate(np.full(1500, 2.0), q_max=7000.0, r0=0.1).final_state
+    later = simulate_constant_power(power, q_max=7000.0, r0=0.1, initial_state=used)
+    assert later.voltage_v[0] < fresh.voltage_v[0] - 0.05  # it started from the used cell
+    assert later.current_a[0] > fresh.current_a[0]
+    np.testing.assert_allclose(fresh.current_a[1:] * fresh.voltage_v[:-1], 8.0, rtol=0.02)  # I = P / V
+    assert np.all(np.diff(fresh.current_a[5:]) >= -1e-9)  # the voltage falls, the current rises

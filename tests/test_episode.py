@@ -10,9 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from uam_studio.battery import simulate
-from uam_studio.battery.parameters import DEFAULT_CELL
+from uam_studio.battery.parameters import DEFAULT_CELL, Cell
 from uam_studio.errors import InputError
-from uam_studio.planning.episode import Episode
+from uam_studio.planning.episode import Episode, fly_batch
 from uam_studio.planning.legs import ALTITUDES_M, N_MAX, LegTable
 from uam_studio.planning.missions.generate import any_valid_mission
 from uam_studio.planning.missions.mission import VERTIPORT
@@ -135,3 +135,34 @@ def test_planners_fly_the_battery_only_through_the_episode():
     offenders = sorted({str(p.relative_to(ROOT)) for p in (ROOT / "planning").rglob("*.py")
                         if pattern.search(p.read_text())} - allowed)
     assert offenders == [], offenders
+
+
+@pytest.mark.parametrize("chunk_s", [64, 700, 5000])
+def test_fly_batch_rows_of_many_lengths_match_simulate_with_their_split_states(chunk_s):
+    """Rows of different lengths, some failing, several integration chunks: per row the same verdict,
+    lowest voltage, end state and split state as :func:`simulate` on that row alone."""
+    cell = Cell("test cell", DEFAULT_CELL, 6000.0, 0.2, 3.2)
+    rng = np.random.default_rng(5)
+    currents = [rng.uniform(0.5, a, n) for a, n in ((1.5, 300), (3.0, 2500), (2.0, 40), (3.5, 4000),
+                                                    (1.0, 1200), (3.0, 3300))]
+    x0 = simulate(np.full(200, 1.0), 1.0, cell.q_max, cell.r0).final_state.as_array()
+    x0 = np.repeat(x0, len(currents), axis=0)
+    split = np.array([max(1, c.size // 3) for c in currents])
+    ok, x_end, v_min, x_split = fly_batch(currents, x0, cell, split=split, chunk_s=chunk_s)
+    assert 0 < ok.sum() < len(currents)  # some rows reach the cut-off, some do not
+    mid = simulate(np.full(200, 1.0), 1.0, cell.q_max, cell.r0).final_state
+    for k, c in enumerate(currents):
+        ref = simulate(c, 1.0, cell.q_max, cell.r0, cell.eod_v, initial_state=mid)
+        assert ok[k] == (not ref.eod_reached), k
+        assert v_min[k] == pytest.approx(ref.min_voltage_v, abs=1e-9), k
+        if ok[k]:
+            np.testing.assert_allclose(x_end[k], ref.final_state.as_array()[0], rtol=1e-10, atol=1e-9)
+        else:
+            np.testing.assert_array_equal(x_end[k], x0[k])  # a failed row keeps its start state
+        part = simulate(c[: split[k]], 1.0, cell.q_max, cell.r0, cell.eod_v, initial_state=mid)
+        if not part.eod_reached:
+            np.testing.assert_allclose(x_split[k], part.final_state.as_array()[0], rtol=1e-10, atol=1e-9)
+        else:
+            np.testing.assert_array_equal(x_split[k], x0[k])
+    empty = fly_batch([], np.zeros((0, 8)), cell)
+    assert len(empty) == 3 and all(a.shape[0] == 0 for a in empty)

@@ -58,7 +58,7 @@ def fly_batch(
     """
     b = len(currents)
     eod_v, params = cell.eod_v, cell.params
-    x_end = np.array(x0, dtype=float, copy=True).reshape(b, -1)
+    x_end = np.array(x0, dtype=float, copy=True).reshape(b, len(STATE_NAMES))
     ok = np.ones(b, dtype=bool)
     v_min = np.full(b, np.inf)
     x_split = x_end.copy() if split is not None else None
