@@ -1,12 +1,17 @@
 """Hostile and malformed input: one line naming the field, exit code 2, never a traceback.
 
-The CLI cases run as real subprocesses (``python -m uam_studio.cli``), all started at once by one
-module fixture; the library and app cases call the same functions in-process.
+The CLI cases run through ``uam_studio.cli.main`` in this process (the console script's parser, checks
+and one-line errors; stdout and stderr captured, warnings included), two of them also as real
+subprocesses (``python -m uam_studio.cli``, started together by the module fixture); the library and app
+cases call the same functions in-process.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
+import os
 import subprocess
 import sys
 import time
@@ -92,17 +97,35 @@ def _cases(tmp: Path) -> dict[str, tuple[list[str], str]]:
 def runs(tmp_path_factory):
     if torch.cuda.is_available():
         pytest.skip("the no-CUDA case needs a machine without CUDA")
+    from uam_studio.cli import main
+
     tmp = tmp_path_factory.mktemp("tail")
     cases = _cases(tmp)
     started = time.monotonic()
-    procs = {name: subprocess.Popen([sys.executable, "-m", "uam_studio.cli", *argv], stdout=subprocess.PIPE,
-                                    stderr=subprocess.PIPE, text=True, cwd=tmp)
-             for name, (argv, _) in cases.items()}
+    procs = {name: subprocess.Popen([sys.executable, "-m", "uam_studio.cli", *cases[name][0]],
+                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp)
+             for name in AS_SUBPROCESS}
     out = {}
+    here = os.getcwd()
+    os.chdir(tmp)
+    try:
+        for name, (argv, _) in cases.items():
+            if name in AS_SUBPROCESS:
+                continue
+            stdout, stderr = io.StringIO(), io.StringIO()
+            with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+                code = main(list(argv))
+            out[name] = (code, stdout.getvalue(), stderr.getvalue(), time.monotonic() - started)
+    finally:
+        os.chdir(here)
     for name, p in procs.items():
         stdout, stderr = p.communicate(timeout=300)
         out[name] = (p.returncode, stdout, stderr, time.monotonic() - started)
     return cases, out
+
+
+# the console script itself, in a process of its own: a hostile file, and a folder it may not write in
+AS_SUBPROCESS = ("plan_int_401_digits", "train_dqn_out_locked")
 
 
 @pytest.mark.parametrize("name", [
