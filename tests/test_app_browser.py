@@ -387,9 +387,12 @@ def test_layout_fits_the_screen_with_the_plan_above_the_fold(browser, app_url, s
         tabs_bottom = page.locator(".bk-tab").first.bounding_box()
         voltage_box = page.locator(".uam-voltage").first.bounding_box()
         assert voltage_box["height"] >= (height - tabs_bottom["y"] - tabs_bottom["height"]) / 3, (voltage_box, size)
-        facts = page.evaluate(JS_PLOT_FACTS)
         route = re.search(r"Route:\s*(.*?)\n", summary.inner_text() + "\n").group(1)
         n_legs = route.count("\u2192")
+        # the voltage plot's data is a document patch of its own, after the summary's (a loaded machine
+        # delivers them apart): wait for its leg names before reading them
+        page.wait_for_function(f"() => ((({JS_PLOT_FACTS})().legs) || []).length === {n_legs}", timeout=30_000)
+        facts = page.evaluate(JS_PLOT_FACTS)
         assert n_legs >= 2 and len(facts["legs"]) == n_legs, (facts, route)  # a name at each leg's take-off
         assert all(re.match(r"#\d+ ", t) for t in facts["legs"]), facts
         assert facts["voltage_legend_inside"] is False and facts["map_scroll"] is None, facts
