@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 import torch
 
+from uam_studio.cli import main
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_profile
 from uam_studio.planning import load_mission, mission_from_json
@@ -97,8 +98,6 @@ def _cases(tmp: Path) -> dict[str, tuple[list[str], str]]:
 def runs(tmp_path_factory):
     if torch.cuda.is_available():
         pytest.skip("the no-CUDA case needs a machine without CUDA")
-    from uam_studio.cli import main
-
     tmp = tmp_path_factory.mktemp("tail")
     cases = _cases(tmp)
     started = time.monotonic()

@@ -92,8 +92,7 @@ def bundled_path(name: str) -> Path:
     file, else the last candidate (which does not exist; :func:`require_bundled` says so)."""
     found = candidates(name)
     path = next((p for p in found if p.is_file()), found[-1])
-    folder = package_dir()
-    if folder is not None and path.parent == folder and path.is_file():
+    if path.is_file() and is_bundled(path):
         st = path.stat()
         _check_digest(str(path), st.st_mtime_ns, st.st_size)
     return path

@@ -26,6 +26,7 @@ from .solver import integrate_current
 from .state import STATE_NAMES, BatteryState, full_charge
 
 __all__ = ["CURVE_CUTOFF_V", "FIT_Q_RANGE", "FIT_R0_RANGE", "MIN_CONTEXT_S", "PREROLL_MAX_S", "HealthEstimate",
+           "clip_to_box",
            "check_context", "preroll_states"]
 
 MIN_CONTEXT_S = float(TAKEOFF_CONTEXT_S)  # s: shortest context accepted: the take-off context
@@ -127,11 +128,16 @@ def _chol(cov: np.ndarray) -> np.ndarray:
         return vecs * np.sqrt(np.clip(vals, 0.0, None))
 
 
+def clip_to_box(wr: np.ndarray) -> np.ndarray:
+    """(w, r0 ohm) [..., 2] clipped to the fit's box (w = Q_REF_C / q_max)."""
+    wr = np.asarray(wr, dtype=float)
+    return np.stack([np.clip(wr[..., 0], *_W_BOX), np.clip(wr[..., 1], *FIT_R0_RANGE)], axis=-1)
+
+
 def _to_qr(wr: np.ndarray) -> np.ndarray:
     """(w, r0) [..., 2] -> (q_max C, r0 ohm), clipped to the box."""
-    w = np.clip(wr[..., 0], *_W_BOX)
-    r = np.clip(wr[..., 1], *FIT_R0_RANGE)
-    return np.stack([Q_REF_C / w, r], axis=-1)
+    box = clip_to_box(wr)
+    return np.stack([Q_REF_C / box[..., 0], box[..., 1]], axis=-1)
 
 
 # ------------------------------------------------------------------------------------ input checks

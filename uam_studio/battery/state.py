@@ -6,7 +6,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from uam_studio.errors import InputError
+from uam_studio.errors import InputError, check_positive
 
 from .parameters import DEFAULT_CELL, CellParameters
 
@@ -60,9 +60,9 @@ def full_charge(q_max, cell: CellParameters = DEFAULT_CELL) -> BatteryState:
     q_max = np.atleast_1d(np.asarray(q_max, dtype=float))
     if q_max.size == 0:
         raise InputError("q_max", "is empty; give the capacity (C) of at least one cell")
-    if not np.all(np.isfinite(q_max) & (q_max > 0.0)):
-        bad = q_max[~(np.isfinite(q_max) & (q_max > 0.0))][0]
-        raise InputError("q_max", f"{bad:g} is out of range; a cell's q_max is a finite number > 0 C")
+    ok = np.isfinite(q_max) & (q_max > 0.0)
+    if not ok.all():
+        check_positive("q_max", float(q_max[~ok][0]), " C")
     q_total = cell.q_total(q_max)
     f_s = cell.vol_s_fraction
     zeros = np.zeros_like(q_max)

@@ -229,8 +229,8 @@ def simulate_route(
     the sample step. The whole route is validated before anything is simulated.
 
     :raises InputError: ``route`` for an unknown name, an empty route, more than
-        :data:`MAX_ROUTE_LEGS` legs, or a zero-length or over-long leg; ``altitudes`` for a count mismatch; ``altitudes[i]`` for an
-        altitude out of range or too high for the leg's length; ``q_max``, ``r0``,
+        :data:`MAX_ROUTE_LEGS` legs, or a zero-length or over-long leg; ``altitudes`` for a count
+        mismatch; ``altitudes[i]`` for an altitude out of range or too high for the leg's length; ``q_max``, ``r0``,
         ``eod_v``, ``dt_s`` for out-of-range values.
     """
     if not isinstance(mission, Mission):

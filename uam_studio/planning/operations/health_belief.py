@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from uam_studio.battery.fit import fit_health
-from uam_studio.battery.health_estimate import FIT_Q_RANGE, FIT_R0_RANGE, MIN_CONTEXT_S, HealthEstimate
-from uam_studio.battery.health_prior import Q_REF_C, HealthPrior, combine, fleet_prior
+from uam_studio.battery.health_estimate import MIN_CONTEXT_S, HealthEstimate, clip_to_box
+from uam_studio.battery.health_prior import HealthPrior, combine, fleet_prior
 from uam_studio.errors import InputError
 from uam_studio.planning.legs import DT_S
 
@@ -88,9 +88,8 @@ class HealthBelief:
         mean, cov = combine([(self.prior.mean, self.prior.cov)] + [(np.array([e.w, e.r0]), e.cov_w) for e in fits])
         # the Gaussian combination can put the mean a little outside the fit's box (a cell at its edge,
         # R0 = 0 say): the estimate the operator plans with stays inside it
-        w = float(np.clip(mean[0], Q_REF_C / FIT_Q_RANGE[1], Q_REF_C / FIT_Q_RANGE[0]))
-        r0 = float(np.clip(mean[1], *FIT_R0_RANGE))
-        return w, float(math.sqrt(cov[0, 0])), r0, float(math.sqrt(cov[1, 1]))
+        w, r0 = clip_to_box(mean)
+        return float(w), float(math.sqrt(cov[0, 0])), float(r0), float(math.sqrt(cov[1, 1]))
 
     def prior_health(self) -> tuple[float, float, float, float]:
         """(w, its std, r0 ohm, its std) of the prior alone."""
