@@ -9,12 +9,13 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import hypothesis
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from uam_studio.battery import full_charge, simulate
+from uam_studio.battery import Q_MAX_RANGE, full_charge, simulate
 from uam_studio.cli import main
 from uam_studio.errors import MAX_SEED, InputError, check_seed
 from uam_studio.planning import load_mission
@@ -116,12 +117,13 @@ def test_any_event_text_parses_or_is_one_line(text):
 
 @settings(max_examples=100, deadline=None, derandomize=True)
 @given(st.floats(allow_nan=True, allow_infinity=True))
+@hypothesis.example(1.0786158809173895e308)  # once overflowed the state to inf
 def test_full_charge_refuses_what_is_not_a_capacity(q):
-    if math.isfinite(q) and q > 0:
+    if Q_MAX_RANGE[0] <= q <= Q_MAX_RANGE[1]:
         state = full_charge(q)
         assert all(np.all(np.isfinite(getattr(state, f))) for f in ("tb", "qnb", "qns", "qpb", "qps"))
     else:
-        with pytest.raises(InputError, match=r"^q_max: \S+ is out of range; allowed > 0 C$"):
+        with pytest.raises(InputError, match=r"^q_max: \S+ is out of range; allowed \[1, 20000\] C$"):
             full_charge(q)
 
 

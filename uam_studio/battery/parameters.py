@@ -23,6 +23,7 @@ THERMAL_MASS = 37.04  # lumped m*C of the cell used by the thermal state (J/K)
 THERMAL_TAU_S = 100.0  # cooling time constant towards ambient (s)
 
 DEFAULT_Q_MAX = 7600.0  # C
+Q_MAX_RANGE = (1.0, 20000.0)  # C accepted by the solver and full_charge; the paper trains on 5000-8000
 DEFAULT_R0 = 0.117215  # ohm
 DEFAULT_EOD_V = 3.0  # V
 PAPER_Q_RANGE = (5000.0, 8000.0)  # C, the paper's range of q_max (its health box; the one home)

@@ -8,11 +8,18 @@ import numpy as np
 
 from ..errors import InputError, check_range
 from .eod import first_below
-from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0, Cell, CellParameters
+from .parameters import (
+    DEFAULT_CELL,
+    DEFAULT_EOD_V,
+    DEFAULT_Q_MAX,
+    DEFAULT_R0,
+    Q_MAX_RANGE,
+    Cell,
+    CellParameters,
+)
 from .solver import integrate_current, output_voltage, step
 from .state import STATE_NAMES, BatteryState, full_charge
 
-Q_MAX_RANGE = (1.0, 20000.0)  # C; the paper trains on 5000-8000
 R0_RANGE = (0.0, 5.0)  # ohm; the paper trains on 0.017-0.45
 EOD_RANGE = (2.5, 4.0)  # V
 CURRENT_LIMIT_A = 50.0  # |current| above this is treated as a unit error (A given as mA, kW...)

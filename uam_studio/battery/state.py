@@ -6,9 +6,9 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from uam_studio.errors import InputError, check_positive
+from uam_studio.errors import InputError, check_range
 
-from .parameters import DEFAULT_CELL, CellParameters
+from .parameters import DEFAULT_CELL, Q_MAX_RANGE, CellParameters
 
 STATE_NAMES = ("tb", "vo", "vsn", "vsp", "qnb", "qns", "qpb", "qps")
 
@@ -55,14 +55,14 @@ def full_charge(q_max, cell: CellParameters = DEFAULT_CELL) -> BatteryState:
 
     This is also what "recharging" at the vertiport resets the cell to.
 
-    :raises InputError: (field ``q_max``) for no cell, or a q_max that is not finite and > 0.
+    :raises InputError: (field ``q_max``) for no cell, or a q_max outside :data:`Q_MAX_RANGE` (C).
     """
     q_max = np.atleast_1d(np.asarray(q_max, dtype=float))
     if q_max.size == 0:
         raise InputError("q_max", "is empty; give the capacity (C) of at least one cell")
-    ok = np.isfinite(q_max) & (q_max > 0.0)
+    ok = (q_max >= Q_MAX_RANGE[0]) & (q_max <= Q_MAX_RANGE[1])  # False for NaN
     if not ok.all():
-        check_positive("q_max", float(q_max[~ok][0]), " C")
+        check_range("q_max", float(q_max[~ok][0]), *Q_MAX_RANGE, " C")
     q_total = cell.q_total(q_max)
     f_s = cell.vol_s_fraction
     zeros = np.zeros_like(q_max)
