@@ -263,6 +263,25 @@ def test_real_cell_report_quick():
     text = format_report(report)
     assert "VTC6 (bundled)" in text and "NASA 18650 (default)" in text
     assert [r["context_s"] for r in report.health] == [20, 60, 120]
+    assert {r["set"] for r in report.health} == {"bundled (in-sample)"}  # no held-out refit asked for
     for r in report.health:
         assert np.isfinite([r["predicted_v"], r["low_v"], r["high_v"]]).all() and r["low_v"] <= r["high_v"]
     assert len(report.safety) == 7 * 3
+    assert "bundled (in-sample)    missed" in text
+
+
+@real
+def test_a_cell_the_set_never_read_is_flagged_and_no_breach_is_cleared():
+    """Issue 38's failing case: the VTC6 set fitted on VAH07 alone, VAH01's real mission from its first
+    20/60/120 s. The 120 s fit puts q_max outside the fleet's range: it is flagged and held with
+    caution, and no cut-off from 3.0 to 3.3 V that the measured landing went below is judged safe."""
+    from uam_studio.studies.real_cells import SET_CELL, health_rows, safety_rows
+
+    mission = mission_cycle(load_cell_log(Path(DATA) / "VAH01_20.csv"))
+    rows = health_rows(identify_vtc6(DATA, hold_out="cell"), mission, np.random.default_rng(20260), label=SET_CELL)
+    measured = float(mission.log.voltage_v[mission.phase_mask(LANDING)].min())
+    safety = safety_rows(rows, measured)
+    assert sum(r["missed_breach"] for r in safety) == 0 and sum(r["measured_breach"] for r in safety) == 15
+    last = rows[-1]
+    assert "outside fleet range" in last["flags"] and last["inside"]
+    assert all(r["discrepancy_factor"] > 1.0 for r in rows if "misfit" in r["flags"])

@@ -31,6 +31,18 @@ GLOSSARY: dict[str, str] = {
                    "fleet spans (the paper's box for the NASA cell). A health fit multiplies what the "
                    "readings say by it, so a short or noisy take-off gives the fleet's typical cell, not a "
                    "wild guess; a long flight outweighs it.",
+    "Model discrepancy": "How far the physics model is from the real cell, beyond the sensor's noise. A "
+                         "health fit reads it from its own residuals: residuals that form a smooth curve "
+                         "(correlated) or sit above the sensor's stated noise widen the fit's interval by "
+                         "the factor 'x' (1: the take-off fits the model).",
+    "Flag: misfit": "The take-off readings do not fit the model (correlated residuals, or residuals above "
+                    "the sensor's noise): the model describes this cell less well than it assumes, and the "
+                    "interval has been widened for it.",
+    "Flag: outside fleet range": "The readings alone put the cell's q_max or R0 outside the range its "
+                                 "fleet spans: an unusual cell, or a model that does not describe it. A cell "
+                                 "that looks better than any of its fleet is not trusted over it: it is "
+                                 "planned as the fleet's best cell, with the difference added to its "
+                                 "uncertainty.",
     "Scenario": "single_flight: one leg only. single_charge: one charge, back to the vertiport at the end. "
                 "multi_charge: as many recharges at the vertiport as the plan wants.",
     "Wind (kt)": "Knots along the leg: positive is a headwind (more power, more time), negative a tailwind. "

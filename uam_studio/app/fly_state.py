@@ -169,7 +169,8 @@ class FlyState(param.Parameterized):
         if self.record is None:
             return []
         return [{"t (s)": round(d.time_s), "at": d.node, "q_max (C)": f"{d.q_max_c:.0f} ± {d.q_max_sd_c:.0f}",
-                 "R0 (ohm)": f"{d.r0_ohm:.3f}", "wind shift (kt)": f"{d.wind_shift_kts:+.1f}",
+                 "R0 (ohm)": f"{d.r0_ohm:.3f}", "fit flags": ", ".join(d.health_flags) or "-",
+                 "wind shift (kt)": f"{d.wind_shift_kts:+.1f}",
                  "next": d.next_to or "-", "reason": d.reason}
                 for d in reversed(self.record.events) if d.time_s <= self.t_s]
 

@@ -31,8 +31,12 @@ coupling) keeps it out of local minima. The estimate is bounded to the box
 :data:`~uam_studio.battery.health_estimate.FIT_Q_RANGE` x
 :data:`~uam_studio.battery.health_estimate.FIT_R0_RANGE`.
 
-The uncertainty. Covariance of (w, R0) = sigma^2 (J^T J)^-1 at the optimum (sigma: the noise
-std), plus a weak Gaussian prior as wide as the box; with a fitted pre-roll, the (w, R0) marginal.
+The uncertainty. Covariance of (w, R0) = sigma^2 f (J^T J)^-1 at the optimum (sigma: the noise
+std; f >= 1: the model-discrepancy factor of :mod:`uam_studio.battery.fit_quality`, from the
+residuals' HAC covariance where they are correlated or, with a stated noise, above it; 1 where they
+look like white noise), plus a weak Gaussian prior as wide as the box; with a fitted pre-roll, the (w, R0)
+marginal. A context that does not fit the model, or whose likelihood puts the cell outside its type's
+fleet range, is flagged (``HealthEstimate.flags``).
 By default (``prior=True``) this Gaussian is then multiplied by the cell type's fleet prior
 (:func:`~uam_studio.battery.health_prior.fleet_prior`: the health range its fleet spans, which is
 known before any measurement): it decides the estimate only where the context says little (a short
@@ -45,9 +49,18 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError, check_range
-from .fit_likelihood import NOISE_FLOOR_V, _lm, _search_preroll, _start
+from .fit_likelihood import NOISE_FLOOR_V, _lm, _search_preroll, _start, current_noise_covariance
+from .fit_quality import (
+    FLEET_Z,
+    current_noise_a,
+    excess_factor,
+    fit_flags,
+    hac_covariance,
+    not_white,
+    residual_autocorrelation,
+)
 from .health_estimate import _PRIOR_PREC, HealthEstimate, _check_noise, _cov_qr, _rep_state, check_context
-from .health_prior import Q_REF_C, HealthPrior, fleet_prior
+from .health_prior import Q_REF_C, HealthPrior, disagrees, fleet_prior
 from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, CellParameters
 from .simulate import EOD_RANGE
 from .state import BatteryState
@@ -80,14 +93,15 @@ def fit_health_batch(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | N
         initial_state = _rep_state(initial_state, cur.shape[0])
     if not isinstance(prior, (bool, HealthPrior)):
         raise InputError("prior", "expected True (the cell type's fleet prior), False or a HealthPrior")
-    known = fleet_prior(cell) if prior is True else (prior or None)
+    fleet = fleet_prior(cell)
+    known = fleet if prior is True else (prior or None)
     b = cur.shape[0]
     preroll = np.zeros(b)
     with np.errstate(all="ignore"):
         wr0, _ = _start(cur, volt, dt, initial_state, cell)
-        wr, cost, jac, mask, iters = _lm(cur, volt, dt, initial_state, cell, wr0)
+        wr, cost, jac, mask, iters, resid = _lm(cur, volt, dt, initial_state, cell, wr0)
         n_par = np.full(b, 2)
-        prec_full: dict[int, np.ndarray] = {}
+        jac3: dict[int, np.ndarray] = {}  # the 3-parameter Jacobians of rows with a pre-roll
         if start == "auto" and initial_state is None:
             # Logs under load at the first sample, unless the fit from full charge is already exact.
             exact = cost / np.maximum(mask.sum(-1), 1) < (0.1 * NOISE_FLOOR_V) ** 2
@@ -97,34 +111,52 @@ def fit_health_batch(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | N
                 alt = under[steps > 0]
                 if alt.size:  # fit (w, r0, pre-roll) for those rows; keep it where it fits significantly better
                     start3 = np.column_stack([wr_s[steps > 0], steps[steps > 0] * dt])
-                    p3, c3, j3, m3, it3 = _lm(cur[alt], volt[alt], dt, None, cell, start3, i0=cur[alt, 0])
+                    p3, c3, j3, m3, it3, r3 = _lm(cur[alt], volt[alt], dt, None, cell, start3, i0=cur[alt, 0])
                     sig2 = np.maximum(c3 / np.maximum(m3.sum(-1) - 3, 1), NOISE_FLOOR_V ** 2)
                     win = (cost[alt] - c3) / sig2 > PREROLL_CHI2
                     for k, row in enumerate(alt):
                         if win[k]:
-                            wr[row], cost[row], mask[row] = p3[k, :2], c3[k], m3[k]
+                            wr[row], cost[row], mask[row], resid[row] = p3[k, :2], c3[k], m3[k], r3[k]
                             iters[row] += it3[k]
                             preroll[row] = p3[k, 2]
                             n_par[row] = 3
-                            prec_full[row] = np.einsum("ti,tj->ij", j3[k], j3[k])
+                            jac3[row] = j3[k]
         n_ok = np.maximum(mask.sum(-1), 4)
         rms = np.sqrt(cost / n_ok)
         sig = np.sqrt(np.maximum(cost / (n_ok - n_par), NOISE_FLOOR_V ** 2)) if noise is None else \
             np.full(b, max(noise, NOISE_FLOOR_V))
-        jtj = np.einsum("bti,btj->bij", jac, jac)
+        rho = residual_autocorrelation(resid, mask)
+        suspect = not_white(rho, n_ok, cost, n_ok - n_par, None if noise is None else sig[0]) & (rms > NOISE_FLOOR_V)
     out = []
     for k in range(b):
-        if n_par[k] == 3:  # the (w, r0) marginal of the 3-parameter Laplace covariance
-            cov3 = np.linalg.inv(prec_full[k] / sig[k] ** 2 + np.diag(_PRIOR_PREC))
-            cw = cov3[:2, :2]
-        else:
-            cw = np.linalg.inv(jtj[k] / sig[k] ** 2 + np.diag(_PRIOR_PREC[:2]))
+        j = jac3.get(k, jac[k])
+        a_inv = np.linalg.inv(np.einsum("ti,tj->ij", j, j) + np.eye(j.shape[1]) * 1e-300)
+        # errors in variables: the current sensor's noise, read off the current, through the model (fit_quality)
+        sigma_i = current_noise_a(cur[k])
+        var = sig[k] ** 2
+        cov_data = var * a_inv
+        if sigma_i > 0.0:
+            pts = np.r_[wr[k], preroll[k]] if k in jac3 else wr[k]
+            state_k = None if initial_state is None else BatteryState.from_array(initial_state.as_array()[k:k + 1])
+            cov_cur, dv2 = current_noise_covariance(cur[k], pts, cur[k, 0] if k in jac3 else None, dt, state_k, cell,
+                                                    j, mask[k], sigma_i)
+            if noise is None:  # the fitted noise std less what the current noise explains
+                var = max(var - dv2, NOISE_FLOOR_V ** 2)
+            cov_data = var * a_inv + cov_cur
+        # the model's discrepancy: residuals still not white noise of the assumed std -> HAC, where larger
+        factor = excess_factor(cov_data, hac_covariance(j, resid[k], mask[k], float(rho[k]))) if suspect[k] else 1.0
+        prior_prec = np.diag(_PRIOR_PREC[:j.shape[1]])
+        cw = np.linalg.inv(np.linalg.inv(cov_data * factor) + prior_prec)[:2, :2]  # with a pre-roll: the marginal
+        face = np.linalg.inv(np.linalg.inv(cov_data) + prior_prec)[:2, :2]  # at face value: without the factor
         w, r = float(wr[k, 0]), float(wr[k, 1])
         cw = 0.5 * (cw + cw.T)
+        outside = bool(disagrees(np.array([w, r]), face, fleet, FLEET_Z).any())
         est = HealthEstimate(q_max=Q_REF_C / w, r0=r, cov=_cov_qr(w, cw), noise_v=float(sig[k]),
                              n_samples=int(mask[k].sum()), cov_w=cw, rms_residual_v=float(rms[k]),
                              iterations=int(iters[k]), preroll_s=float(preroll[k]),
-                             preroll_current_a=float(cur[k, 0]) if preroll[k] > 0 else 0.0)
+                             preroll_current_a=float(cur[k, 0]) if preroll[k] > 0 else 0.0,
+                             residual_autocorr=float(rho[k]), discrepancy_factor=float(factor),
+                             flags=fit_flags(factor > 1.0, outside))
         out.append(est if known is None else est.with_prior(known))
     return out
 

@@ -19,7 +19,8 @@ import numpy as np
 
 from ..errors import InputError, check_range
 from ..flight.context import TAKEOFF_CONTEXT_S
-from .health_prior import Q_REF_C, HealthPrior, combine
+from .fit_quality import FLAG_OUTSIDE_FLEET
+from .health_prior import Q_REF_C, HealthPrior, combine, hold_to_fleet
 from .parameters import DEFAULT_CELL, CellParameters
 from .simulate import CURRENT_LIMIT_A, DT_RANGE, EOD_RANGE
 from .solver import integrate_current
@@ -56,6 +57,11 @@ class HealthEstimate:
     :param preroll_s: load time (s) before the log's first sample, for a log that starts under load:
         the cell was full and rested ``preroll_s`` earlier and drew ``preroll_current_a`` (A, the
         first logged current) since. 0 for a log that starts at the take-off or at rest.
+    :param residual_autocorr: lag-1 autocorrelation of the fit's residuals (-).
+    :param discrepancy_factor: the model-discrepancy factor (>= 1) the likelihood's covariance was
+        multiplied by (:mod:`uam_studio.battery.fit_quality`).
+    :param flags: :data:`~uam_studio.battery.fit_quality.FLAG_MISFIT` and/or
+        :data:`~uam_studio.battery.fit_quality.FLAG_OUTSIDE_FLEET`; empty for a context that fits.
     """
 
     q_max: float
@@ -68,6 +74,15 @@ class HealthEstimate:
     iterations: int = 0
     preroll_s: float = 0.0
     preroll_current_a: float = 0.0
+    residual_autocorr: float = 0.0
+    discrepancy_factor: float = 1.0
+    flags: tuple[str, ...] = ()
+
+    @property
+    def flagged(self) -> bool:
+        """Whether the fit is flagged (:mod:`uam_studio.battery.fit_quality`): a context that does not
+        fit the model, or a cell outside its type's fleet range."""
+        return bool(self.flags)
 
     @property
     def w(self) -> float:
@@ -96,8 +111,14 @@ class HealthEstimate:
 
     def with_prior(self, prior: HealthPrior) -> HealthEstimate:
         """This estimate's Gaussian in (w, R0) multiplied by ``prior`` (and clipped to the fit's box):
-        the posterior that :func:`~uam_studio.battery.fit.fit_health` returns by default."""
+        the posterior that :func:`~uam_studio.battery.fit.fit_health` returns by default. An estimate
+        flagged outside the fleet's range (:data:`~uam_studio.battery.fit_quality.FLAG_OUTSIDE_FLEET`)
+        on the optimistic side (a better cell than any of its fleet) is not trusted over its fleet:
+        :func:`~uam_studio.battery.health_prior.hold_to_fleet`."""
         mean, cov_w = combine([(np.array([self.w, self.r0]), self.cov_w), (prior.mean, prior.cov)])
+        if FLAG_OUTSIDE_FLEET in self.flags:
+            # the flag has decided (at face value): hold every component beyond the fleet's optimistic edge
+            mean, cov_w = hold_to_fleet(mean, cov_w, np.array([self.w, self.r0]), self.cov_w, prior, 0.0)
         w, r = (float(x) for x in np.clip(mean, _LO[:2], _HI[:2]))
         cov_w = 0.5 * (cov_w + cov_w.T)
         return replace(self, q_max=Q_REF_C / w, r0=r, cov=_cov_qr(w, cov_w), cov_w=cov_w)

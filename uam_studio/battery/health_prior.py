@@ -72,3 +72,36 @@ def combine(parts: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.
         vec += p @ np.asarray(mean, dtype=float)
     cov = np.linalg.inv(prec)
     return cov @ vec, cov
+
+
+def hold_to_fleet(mean: np.ndarray, cov: np.ndarray, likelihood_mean: np.ndarray, likelihood_cov: np.ndarray,
+                  prior: HealthPrior, z: float) -> tuple[np.ndarray, np.ndarray]:
+    """A belief ``(mean [2], cov [2, 2])`` in (w, R0) held with caution where the readings alone
+    (``likelihood_mean``, ``likelihood_cov``) put the cell more than ``z`` of their std beyond the
+    optimistic edge of ``prior``'s box (w below it: q_max above every fleet cell's; R0 below every
+    fleet cell's): in that component the mean is moved no further than the fleet's best cell, and the
+    variance grows by the squared distance from the readings' value to that mean (so the belief still
+    holds both). Components inside the box, or beyond its pessimistic edge, are left as they are; the
+    correlation is kept."""
+    mean = np.asarray(mean, dtype=float).copy()
+    cov = np.asarray(cov, dtype=float)
+    lik = np.asarray(likelihood_mean, dtype=float)
+    lik_sd = np.sqrt(np.maximum(np.diag(np.asarray(likelihood_cov, dtype=float)), 0.0))
+    edge = prior.mean - math.sqrt(3.0) * np.sqrt(np.diag(prior.cov))  # the box's optimistic edge
+    beyond = edge - lik > z * lik_sd
+    if not beyond.any():
+        return mean, cov
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    corr = cov[0, 1] / max(sd[0] * sd[1], 1e-300)
+    mean = np.where(beyond, np.maximum(mean, edge), mean)
+    sd = np.where(beyond, np.sqrt(sd ** 2 + (mean - lik) ** 2), sd)
+    off = corr * sd[0] * sd[1]
+    return mean, np.array([[sd[0] ** 2, off], [off, sd[1] ** 2]])
+
+
+def disagrees(mean: np.ndarray, cov: np.ndarray, prior: HealthPrior, z: float) -> np.ndarray:
+    """Per component of (w, R0): whether ``mean`` lies more than ``z`` of its std (from ``cov``) outside
+    the box that ``prior`` stands for (its mean +- sqrt(3) std: the uniform box it was made from)."""
+    sd = np.sqrt(np.maximum(np.diag(np.asarray(cov, dtype=float)), 0.0))
+    half = math.sqrt(3.0) * np.sqrt(np.diag(prior.cov))
+    return np.abs(np.asarray(mean, dtype=float) - prior.mean) - half > z * sd

@@ -51,8 +51,8 @@ def _run_fly(args: argparse.Namespace) -> int:
     for d in rec.events:
         print(f"t={d.time_s:>6.0f} s at {d.node}: {d.kind}: {d.reason}")
         print(f"           knows q_max {d.q_max_c:.0f} +- {d.q_max_sd_c:.0f} C, R0 {d.r0_ohm:.3f} +- "
-              f"{d.r0_sd_ohm:.3f} ohm, wind shift {d.wind_shift_kts:+.1f} kt; plans "
-              f"{' -> '.join(d.route) or 'nothing more'}")
+              f"{d.r0_sd_ohm:.3f} ohm" + (f" (fit flagged: {', '.join(d.health_flags)})" if d.health_flags else "")
+              + f", wind shift {d.wind_shift_kts:+.1f} kt; plans {' -> '.join(d.route) or 'nothing more'}")
         if d.next_to is not None:
             to, alt, wind, forecast, end = next(legs)
             print(f"           flies to {to} at {alt:g} m: wind {wind:+.0f} kt (forecast {forecast:+.0f}), "

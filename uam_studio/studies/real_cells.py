@@ -8,16 +8,20 @@ models on a real VTC6? Every row is scored on measurements; the held-out status 
   against the measured voltage of cell VAH01's 1 Hz mission: RMSE (mV) and the error of the lowest
   (landing) voltage (mV), for the bundled VTC6 set (its fit read this mission), refits that held out the
   landing or the whole cell, and the NASA cell (as bundled, and with q_max/R0 fitted to the mission);
-- health: q_max/R0 fitted to the first 20/60/120 s of the mission (the VTC6 set, with the VTC6 fleet's
-  prior, as by default), the landing's lowest voltage predicted by power with its 90% interval (draws
-  of the fit's uncertainty); and the same without the prior (the likelihood alone);
-- Dynaformer: the bundled model (trained on the NASA cell, 0.05-3 A), and the one fine-tuned on the
-  identified VTC6's synthetic data (``dynaformer_vtc6.pt``), on the same contexts along the measured
-  current; beside each, the reference in the same run: the same physics fit flown along the same current;
+- health: q_max/R0 fitted to the first 20/60/120 s of the mission (with the VTC6 fleet's prior, as by
+  default), the landing's lowest voltage predicted by power with its 90% interval (draws of the fit's
+  uncertainty, model-discrepancy factor and flags included: :mod:`uam_studio.battery.fit_quality`);
+  and the same without the prior (the likelihood alone). On three parameter sets: the two refits that
+  never read the scored landing (:data:`SET_LANDING`, :data:`SET_CELL`; held out, the default), and the
+  bundled set as the in-sample reference (:data:`SET_BUNDLED`; only it with ``refit=False``);
+- Dynaformer: the bundled model (trained on the NASA cell, 0.05-3 A; held out), and the one fine-tuned
+  on the bundled VTC6 set's synthetic data (``dynaformer_vtc6.pt``; in-sample: that set read this
+  landing), on the same contexts along the measured current; beside each, the reference in the same run: the same physics fit flown along the same current;
 - capacity: q_max fitted to each C/5 reference discharge of the four resampled lives (the whole discharge,
   and only its part above 3.4 V), the capacity to 2.5 V it gives against the dataset's integrated capacity;
 - safety: for cut-offs from 3.0 to 3.3 V, would the health fit's 90% lower bound have called the
-  landing safe where the measured voltage went below the cut-off?
+  landing safe where the measured voltage went below the cut-off? Per parameter set
+  (:func:`held_out_summary`).
 """
 
 from __future__ import annotations
@@ -44,6 +48,9 @@ from uam_studio.battery.real_cells import ZERO_C, identify_vtc6, replay_mission
 from uam_studio.errors import InputError
 
 CONTEXTS_S = (20, 60, 120)
+SET_LANDING = "landing held out"  # the VTC6 refit that never read VAH01's landing and the rest after it
+SET_CELL = "cell VAH01 held out"  # the VTC6 refit on VAH07 alone
+SET_BUNDLED = "bundled (in-sample)"  # the bundled VTC6 set: its fit read this landing
 SAFETY_CUTOFFS_V = (3.0, 3.05, 3.1, 3.15, 3.2, 3.25, 3.3)
 CAPACITY_FIT_ABOVE_V = 3.4  # V: the part of each C/5 discharge the capacity fit reads
 CAPACITY_DT_S = 1.0  # s: simulation step of the C/5 discharges (below the VTC6's fastest time constant)
@@ -68,7 +75,7 @@ class RealCellReport:
         return {"measured_landing_min_v": self.measured_landing_min_v, "physics": self.physics,
                 "health": self.health, "health_likelihood": self.health_likelihood, "dynaformer": self.dynaformer,
                 "dynaformer_vtc6": self.dynaformer_vtc6, "capacity": self.capacity,
-                "safety": self.safety}
+                "safety": self.safety, "summary": held_out_summary(self)}
 
 
 def _landing_min(voltage: np.ndarray, mission: MissionLog) -> np.ndarray:
@@ -99,9 +106,11 @@ def _mission_fitted_nasa(mission: MissionLog) -> Cell:
     return Cell("NASA set, q_max and R0 fitted to this mission", NASA_18650.params, est.q_max, est.r0)
 
 
-def health_rows(cell: Cell, mission: MissionLog, rng: np.random.Generator, prior: bool = True) -> list[dict]:
+def health_rows(cell: Cell, mission: MissionLog, rng: np.random.Generator, prior: bool = True,
+                label: str = "") -> list[dict]:
     """q_max/R0 from the mission's first seconds (with the cell type's fleet prior, or without:
-    ``prior``); the landing's lowest voltage predicted by power."""
+    ``prior``) on the parameter set ``cell`` (``label``: its name in the rows' ``"set"``); the
+    landing's lowest voltage predicted by power, with the fit's flags."""
     params = replace(cell.params, t_ambient_k=ZERO_C + float(mission.log.temperature_c[0]))
     log = mission.log
     truth = float(_landing_min(log.voltage_v, mission))
@@ -113,9 +122,10 @@ def health_rows(cell: Cell, mission: MissionLog, rng: np.random.Generator, prior
                                       draws[:, 0], draws[:, 1], eod_v=2.5, cell=params)
         mins = _landing_min(res.voltage_v, mission)
         lo, hi = np.quantile(mins[1:], [(1 - LEVEL) / 2, (1 + LEVEL) / 2])
-        rows.append({"context_s": ctx, "q_max_c": est.q_max, "r0_ohm": est.r0, "predicted_v": float(mins[0]),
-                     "low_v": float(lo), "high_v": float(hi), "error_mv": float(1000 * (mins[0] - truth)),
-                     "inside": bool(lo <= truth <= hi)})
+        rows.append({"set": label, "context_s": ctx, "q_max_c": est.q_max, "r0_ohm": est.r0,
+                     "predicted_v": float(mins[0]), "low_v": float(lo), "high_v": float(hi),
+                     "error_mv": float(1000 * (mins[0] - truth)), "inside": bool(lo <= truth <= hi),
+                     "flags": list(est.flags), "discrepancy_factor": est.discrepancy_factor})
     return rows
 
 
@@ -179,12 +189,13 @@ def safety_rows(health: list[dict], measured_min: float) -> list[dict]:
     """Per cut-off: the health fit (each context) judged the landing safe (90% lower bound above the
     cut-off) where the measured lowest voltage fell below it: a missed breach."""
     rows = []
-    for cut in SAFETY_CUTOFFS_V:
-        for h in health:
+    for h in health:
+        for cut in SAFETY_CUTOFFS_V:
             judged_safe = h["low_v"] >= cut
             breached = measured_min < cut
-            rows.append({"cutoff_v": cut, "context_s": h["context_s"], "judged_safe": judged_safe,
-                         "measured_breach": breached, "missed_breach": judged_safe and breached})
+            rows.append({"set": h.get("set", ""), "cutoff_v": cut, "context_s": h["context_s"],
+                         "judged_safe": judged_safe, "measured_breach": breached,
+                         "missed_breach": judged_safe and breached})
     return rows
 
 
@@ -197,21 +208,38 @@ def real_cell_report(data: str | Path | None = None, refit: bool = True, capacit
     mission = mission_cycle(load_cell_log(folder / MISSION_FILE))
     report = RealCellReport(measured_landing_min_v=float(_landing_min(mission.log.voltage_v, mission)))
     report.physics.append(physics_row("VTC6 (bundled)", "none: its fit read this mission", VTC6, mission))
+    sets = []  # (label, cell): the held-out sets first, the bundled set as the in-sample reference
     if refit:
-        report.physics.append(physics_row("VTC6 refit", "this mission's landing and rest",
-                                          identify_vtc6(folder, hold_out="landing"), mission))
-        report.physics.append(physics_row("VTC6 refit", "cell VAH01 (fit on VAH07 only)",
-                                          identify_vtc6(folder, hold_out="cell"), mission))
+        for hold_out, label, what in (("landing", SET_LANDING, "this mission's landing and rest"),
+                                      ("cell", SET_CELL, "cell VAH01 (fit on VAH07 only)")):
+            refitted = identify_vtc6(folder, hold_out=hold_out)
+            report.physics.append(physics_row("VTC6 refit", what, refitted, mission))
+            sets.append((label, refitted))
+    sets.append((SET_BUNDLED, VTC6))
     report.physics.append(physics_row("NASA 18650 (default)", "all (not fitted)", NASA_18650, mission))
     report.physics.append(physics_row("NASA set, q_max/R0 fitted", "none", _mission_fitted_nasa(mission), mission))
-    report.health = health_rows(VTC6, mission, np.random.default_rng(seed))
-    report.health_likelihood = health_rows(VTC6, mission, np.random.default_rng(seed), prior=False)
+    for label, cell in sets:
+        report.health += health_rows(cell, mission, np.random.default_rng(seed), label=label)
+        report.health_likelihood += health_rows(cell, mission, np.random.default_rng(seed), prior=False, label=label)
     report.dynaformer = dynaformer_rows(mission)
     report.dynaformer_vtc6 = dynaformer_rows(mission, "vtc6")
     if capacity:
         report.capacity = capacity_rows(folder, VTC6)
     report.safety = safety_rows(report.health, report.measured_landing_min_v)
     return report
+
+
+def held_out_summary(report: RealCellReport) -> dict:
+    """Per parameter set of the health rows: missed breaches (of all cut-offs x contexts), the
+    contexts whose 90% interval holds the measured landing minimum, the median interval width (mV)."""
+    out = {}
+    for label in dict.fromkeys(r["set"] for r in report.health):
+        rows = [r for r in report.health if r["set"] == label]
+        safety = [r for r in report.safety if r["set"] == label]
+        out[label] = {"missed_breaches": sum(r["missed_breach"] for r in safety), "cases": len(safety),
+                      "inside": sum(r["inside"] for r in rows), "contexts": len(rows),
+                      "median_width_mv": float(np.median([1000 * (r["high_v"] - r["low_v"]) for r in rows]))}
+    return out
 
 
 def _fmt(x, spec: str) -> str:
@@ -233,18 +261,22 @@ def format_report(report: RealCellReport) -> str:
                    f"({_fmt(r['rmse_mv_current'], '6.1f')}) {_fmt(r['landing_min_err_mv_power'], '+9.1f'):>11s} "
                    f"({_fmt(r['landing_min_err_mv_current'], '+8.1f')})  "
                    + (f"reached at {cut:.0f} s" if cut is not None else "never"))
-    for title, rows in (("health fit (VTC6 set, VTC6 fleet prior: the default)", report.health),
-                        ("health fit (VTC6 set, likelihood alone: prior=False)", report.health_likelihood)):
+    for title, rows in (("health fit (VTC6 fleet prior: the default)", report.health),
+                        ("health fit (likelihood alone: prior=False)", report.health_likelihood)):
         if not rows:
             continue
-        out += ["", f"{title} from the mission's first seconds: landing's lowest voltage, 90% interval",
-                f"{'context':>8s} {'q_max C':>8s} {'R0 ohm':>8s} {'predicted V':>11s} {'90% interval V':>17s} "
-                f"{'error mV':>9s} inside"]
+        out += ["", f"{title} from the mission's first seconds: landing's lowest voltage, 90% interval; "
+                "x: the model-discrepancy factor on the covariance",
+                f"{'parameter set':22s} {'context':>8s} {'q_max C':>8s} {'R0 ohm':>8s} {'predicted V':>11s} "
+                f"{'90% interval V':>17s} {'error mV':>9s} inside  {'x':>5s}  flags"]
         for r in rows:
-            out.append(f"{r['context_s']:>6d} s {r['q_max_c']:8.0f} {r['r0_ohm']:8.4f} {r['predicted_v']:11.3f} "
-                       f"{r['low_v']:8.3f}-{r['high_v']:.3f} {r['error_mv']:+9.1f} {'yes' if r['inside'] else 'NO'}")
+            out.append(f"{r['set']:22s} {r['context_s']:>6d} s {r['q_max_c']:8.0f} {r['r0_ohm']:8.4f} "
+                       f"{r['predicted_v']:11.3f} {r['low_v']:8.3f}-{r['high_v']:.3f} {r['error_mv']:+9.1f} "
+                       f"{'yes' if r['inside'] else 'NO ':3s}  {r['discrepancy_factor']:5.1f}  "
+                       f"{', '.join(r['flags']) or '-'}")
     for title, rows in (("Dynaformer as bundled (trained on the NASA cell, 0.05-3 A)", report.dynaformer),
-                        ("Dynaformer fine-tuned on the VTC6 set's synthetic data (dynaformer_vtc6.pt)",
+                        ("Dynaformer fine-tuned on the bundled VTC6 set's synthetic data (dynaformer_vtc6.pt; "
+                         "in-sample: that set read this landing)",
                          report.dynaformer_vtc6)):
         out += ["", f"{title}, same contexts, along the measured current; physics: its own fit (the weights' "
                 "cell) flown along the same current"]
@@ -276,10 +308,15 @@ def format_report(report: RealCellReport) -> str:
             errs = np.array([r[f"error_pct{key}"] for r in report.capacity])
             out.append(f"{what}: worst |error| {np.nanmax(np.abs(errs)):.2f}%, within 3%: "
                        f"{int(np.sum(np.abs(errs) <= 3))} of {len(errs)}")
-    missed = [r for r in report.safety if r["missed_breach"]]
     breaches = {r["cutoff_v"] for r in report.safety if r["measured_breach"]}
     out += ["", "safety: cut-offs 3.00-3.30 V; the landing breached at "
-            + (", ".join(f"{c:.2f}" for c in sorted(breaches)) or "none") + " V",
-            "missed breaches (judged safe by the 90% lower bound, breached in the measurement): "
-            + (", ".join(f"{r['cutoff_v']:.2f} V from {r['context_s']} s" for r in missed) or "none")]
+            + (", ".join(f"{c:.2f}" for c in sorted(breaches)) or "none") + " V; missed breaches: judged safe by "
+            "the 90% lower bound, breached in the measurement"]
+    for label, summary in held_out_summary(report).items():
+        missed = [r for r in report.safety if r["set"] == label and r["missed_breach"]]
+        out.append(f"{label:22s} missed {summary['missed_breaches']} of {summary['cases']}"
+                   + (" (" + ", ".join(f"{r['cutoff_v']:.2f} V from {r['context_s']} s" for r in missed) + ")"
+                      if missed else "")
+                   + f"; measured minimum inside the 90% interval in {summary['inside']} of {summary['contexts']} "
+                   f"contexts; median width {summary['median_width_mv']:.0f} mV")
     return "\n".join(out)

@@ -17,7 +17,9 @@ class Decision:
     (``q_max_c``, ``q_max_sd_c``, ``r0_ohm``, ``r0_sd_ohm``), the belief cell it planned with
     (``plan_q_max_c``, ``plan_r0_ohm``), the estimated common wind shift (``wind_shift_kts`` with
     ``wind_shift_sd_kts``), the planned remaining ``route`` and ``altitudes_m``, the next leg
-    (``next_to``, ``next_altitude_m``; None: the flight ends) and ``compute_s`` (s of wall time).
+    (``next_to``, ``next_altitude_m``; None: the flight ends), ``compute_s`` (s of wall time) and
+    ``health_flags``, the flags of the health fits behind the estimate
+    (:mod:`uam_studio.battery.fit_quality`: ``"misfit"``, ``"outside fleet range"``).
     """
 
     time_s: float
@@ -37,8 +39,10 @@ class Decision:
     next_to: str | None
     next_altitude_m: float | None
     compute_s: float = 0.0
+    health_flags: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
         d["route"], d["altitudes_m"] = list(self.route), list(self.altitudes_m)
+        d["health_flags"] = list(self.health_flags)
         return {k: (round(v, 6) if isinstance(v, float) else v) for k, v in d.items()}

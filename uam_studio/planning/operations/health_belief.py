@@ -14,8 +14,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from uam_studio.battery.fit import fit_health
+from uam_studio.battery.fit_quality import FLAG_MISFIT, FLAG_OUTSIDE_FLEET, FLEET_Z, fit_flags
 from uam_studio.battery.health_estimate import MIN_CONTEXT_S, HealthEstimate, clip_to_box
-from uam_studio.battery.health_prior import HealthPrior, combine, fleet_prior
+from uam_studio.battery.health_prior import HealthPrior, combine, fleet_prior, hold_to_fleet
 from uam_studio.errors import InputError
 from uam_studio.planning.legs import DT_S
 
@@ -77,6 +78,9 @@ class HealthBelief:
 
     def health(self) -> tuple[float, float, float, float]:
         """(w, its std, r0 ohm, its std) from all readings so far and the prior; w = 6500 C / q_max.
+        Readings that put the cell beyond its prior's box on the optimistic side are held with caution
+        (:func:`~uam_studio.battery.health_prior.hold_to_fleet`: a cell better than any of its fleet is
+        planned as the fleet's best, with the difference in its std).
 
         :raises InputError: fewer than :data:`MIN_FIT_SAMPLES` readings in all.
         """
@@ -85,11 +89,21 @@ class HealthBelief:
         fits = self.past + ([est] if est is not None else [])
         if not fits:
             raise InputError("readings", f"at least {MIN_FIT_SAMPLES} s of readings are needed before planning")
-        mean, cov = combine([(self.prior.mean, self.prior.cov)] + [(np.array([e.w, e.r0]), e.cov_w) for e in fits])
+        parts = [(self.prior.mean, self.prior.cov)] + [(np.array([e.w, e.r0]), e.cov_w) for e in fits]
+        mean, cov = combine(parts)
+        # readings that put the cell beyond the optimistic edge of its prior's box are held with caution
+        lik_mean, lik_cov = combine([(np.array([e.w, e.r0]), e.cov_w / e.discrepancy_factor) for e in fits])  # face value
+        mean, cov = hold_to_fleet(mean, cov, lik_mean, lik_cov, self.prior, FLEET_Z)
         # the Gaussian combination can put the mean a little outside the fit's box (a cell at its edge,
         # R0 = 0 say): the estimate the operator plans with stays inside it
         w, r0 = clip_to_box(mean)
         return float(w), float(math.sqrt(cov[0, 0])), float(r0), float(math.sqrt(cov[1, 1]))
+
+    def flags(self) -> tuple[str, ...]:
+        """The flags of the fits behind the belief (this charge's latest and the earlier charges'), each
+        once, in :func:`~uam_studio.battery.fit_quality.fit_flags` order."""
+        fits = self.past + ([self.estimate] if self.estimate is not None else [])
+        return fit_flags(any(FLAG_MISFIT in e.flags for e in fits), any(FLAG_OUTSIDE_FLEET in e.flags for e in fits))
 
     def prior_health(self) -> tuple[float, float, float, float]:
         """(w, its std, r0 ohm, its std) of the prior alone."""

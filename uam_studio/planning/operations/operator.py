@@ -248,7 +248,7 @@ class Operator:
         q, q_sd = Q_REF_C / w, Q_REF_C * w_sd / w ** 2
         shift, shift_sd = self.winds.shift()
         d = Decision(self.time_s, self.node, "abort", reason, q, q_sd, r, r_sd, q, r, shift, shift_sd, (), (),
-                     None, None)
+                     None, None, health_flags=self.health_belief.flags())
         self.decisions.append(d)
         return d
 
@@ -299,7 +299,8 @@ class Operator:
         self.last_observation = ""
         nxt = route[0] if route else None
         d = Decision(self.time_s, self.node, kind, reason, q, q_sd, r, r_sd, q_plan, r_plan, shift, shift_sd,
-                     tuple(route), tuple(alts), nxt, alts[0] if route else None, time.perf_counter() - t0)
+                     tuple(route), tuple(alts), nxt, alts[0] if route else None, time.perf_counter() - t0,
+                     self.health_belief.flags())
         self._last_route = tuple(route[1:])
         self.decisions.append(d)
         if nxt is not None:
