@@ -3,8 +3,6 @@ bands, and the Dynaformer predictor's default path on it (issue 18)."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
@@ -117,7 +115,9 @@ def test_interval_coverage_and_band_on_a_seeded_set():
 def test_profile_ending_before_the_cut_off(flight):
     cur, volt, _ = flight
     e = fit_health(cur[:120], volt[:120])
-    assert eod_interval_s(e, cur[:1500]) == (math.inf, math.inf, math.inf)
+    censored = eod_interval_s(e, cur[:1500])
+    assert tuple(censored) == (1500.0, 1500.0, 1500.0) and censored.censored == (True, True, True)
+    assert censored.any_censored and censored.describe().count(">= 1500 s") == 3
 
 
 @pytest.mark.parametrize("kwargs,field", [

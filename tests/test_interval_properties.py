@@ -89,3 +89,21 @@ def test_dynaformer_interval_is_finite_and_ordered(predictor, flight, seed):
     cur, volt, _eod, ctx, noise = flight
     v = _noisy(volt[:ctx], noise, seed)
     _ordered_and_finite(*predictor.eod_interval_s(cur[:ctx], v, cur), "Dynaformer")
+
+
+@settings(max_examples=20 * SCALE, **_SETTINGS)
+@given(flight=flights(), seed=st.integers(0, 2**31 - 1), keep=st.floats(0.05, 1.0))
+def test_a_profile_cut_short_gives_censored_bounds_never_inf(predictor, flight, seed, keep):
+    """Any profile, cut anywhere after the context: every end is finite, at most the profile's length,
+    and flagged censored exactly where it sits at that length because the cut-off was not reached."""
+    assume(flight is not None)
+    cur, volt, _eod, ctx, noise = flight
+    n = max(ctx + 1, int(keep * cur.size))
+    v = _noisy(volt[:ctx], noise, seed)
+    est = fit_health(cur[:ctx], v, 1.0)
+    for what, interval in (("physics fit", eod_interval_s(est, cur[:n], 1.0)),
+                           ("Dynaformer", predictor.eod_interval_s(cur[:ctx], v, cur[:n], estimate=est))):
+        _ordered_and_finite(*interval, what)
+        assert interval.horizon_s == n and all(x <= n for x in interval), (what, interval)
+        for x, c in zip(interval, interval.censored):
+            assert not c or x == n, (what, interval)

@@ -14,6 +14,7 @@ along a planned profile (current in A), physics model.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from statistics import NormalDist
 
 import numpy as np
@@ -35,7 +36,7 @@ from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, CellParameters
 from .simulate import CURRENT_LIMIT_A, DT_RANGE, EOD_RANGE, simulate
 from .state import BatteryState
 
-__all__ = ["band_from_sigma_points", "crossing_times", "eod_interval_s", "eod_intervals", "interval_ends",
+__all__ = ["EodInterval", "band_from_sigma_points", "crossing_times", "eod_interval_s", "eod_intervals", "interval_ends",
            "interval_points", "two_sided_z", "voltage_band", "with_preroll"]
 
 
@@ -46,6 +47,49 @@ def _check_profile(current_a, dt_s: float, level: float) -> tuple[np.ndarray, fl
         raise InputError("current_a", f"|current| must be <= {CURRENT_LIMIT_A:g} A")
     lv = check_range("level", level, 0.5, 0.999)
     return cur, dt, lv
+
+
+@dataclass(frozen=True)
+class EodInterval:
+    """An end-of-discharge interval (s from the log's first sample): ``low_s``, ``median_s``, ``high_s``.
+
+    A bound that the planned profile ends before reaching is *censored*: it is stated as the profile's
+    length ``horizon_s`` (s) with its flag in ``censored`` (low, median, high) set, and means "at least
+    ``horizon_s``" (never ``inf``, which would poison a mean or a median). Unpacks and indexes as
+    (low, median, high); :meth:`describe` writes it with the censored ends marked.
+    """
+
+    low_s: float
+    median_s: float
+    high_s: float
+    horizon_s: float
+    censored: tuple[bool, bool, bool] = (False, False, False)
+
+    @classmethod
+    def from_times(cls, low: float, median: float, high: float, horizon_s: float) -> EodInterval:
+        """From times (s) where inf means "not within the profile" (:func:`crossing_times`)."""
+        vals = (float(low), float(median), float(high))
+        return cls(*(v if math.isfinite(v) else float(horizon_s) for v in vals), float(horizon_s),
+                   tuple(not math.isfinite(v) for v in vals))
+
+    def __iter__(self):
+        return iter((self.low_s, self.median_s, self.high_s))
+
+    def __getitem__(self, k):
+        return (self.low_s, self.median_s, self.high_s)[k]
+
+    def __len__(self) -> int:
+        return 3
+
+    @property
+    def any_censored(self) -> bool:
+        """Whether an end lies beyond the profile (the cut-off is not reached there)."""
+        return any(self.censored)
+
+    def describe(self) -> str:
+        """E.g. ``"1200-1500 s (median 1350 s)"``, or ``">= 3600 s"`` for a censored end."""
+        low, med, high = (f">= {v:.0f} s" if c else f"{v:.0f} s" for v, c in zip(self, self.censored))
+        return f"{low} to {high} (median {med})"
 
 
 def with_preroll(estimates: list[HealthEstimate], current: np.ndarray, dt: float) -> tuple[np.ndarray, int]:
@@ -176,7 +220,7 @@ def eod_intervals(estimates: list[HealthEstimate], current_a, dt_s: float = 1.0,
 def eod_interval_s(estimate: HealthEstimate, current_a, dt_s: float = 1.0, level: float = 0.9,
                    eod_v: float = DEFAULT_EOD_V, n_draws: int | None = None,
                    initial_state: BatteryState | None = None, seed: int = 0,
-                   cell: CellParameters = DEFAULT_CELL) -> tuple[float, float, float]:
+                   cell: CellParameters = DEFAULT_CELL) -> EodInterval:
     """``level`` interval of the end-of-discharge time (s) along a planned profile, physics model.
 
     :param estimate: a :class:`HealthEstimate` (from :func:`~uam_studio.battery.fit.fit_health`).
@@ -189,9 +233,9 @@ def eod_interval_s(estimate: HealthEstimate, current_a, dt_s: float = 1.0, level
         over that many random draws (:meth:`HealthEstimate.sample`).
     :param initial_state: the state at the log's first sample, as given to :func:`~uam_studio.battery.fit.fit_health`.
     :param seed: seed of the draws.
-    :return: (low, median, high): time (s) from the log's first sample to the first sample below
-        ``eod_v``, on ``current_a``'s grid; ``median`` at the fitted health; ``math.inf`` where the
-        profile ends before the cut-off.
+    :return: an :class:`EodInterval` (low, median, high): time (s) from the log's first sample to the
+        first sample below ``eod_v``, on ``current_a``'s grid; ``median`` at the fitted health; an end
+        the profile does not reach is censored at the profile's length.
     """
     cur, dt, lv = _check_profile(current_a, dt_s, level)
     eod = check_range("eod_v", eod_v, *EOD_RANGE, " V")
@@ -201,7 +245,7 @@ def eod_interval_s(estimate: HealthEstimate, current_a, dt_s: float = 1.0, level
         raise InputError("n_draws", f"{n_draws!r} is out of range; allowed None or integers in [10, 10000]")
     if n_draws is None:
         lo, med, hi = eod_intervals([estimate], cur, dt, lv, eod, initial_state, cell)
-        return float(lo[0]), float(med[0]), float(hi[0])
+        return EodInterval.from_times(lo[0], med[0], hi[0], cur.size * dt)
     draws = np.vstack([[estimate.q_max, estimate.r0], estimate.sample(int(n_draws), np.random.default_rng(seed))])
     state = _start_states([estimate], draws, draws.shape[0], dt, cell, initial_state)
     v = simulate(np.broadcast_to(cur, (draws.shape[0], cur.size)), dt, draws[:, 0], draws[:, 1], eod_v=eod,
@@ -209,7 +253,7 @@ def eod_interval_s(estimate: HealthEstimate, current_a, dt_s: float = 1.0, level
     grid, _ = crossing_times(v, dt, eod)
     lo, hi = np.quantile(grid[1:], [(1 - lv) / 2, (1 + lv) / 2], method="inverted_cdf")
     med = float(grid[0])
-    return min(float(lo), med), med, max(float(hi), med)
+    return EodInterval.from_times(min(float(lo), med), med, max(float(hi), med), cur.size * dt)
 
 
 def band_from_sigma_points(v: np.ndarray, level: float, extra_std_v: float = 0.0):

@@ -28,6 +28,7 @@ from ..battery import DEFAULT_EOD_V, rest_voltage, simulate
 from ..battery.eod import first_below
 from ..battery.fit import fit_health_batch
 from ..battery.fit_intervals import (
+    EodInterval,
     band_from_sigma_points,
     crossing_times,
     interval_ends,
@@ -346,8 +347,7 @@ class DynaformerPredictor:
                        level: float = 0.9, eod_v: float = DEFAULT_EOD_V, noise_v: float | None = None, estimate=None,
                        health_source: str | None = None):
         """``level`` interval (low, median, high) of the time (s) from the log's first sample to the
-        first sample below ``eod_v`` along ``current_a`` (the same time as :meth:`predict_eod_s`),
-        ``math.inf`` where the profile ends first.
+        first sample below ``eod_v`` along ``current_a`` (the same time as :meth:`predict_eod_s`).
 
         median: the Dynaformer at the fitted health. The health part of the spread: the health at the
         two ends of the physics model's first-order EOD interval
@@ -355,7 +355,8 @@ class DynaformerPredictor:
         band of :meth:`decoder_error` about the median. The two spreads add in quadrature. One physics
         call (5 trajectories per row) and one decoder call (3 per row).
 
-        :return: floats for a 1-D input, else three arrays [B].
+        :return: for a 1-D input an :class:`~uam_studio.battery.fit_intervals.EodInterval` (an end the
+            profile does not reach censored at its length); else three arrays [B], ``math.inf`` there.
         """
         dt, lv, cur, ests, obs, single = self._interval_inputs(context_current_a, context_voltage_v, current_a,
                                                                dt_s, level, noise_v, estimate, health_source)
@@ -380,7 +381,7 @@ class DynaformerPredictor:
         low = np.where(np.isfinite(low), np.maximum(np.ceil(low / dt - 1e-9) * dt, dt), low)
         high = np.where(np.isfinite(high), np.ceil(high / dt - 1e-9) * dt, high)
         if single:
-            return float(low[0]), float(med[0]), float(high[0])
+            return EodInterval.from_times(low[0], med[0], high[0], cur.shape[1] * dt)
         return low, med, high
 
     @torch.no_grad()

@@ -1,0 +1,275 @@
+"""Leave one cell out over the four resampled lives of the CMU eVTOL dataset: every baseline mission's
+landing predicted from the pack's own earlier flight, on a parameter set that never read the cell.
+
+For each life (VAH07, VAH09, VAH27, VAH30) held out in turn:
+
+1. **The parameter set** is identified on the other three (:func:`identify_without`: each one's first
+   C/5 reference discharge and first four missions, the recipe of
+   :func:`~uam_studio.battery.real_cells.vtc6_fit_segments`); nothing of the held-out cell is read.
+2. **The health** for mission k comes from mission k-1 of the same cell (:func:`fit_mission`): q_max
+   (C), R0 (ohm) and the charge out of full at its start, fitted to all its clean samples along its
+   interpolated current, with a Laplace covariance whose std is the residuals' own and, where they are
+   not white noise, the HAC factor of :mod:`uam_studio.battery.fit_quality` (the model's discrepancy).
+3. **The prediction** (:func:`predict_landing`): mission k flown along its own interpolated current from
+   a rested start whose charge matches the rest voltage measured just before its take-off, for 200
+   draws of that health; the 90% interval of the voltage at each of its landing's sampled times.
+
+Scored at the sampled times, never against a sampled minimum (sampling misses the true minimum):
+coverage of the 90% interval, and per cut-off from 3.0 to 3.3 V, missed breaches (the interval's lower
+end at or above the cut-off where the measured voltage is below it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from uam_studio.battery.cmu_data import (
+    LANDING,
+    LIFE_FILES,
+    CellLog,
+    ResampledMission,
+    data_folder,
+    load_cell_log,
+)
+from uam_studio.battery.cmu_data import resampled_missions as find_missions
+from uam_studio.battery.fit_quality import excess_factor, hac_covariance, not_white, residual_autocorrelation
+from uam_studio.battery.identify import FitSegment, identify_cell
+from uam_studio.battery.parameters import Cell, CellParameters
+from uam_studio.battery.real_cells import (
+    START_Q_MAX,
+    START_R0,
+    ZERO_C,
+    mission_current,
+    mission_segment,
+    reference_segment,
+    vtc6_start,
+)
+from uam_studio.battery.simulate import simulate
+from uam_studio.battery.solver import output_voltage
+from uam_studio.battery.state import rested_state
+from uam_studio.errors import InputError
+
+CUTOFFS_V = (3.0, 3.05, 3.1, 3.15, 3.2, 3.25, 3.3)
+LEVEL = 0.9
+N_DRAWS = 200
+REMOVED_START_C = 2160.0  # C: the fit's start for the charge out of full (a 4.0 V charge of a VTC6)
+_STEP = np.array([1e-4, 1e-4, 1e-3])  # finite-difference steps in (ln q_max, ln R0, removed kC)
+
+
+@dataclass
+class MissionFit:
+    """:func:`fit_mission`'s result: (ln q_max, ln R0, removed kC) with its covariance (already
+    multiplied by ``factor``), the RMS residual (V) and the model-discrepancy factor (>= 1)."""
+
+    theta: np.ndarray
+    cov: np.ndarray
+    rms_v: float
+    factor: float
+
+
+@dataclass
+class LifeScore:
+    """One held-out cell: missions predicted, landing samples scored, breaches (over all cut-offs x
+    samples); covered samples and missed breaches of the calibrated interval (the model's error
+    included, :func:`conformal_margin`) and of the health-only one (``raw_``); each sample's
+    (measured, low, median, high) voltage (V) of the calibrated interval (an infinite end: no
+    calibration yet)."""
+
+    cell: str
+    missions: int = 0
+    samples: int = 0
+    breaches: int = 0
+    inside: int = 0
+    missed: int = 0
+    raw_inside: int = 0
+    raw_missed: int = 0
+    rows: list[tuple[float, float, float, float]] = field(default_factory=list)
+
+    @property
+    def coverage(self) -> float:
+        return self.inside / self.samples if self.samples else float("nan")
+
+    @property
+    def raw_coverage(self) -> float:
+        return self.raw_inside / self.samples if self.samples else float("nan")
+
+
+def conformal_margin(scores: list[float], level: float = LEVEL) -> float:
+    """The split-conformal margin (V) from the nonconformity scores of earlier predictions (each
+    max(low - measured, measured - high), V): their ceil((n + 1) level)-th smallest; inf while there
+    are too few (fewer than level / (1 - level)) for a finite one."""
+    n = len(scores)
+    k = int(np.ceil((n + 1) * level))
+    if k > n:
+        return float("inf")
+    return max(float(np.sort(scores)[k - 1]), 0.0)
+
+
+def segments_without(folder: str | Path, held: str, n_missions: int = 4) -> list[FitSegment]:
+    """The identification data without the life ``held`` (a file name of
+    :data:`~uam_studio.battery.cmu_data.LIFE_FILES`): each other life's first C/5 reference discharge
+    and its first ``n_missions`` missions, named after their cell."""
+    if held not in LIFE_FILES:
+        raise InputError("held", f"{held!r}; allowed {', '.join(LIFE_FILES)}")
+    folder = Path(folder)
+    segs = []
+    for name in LIFE_FILES:
+        if name == held:
+            continue
+        log = load_cell_log(folder / name)
+        segs.append(reference_segment(log, name=f"{log.name} c5"))
+        segs += [mission_segment(log, m, f"{log.name} mission {j}", REMOVED_START_C)
+                 for j, m in enumerate(find_missions(log)[:n_missions])]
+    return segs
+
+
+def identify_without(folder: str | Path, held: str, n_missions: int = 4, max_nfev: int = 300) -> Cell:
+    """The VTC6 parameter set identified on :func:`segments_without` ``held``."""
+    fit = identify_cell(segments_without(folder, held, n_missions), vtc6_start(), START_Q_MAX, START_R0,
+                        max_nfev=max_nfev)
+    return Cell(f"VTC6 identified without {held}", fit.cell, fit.q_max, fit.r0)
+
+
+def _params(cell: Cell, log: CellLog, mission: ResampledMission) -> CellParameters:
+    return replace(cell.params, t_ambient_k=ZERO_C + float(log.temperature_c[mission.index[0]]))
+
+
+def _voltages(thetas: np.ndarray, current: np.ndarray, params: CellParameters) -> np.ndarray:
+    """Voltage [N, T] (V) of rested cells at (ln q_max, ln R0, removed kC) ``thetas`` [N, 3] along
+    ``current`` [T] (A, 1 s steps)."""
+    q, r = np.exp(thetas[:, 0]), np.exp(thetas[:, 1])
+    x0 = rested_state(q, thetas[:, 2] * 1000.0, params)
+    res = simulate(np.broadcast_to(current, (len(thetas), current.size)), 1.0, q, r, eod_v=2.5, initial_state=x0,
+                   cell=params)
+    return res.voltage_v
+
+
+def fit_mission(log: CellLog, mission: ResampledMission, cell: Cell, max_iter: int = 40) -> MissionFit | None:
+    """q_max, R0 and the start's charge out of full of one resampled mission (module docstring, step 2);
+    None where it has too few clean samples (fewer than 5)."""
+    cur, observed = mission_current(log, mission, 1.0)
+    keep = observed >= 0
+    if keep.sum() < 5:
+        return None
+    obs, meas = observed[keep], log.voltage_v[mission.index[keep]]
+    params = _params(cell, log, mission)
+    theta = np.array([np.log(cell.q_max), np.log(cell.r0), REMOVED_START_C / 1000.0])
+    lam = 1e-2
+
+    def evaluate(t):
+        pts = np.vstack([t, t + np.diag(_STEP)])
+        v = _voltages(pts, cur, params)[:, obs]
+        return meas - v[0], (v[1:] - v[0]).T / _STEP
+
+    r, j = evaluate(theta)
+    cost = float(r @ r)
+    for _ in range(max_iter):
+        a = j.T @ j
+        step = np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-12), j.T @ r)
+        trial = theta + step
+        trial[2] = min(max(trial[2], 0.0), 10.0)
+        r_t, j_t = evaluate(trial)
+        if np.all(np.isfinite(r_t)) and float(r_t @ r_t) <= cost:
+            done = cost - float(r_t @ r_t) < 1e-10
+            theta, r, j, cost, lam = trial, r_t, j_t, float(r_t @ r_t), max(lam * 0.3, 1e-9)
+            if done:
+                break
+        else:
+            lam *= 10.0
+            if lam > 1e8:
+                break
+    n = r.size
+    s2 = max(cost / max(n - 3, 1), (0.5e-3) ** 2)
+    try:
+        cov = s2 * np.linalg.inv(j.T @ j)
+    except np.linalg.LinAlgError:
+        return None
+    rho = float(residual_autocorrelation(r[None])[0])
+    factor = excess_factor(cov, hac_covariance(j, r, np.ones(n, bool), rho)) if not_white(rho, n) else 1.0
+    return MissionFit(theta, cov * factor, float(np.sqrt(cost / n)), factor)
+
+
+def _removed_for_rest(q: np.ndarray, rest_v: float, params: CellParameters) -> np.ndarray:
+    """Charge out of full (C) at which a rested cell of each q_max (C) shows ``rest_v`` (V): bisection."""
+    lo, hi = np.zeros_like(q), 0.95 * q
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        x = rested_state(q, mid, params)
+        v = output_voltage(x.__dict__, params.q_total(q), params)
+        above = v > rest_v  # still too full
+        lo, hi = np.where(above, mid, lo), np.where(above, hi, mid)
+    return 0.5 * (lo + hi)
+
+
+def predict_landing(log: CellLog, mission: ResampledMission, cell: Cell, health: MissionFit,
+                    rng: np.random.Generator) -> list[tuple[float, float, float, float]]:
+    """(measured, low, median, high) voltage (V) at each sampled time of the mission's landing, the
+    interval at :data:`LEVEL` over :data:`N_DRAWS` draws of ``health`` (module docstring, step 3)."""
+    cur, observed = mission_current(log, mission, 1.0)
+    at = (mission.segment == LANDING) & (observed >= 0)
+    if not at.any():
+        return []
+    params = _params(cell, log, mission)
+    chol = np.linalg.cholesky(health.cov[:2, :2] + np.eye(2) * 1e-14)
+    draws = np.vstack([health.theta[:2], health.theta[:2] + rng.standard_normal((N_DRAWS, 2)) @ chol.T])
+    q = np.exp(draws[:, 0])
+    removed = _removed_for_rest(q, float(log.voltage_v[mission.index[0]]), params)
+    v = _voltages(np.column_stack([draws, removed / 1000.0]), cur, params)[:, observed[at]]
+    lo, hi = np.quantile(v[1:], [(1 - LEVEL) / 2, (1 + LEVEL) / 2], axis=0)
+    meas = log.voltage_v[mission.index[at]]
+    return [(float(m), float(a), float(c), float(b)) for m, a, c, b in zip(meas, lo, v[0], hi)]
+
+
+def score_life(log: CellLog, cell: Cell, seed: int = 38200, every: int = 1) -> LifeScore:
+    """Every ``every``-th mission of a life predicted from the one before it (module docstring). The
+    calibrated interval widens the health-only one by :func:`conformal_margin` of the scores of this
+    cell's earlier predictions (its own earlier flights only: online, never the mission scored)."""
+    missions = find_missions(log)
+    score = LifeScore(log.name)
+    rng = np.random.default_rng([seed, sum(map(ord, log.name))])
+    past: list[float] = []
+    for k in range(1, len(missions), every):
+        health = fit_mission(log, missions[k - 1], cell)
+        if health is None:
+            continue
+        rows = predict_landing(log, missions[k], cell, health, rng)
+        if not rows:
+            continue
+        margin = conformal_margin(past)
+        score.missions += 1
+        for meas, lo, med, hi in rows:
+            score.samples += 1
+            score.raw_inside += lo <= meas <= hi
+            score.inside += lo - margin <= meas <= hi + margin
+            score.rows.append((meas, lo - margin, med, hi + margin))
+            for cut in CUTOFFS_V:
+                breached = meas < cut
+                score.breaches += breached
+                score.raw_missed += breached and lo >= cut
+                score.missed += breached and lo - margin >= cut
+        past += [max(lo - meas, meas - hi) for meas, lo, _, hi in rows]
+    return score
+
+
+def leave_one_cell_out(data: str | Path | None = None, every: int = 1, seed: int = 38200) -> list[LifeScore]:
+    """The table of the module docstring: one :class:`LifeScore` per life, each on the parameter set
+    identified without it."""
+    folder = data_folder(data)
+    return [score_life(load_cell_log(folder / name), identify_without(folder, name), seed, every)
+            for name in LIFE_FILES]
+
+
+def format_scores(scores: list[LifeScore]) -> str:
+    """The table as plain text: calibrated (health-only in brackets)."""
+    out = [f"{'cell':6s} {'missions':>8s} {'landing samples':>15s} {'90% coverage':>16s} "
+           f"{'median width mV':>15s} {'breaches':>8s} {'missed':>11s}  (health-only interval in brackets; "
+           "width over the finite intervals)"]
+    for s in scores:
+        finite = [1000 * (hi - lo) for _, lo, _, hi in s.rows if np.isfinite(hi - lo)]
+        width = np.median(finite) if finite else float("nan")
+        out.append(f"{s.cell:6s} {s.missions:8d} {s.samples:15d} {s.coverage:7.3f} ({s.raw_coverage:.3f}) "
+                   f"{width:15.0f} {s.breaches:8d} {s.missed:4d} ({s.raw_missed:4d})")
+    return "\n".join(out)
