@@ -226,6 +226,15 @@ def test_toy_env_learned_with_no_invalid_action_and_streamed_stats():
     assert np.mean([s.reward for s in stats[-50:]]) > OPTIMUM - 2.0
 
 
+def test_training_leaves_no_log_folder_behind(tmp_path, monkeypatch):
+    """SB3's default logger makes an empty tempdir/SB3-<time> folder per run; training logs nowhere."""
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    train_dqn(DQNTrainConfig(steps=50, n_envs=1, learning_starts=10, net_arch=(16,), seed=3), VisitEnv)
+    assert not list(tmp_path.glob("SB3-*"))
+
+
 def test_stop_event_stops_training():
     stop = threading.Event()
     seen = []

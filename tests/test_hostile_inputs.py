@@ -160,3 +160,26 @@ def test_a_very_long_route_names_the_route(example):
     route = ["Richmond", "vertiport"] * 5000
     with pytest.raises(InputError, match=rf"^route: 10000 legs; at most {MAX_ROUTE_LEGS} allowed in one route$"):
         simulate_route(example, route, [500.0] * len(route))
+
+
+# --------------------------------------------------------------------------- health fit on readings that are not a cell's
+@settings(max_examples=25, deadline=None)
+@given(volt=st.floats(0.0, 1.5), n=st.integers(20, 200))
+def test_readings_no_cell_state_explains_are_refused(volt, n):
+    """0-1.5 V throughout under load: no state of the cell model is near it. One line naming the
+    voltage and the residual, instead of a confident-looking fleet prior."""
+    from uam_studio.battery import fit_health
+
+    with pytest.raises(InputError, match=r"^voltage_v: the cell model cannot explain these readings: RMS residual "
+                                         r"[0-9.]+ V, at most 0.25 V; check the units \(V, A\) and the cell type$"):
+        fit_health(np.full(n, 1.0), np.full(n, volt))
+
+
+@settings(max_examples=25, deadline=None)
+@given(current=st.floats(-30.0, -1e-3), n=st.integers(20, 200))
+def test_a_context_that_charges_a_full_cell_is_refused(current, n):
+    from uam_studio.battery import fit_health
+
+    with pytest.raises(InputError, match=r"^current_a: the context charges the cell \(net -[0-9.e+-]+ C\); the fit "
+                                         r"reads a discharge from a full cell \(\+ = discharge\)$"):
+        fit_health(np.full(n, current), np.full(n, 3.8))

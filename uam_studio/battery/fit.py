@@ -52,6 +52,7 @@ from ..errors import InputError, check_range
 from .fit_likelihood import NOISE_FLOOR_V, _lm, _search_preroll, _start, current_noise_covariance
 from .fit_quality import (
     FLEET_Z,
+    MAX_FIT_RMS_V,
     current_noise_a,
     excess_factor,
     fit_flags,
@@ -85,6 +86,11 @@ def fit_health_batch(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | N
     if start not in ("auto", "full"):
         raise InputError("start", f"{start!r} is not allowed; use 'auto' or 'full'")
     cur, volt = np.atleast_2d(cur), np.atleast_2d(volt)
+    net = cur.sum(axis=-1) * dt
+    if initial_state is None and np.any(net < 0.0):  # from a full cell, a net charge is impossible
+        k = int(np.argmax(net < 0.0))
+        raise InputError("current_a", f"the context charges the cell (net {net[k]:.3g} C{f' in row {k}' if len(net) > 1 else ''}); "
+                         "the fit reads a discharge from a full cell (+ = discharge)")
     if initial_state is not None and not isinstance(initial_state, BatteryState):
         raise InputError("initial_state", "expected a BatteryState (e.g. a result's final_state)")
     if initial_state is not None and initial_state.batch_size not in (1, cur.shape[0]):
@@ -123,6 +129,10 @@ def fit_health_batch(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | N
                             jac3[row] = j3[k]
         n_ok = np.maximum(mask.sum(-1), 4)
         rms = np.sqrt(cost / n_ok)
+        for k in np.flatnonzero(~(rms <= MAX_FIT_RMS_V)):
+            row = f" (row {k})" if b > 1 else ""
+            raise InputError("voltage_v", f"the cell model cannot explain these readings{row}: RMS residual "
+                             f"{rms[k]:.3g} V, at most {MAX_FIT_RMS_V:g} V; check the units (V, A) and the cell type")
         sig = np.sqrt(np.maximum(cost / (n_ok - n_par), NOISE_FLOOR_V ** 2)) if noise is None else \
             np.full(b, max(noise, NOISE_FLOOR_V))
         rho = residual_autocorrelation(resid, mask)
@@ -191,7 +201,8 @@ def fit_health(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | None = 
         False: the likelihood alone (with a weak prior as wide as the fit's box), for a caller that
         combines several fits with its own prior once.
     :raises InputError: NaN or inf, a context shorter than 20 s, mismatched lengths, a negative
-        noise level, naming the field.
+        noise level, a context that charges the cell (net), or one the model cannot explain at all
+        (RMS residual above :data:`~uam_studio.battery.fit_quality.MAX_FIT_RMS_V`), naming the field.
     """
     check_range("eod_v", eod_v, *EOD_RANGE, " V")
     cur, volt, dt = check_context(current_a, voltage_v, dt_s, ndim=(1,))

@@ -16,7 +16,8 @@ def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", default=None, metavar="PATH",
                    help="real: the CMU eVTOL dataset's folder (default: $UAM_STUDIO_CMU_DATA; DOI 10.1184/R1/14226830)")
     p.add_argument("--quick", action="store_true",
-                   help="real: skip the two held-out refits of the VTC6 set (about a minute each)")
+                   help="real: skip the two held-out refits of the VTC6 set (about 10 s each): the health and "
+                        "safety rows are then only the bundled set's, in-sample")
     p.add_argument("--weights", default=None, help="weights file (default: the bundled model)")
     p.add_argument("--table", choices=["default", "noise"], default="default",
                    help="default: the held-out sets, beside the physics fit; noise: EOD timing over sensor noise "

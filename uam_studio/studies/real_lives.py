@@ -36,6 +36,7 @@ from uam_studio.battery.cmu_data import (
 )
 from uam_studio.battery.cmu_data import resampled_missions as find_missions
 from uam_studio.battery.fit_quality import excess_factor, hac_covariance, not_white, residual_autocorrelation
+from uam_studio.battery.health_estimate import FIT_Q_RANGE
 from uam_studio.battery.identify import FitSegment, identify_cell
 from uam_studio.battery.parameters import Cell, CellParameters
 from uam_studio.battery.real_cells import (
@@ -57,6 +58,7 @@ LEVEL = 0.9
 N_DRAWS = 200
 REMOVED_START_C = 2160.0  # C: the fit's start for the charge out of full (a 4.0 V charge of a VTC6)
 _STEP = np.array([1e-4, 1e-4, 1e-3])  # finite-difference steps in (ln q_max, ln R0, removed kC)
+_LN_R0 = (np.log(1e-4), np.log(1.0))  # ln ohm: the box of R0 (draws and fits); q_max: the health fit's box
 
 
 @dataclass
@@ -170,7 +172,7 @@ def fit_mission(log: CellLog, mission: ResampledMission, cell: Cell, max_iter: i
         a = j.T @ j
         step = np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-12), j.T @ r)
         trial = theta + step
-        trial[2] = min(max(trial[2], 0.0), 10.0)
+        trial = np.clip(trial, [np.log(FIT_Q_RANGE[0]), _LN_R0[0], 0.0], [np.log(FIT_Q_RANGE[1]), _LN_R0[1], 10.0])
         r_t, j_t = evaluate(trial)
         if np.all(np.isfinite(r_t)) and float(r_t @ r_t) <= cost:
             done = cost - float(r_t @ r_t) < 1e-10
@@ -215,6 +217,7 @@ def predict_landing(log: CellLog, mission: ResampledMission, cell: Cell, health:
     params = _params(cell, log, mission)
     chol = np.linalg.cholesky(health.cov[:2, :2] + np.eye(2) * 1e-14)
     draws = np.vstack([health.theta[:2], health.theta[:2] + rng.standard_normal((N_DRAWS, 2)) @ chol.T])
+    draws = np.column_stack([np.clip(draws[:, 0], *np.log(FIT_Q_RANGE)), np.clip(draws[:, 1], *_LN_R0)])
     q = np.exp(draws[:, 0])
     removed = _removed_for_rest(q, float(log.voltage_v[mission.index[0]]), params)
     v = _voltages(np.column_stack([draws, removed / 1000.0]), cur, params)[:, observed[at]]

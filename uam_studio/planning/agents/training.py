@@ -29,6 +29,7 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from uam_studio.errors import InputError
@@ -263,6 +264,8 @@ def train_dqn(
         )
         if config.init_agent is not None:
             _warm_start(model, config.init_agent)
+        if not verbose:  # SB3's default logger makes an empty tempdir/SB3-<time> folder per run: log nowhere
+            model.set_logger(Logger(folder=None, output_formats=[]))
         callbacks: list[BaseCallback] = [EpisodeStatsCallback(callback, stop_event, keep=False)]
         if progress_bar:
             callbacks.append(TqdmCallback())
