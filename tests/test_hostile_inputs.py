@@ -171,7 +171,7 @@ def test_readings_no_cell_state_explains_are_refused(volt, n):
     from uam_studio.battery import fit_health
 
     with pytest.raises(InputError, match=r"^voltage_v: the cell model cannot explain these readings: RMS residual "
-                                         r"[0-9.]+ V, at most 0.25 V; check the units \(V, A\) and the cell type$"):
+                                         r"[0-9.]+ V, at most 0.5 V; check the units \(V, A\) and the cell type$"):
         fit_health(np.full(n, 1.0), np.full(n, volt))
 
 

@@ -37,7 +37,7 @@ __all__ = ["FLAG_MISFIT", "FLAG_OUTSIDE_FLEET", "FLEET_Z", "MAX_FIT_RMS_V", "MAX
 WHITE_Z = 2.33  # rho sqrt(n) above this: the residuals are not white (one-sided, p = 0.01)
 MAX_RHO = 0.99  # rho is capped here in the bandwidth rule
 NOISE_P = 0.01  # significance of residuals above a stated sensor noise
-MAX_FIT_RMS_V = 0.25  # V: residuals above this are not a reading of the cell type (units, cell or sensor)
+MAX_FIT_RMS_V = 0.5  # V: residuals above this are not a reading of the cell type (units, cell or sensor)
 FLEET_Z = 2.0  # std of the likelihood estimate outside the fleet range that flags it
 FLAG_MISFIT = "misfit"
 FLAG_OUTSIDE_FLEET = "outside fleet range"
