@@ -41,6 +41,18 @@ def test_create_app_in_notebook_is_plain_tabs_and_renders():
     assert app.get_root(Document()) is not None
 
 
+def test_the_page_document_validates_without_warnings(caplog):
+    """Bokeh validates every session's document; a warning there was logged once per student
+    (W-1005 for the map, sized by its frame)."""
+    import logging
+
+    doc = Document()
+    create_app(template=True).server_doc(doc)
+    with caplog.at_level(logging.WARNING, logger="bokeh.core.validation.check"):
+        doc.validate()
+    assert [r.getMessage() for r in caplog.records] == []
+
+
 def test_planner_view_contract():
     state = PlannerState(policy="greedy")
     view = PlannerView(state)

@@ -19,6 +19,8 @@ import numpy as np
 import pandas as pd
 import panel as pn
 import param
+from bokeh.core.validation import silence
+from bokeh.core.validation.warnings import FIXED_SIZING_MODE
 
 from uam_studio.app.planner_plots import WIDE_MIN_PX, PlannerPlots
 from uam_studio.app.planner_state import PlannerState
@@ -34,6 +36,10 @@ from uam_studio.app.style import NOTE_STYLE, heading
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning import plan_csv
 from uam_studio.planning.missions.mission import COORD_RANGE_KM, SCENARIOS
+
+# The map is sized by its frame (frame_width/frame_height, as HoloViews sets them); Bokeh's
+# FIXED_SIZING_MODE check (W-1005) reads only width/height, and warned once for every session served.
+silence(FIXED_SIZING_MODE, True)
 
 COLUMNS = ["name", "x_km", "y_km", "priority", "wind_kts", "dwell_s"]
 MAP_HALF_KM = 80.0

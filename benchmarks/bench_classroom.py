@@ -1,0 +1,110 @@
+"""A class opening the app together (issue 40): N concurrent first loads of ``uam-studio serve``.
+
+    OMP_NUM_THREADS=1 python benchmarks/bench_classroom.py [--sessions 1 30 60] [--hold 5]
+
+One server (:class:`uam_studio.app.serve.ServedApp`: ``uam-studio serve --no-show`` in a subprocess, as a
+teacher starts it). For each N, N clients start at once; each does what a browser's first load does to
+the server: GET the page (the server builds the session's document), open the ``/ws`` websocket with
+the page's token, wait for the server's ACK, ask for the document (PULL-DOC-REQ) and read the whole
+reply. A load's time runs from its GET to the reply's last frame. With all N connected (and ``--hold``
+s after), the server's resident memory (RSS, MB) is read, then they disconnect. Printed per N: p50 and
+p95 of the load times (s), the slowest, errors, RSS, and the server log's Bokeh warnings per session.
+The reference in the same run: N = 1, one load alone. Goals: 30 sessions p95 <= 5 s, 60 sessions all
+served with p95 <= 10 s, RSS <= 1.5 GB with 30 open, no per-session warning.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import re
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+from tornado.httpclient import HTTPRequest
+from tornado.websocket import websocket_connect
+
+from uam_studio.app.serve import ServedApp
+
+TOKEN = re.compile(r'"token":\s*"([^"]+)"')
+
+
+async def _read_message(conn) -> dict:
+    """One Bokeh protocol message: header, metadata, content, then a header and a payload per buffer."""
+    header = json.loads(await conn.read_message())
+    await conn.read_message()  # metadata
+    await conn.read_message()  # content
+    for _ in range(2 * int(header.get("num_buffers", 0))):
+        await conn.read_message()
+    return header
+
+
+async def first_load(url: str) -> tuple[float, object]:
+    """(seconds, the open websocket) of one first load (module docstring)."""
+    t0 = time.perf_counter()
+    loop = asyncio.get_running_loop()
+    html = await loop.run_in_executor(None, lambda: urllib.request.urlopen(url, timeout=600).read().decode())
+    token = TOKEN.search(html)
+    if token is None:
+        raise RuntimeError("no session token in the page")
+    ws_url = url.replace("http://", "ws://").rstrip("/") + "/ws"
+    conn = await websocket_connect(HTTPRequest(ws_url, headers={"Origin": url.rstrip("/")}, request_timeout=600),
+                                   subprotocols=["bokeh", token.group(1)], max_message_size=1 << 30)
+    ack = await _read_message(conn)
+    if ack.get("msgtype") != "ACK":
+        raise RuntimeError(f"expected ACK, got {ack.get('msgtype')}")
+    await conn.write_message(json.dumps({"msgid": "1", "msgtype": "PULL-DOC-REQ"}))
+    await conn.write_message("{}")
+    await conn.write_message("{}")
+    while True:
+        reply = await _read_message(conn)
+        if reply.get("msgtype") == "PULL-DOC-REPLY":
+            break
+    return time.perf_counter() - t0, conn
+
+
+def rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+async def run(url: str, n: int, pid: int, hold_s: float) -> dict:
+    results = await asyncio.gather(*(first_load(url) for _ in range(n)), return_exceptions=True)
+    times = [r[0] for r in results if not isinstance(r, BaseException)]
+    errors = [repr(r)[:120] for r in results if isinstance(r, BaseException)]
+    await asyncio.sleep(hold_s)
+    rss = rss_mb(pid)
+    for r in results:
+        if not isinstance(r, BaseException):
+            r[1].close()
+    await asyncio.sleep(2.0)
+    return {"n": n, "times": times, "errors": errors, "rss_mb": rss}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--sessions", type=int, nargs="+", default=[1, 30, 60])
+    ap.add_argument("--hold", type=float, default=5.0, help="s with all sessions open before RSS is read")
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as home, ServedApp(Path(home)) as app:
+        print(f"server up in {app.startup_s:.1f} s (liveness, one app build); RSS {rss_mb(app.proc.pid):.0f} MB")
+        for n in args.sessions:
+            before = app.log_path.read_text().count("W-1005")
+            out = asyncio.run(run(app.url, n, app.proc.pid, args.hold))
+            t = np.array(out["times"]) if out["times"] else np.array([np.nan])
+            warnings = app.log_path.read_text().count("W-1005") - before
+            print(f"{n:3d} sessions: p50 {np.percentile(t, 50):6.2f} s, p95 {np.percentile(t, 95):6.2f} s, "
+                  f"max {np.max(t):6.2f} s, served {len(out['times'])}/{n}, errors {len(out['errors'])}, "
+                  f"RSS {out['rss_mb']:.0f} MB, W-1005 warnings {warnings}", flush=True)
+            for e in out["errors"][:3]:
+                print("   ", e)
+
+
+if __name__ == "__main__":
+    main()
