@@ -29,6 +29,7 @@ from uam_studio.atomic_io import (
     remove_stale_temps,
     temp_path,
 )
+from uam_studio.errors import InputError
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "assets" / "example_mission.json"
@@ -404,3 +405,30 @@ def test_a_kill_between_the_weights_and_the_card_leaves_no_card_of_other_weights
     train(folder, 3)  # the next run writes both again
     assert (folder / card).is_file()
     check(folder)
+
+
+@pytest.mark.parametrize("kind, weights", [("attention", "attention_planner.pt"), ("dqn", "agent.zip"),
+                                           ("dynaformer", "dynaformer.pt")])
+def test_every_trainer_writes_the_weights_sha256_and_a_changed_byte_is_refused(kind, weights, tmp_path, monkeypatch):
+    """Each trainer writes ``<weights>.sha256`` with its weights; a loader refuses the weights once a
+    byte changes, in one line naming the file, before reading them."""
+    import hashlib
+
+    from uam_studio.dynaformer import load_predictor
+    from uam_studio.planning.agents.agent_file import load_agent
+    from uam_studio.planning.agents.attention.decode import load_policy
+
+    monkeypatch.setenv("TQDM_DISABLE", "1")
+    {"attention": _train_attention, "dqn": _train_dqn, "dynaformer": _train_dynaformer}[kind](tmp_path, 1)
+    path = tmp_path / weights
+    digest = (tmp_path / f"{weights}.sha256").read_text().split()
+    assert digest == [hashlib.sha256(path.read_bytes()).hexdigest(), weights]
+    load = {"attention": load_policy, "dqn": load_agent, "dynaformer": load_predictor}[kind]
+    load(path)
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0x01
+    path.write_bytes(bytes(data))
+    with pytest.raises(InputError) as err:
+        load(path)
+    assert str(err.value).startswith(("agent: ", "weights: ")) and str(path) in str(err.value)
+    assert "SHA-256" in str(err.value) and "\n" not in str(err.value)

@@ -13,6 +13,9 @@ the new complete content, or absent (never written yet); any exception removes t
   metadata). They are staged together with it, the old sidecars are deleted before the main file
   is replaced, and the new ones are put in place after it. So a sidecar that exists always
   describes the main file beside it; a kill in between leaves the sidecar absent, never stale.
+- ``digest=True`` (:func:`atomic_save`, :func:`atomic_write_bytes`): the main file's SHA-256 is
+  written as one more sidecar, ``<name>.sha256`` (:func:`digest_path`); :func:`check_digest` is
+  the loaders' check of it.
 - :func:`remove_stale_temps`: delete the temp files a killed writer left in a folder.
 
 No function here creates folders; the destination's folder must exist.
@@ -33,11 +36,16 @@ from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import BinaryIO
 
+from uam_studio.errors import InputError
+
 __all__ = [
+    "DIGEST_SUFFIX",
     "STALE_AGE_S",
     "atomic_save",
     "atomic_write_bytes",
     "atomic_write_text",
+    "check_digest",
+    "digest_path",
     "remove_stale_temps",
     "temp_path",
 ]
@@ -45,6 +53,7 @@ __all__ = [
 StrPath = str | os.PathLike[str]
 Sidecars = Mapping[StrPath, bytes | str]
 
+DIGEST_SUFFIX = ".sha256"
 STALE_AGE_S = 3600.0
 """s: a temp file older than this is stale even when its writer cannot be checked (another host,
 Windows, a temp file of an older version); the longest write (a dataset cache) takes minutes."""
@@ -115,13 +124,55 @@ def _as_bytes(data: bytes | str) -> bytes:
     return data.encode("utf-8") if isinstance(data, str) else bytes(data)
 
 
-def atomic_save(path: StrPath, write: Callable[[BinaryIO], object], *, sidecars: Sidecars | None = None) -> None:
+def digest_path(path: StrPath) -> Path:
+    """The SHA-256 sidecar of ``path`` (``<name>.sha256``, ``sha256sum`` format) that
+    :func:`atomic_save` writes with ``digest=True``."""
+    p = Path(path)
+    return p.with_name(p.name + DIGEST_SUFFIX)
+
+
+def _sha256_of(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+@functools.lru_cache(maxsize=64)
+def _check_written_digest(path: str, mtime_ns: int, size: int, digest_mtime_ns: int, field: str) -> None:
+    p = Path(path)
+    side = digest_path(p)
+    try:
+        want = side.read_text().split()[0].lower()
+    except (OSError, IndexError, UnicodeDecodeError):
+        return
+    if _sha256_of(p) != want:
+        raise InputError(field, f"{p} is damaged: its SHA-256 is not the one written with it in {side.name} "
+                                f"({want[:16]}...)")
+
+
+def check_digest(path: StrPath, field: str) -> None:
+    """Raise :class:`~uam_studio.errors.InputError` (``field``) if the file ``path`` has a SHA-256
+    sidecar (:func:`digest_path`, written with ``digest=True``: every trainer's weights) that it does
+    not match; a file without one is not checked here (the bundled ones are, by
+    :func:`uam_studio.bundled.bundled_path`). Cached by the modification times and size."""
+    p = Path(path)
+    if p.is_file() and digest_path(p).is_file():
+        st = p.stat()
+        _check_written_digest(str(p), st.st_mtime_ns, st.st_size, digest_path(p).stat().st_mtime_ns, field)
+
+
+def atomic_save(path: StrPath, write: Callable[[BinaryIO], object], *, sidecars: Sidecars | None = None,
+                digest: bool = False) -> None:
     """Write ``path`` atomically with ``write(f)`` (``f``: a binary file open on a temp file).
 
     :param path: the destination; its folder must exist.
     :param write: writes the whole content to ``f`` (it must not close ``f``).
     :param sidecars: ``{path: bytes or UTF-8 text}`` of files that describe ``path`` (see the module
         docstring): staged first, old ones deleted, then ``path`` replaced, then the sidecars.
+    :param digest: also write the SHA-256 of what was written as the sidecar :func:`digest_path`
+        (``sha256sum`` format), for loaders to check (:func:`check_digest`).
     :raises ValueError: a sidecar named like ``path``.
     """
     dest = Path(path)
@@ -131,6 +182,8 @@ def atomic_save(path: StrPath, write: Callable[[BinaryIO], object], *, sidecars:
     staged: list[tuple[Path, Path]] = []
     try:
         staged.append((dest, _stage(dest, write)))
+        if digest:
+            sides.append((digest_path(dest), f"{_sha256_of(staged[0][1])}  {dest.name}\n".encode()))
         for side, data in sides:
             staged.append((side, _stage(side, lambda f, data=data: f.write(data))))
         folders = {d.parent for d, _ in staged}
@@ -152,9 +205,9 @@ def atomic_save(path: StrPath, write: Callable[[BinaryIO], object], *, sidecars:
         raise
 
 
-def atomic_write_bytes(path: StrPath, data: bytes, *, sidecars: Sidecars | None = None) -> None:
-    """Write ``data`` to ``path`` atomically (``sidecars``: as :func:`atomic_save`)."""
-    atomic_save(path, lambda f: f.write(data), sidecars=sidecars)
+def atomic_write_bytes(path: StrPath, data: bytes, *, sidecars: Sidecars | None = None, digest: bool = False) -> None:
+    """Write ``data`` to ``path`` atomically (``sidecars``, ``digest``: as :func:`atomic_save`)."""
+    atomic_save(path, lambda f: f.write(data), sidecars=sidecars, digest=digest)
 
 
 def atomic_write_text(path: StrPath, text: str, *, encoding: str = "utf-8",

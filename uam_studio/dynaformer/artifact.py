@@ -10,7 +10,7 @@ from typing import Any
 
 import torch
 
-from ..atomic_io import atomic_save
+from ..atomic_io import atomic_save, check_digest
 from ..bundled import bundled_path
 from ..errors import InputError
 from .cells import dynaformer_cell
@@ -30,10 +30,11 @@ class WeightsError(InputError):
 def atomic_torch_save(obj: Any, path: str | os.PathLike[str], *,
                       sidecars: Mapping[str | os.PathLike[str], bytes | str] | None = None) -> None:
     """``torch.save(obj)`` to ``path`` atomically (:func:`uam_studio.atomic_io.atomic_save`), creating
-    its folder; ``sidecars``: files describing ``path``, written with it (see there)."""
+    its folder; ``sidecars``: files describing ``path``, written with it (see there), and its SHA-256
+    (``<name>.sha256``, checked by :func:`load_artifact`)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_save(path, lambda f: torch.save(obj, f), sidecars=sidecars)
+    atomic_save(path, lambda f: torch.save(obj, f), sidecars=sidecars, digest=True)
 
 
 def save_artifact(path: str | os.PathLike[str], model: Dynaformer, pca: dict, meta: dict, *,
@@ -54,6 +55,7 @@ def load_artifact(path) -> tuple[Dynaformer, dict, dict]:
     path = Path(path)
     if not path.is_file():
         raise WeightsError(path, "file not found")
+    check_digest(path, "weights")  # the SHA-256 written with it, where there is one
     try:
         blob = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # corrupted or not a torch file

@@ -22,7 +22,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from uam_studio.atomic_io import atomic_write_bytes
+from uam_studio.atomic_io import atomic_write_bytes, check_digest
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.dqn import MaskedDQN, MaskedDQNPolicy
 
@@ -49,7 +49,8 @@ def save_agent(model: MaskedDQN, path: str | os.PathLike[str], card: dict[str, A
 
     The SB3 zip is built in memory with the card added as ``card.json``, then written with
     :func:`uam_studio.atomic_io.atomic_write_bytes` (creating the folder): a kill never leaves a
-    half-written agent. The replay buffer is not saved. The card gets a ``network`` entry
+    half-written agent, and its SHA-256 beside it (``<name>.sha256``, checked at load). The replay
+    buffer is not saved. The card gets a ``network`` entry
     (:func:`network_description`: spaces and layer sizes), which :func:`load_agent` builds the network from.
 
     :param card_file: also write the card as this JSON file beside the agent, as a sidecar of the
@@ -65,13 +66,14 @@ def save_agent(model: MaskedDQN, path: str | os.PathLike[str], card: dict[str, A
     with zipfile.ZipFile(buf, mode="a") as zf:
         zf.writestr(CARD_NAME, card_json)
     sidecars = {card_file: json.dumps(card, indent=2, default=str) + "\n"} if card_file is not None else None
-    atomic_write_bytes(p, buf.getvalue(), sidecars=sidecars)
+    atomic_write_bytes(p, buf.getvalue(), sidecars=sidecars, digest=True)
 
 
 def _read_agent_bytes(path: str | os.PathLike[str]) -> tuple[Path, bytes]:
     p = Path(path)
     if not p.is_file():
         raise InputError("agent", f"{p}: file not found")
+    check_digest(p, "agent")  # the SHA-256 written with it, where there is one
     data = p.read_bytes()
     if not zipfile.is_zipfile(io.BytesIO(data)):
         raise InputError("agent", f"{p}: not a DQN agent file (not a zip archive)")

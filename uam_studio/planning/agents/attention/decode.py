@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from uam_studio.atomic_io import check_digest
 from uam_studio.bundled import bundled_path
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.attention import WEIGHTS_NAME
@@ -92,6 +93,7 @@ def load_policy(path: str | os.PathLike[str] | None = None) -> tuple[AttentionPo
     p = Path(path) if path is not None else bundled_weights_path()
     if not p.is_file():
         raise InputError("agent", f"{p}: no such file (the attention planner's weights)")
+    check_digest(p, "agent")  # the SHA-256 written with it, where there is one
     try:
         data = load_tensors(p)
     except TensorFileError as err:

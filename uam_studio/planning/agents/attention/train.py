@@ -413,6 +413,7 @@ def train_attention(cfg: AttentionTrainConfig, out: str | os.PathLike[str],
                "card": json.loads(json.dumps(card))}
     # card.json is a sidecar of the same save: the old card is deleted before the weights are replaced,
     # so a card on disk always describes the weights beside it
-    atomic_save(path, lambda f: torch.save(payload, f), sidecars={out / "card.json": json.dumps(card, indent=2) + "\n"})
+    atomic_save(path, lambda f: torch.save(payload, f), sidecars={out / "card.json": json.dumps(card, indent=2) + "\n"},
+                digest=True)
     log(f"saved {path} ({path.stat().st_size / 1024:.0f} KB) in {stats['train_s']:.0f} s")
     return path
