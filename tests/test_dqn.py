@@ -254,7 +254,7 @@ def test_save_load_round_trip_and_bad_files(tmp_path):
     model.learn(200)
     path = tmp_path / "sub" / "agent.zip"
     save_agent(model, path, {"scenario": "toy", "steps": 200})
-    assert not [p for p in path.parent.iterdir() if p.name != "agent.zip"]  # no temp file left behind
+    assert sorted(p.name for p in path.parent.iterdir()) == ["agent.zip", "agent.zip.sha256"]  # no temp file left
     loaded = load_agent(path, env=VisitEnv())
     assert isinstance(loaded, MaskedDQN) and loaded.double_dqn
     obs = random_masked_obs(np.random.default_rng(2), 50)
