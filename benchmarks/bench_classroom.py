@@ -22,6 +22,7 @@ import re
 import tempfile
 import time
 import urllib.request
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -43,16 +44,17 @@ async def _read_message(conn) -> dict:
     return header
 
 
-async def first_load(url: str) -> tuple[float, object]:
-    """(seconds, the open websocket) of one first load (module docstring)."""
+async def first_load(url: str, pool: ThreadPoolExecutor) -> tuple[float, object]:
+    """(seconds, the open websocket) of one first load (module docstring); the GET runs in ``pool``."""
     t0 = time.perf_counter()
     loop = asyncio.get_running_loop()
-    html = await loop.run_in_executor(None, lambda: urllib.request.urlopen(url, timeout=600).read().decode())
+    html = await loop.run_in_executor(pool, lambda: urllib.request.urlopen(url, timeout=600).read().decode())
     token = TOKEN.search(html)
     if token is None:
         raise RuntimeError("no session token in the page")
     ws_url = url.replace("http://", "ws://").rstrip("/") + "/ws"
-    conn = await websocket_connect(HTTPRequest(ws_url, headers={"Origin": url.rstrip("/")}, request_timeout=600),
+    conn = await websocket_connect(HTTPRequest(ws_url, headers={"Origin": url.rstrip("/")}, connect_timeout=600,
+                                               request_timeout=600),
                                    subprotocols=["bokeh", token.group(1)], max_message_size=1 << 30)
     ack = await _read_message(conn)
     if ack.get("msgtype") != "ACK":
@@ -75,7 +77,8 @@ def rss_mb(pid: int) -> float:
 
 
 async def run(url: str, n: int, pid: int, hold_s: float) -> dict:
-    results = await asyncio.gather(*(first_load(url) for _ in range(n)), return_exceptions=True)
+    with ThreadPoolExecutor(max_workers=n) as pool:  # every GET at once, as N browsers send them
+        results = await asyncio.gather(*(first_load(url, pool) for _ in range(n)), return_exceptions=True)
     times = [r[0] for r in results if not isinstance(r, BaseException)]
     errors = [repr(r)[:120] for r in results if isinstance(r, BaseException)]
     await asyncio.sleep(hold_s)
