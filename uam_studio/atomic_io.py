@@ -47,6 +47,7 @@ __all__ = [
     "check_digest",
     "digest_path",
     "remove_stale_temps",
+    "sha256_file",
     "temp_path",
 ]
 
@@ -131,7 +132,8 @@ def digest_path(path: StrPath) -> Path:
     return p.with_name(p.name + DIGEST_SUFFIX)
 
 
-def _sha256_of(path: Path) -> str:
+def sha256_file(path: StrPath) -> str:
+    """The SHA-256 digest (hex) of the file at ``path``."""
     h = hashlib.sha256()
     with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
@@ -147,7 +149,7 @@ def _check_written_digest(path: str, mtime_ns: int, size: int, digest_mtime_ns: 
         want = side.read_text().split()[0].lower()
     except (OSError, IndexError, UnicodeDecodeError):
         return
-    if _sha256_of(p) != want:
+    if sha256_file(p) != want:
         raise InputError(field, f"{p} is damaged: its SHA-256 is not the one written with it in {side.name} "
                                 f"({want[:16]}...)")
 
@@ -183,7 +185,7 @@ def atomic_save(path: StrPath, write: Callable[[BinaryIO], object], *, sidecars:
     try:
         staged.append((dest, _stage(dest, write)))
         if digest:
-            sides.append((digest_path(dest), f"{_sha256_of(staged[0][1])}  {dest.name}\n".encode()))
+            sides.append((digest_path(dest), f"{sha256_file(staged[0][1])}  {dest.name}\n".encode()))
         for side, data in sides:
             staged.append((side, _stage(side, lambda f, data=data: f.write(data))))
         folders = {d.parent for d, _ in staged}

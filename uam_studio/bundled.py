@@ -25,11 +25,11 @@ and is not checked.
 from __future__ import annotations
 
 import functools
-import hashlib
 import os
 from importlib import resources
 from pathlib import Path
 
+from uam_studio.atomic_io import sha256_file
 from uam_studio.errors import InputError
 
 PACKAGE = "uam_studio.pretrained"
@@ -96,15 +96,6 @@ def bundled_path(name: str) -> Path:
         st = path.stat()
         _check_digest(str(path), st.st_mtime_ns, st.st_size)
     return path
-
-
-def sha256_file(path: str | os.PathLike[str]) -> str:
-    """The SHA-256 digest (hex) of the file at ``path``."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 @functools.lru_cache(maxsize=64)
