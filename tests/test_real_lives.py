@@ -57,4 +57,5 @@ def test_a_life_scored_at_its_landing_times():
     assert score.missions >= 15 and score.samples >= score.missions
     assert all(lo <= med <= hi and np.isfinite(med) for _, lo, med, hi in score.rows)
     assert score.inside >= score.raw_inside and score.missed <= score.raw_missed
+    assert score.strict_missed <= score.raw_missed  # the safety bound is never above the health-only low end
     assert np.isinf(score.rows[0][1])  # no earlier prediction: no calibration yet, no safe verdict

@@ -16,7 +16,8 @@ For each life (VAH07, VAH09, VAH27, VAH30) held out in turn:
 
 Scored at the sampled times, never against a sampled minimum (sampling misses the true minimum):
 coverage of the 90% interval, and per cut-off from 3.0 to 3.3 V, missed breaches (the interval's lower
-end at or above the cut-off where the measured voltage is below it).
+end at or above the cut-off where the measured voltage is below it), also for a one-sided safety
+bound at :data:`SAFETY_LEVEL`.
 """
 
 from __future__ import annotations
@@ -55,6 +56,7 @@ from uam_studio.errors import InputError
 
 CUTOFFS_V = (3.0, 3.05, 3.1, 3.15, 3.2, 3.25, 3.3)
 LEVEL = 0.9
+SAFETY_LEVEL = 0.99  # the one-sided safety bound: a measurement below it 1 time in 100 at most
 N_DRAWS = 200
 REMOVED_START_C = 2160.0  # C: the fit's start for the charge out of full (a 4.0 V charge of a VTC6)
 _STEP = np.array([1e-4, 1e-4, 1e-3])  # finite-difference steps in (ln q_max, ln R0, removed kC)
@@ -78,7 +80,9 @@ class LifeScore:
     samples); covered samples and missed breaches of the calibrated interval (the model's error
     included, :func:`conformal_margin`) and of the health-only one (``raw_``); each sample's
     (measured, low, median, high) voltage (V) of the calibrated interval (an infinite end: no
-    calibration yet)."""
+    calibration yet). ``strict_missed``: missed breaches of the one-sided safety bound at
+    :data:`SAFETY_LEVEL` (the health-only low end less the conformal margin of earlier low-side
+    scores at that level)."""
 
     cell: str
     missions: int = 0
@@ -88,6 +92,7 @@ class LifeScore:
     missed: int = 0
     raw_inside: int = 0
     raw_missed: int = 0
+    strict_missed: int = 0
     rows: list[tuple[float, float, float, float]] = field(default_factory=list)
 
     @property
@@ -234,6 +239,7 @@ def score_life(log: CellLog, cell: Cell, seed: int = 38200, every: int = 1) -> L
     score = LifeScore(log.name)
     rng = np.random.default_rng([seed, sum(map(ord, log.name))])
     past: list[float] = []
+    past_low: list[float] = []  # how far earlier measurements fell below the health-only low end (V)
     for k in range(1, len(missions), every):
         health = fit_mission(log, missions[k - 1], cell)
         if health is None:
@@ -242,6 +248,7 @@ def score_life(log: CellLog, cell: Cell, seed: int = 38200, every: int = 1) -> L
         if not rows:
             continue
         margin = conformal_margin(past)
+        strict = conformal_margin(past_low, SAFETY_LEVEL)
         score.missions += 1
         for meas, lo, med, hi in rows:
             score.samples += 1
@@ -253,7 +260,9 @@ def score_life(log: CellLog, cell: Cell, seed: int = 38200, every: int = 1) -> L
                 score.breaches += breached
                 score.raw_missed += breached and lo >= cut
                 score.missed += breached and lo - margin >= cut
+                score.strict_missed += breached and lo - strict >= cut
         past += [max(lo - meas, meas - hi) for meas, lo, _, hi in rows]
+        past_low += [lo - meas for meas, lo, _, _ in rows]
     return score
 
 
@@ -270,11 +279,11 @@ def leave_one_cell_out(data: str | Path | None = None, every: int = 1, seed: int
 def format_scores(scores: list[LifeScore]) -> str:
     """The table as plain text: calibrated (health-only in brackets)."""
     out = [f"{'cell':6s} {'missions':>8s} {'landing samples':>15s} {'90% coverage':>16s} "
-           f"{'median width mV':>15s} {'breaches':>8s} {'missed':>11s}  (health-only interval in brackets; "
-           "width over the finite intervals)"]
+           f"{'median width mV':>15s} {'breaches':>8s} {'missed':>11s} {'missed, 99% bound':>17s}  (health-only "
+           "interval in brackets; width over the finite intervals)"]
     for s in scores:
         finite = [1000 * (hi - lo) for _, lo, _, hi in s.rows if np.isfinite(hi - lo)]
         width = np.median(finite) if finite else float("nan")
         out.append(f"{s.cell:6s} {s.missions:8d} {s.samples:15d} {s.coverage:7.3f} ({s.raw_coverage:.3f}) "
-                   f"{width:15.0f} {s.breaches:8d} {s.missed:4d} ({s.raw_missed:4d})")
+                   f"{width:15.0f} {s.breaches:8d} {s.missed:4d} ({s.raw_missed:4d}) {s.strict_missed:17d}")
     return "\n".join(out)
