@@ -32,7 +32,7 @@ from uam_studio.cli import main
 
 DATA = os.environ.get("UAM_STUDIO_CMU_DATA", "")
 real = pytest.mark.skipif(not (DATA and (Path(DATA) / "VAH01_20.csv").is_file()),
-                          reason="the CMU eVTOL dataset is not beside the checkout")
+                          reason="the CMU eVTOL dataset is not at ../shared/data/cmu_evtol or $UAM_STUDIO_CMU_DATA")
 HEADER = "times,EcellV,ImA,EnergyChargeWh,QChargemAh,EnergyDischargeWh,QDischargemAh,TemperatureC,cycleNumber,Ns"
 
 

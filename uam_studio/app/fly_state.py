@@ -212,7 +212,7 @@ class FlyState(param.Parameterized):
                     f"{', '.join(reached) or 'none'} · the results show at the landing")
         own = "BREACHED the cut-off (priority 0)" if r.breached else f"priority {r.reached_priority}"
         blind = "breached" if r.static_breached else f"priority {r.static_priority}"
-        return (f"flown: {own}, {r.charging_cycles} recharges, min {r.min_voltage_v:.3f} V · blind pre-flight "
+        return (f"flown: {own}, {r.charging_cycles} recharge{'' if r.charging_cycles == 1 else 's'}, min {r.min_voltage_v:.3f} V · blind pre-flight "
                 f"plan: {blind} · hindsight oracle{'' if r.hindsight_exact else ' (best known plan)'}: "
                 f"priority {r.hindsight_priority}")
 
