@@ -137,22 +137,30 @@ def fit_health_batch(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | N
             np.full(b, max(noise, NOISE_FLOOR_V))
         rho = residual_autocorrelation(resid, mask)
         suspect = not_white(rho, n_ok, cost, n_ok - n_par, None if noise is None else sig[0]) & (rms > NOISE_FLOOR_V)
+        # errors in variables: the current sensor's noise, read off the current, through the model (fit_quality)
+        sigma_i = np.array([current_noise_a(c) for c in cur])
+        cov_cur: dict[int, tuple[np.ndarray, float]] = {}
+        for three in (False, True):  # one batched model call per parameter count
+            rows = [k for k in range(b) if sigma_i[k] > 0.0 and (k in jac3) == three]
+            if not rows:
+                continue
+            pts = np.column_stack([wr[rows], preroll[rows]]) if three else wr[rows]
+            states = None if initial_state is None else BatteryState.from_array(initial_state.as_array()[rows])
+            covs, dv2 = current_noise_covariance(cur[rows], pts, cur[rows, 0] if three else None, dt, states, cell,
+                                                 np.stack([jac3[k] if three else jac[k] for k in rows]), mask[rows],
+                                                 sigma_i[rows])
+            cov_cur.update({k: (covs[i], dv2[i]) for i, k in enumerate(rows)})
     out = []
     for k in range(b):
         j = jac3.get(k, jac[k])
+        # a context that says nothing (at rest: J = 0) gets an unbounded covariance, not a singular matrix
         a_inv = np.linalg.inv(np.einsum("ti,tj->ij", j, j) + np.eye(j.shape[1]) * 1e-300)
-        # errors in variables: the current sensor's noise, read off the current, through the model (fit_quality)
-        sigma_i = current_noise_a(cur[k])
         var = sig[k] ** 2
         cov_data = var * a_inv
-        if sigma_i > 0.0:
-            pts = np.r_[wr[k], preroll[k]] if k in jac3 else wr[k]
-            state_k = None if initial_state is None else BatteryState.from_array(initial_state.as_array()[k:k + 1])
-            cov_cur, dv2 = current_noise_covariance(cur[k], pts, cur[k, 0] if k in jac3 else None, dt, state_k, cell,
-                                                    j, mask[k], sigma_i)
+        if k in cov_cur:
             if noise is None:  # the fitted noise std less what the current noise explains
-                var = max(var - dv2, NOISE_FLOOR_V ** 2)
-            cov_data = var * a_inv + cov_cur
+                var = max(var - cov_cur[k][1], NOISE_FLOOR_V ** 2)
+            cov_data = var * a_inv + cov_cur[k][0]
         # the model's discrepancy: residuals still not white noise of the assumed std -> HAC, where larger
         factor = excess_factor(cov_data, hac_covariance(j, resid[k], mask[k], float(rho[k]))) if suspect[k] else 1.0
         prior_prec = np.diag(_PRIOR_PREC[:j.shape[1]])

@@ -175,27 +175,34 @@ def _search_preroll(cur: np.ndarray, volt: np.ndarray, dt: float, cell: CellPara
 CURRENT_NOISE_DRAWS = 48  # draws of the current noise propagated through the model (a fixed seed)
 
 
-def current_noise_covariance(current: np.ndarray, pts: np.ndarray, i0: float | None, dt: float,
+def current_noise_covariance(current: np.ndarray, pts: np.ndarray, i0: np.ndarray | None, dt: float,
                              state: BatteryState | None, cell: CellParameters, jac: np.ndarray, mask: np.ndarray,
-                             sigma_i: float) -> tuple[np.ndarray, float]:
-    """What white current-sensor noise of std ``sigma_i`` (A) does to a least-squares fit at ``pts`` [P]
-    (w, r0[, pre-roll s]) of one context (``current`` [T] A; its Jacobian ``jac`` [T, P] and counted
-    samples ``mask`` [T]): (the covariance [P, P] it adds to the parameters, the mean square (V^2) it
-    adds to the counted residuals). :data:`CURRENT_NOISE_DRAWS` noise draws (a fixed seed) flown on
-    the model in one batched call; each voltage change is mapped to a parameter change by the
-    linearised least squares (J^T J)^-1 J^T."""
-    rng = np.random.default_rng(0)
+                             sigma_i: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """What white current-sensor noise of std ``sigma_i`` [R] (A) does to least-squares fits at ``pts``
+    [R, P] (w, r0[, pre-roll s of ``i0`` [R] A]) of R contexts (``current`` [R, T] A, from ``state``
+    (R rows) or full; their Jacobians ``jac`` [R, T, P] and counted samples ``mask`` [R, T]): (the
+    covariances [R, P, P] it adds to the parameters, the mean squares [R] (V^2) it adds to the counted
+    residuals). :data:`CURRENT_NOISE_DRAWS` noise draws (one fixed-seed pattern, scaled by each row's
+    std), flown on the model in one batched call for all rows; each voltage change is mapped to a
+    parameter change by the linearised least squares (J^T J)^-1 J^T."""
     m = CURRENT_NOISE_DRAWS
-    cur = np.vstack([current[None], current[None] + rng.normal(0.0, sigma_i, (m, current.size))])
-    p = np.repeat(np.asarray(pts, float)[None], m + 1, axis=0)
-    v, ok = _simulate_pts(cur, p, None if i0 is None else np.full(m + 1, i0), dt,
+    r, t = current.shape
+    z = np.random.default_rng(0).standard_normal((m, t))
+    cur = np.concatenate([current[:, None], current[:, None] + sigma_i[:, None, None] * z[None]], axis=1)
+    p = np.repeat(np.asarray(pts, float), m + 1, axis=0)
+    v, ok = _simulate_pts(cur.reshape(r * (m + 1), t), p, None if i0 is None else np.repeat(i0, m + 1), dt,
                           _rep_state(state, m + 1), cell)
-    counted = mask & ok.all(axis=0)
-    dv = (v[1:] - v[0]) * counted
-    j = jac * counted[:, None]
-    try:
-        dtheta = np.linalg.solve(j.T @ j, j.T @ dv.T).T  # [m, P]
-    except np.linalg.LinAlgError:
-        return np.zeros((jac.shape[1], jac.shape[1])), 0.0
-    cov = dtheta.T @ dtheta / m
-    return 0.5 * (cov + cov.T), float(np.sum(dv ** 2) / (m * max(counted.sum(), 1)))
+    v, ok = v.reshape(r, m + 1, t), ok.reshape(r, m + 1, t)
+    n_par = jac.shape[-1]
+    covs, dv2 = np.zeros((r, n_par, n_par)), np.zeros(r)
+    for k in range(r):
+        counted = mask[k] & ok[k].all(axis=0)
+        dv = (v[k, 1:] - v[k, 0]) * counted
+        j = jac[k] * counted[:, None]
+        try:
+            dtheta = np.linalg.solve(j.T @ j, j.T @ dv.T).T  # [m, P]
+        except np.linalg.LinAlgError:
+            continue
+        cov = dtheta.T @ dtheta / m
+        covs[k], dv2[k] = 0.5 * (cov + cov.T), float(np.sum(dv ** 2) / (m * max(counted.sum(), 1)))
+    return covs, dv2

@@ -45,7 +45,8 @@ _FLAG_TEXT = {
     FLAG_MISFIT: "the context does not fit the model (its residuals are correlated or above the sensor noise): "
                  "the interval is widened by what they imply",
     FLAG_OUTSIDE_FLEET: "the fit puts this cell outside its type's fleet range: an unusual cell or a model "
-                        "that does not describe it; plan with the cautious side of both",
+                        "that does not describe it; a cell better than any of its fleet is planned as the "
+                        "fleet's best",
 }
 
 
