@@ -87,7 +87,7 @@ class EodInterval:
         return any(self.censored)
 
     def describe(self) -> str:
-        """E.g. ``"1200-1500 s (median 1350 s)"``, or ``">= 3600 s"`` for a censored end."""
+        """E.g. ``"1200 s to 1500 s (median 1350 s)"``; a censored end reads ``">= 3600 s"``."""
         low, med, high = (f">= {v:.0f} s" if c else f"{v:.0f} s" for v, c in zip(self, self.censored))
         return f"{low} to {high} (median {med})"
 

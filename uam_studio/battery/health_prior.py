@@ -54,6 +54,12 @@ class HealthPrior:
         """q_max (C) at the prior's mean."""
         return Q_REF_C / float(self.mean[0])
 
+    @property
+    def half_width(self) -> np.ndarray:
+        """Half the widths (w, R0 ohm) of the box the prior stands for: its mean +- sqrt(3) std (the
+        uniform box :meth:`from_ranges` made it from)."""
+        return math.sqrt(3.0) * np.sqrt(np.diag(self.cov))
+
 
 def fleet_prior(cell: CellParameters = DEFAULT_CELL) -> HealthPrior:
     """The prior of a cell of type ``cell``: its fleet's health box (``cell.fleet_q_range`` C,
@@ -87,7 +93,7 @@ def hold_to_fleet(mean: np.ndarray, cov: np.ndarray, likelihood_mean: np.ndarray
     cov = np.asarray(cov, dtype=float)
     lik = np.asarray(likelihood_mean, dtype=float)
     lik_sd = np.sqrt(np.maximum(np.diag(np.asarray(likelihood_cov, dtype=float)), 0.0))
-    edge = prior.mean - math.sqrt(3.0) * np.sqrt(np.diag(prior.cov))  # the box's optimistic edge
+    edge = prior.mean - prior.half_width  # the box's optimistic edge
     beyond = edge - lik > z * lik_sd
     if not beyond.any():
         return mean, cov
@@ -101,7 +107,6 @@ def hold_to_fleet(mean: np.ndarray, cov: np.ndarray, likelihood_mean: np.ndarray
 
 def disagrees(mean: np.ndarray, cov: np.ndarray, prior: HealthPrior, z: float) -> np.ndarray:
     """Per component of (w, R0): whether ``mean`` lies more than ``z`` of its std (from ``cov``) outside
-    the box that ``prior`` stands for (its mean +- sqrt(3) std: the uniform box it was made from)."""
+    the box that ``prior`` stands for (:attr:`HealthPrior.half_width`)."""
     sd = np.sqrt(np.maximum(np.diag(np.asarray(cov, dtype=float)), 0.0))
-    half = math.sqrt(3.0) * np.sqrt(np.diag(prior.cov))
-    return np.abs(np.asarray(mean, dtype=float) - prior.mean) - half > z * sd
+    return np.abs(np.asarray(mean, dtype=float) - prior.mean) - prior.half_width > z * sd
