@@ -400,9 +400,11 @@ def test_layout_fits_the_screen_with_the_plan_above_the_fold(browser, app_url, s
         assert any(s["text"].startswith("Wind home") for s in sliders), sliders
         assert all(s["visible"] and re.search(r":\s*-?\d", s["text"]) for s in sliders), sliders
 
-        for tab in ("Planner", "Battery lab", "Retrain", "Glossary"):
+        for tab in ("Planner", "Battery lab", "Fly", "Retrain", "Glossary"):
             page.locator(".bk-tab", has_text=tab).click()
-            if tab == "Glossary":
+            if tab == "Fly":
+                page.locator(".uam-fly").wait_for()
+            elif tab == "Glossary":
                 page.locator(".uam-glossary").get_by_text("Hindsight oracle").wait_for()
             elif tab == "Battery lab":
                 page.locator(".uam-lab-summary").get_by_text("this setting").wait_for()
@@ -410,6 +412,11 @@ def test_layout_fits_the_screen_with_the_plan_above_the_fold(browser, app_url, s
                 page.locator(".uam-train-status").get_by_text("episodes:").wait_for()
             page.wait_for_timeout(1000)  # layout settles
             assert page.evaluate(JS_OVERFLOW) == [], (tab, size)
+        # the mouse wheel scrolls the page over every figure of every tab: no figure zooms on it
+        zooming = page.evaluate("() => [...window.Bokeh.index.all_views()].filter(v => v.model.type === 'Figure'"
+                                " && v.model.toolbar.active_scroll != null).map(v => v.model.title ? "
+                                "v.model.title.text : '(untitled)')")
+        assert zooming == [], zooming
         assert requests and outside == [], outside
     finally:
         page.close()

@@ -31,7 +31,7 @@ def test_fly_plays_back_and_moves_the_aircraft(state):
     seen = state.series_until()  # nothing after the playback time
     for key in ("measured", "true", "predicted"):
         assert len(seen[key][0]) == int((state.record.time_s <= 500.0).sum()) and max(seen[key][0]) <= 500.0 / 60
-    assert [round(t * 60) for t, _ in seen["decisions"]] == [20]
+    assert [round(t * 60) for t, _, _ in seen["decisions"]] == [20]
     x1, y1, leg1 = state.position()
     assert (x1, y1) != (x0, y0) and leg1 == 0
     assert [r["at"] for r in state.decisions_until()] == ["vertiport"]
@@ -52,7 +52,7 @@ def test_injected_wind_change_reflies_from_the_playback_time(state):
     assert state.t_s == 1000.0 and state.events[-1].start_s == 1000
     after = state.record
     assert after is not before and after.wind_events == ["wind+30@1000"]
-    assert state.series_until()["changes"] == [(1000 / 60, "wind +30 kt")]  # the change is marked where it began
+    assert state.series_until()["changes"] == [(1000 / 60, "wind +30 kt from the next take-off")]  # marked where injected
     # the flight up to the change is the same flight
     k = int((after.time_s <= 1000.0).sum())
     assert (after.measured_voltage_v[:k] == before.measured_voltage_v[:k]).all()

@@ -38,6 +38,15 @@ JS_VOLTAGE = """() => { const out = {now_min: null, curve_max_min: 0, last_decis
   return out; }"""
 
 
+# The injected change's time (min) on the voltage figure, and the Fly log's "leg wind vs forecast" column.
+JS_CHANGE_MIN = """() => { for (const v of window.Bokeh.index.all_views()) { const m = v.model;
+    if (m.type !== 'Figure' || !m.title || !m.title.text.startsWith('voltage: measured')) continue;
+    for (const r of m.renderers) if (r.glyph && r.glyph.type === 'Text' && r.data_source.data.text.length)
+      return r.data_source.data.x[0]; }
+  return null; }"""
+LEG_WINDS = '.uam-fly-log .tabulator-row .tabulator-cell[tabulator-field="leg wind vs forecast (kt)"]'
+
+
 def _speed(page, value: str) -> None:
     page.locator(".bk-input-group", has_text="Playback speed").locator("select").select_option(value)
 
@@ -65,12 +74,30 @@ def test_fly_tab_flies_plays_and_takes_a_wind_change(browser, app_url):
     assert facts["last_decision_min"] <= facts["now_min"] + 0.1, facts
     page.locator("button", has_text="Inject wind change now").click(timeout=TIMEOUT_MS)
     page.wait_for_function(f"() => ({JS_VOLTAGE})().changes.length === 1", timeout=TIMEOUT_MS)
-    assert page.evaluate(JS_VOLTAGE)["changes"][0] == "wind +25 kt"  # the change, marked where it began
+    # the change, marked where it was injected
+    assert page.evaluate(JS_VOLTAGE)["changes"][0] == "wind +25 kt from the next take-off"
+    inject_s = round(60 * page.evaluate(JS_CHANGE_MIN))
     _speed(page, "1000")  # on to the landing: then the result and the references show
     status.get_by_text("hindsight oracle (best known plan)").wait_for(timeout=TIMEOUT_MS)
     status.get_by_text("flown:").wait_for(timeout=TIMEOUT_MS)
     # the playback went on from the injection: the next arrival's re-plan is in the log
     log.get_by_text(re.compile(r"plan (changed|unchanged)")).first.wait_for(timeout=TIMEOUT_MS)
+    # The operator noticed the change: the log shows what each leg measured against the forecast, the
+    # same as the library's flight with the event, and at least one leg after the change flew over 20 kt
+    # more headwind against the forecast than the same flight without it.
+    from uam_studio.app.planner_state import PlannerState
+    from uam_studio.planning.operations import WindEvent, fly_mission
+
+    mission = PlannerState().mission
+    flown = fly_mission(mission, seed=0, events=[WindEvent(inject_s, 25.0)])
+    calm = fly_mission(mission, seed=0)
+    cells = page.locator(LEG_WINDS)
+    cells.nth(len(flown.events) - 1).wait_for(timeout=TIMEOUT_MS)
+    shown = [t.strip() for t in cells.all_inner_texts()]
+    assert shown == [d.leg_wind_text for d in reversed(flown.events)], (shown, inject_s)
+    after = [d.leg_wind_vs_forecast_kts for d in flown.events[1:]]
+    before = [d.leg_wind_vs_forecast_kts for d in calm.events[1:]]
+    assert max(a - b for a, b in zip(after, before)) > 20.0, (after, before)
     if os.environ.get("UAM_SCREENSHOTS") == "1":
         page.screenshot(path=str(ROOT / "assets" / "screenshots" / "fly_tab.png"))
     width = page.evaluate("() => document.documentElement.scrollWidth")

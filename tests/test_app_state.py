@@ -320,6 +320,18 @@ def test_retrain_into_pretrained_is_refused():
     assert not (ROOT / "pretrained" / "refused.zip").exists()
 
 
+def test_a_dqn_run_stopped_before_its_first_episode_saves_nothing(home):
+    """An agent that finished no episode learned nothing: no file, no card, nothing in the agent list."""
+    import threading
+
+    cfg, env_fn = training_setup(steps=500)
+    stop = threading.Event()
+    stop.set()
+    path = new_agent_path("single_charge", "random")
+    assert retrain_dqn(cfg, env_fn, path, stop_event=stop) is None
+    assert not path.exists() and list(path.parent.glob("*")) == [] and list_agents() == []
+
+
 def test_training_setup_safe_return_reaches_the_env_and_the_card():
     for flag in (False, True):
         cfg, env_fn = training_setup(steps=10, safe_return=flag)
@@ -368,6 +380,7 @@ def test_retrain_state_trains_saves_and_the_planner_can_use_it(home):
 
     label = planner.policy_label(value)
     assert label.startswith("Retrained: ") and path.stem in label and str(path) not in label
+    assert re.search(r"\(DQN, \d+ steps, ", label), label  # what it learned, from its card
     assert f"<b>Policy:</b> {label}" in summary_html(planner)  # its label, never the file path
     planner.close()
 
@@ -449,6 +462,10 @@ def test_battery_lab_families(vary):
         assert curve["voltage_time_s"].size == curve["voltage_v"].size > 0
         assert np.all(np.isfinite(curve["voltage_v"]))
         assert curve["eod_s"] is None or np.isfinite(curve["eod_s"])  # never NaN: "nan min" in the table
+        # the flight ends at the cut-off: no current drawn after it, so no curve stretches the time axis
+        assert curve["time_s"][-1] == curve["voltage_time_s"][-1]
+        if curve["eod_s"] is not None:
+            assert curve["time_s"][-1] <= curve["eod_s"] + 1.0
     assert c["t_end_s"] == max(float(cv["time_s"][-1]) for cv in c["family"] + c["setting"])
     values = [cv["value"][{"altitude": "altitude_m", "wind": "wind_kts", "R0": "r0", "q_max": "q_max"}[vary]]
               for cv in c["family"]]
@@ -697,6 +714,9 @@ def test_retrain_progress_text_and_oracle_reference():
     rs.poll()
     text = rs.progress_text()
     assert text.startswith(f"{rs.timesteps} of 200 steps (100%)") and "elapsed" in text and "left" not in text
+    assert rs.status.startswith("done: ") and rs.episodes > 0
+    rs.model = "attention"  # the DQN run's status, counts and clock do not stay beside the other planner
+    assert (rs.status, rs.episodes, rs.timesteps, rs.progress_text()) == ("", 0, 0, "not started")
     rs.source = "random"
     rs.request_reference(None)
     assert rs.reference is None

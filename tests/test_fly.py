@@ -288,3 +288,24 @@ def test_hindsight_with_an_event_flies_the_winds_of_each_legs_time_and_never_tra
     world = World(mission, 0.0, rec.sensor_noise_mv, rec.sensor_noise_ma, [parse_event(event)], 1)
     breached, reached = _fly_fixed(world, rec.hindsight_route, rec.hindsight_altitudes_m, takeoff_current())
     assert not breached and sum(mission.node(n).priority for n in reached) == rec.hindsight_priority
+
+
+def test_each_decision_says_what_its_leg_measured_and_a_wind_change_shows_up_as_it_happened(example):
+    """The decision at an arrival carries the leg's wind as the operator read it off the leg's duration
+    (1 kt grid inversion), the same against the forecast, and its reason says it; an injected +25 kt
+    change shows up as about +25 kt more against the forecast on the legs taking off after it
+    (unless the tables' 39 kt clip bites)."""
+    calm = fly_mission(example, seed=3)
+    windy = fly_mission(example, seed=3, events=[parse_event("wind+25@300")])
+    for rec in (calm, windy):
+        first, rest = rec.events[0], rec.events[1:]
+        assert first.leg_wind_kts is None and first.leg_wind_vs_forecast_kts is None and not first.wind_surprise
+        for d, actual, forecast in zip(rest, rec.actual_winds_kts, rec.forecast_winds_kts):
+            assert abs(d.leg_wind_kts - actual) <= 1.0, (d.node, d.leg_wind_kts, actual)
+            assert d.leg_wind_vs_forecast_kts == pytest.approx(d.leg_wind_kts - forecast)
+            assert f"{d.leg_wind_kts:+.0f} kt ({d.leg_wind_vs_forecast_kts:+.0f} kt against the forecast)" in d.reason
+    assert windy.route[0] == calm.route[0] and windy.leg_end_s[0] > 300  # the first leg was already in the air
+    assert windy.events[1].leg_wind_kts == calm.events[1].leg_wind_kts
+    if windy.route[1] == calm.route[1] and calm.actual_winds_kts[1] + 25 <= 39:
+        assert windy.events[2].leg_wind_vs_forecast_kts - calm.events[2].leg_wind_vs_forecast_kts == pytest.approx(25, abs=1.5)
+    assert any(d.leg_wind_vs_forecast_kts > 15 for d in windy.events[1:])

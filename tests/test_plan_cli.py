@@ -110,7 +110,14 @@ def test_plan_greedy_json_and_table(capsys):
     assert res["policy"] == "greedy" and res["safe"] and res["reached"]
     assert main(["plan", str(EXAMPLE), "--policy", "greedy"]) == 0
     out = capsys.readouterr().out
-    assert "route: vertiport -> " in out and "safe: yes" in out and "charging cycles: 1" in out
+    assert "route: vertiport -> " in out and "safe: yes" in out and "recharges: 1" in out
+
+
+def test_a_cell_that_cannot_take_off_is_not_called_safe(capsys):
+    """The largest R0 of the box: nothing is flown, and the table says why, as the app's verdict does."""
+    assert main(["plan", str(EXAMPLE), "--policy", "greedy", "--r0", "0.45"]) == 0
+    out = capsys.readouterr().out
+    assert "route: none" in out and "safe: NO, the cell cannot take off" in out and "safe: yes" not in out
 
 
 @pytest.mark.parametrize("policy", ["oracle", "greedy", "dqn"])

@@ -171,8 +171,11 @@ def test_unknown_suffix_and_missing_folder(tmp_path, monkeypatch):
     with pytest.raises(CellDataError, match="x.txt: path: expected a .csv or .mat"):
         load_cell_log(tmp_path / "x.txt")
     monkeypatch.delenv("UAM_STUDIO_CMU_DATA", raising=False)
-    with pytest.raises(ValueError, match="data: no dataset folder"):
+    monkeypatch.setattr("uam_studio.battery.cmu_data.BESIDE_CHECKOUT", tmp_path / "nowhere")
+    with pytest.raises(ValueError, match="data: no dataset folder") as err:
         data_folder(None)
+    text = str(err.value)  # one line, saying where it looked and how to point at the data from a notebook
+    assert "\n" not in text and "nowhere" in text and "os.environ['UAM_STUDIO_CMU_DATA']" in text
 
 
 def test_cli_evaluate_real_bad_folder_is_one_line(tmp_path, capsys):

@@ -63,7 +63,7 @@ def test_attention_run_in_a_child_process_streams_epochs_scores_the_map_and_plan
     assert agent_policy(value) == ("attention", str(path))
     assert value in planner.policy_objects.values()
     label = planner.policy_label(value)
-    assert label == f"Retrained: {path.parent.name}"
+    assert label == f"Retrained: {path.parent.name} (attention, 3 epochs)"  # what it learned, from its card
     assert planner.apply(policy=value), planner.error
     assert planner.plan_error == "" and planner.plan["policy"] == "attention" and planner.plan["route"]
     assert "paper" in planner._compare_specs(planner.plan_request)
@@ -101,7 +101,7 @@ def test_attention_stop_saves_the_network_so_far_or_says_nothing_was_saved(home)
     early.stop()  # while the oracle solves the training missions
     early.join(120)
     early.poll()
-    assert early.error == "" and early.status == "stopped before the first epoch: nothing saved"
+    assert early.error == "" and early.status == "stopped before the first epoch ended: nothing learned, nothing saved"
     assert not early.agent_path and [a.name for a in list_agents()] == [Path(rs.agent_path).parent.name]
 
 

@@ -22,7 +22,7 @@ import param
 from uam_studio.app.battery_lab_state import CELLS, VARY, BatteryLabState
 from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE
 from uam_studio.app.session import ensure_bokeh_backend, respond_at_once, session_dispatcher
-from uam_studio.app.style import heading
+from uam_studio.app.style import heading, no_scroll_zoom
 from uam_studio.flight.tables import ALTITUDE_RANGE_M, WIND_RANGE_KTS
 
 FAMILY_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2")
@@ -142,7 +142,7 @@ class BatteryLabView(pn.viewable.Viewer):
                 self._current_pipe.send(data)
                 self._voltage_pipe.send(data)
             me = c["setting"][0]
-            rows = "".join(f"<tr><td>{html.escape(cv['label'])}</td><td>{eod_text(cv)}</td></tr>"
+            rows = "".join(f"<tr><td style='padding-right:12px'>{html.escape(cv['label'])}</td><td>{eod_text(cv)}</td></tr>"
                            for cv in [me, *c["family"]])
             skipped = "".join(f"<li>not drawn: {html.escape(m)}</li>" for m in c["skipped"])
             self.eod_table.object = ("<div class='uam-lab-summary'><table><tr><th style='text-align:left'>curve</th>"
@@ -176,7 +176,7 @@ class BatteryLabView(pn.viewable.Viewer):
 
     def _current_element(self, data: dict[str, Any], labels: list[str], factor: str) -> hv.Overlay:
         return hv.Overlay(self._curves(data["current"], labels, "current (A)")).opts(
-            hv.opts.Overlay(responsive=True, height=250, title=f"Per-cell current, varying {factor}",
+            hv.opts.Overlay(responsive=True, height=250, title=f"Per-cell current, varying {factor}", hooks=[no_scroll_zoom],
                             legend_position="right", show_grid=True, xlim=data["xlim"],
                             fontsize={"title": "10pt", "legend": "8pt"}),
             hv.opts.Curve(framewise=True))
@@ -187,7 +187,7 @@ class BatteryLabView(pn.viewable.Viewer):
         line = hv.Curve(([x0, x1], [eod, eod]), "time (min)", "voltage (V)", label=f"EOD {eod:g} V").opts(
             color=EOD_COLOR, line_width=1.5, line_dash="dashed")
         return hv.Overlay([*self._curves(data["voltage"], labels, "voltage (V)"), line]).opts(
-            hv.opts.Overlay(responsive=True, height=290, title=f"Voltage (physics model), varying {factor}",
+            hv.opts.Overlay(responsive=True, height=290, title=f"Voltage (physics model), varying {factor}", hooks=[no_scroll_zoom],
                             legend_position="right", show_grid=True, xlim=data["xlim"], ylim=data["ylim"],
                             fontsize={"title": "10pt", "legend": "8pt"}),
             hv.opts.Curve(framewise=True))

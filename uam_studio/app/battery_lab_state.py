@@ -124,9 +124,9 @@ class BatteryLabState(param.Parameterized):
         "eod_v", "labels", "cell"}``.
 
         The family is in the factor's order (ascending); ``t_end_s`` is the end of the longest
-        current profile, one time range for every plot. Each curve is ``{"label", "value", "time_s",
-        "current_a", "voltage_time_s", "voltage_v", "eod_s", "min_voltage_v"}``: the current over
-        the whole flight, the voltage up to and including the first sample below the cut-off, both
+        curve, one time range for every plot. Each curve is ``{"label", "value", "time_s",
+        "current_a", "voltage_time_s", "voltage_v", "eod_s", "min_voltage_v"}``: the current and the
+        voltage up to and including the first sample below the cut-off (the flight ends there), both
         thinned to at most :data:`MAX_POINTS` samples; ``eod_s`` is None where the cut-off is never
         reached and ``min_voltage_v`` the lowest voltage (every sample).
         """
@@ -159,7 +159,7 @@ class BatteryLabState(param.Parameterized):
         v = np.asarray(sim.voltage_v, dtype=float)
         n = min(int(np.count_nonzero(sim.valid)) + 1, v.size)  # the first sample below the cut-off too
         eod = float(sim.eod_s)
-        it = _thin_index(t.size, self.MAX_POINTS)
+        it = _thin_index(n, self.MAX_POINTS)  # the flight ends at the cut-off: its current too
         iv = _thin_index(n, self.MAX_POINTS, keep=int(np.argmin(v[:n])))
         return {"label": label, "value": s, "time_s": t[it], "current_a": cur[it],
                 "voltage_time_s": t[iv], "voltage_v": v[iv], "eod_s": eod if math.isfinite(eod) else None,

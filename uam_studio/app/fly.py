@@ -74,11 +74,15 @@ class FlyView(pn.viewable.Viewer):
         self.status = pn.pane.Markdown("", css_classes=["uam-fly-status"], sizing_mode="stretch_width")
         self.error = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width")
         self.progress = pn.indicators.LoadingSpinner(value=False, size=24, name="flying...", visible=False)
-        self.log = pn.widgets.Tabulator(pd.DataFrame(columns=["t (s)", "at", "q_max (C)", "R0 (ohm)",
-                                                              "wind shift (kt)", "next", "reason"]),
+        self.log = pn.widgets.Tabulator(pd.DataFrame(columns=["t (s)", "at", "q_max (C)", "R0 (ohm)", "fit flags",
+                                                              "leg wind vs forecast (kt)", "common shift (kt)",
+                                                              "next", "reason"]),
                                         disabled=True, show_index=False, height=300, sizing_mode="stretch_width",
-                                        css_classes=["uam-fly-log"], layout="fit_data_stretch",
-                                        formatters={"reason": {"type": "textarea"}}, widths={"reason": 520})
+                                        css_classes=["uam-fly-log"], layout="fit_columns",
+                                        formatters={"reason": {"type": "textarea"}},
+                                        widths={"t (s)": 60, "at": 90, "q_max (C)": 100, "R0 (ohm)": 70,
+                                                "fit flags": 70, "leg wind vs forecast (kt)": 120,
+                                                "common shift (kt)": 100, "next": 80})
         self.pos = hv.streams.Pipe(data=[])
         self.leg_labels = hv.streams.Pipe(data={"x": [], "y": [], "text": []})
         self.seen = hv.streams.Pipe(data=[])
@@ -151,7 +155,8 @@ class FlyView(pn.viewable.Viewer):
         cutoff = hv.HLine(eod, label="EOD cut-off").opts(color=EOD_COLOR, line_dash="dashed", line_width=2)
         if r is None or r.time_s.size == 0:
             empty = hv.Curve([], TIME_DIM, VOLT_DIM).opts(responsive=True, height=MAP_PX)
-            return (empty * cutoff).opts(title="voltage: fly the mission to see it", ylim=(eod - 0.1, 4.25))
+            return (empty * cutoff).opts(title="voltage: fly the mission to see it", ylim=(eod - 0.1, 4.25),
+                                         hooks=[no_scroll_zoom])
         lo = min(eod, float(r.true_voltage_v.min())) - 0.08
 
         def curve(key: str, label: str, **style: Any) -> hv.DynamicMap:
@@ -162,8 +167,8 @@ class FlyView(pn.viewable.Viewer):
         true = curve("true", "true (hidden from the operator)", color="#2ca02c", line_width=1, alpha=0.8)
         measured = curve("measured", "measured (sensor)", color="#333333", line_width=1.5)
         marks = hv.DynamicMap(lambda data: hv.Points(
-            [(t, eod + 0.02, reason) for t, reason in data["decisions"]], [TIME_DIM, VOLT_DIM], ["decision"],
-            label="decisions").opts(marker="triangle", size=10, color="black", tools=["hover"]),
+            [(t, v, reason) for t, v, reason in data["decisions"]], [TIME_DIM, VOLT_DIM], ["decision"],
+            label="decisions").opts(marker="triangle", size=11, color="#ff7f0e", line_color="black", tools=["hover"]),
             streams=[self.series])
         changes = hv.DynamicMap(lambda data: hv.VLines([t for t, _ in data["changes"]], TIME_DIM).opts(
             color=EVENT_COLOR, line_width=2, line_dash="dashdot") * hv.Labels(
@@ -175,7 +180,8 @@ class FlyView(pn.viewable.Viewer):
             color="black", line_width=1), streams=[self.now])
         return (predicted * true * measured * cutoff * marks * changes * now).opts(
             title="voltage: measured vs predicted, and the cut-off", responsive=True, height=MAP_PX,
-            legend_position="right", ylim=(lo, 4.25), xlim=(0, float(r.time_s[-1]) / 60.0 * 1.02))
+            legend_position="right", ylim=(lo, 4.25), xlim=(0, float(r.time_s[-1]) / 60.0 * 1.02),
+            hooks=[no_scroll_zoom])
 
     # ------------------------------------------------------------------ updates
     def _on_record(self, *_: Any) -> None:

@@ -21,7 +21,13 @@ import param
 from uam_studio.app.services import FLIGHT_POOL, LatestWorker, one_line
 from uam_studio.errors import InputError
 from uam_studio.planning import VERTIPORT, Mission
-from uam_studio.planning.operations import FlightRecord, WindEvent, fly_mission, parse_event, position_at
+from uam_studio.planning.operations import (
+    FlightRecord,
+    WindEvent,
+    fly_mission,
+    parse_event,
+    position_at,
+)
 from uam_studio.planning.operations.world import (
     DEFAULT_FORECAST_SIGMA_KT,
     DEFAULT_SENSOR_NOISE_MV,
@@ -168,10 +174,7 @@ class FlyState(param.Parameterized):
         """The decisions made up to the playback time, newest first, as table rows."""
         if self.record is None:
             return []
-        return [{"t (s)": round(d.time_s), "at": d.node, "q_max (C)": f"{d.q_max_c:.0f} ± {d.q_max_sd_c:.0f}",
-                 "R0 (ohm)": f"{d.r0_ohm:.3f}", "fit flags": ", ".join(d.health_flags) or "-",
-                 "wind shift (kt)": f"{d.wind_shift_kts:+.1f}",
-                 "next": d.next_to or "-", "reason": d.reason}
+        return [d.row()
                 for d in reversed(self.record.events) if d.time_s <= self.t_s]
 
     @param.depends("t_s", watch=True)
@@ -186,7 +189,8 @@ class FlyState(param.Parameterized):
 
     def series_until(self) -> dict[str, Any]:
         """The record's series up to the playback time (time in min): ``measured``, ``true`` and
-        ``predicted`` voltages (V), the ``decisions`` made so far (time min, reason) and the wind
+        ``predicted`` voltages (V), the ``decisions`` made so far (time min, the measured voltage then V,
+        reason) and the wind
         ``changes`` that have started (time min, text)."""
         r = self.record
         if r is None:
@@ -195,8 +199,9 @@ class FlyState(param.Parameterized):
         t = r.time_s[:k] / 60.0
         return {"measured": (t, r.measured_voltage_v[:k]), "true": (t, r.true_voltage_v[:k]),
                 "predicted": (t, r.predicted_voltage_v[:k]),
-                "decisions": [(d.time_s / 60.0, d.reason) for d in r.events if d.time_s <= self.t_s],
-                "changes": [(e.start_s / 60.0, f"wind {e.delta_kts:+g} kt")
+                "decisions": [(d.time_s / 60.0, float(np.interp(d.time_s, r.time_s, r.measured_voltage_v)), d.reason)
+                              for d in r.events if d.time_s <= self.t_s],
+                "changes": [(e.start_s / 60.0, f"wind {e.delta_kts:+g} kt from the next take-off")
                             for e in map(parse_event, r.wind_events) if e.start_s <= self.t_s]}
 
     def summary(self) -> str:

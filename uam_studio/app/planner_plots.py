@@ -138,7 +138,8 @@ class PlannerPlots:
             hv.opts.Rectangles(xticks=ticks, xrotation=30, xlim=(0.4, max(n, 1) + 0.6), ylim=(0, 3300),
                                xlabel="", ylabel="altitude (m)", framewise=True),
             hv.opts.Labels(framewise=True),
-        ).opts(width=WIDE_MIN_PX, height=240, title="Cruise altitude per leg (colour = charging cycle)")
+        ).opts(width=WIDE_MIN_PX, height=240, title="Cruise altitude per leg (colour = charging cycle)",
+                hooks=[no_scroll_zoom])
 
     def _voltage_data(self) -> dict[str, Any]:
         """The voltage plot's series (minutes, V): physics (the plan's, or the failed take-off's),
@@ -187,7 +188,7 @@ class PlannerPlots:
         overlay = (band * phys * pred * eod * leg_lines * leg_names).opts(
             responsive=True, height=VOLTAGE_HEIGHT_PX, legend_position="top", legend_cols=4, show_grid=True,
             fontsize={"legend": "8pt", "title": "10pt"},
-            title="Voltage: physics (what happens) vs Dynaformer (predicted)")
+            title="Voltage: physics (what happens) vs Dynaformer (predicted)", hooks=[no_scroll_zoom])
         return {"overlay": overlay, "band": band, "physics": phys, "predicted": pred, "eod": eod,
                 "leg_lines": leg_lines, "leg_names": leg_names}
 
@@ -220,7 +221,8 @@ class PlannerPlots:
         return hv.Points(df, ["PC1", "PC2"], ["R0 (ohm)", "q_max (C)"], label="training population").opts(
             color="R0 (ohm)", cmap="viridis", colorbar=True, size=5, alpha=0.6, tools=["hover"],
             width=WIDE_MIN_PX, height=280, title="Health estimate (Dynaformer PCs) vs population", show_grid=True,
-            legend_position="top", legend_cols=2, xlabel="PC1 (tracks R0)", ylabel="PC2 (tracks q_max)")
+            legend_position="top", legend_cols=2, xlabel="PC1 (tracks R0)", ylabel="PC2 (tracks q_max)",
+            hooks=[no_scroll_zoom])
 
     @staticmethod
     def _health_element(data: tuple[float, float] | None) -> hv.Points:

@@ -24,7 +24,7 @@ from uam_studio.app.planner_state import PlannerState
 from uam_studio.app.retrain_state import CURVE_COLUMNS, EPOCH_COLUMNS, MODELS, RetrainState
 from uam_studio.app.services import registry
 from uam_studio.app.session import ensure_bokeh_backend
-from uam_studio.app.style import NOTE_STYLE, heading
+from uam_studio.app.style import NOTE_STYLE, heading, no_scroll_zoom
 from uam_studio.planning.agents.retrain import agents_dir
 from uam_studio.planning.missions.mission import SCENARIOS
 
@@ -117,7 +117,16 @@ class RetrainView(pn.viewable.Viewer):
                                            sizing_mode="stretch_width")
         self.dqn_curves = pn.Column(self.reached_plot, self.cycles_plot, self.reward_plot, self.breach_plot,
                                     sizing_mode="stretch_width", margin=0)
-        self.attention_curves = pn.Column(self.priority_plot, self.loss_plot, sizing_mode="stretch_width", margin=0)
+        self.priority_note = pn.pane.HTML(
+            "How to read it: <b>its plan</b> is what the Planner flies: the network ranks the choices and "
+            "the Planner's search checks each leg on the physics model, so it can match the oracle from the "
+            "first epoch. <b>First choices alone</b> follows the network's top choice with no search and "
+            "scores 0 as soon as one of them is unsafe: in a short run it often falls to 0 while the network "
+            "is still learning; what training improves is how often the oracle's choice is ranked first "
+            "(the share below).", css_classes=["uam-curve-priority-note"], styles=NOTE_STYLE,
+            sizing_mode="stretch_width")
+        self.attention_curves = pn.Column(self.priority_plot, self.priority_note, self.loss_plot,
+                                          sizing_mode="stretch_width", margin=0)
         self.dqn_only = [self.alpha, self.beta, self.gamma, self.steps]
         self.attention_only = [self.missions, self.epochs]
         self._poller = None
@@ -136,19 +145,17 @@ class RetrainView(pn.viewable.Viewer):
     def __panel__(self) -> pn.viewable.Viewable:
         w = SETTINGS_WIDTH
         intro = pn.pane.Markdown(
-            "Retrain a planner. **DQN (paper)** learns by trial and error, one episode after another: "
-            "*current map* trains on the Planner's destinations with a random cell (q_max, R0) each episode, "
-            "*random missions* draws a new mission every episode. *Fine-tune bundled* starts from the "
-            "scenario's bundled agent and plays its own (slightly randomised) choices from the first episode "
-            "on, where a run from random weights first plays ~100 episodes at random to fill its memory: on an "
-            "8-destination map fine-tuning reached the exact oracle's priority in 3 minutes where random "
-            "weights did not (`benchmarks/RESULTS.md`). **Attention (default planner)** learns by imitation: "
-            "random missions of 2-6 destinations are solved by the exact oracle, and the network learns to "
-            "rank the oracle's choice first; after each epoch it plans the *current map* (with the Planner's "
-            "search, and by its own first choices alone) and the curve shows the priority it reaches. "
-            "The full recipe (also 9-20 destinations) is `uam-studio train attention`. "
-            f"Both are saved in `{html.escape(str(agents_dir()))}` (set `UAM_STUDIO_HOME` to move it), "
-            "never over the bundled ones, and appear in the Planner's policy list.",
+            "Retrain a planner and watch it learn.\n\n"
+            "- **DQN (paper)** learns by trial and error, one episode after another, on the *current map* "
+            "(a random cell each episode) or on *random missions*.\n"
+            "- **Attention (default)** learns by imitation: the exact oracle solves random missions of 2-6 "
+            "destinations and the network learns to rank the oracle's choice first. After each epoch it "
+            "plans the *current map*.\n"
+            "- *Fine-tune bundled* starts from the bundled agent (DQN: it reached the oracle on an "
+            "8-destination map in 3 minutes where random weights did not, `benchmarks/RESULTS.md`).\n"
+            f"- Saved in `{html.escape(str(agents_dir()))}` (`UAM_STUDIO_HOME` moves it), never over the bundled "
+            "ones; they appear in every session's Planner policy list. The full recipe is "
+            "`uam-studio train attention`.",
             sizing_mode="stretch_width", styles={"font-size": "13px"})
         self.rewards = pn.pane.HTML("alpha: reward per destination x priority; beta: penalty per charging stop; "
                                     "gamma: penalty for an end of discharge", width=w, styles=NOTE_STYLE,
@@ -262,6 +269,7 @@ class RetrainView(pn.viewable.Viewer):
         span = top - bottom
         return (raw * ma * ref).opts(
             hv.opts.Overlay(responsive=True, height=240, title=title, ylabel=ylabel, legend_position="right",
+                            hooks=[no_scroll_zoom],
                             show_grid=True, xlim=(0.0, x1), ylim=(bottom - 0.05 * span, top + 0.1 * span + 0.1),
                             fontsize={"title": "10pt", "legend": "8pt"}),
             hv.opts.Curve(framewise=True))
@@ -300,7 +308,7 @@ class RetrainView(pn.viewable.Viewer):
         x1 = max(10.0, n)
         search = hv.Curve(data, "epoch", "priority", label="its plan (Planner's search)").opts(
             color="#08519c", line_width=2.5)
-        alone = hv.Curve(data, "epoch", "priority_net", label="first choices alone").opts(
+        alone = hv.Curve(data, "epoch", "priority_net", label="first choices alone (no search)").opts(
             color="#6baed6", line_width=1.5, line_dash="dotted")
         ref_value = float(reference["priority"]) if reference is not None and reference.get("status") == "done" \
             else np.nan
@@ -311,6 +319,7 @@ class RetrainView(pn.viewable.Viewer):
         return (search * alone * ref).opts(
             hv.opts.Overlay(responsive=True, height=260, title="Priority of its plan of this map after each epoch "
                             "(0 = unsafe)", ylabel="priority reached", legend_position="right", show_grid=True,
+                            hooks=[no_scroll_zoom],
                             xlim=(0.0, x1), ylim=(-0.05 * top, 1.1 * top + 0.1),
                             fontsize={"title": "10pt", "legend": "8pt"}),
             hv.opts.Curve(framewise=True))
@@ -325,7 +334,7 @@ class RetrainView(pn.viewable.Viewer):
         top = max([1.0, *(float(v) for v in data["loss"])]) if len(data) else 1.0
         return (loss * acc).opts(
             hv.opts.Overlay(responsive=True, height=240, title="Imitation of the exact oracle: loss and agreement",
-                            ylabel="loss / share", legend_position="right", show_grid=True,
+                            ylabel="loss / share", legend_position="right", show_grid=True, hooks=[no_scroll_zoom],
                             xlim=(0.0, max(10.0, n)), ylim=(0.0, 1.05 * top),
                             fontsize={"title": "10pt", "legend": "8pt"}),
             hv.opts.Curve(framewise=True))

@@ -52,7 +52,7 @@ CURVE_COLUMNS = ["episode", *CURVE_SERIES, *(f"{k}_ma" for k in CURVE_SERIES)]
 """Columns of :meth:`RetrainState.poll`'s rows for a DQN run."""
 EPOCH_COLUMNS = ["epoch", "loss", "accuracy", "priority", "priority_net"]
 """Columns of :meth:`RetrainState.poll`'s rows for an attention run (priorities NaN without a map)."""
-MODELS = {"DQN (paper)": "dqn", "Attention (default planner)": "attention"}
+MODELS = {"DQN (paper)": "dqn", "Attention (default)": "attention"}
 
 
 class RetrainState(param.Parameterized):
@@ -134,6 +134,16 @@ class RetrainState(param.Parameterized):
         self._last_timestep = 0
         self._run_epochs = 0
         self._stage: tuple[str, int, int] | None = None  # an attention run's examples: (stage, done, total)
+
+    @param.depends("model", watch=True)
+    def _forget_other_run(self) -> None:
+        """Choosing the other planner while no run goes clears the last run's status, counts and
+        clock: they described the other planner's run (its saved agent stays in the policy list)."""
+        if self.running or self.model == self._kind:
+            return
+        self._target_steps, self._t_start, self._t_end, self._stage = 0, None, None, None
+        self._kind = self.model
+        self.param.update(timesteps=0, episodes=0, status="", error="")
 
     def start(self, mission: Mission | None = None) -> bool:
         """Start training on ``mission`` (``source == "map"``) or on random missions (the attention
@@ -282,6 +292,10 @@ class RetrainState(param.Parameterized):
         if not self._target_steps:
             return "not started"
         p = self.progress
+        if self.running and p == 0 and self._proc is not None and (self._kind != "attention" or self._stage is None):
+            return (f"starting the trainer: a new process loads torch · {_clock(self.elapsed_s)} elapsed "
+                    "(Stop ends it at once; nothing is saved before the first "
+                    f"{'epoch' if self._kind == 'attention' else 'episode'})")
         if self._kind == "attention":
             total = self._target_steps - self._run_epochs
             solved = self._stage[1] if self._stage is not None else 0
@@ -372,8 +386,9 @@ class RetrainState(param.Parameterized):
                     changes.update(timesteps=r.timesteps, agent_path=str(r.path), error="",
                                    status=f"{end}: {r.episodes} episodes, {r.timesteps} steps; saved "
                                           f"{r.path.name} (now in the Planner's policy list)")
-            else:  # an attention run stopped while the oracle solved its training missions
-                changes.update(error="", status="stopped before the first epoch: nothing saved")
+            else:  # stopped before the first episode (DQN) or epoch (attention: the oracle was solving its missions)
+                first = "epoch" if self._kind == "attention" else "episode"
+                changes.update(error="", status=f"stopped before the first {first} ended: nothing learned, nothing saved")
         if changes:
             self.param.update(**changes)
         return rows

@@ -30,6 +30,8 @@ from ..errors import InputError
 DATA_ENV = "UAM_STUDIO_CMU_DATA"  # environment variable: the dataset's folder
 DATASET_DOI = "10.1184/R1/14226830"
 MISSION_FILE = "VAH01_20.csv"  # the 1 Hz baseline mission (cell VAH01, cycle 20)
+# Where a source checkout finds the dataset without being told: ../shared/data/cmu_evtol beside it.
+BESIDE_CHECKOUT = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "cmu_evtol"
 LIFE_FILES = ("VAH07.csv.mat", "VAH09.csv.mat", "VAH27.csv.mat", "VAH30.csv.mat")
 
 # Segment codes (Ns) of a mission cycle in the dataset.
@@ -233,14 +235,20 @@ def load_cell_log(path: str | os.PathLike) -> CellLog:
 
 
 def data_folder(path: str | os.PathLike | None = None) -> Path:
-    """The dataset's folder: ``path`` if given, else ``$UAM_STUDIO_CMU_DATA``.
+    """The dataset's folder: ``path`` if given, else ``$UAM_STUDIO_CMU_DATA``, else
+    :data:`BESIDE_CHECKOUT` (``shared/data/cmu_evtol`` beside a source checkout) if it is there.
 
-    :raises InputError: neither given, or the folder lacks the mission file.
+    :raises InputError: none found, or the folder lacks the mission file. The message says where it
+        looked and how to point at the data from a notebook, a shell or the CLI.
     """
     text = str(path) if path is not None else os.environ.get(DATA_ENV, "")
+    if not text and (BESIDE_CHECKOUT / MISSION_FILE).is_file():
+        text = str(BESIDE_CHECKOUT)
     if not text:
-        raise InputError("data", f"no dataset folder: pass --data PATH or set ${DATA_ENV} (the CMU eVTOL "
-                         f"dataset, DOI {DATASET_DOI})")
+        raise InputError("data", f"no dataset folder: the CMU eVTOL dataset (DOI {DATASET_DOI}) is not at "
+                         f"${DATA_ENV} nor at {BESIDE_CHECKOUT}; point at it with "
+                         f"os.environ['{DATA_ENV}'] = '/path/to/cmu_evtol' in a notebook's first cell, "
+                         f"export {DATA_ENV}=/path/to/cmu_evtol in a shell, or --data PATH on the command line")
     folder = Path(text).expanduser()
     if not (folder / MISSION_FILE).is_file():
         raise InputError("data", f"{folder} has no {MISSION_FILE} (the CMU eVTOL dataset's 1 Hz mission, "

@@ -37,6 +37,7 @@ _PLAN_FLAGS = {"agent_path": "--agent", "lookahead": "--lookahead", "policy": "-
 def _run_plan(args: argparse.Namespace) -> int:
     from uam_studio.planning import load_mission
     from uam_studio.planning.planner import plan_mission
+    from uam_studio.planning.safety import takeoff_attempt
 
     mission = load_mission(args.mission)  # a Mission holds 1-20 destinations: checked in the mission
     try:
@@ -61,9 +62,14 @@ def _run_plan(args: argparse.Namespace) -> int:
         print("route: none (nothing is flown)")
     reached = ", ".join(res.reached) or "none"
     print(f"reached: {reached} (priority {res.reached_priority})")
-    print(f"charging cycles: {res.charging_cycles}")
+    print(f"recharges: {res.charging_cycles}")
     if not res.route:
-        print("safe: yes (empty route)")
+        attempt = takeoff_attempt(mission.with_battery(args.q_max, args.r0))
+        if attempt is not None:
+            print(f"safe: NO, the cell cannot take off: below EOD {attempt['eod_s']:.0f} s into the take-off "
+                  "and climb (nothing is flown)")
+        else:
+            print("safe: nothing is flown (no destination can be reached and flown home above the cut-off)")
     elif res.safe:
         print(f"safe: yes, min {res.min_voltage_v:.3f} V")
     else:

@@ -78,7 +78,18 @@ class AgentInfo:
 
     @property
     def label(self) -> str:
-        return f"{self.name} ({self.scenario})" if self.scenario else self.name
+        """The name with what the card says was learned, e.g. ``"single_charge-map-20261126-120000
+        (DQN, 5000 steps, single_charge)"`` or ``"... (attention, 3 epochs, stopped early)"``."""
+        c = self.card
+        if self.model == "attention":
+            done = (c.get("stats") or {}).get("epochs_done")
+            what = ["attention", f"{done} epoch{'' if done == 1 else 's'}" if isinstance(done, int) else None]
+        else:
+            steps = (c.get("final_stats") or {}).get("timesteps")
+            what = ["DQN", f"{steps} steps" if isinstance(steps, int) else None, self.scenario]
+        if c.get("stopped_early"):
+            what.append("stopped early")
+        return f"{self.name} ({', '.join(w for w in what if w)})"
 
 
 def agent_model(path: str | os.PathLike[str]) -> str:
@@ -235,7 +246,7 @@ def retrain_dqn(
     progress_bar: bool = False,
     source: str | None = None,
     card_path: str | os.PathLike[str] | None = None,
-) -> RetrainResult:
+) -> RetrainResult | None:
     """Train a DQN agent (:func:`~uam_studio.planning.agents.training.train_dqn`) and save it with its card.
 
     :param config: a :class:`~uam_studio.planning.agents.training.DQNTrainConfig` (see :func:`training_setup`).
@@ -245,7 +256,8 @@ def retrain_dqn(
     :param on_episode: called with each :class:`~uam_studio.planning.agents.training.EpisodeStats`, in the
         training thread.
     :param stop_event: set it to stop early; the agent trained so far is saved, with
-        ``"stopped_early": true`` in its card.
+        ``"stopped_early": true`` in its card, unless it has not finished one episode: then nothing is
+        saved (an agent that learned nothing is not an agent) and None is returned.
     :param source: a short note on where the run came from (``"cli"``, ``"app"``), kept in the card.
     :param card_path: also write the card as this JSON file, consistent with the agent (see
         :func:`~uam_studio.planning.agents.agent_file.save_agent`).
@@ -274,6 +286,8 @@ def retrain_dqn(
     model = train_dqn(config, env_fn, callback=_on_episode, stop_event=stop_event, progress_bar=progress_bar)
     wall_s = time.perf_counter() - t0
     stopped = bool(stop_event is not None and stop_event.is_set() and model.num_timesteps < config.steps)
+    if stopped and tally.n == 0:
+        return None
     card = {
         "model": "dqn",
         "uam_studio_version": version,
@@ -328,7 +342,8 @@ def _process_main(kind: str, setup: dict[str, Any], agent_path: str, mission: Mi
         cfg, env_fn = training_setup(mission=mission, **setup)
         res = retrain_dqn(cfg, env_fn, agent_path, mission=mission, on_episode=on_episode, stop_event=stop,
                           source=source)
-        out.put(RetrainResult(res.path, res.card, res.episodes, res.timesteps, res.stopped))
+        out.put(RetrainResult(res.path, res.card, res.episodes, res.timesteps, res.stopped) if res is not None
+                else ("nothing saved",))
     except BaseException as err:  # reported to the parent; nothing is raised in the child
         out.put(("error", f"{type(err).__name__}: {' '.join(str(err).split())}"))
 
@@ -383,19 +398,28 @@ class RetrainProcess:
         self.stage: tuple[str, int, int] | None = None  # the attention run's last (stage, done, total)
         self.error: str | None = None
         self.finished = False
+        self._seen = 0  # episodes (epochs) reported so far
+        self._pending: list[Any] = []  # drained by stop(), returned by the next poll()
 
     def start(self) -> None:
         self._proc.start()
 
     def stop(self) -> None:
-        """Ask the child to stop at its next environment step; it still saves the agent so far."""
+        """Ask the child to stop at its next environment step; it still saves the agent so far. Before
+        the child has reported its first episode (epoch) there is nothing to save: it is ended at once
+        (it may still be importing torch, which does not look at the stop request)."""
         self._stop.set()
+        self._pending.extend(self.poll())  # kept for the next poll
+        if not self._seen and not self.finished and self._proc.is_alive():
+            self._proc.terminate()
+            self._proc.join(5.0)
+            self.finished = True
 
     def poll(self) -> list[Any]:
         """The episodes reported since the last call (never blocks). Sets :attr:`result` or
         :attr:`error` and :attr:`finished` when the child is done (neither: an attention run stopped
         before its first epoch saved nothing)."""
-        episodes: list[Any] = []
+        episodes, self._pending = self._pending, []
         exited = not self._proc.is_alive() if self._proc.pid is not None else False
         while True:
             try:
@@ -414,6 +438,7 @@ class RetrainProcess:
                 self.stage = (str(item[1]), int(item[2]), int(item[3]))
             else:
                 episodes.append(item)
+                self._seen += 1
         if exited and not self.finished:
             self.error = f"the training process exited (code {self._proc.exitcode}) without a result"
             self.finished = True

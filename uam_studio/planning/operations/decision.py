@@ -19,7 +19,10 @@ class Decision:
     ``wind_shift_sd_kts``), the planned remaining ``route`` and ``altitudes_m``, the next leg
     (``next_to``, ``next_altitude_m``; None: the flight ends), ``compute_s`` (s of wall time) and
     ``health_flags``, the flags of the health fits behind the estimate
-    (:mod:`uam_studio.battery.fit_quality`: ``"misfit"``, ``"outside fleet range"``).
+    (:mod:`uam_studio.battery.fit_quality`: ``"misfit"``, ``"outside fleet range"``), and what the
+    leg just flown told about the wind: ``leg_wind_kts`` (kt, read off its measured duration),
+    ``leg_wind_vs_forecast_kts`` (kt, that wind minus the forecast) and ``wind_surprise`` (it was
+    further from the prediction than the forecast's error explains); None before the first leg.
     """
 
     time_s: float
@@ -40,6 +43,30 @@ class Decision:
     next_altitude_m: float | None
     compute_s: float = 0.0
     health_flags: tuple[str, ...] = ()
+    leg_wind_kts: float | None = None
+    leg_wind_vs_forecast_kts: float | None = None
+    wind_surprise: bool = False
+
+    @property
+    def leg_wind_text(self) -> str:
+        """What the leg just flown told about the wind, e.g. ``"+14 (flew in +9)"`` (kt, against the
+        forecast, then the wind read off the leg), ``", a surprise"`` added where it was one; ``"-"``
+        before the first leg."""
+        if self.leg_wind_kts is None or self.leg_wind_vs_forecast_kts is None:
+            return "-"
+        text = f"{self.leg_wind_vs_forecast_kts:+.0f} (flew in {self.leg_wind_kts:+.0f})"
+        return text + ", a surprise" if self.wind_surprise else text
+
+    def row(self) -> dict[str, Any]:
+        """The decision as one row of a log table (the Fly tab, notebook 09): time (s), place, the
+        health estimate with its std, the fit's flags, the leg's wind against the forecast and the
+        estimated common shift (kt), the next leg and the reason."""
+        return {"t (s)": round(self.time_s), "at": self.node,
+                "q_max (C)": f"{self.q_max_c:.0f} ± {self.q_max_sd_c:.0f}", "R0 (ohm)": f"{self.r0_ohm:.3f}",
+                "fit flags": ", ".join(self.health_flags) or "-",
+                "leg wind vs forecast (kt)": self.leg_wind_text,
+                "common shift (kt)": f"{self.wind_shift_kts:+.1f} ± {self.wind_shift_sd_kts:.1f}",
+                "next": self.next_to or "-", "reason": self.reason}
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)

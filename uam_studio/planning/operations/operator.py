@@ -114,6 +114,7 @@ class Operator:
         self._leg_start_s = 0.0
         self._leg: tuple[str, str, float] | None = None
         self.last_observation = ""
+        self._leg_wind: tuple[float, float, bool] | None = None  # the last leg's wind, residual (kt), surprise
 
     # ------------------------------------------------------------------ sensing
     def observe(self, time_s: np.ndarray, current_a: np.ndarray, voltage_v: np.ndarray) -> None:
@@ -143,6 +144,7 @@ class Operator:
         if surprise:
             note += "; a surprise: the wind estimate is reset"
         self.last_observation = note
+        self._leg_wind = (wind, resid, surprise)
         return note
 
     def health(self) -> tuple[float, float, float, float]:
@@ -288,19 +290,22 @@ class Operator:
                            f"({'weaker' if q < prev.q_max_c else 'stronger'} battery than thought)")
         if prev is not None and abs(r - prev.r0_ohm) > max(2 * prev.r0_sd_ohm, 0.01):
             learned.append(f"R0 estimate {prev.r0_ohm:.3f} -> {r:.3f} ohm")
+        seen = f" ({self.last_observation})" if self.last_observation else ""
         if not route or why.startswith("no way home"):
-            reason = why
+            reason = why + seen
         elif self._last_route is not None and tuple(route) == self._last_route:
-            reason = "plan unchanged"
+            reason = "plan unchanged" + seen
         elif self._last_route is None:
-            reason = why
+            reason = why + seen
         else:
             reason = "plan changed: " + "; ".join(learned + [why])
         self.last_observation = ""
+        leg_wind, leg_resid, surprise = self._leg_wind if self._leg_wind is not None else (None, None, False)
+        self._leg_wind = None
         nxt = route[0] if route else None
         d = Decision(self.time_s, self.node, kind, reason, q, q_sd, r, r_sd, q_plan, r_plan, shift, shift_sd,
                      tuple(route), tuple(alts), nxt, alts[0] if route else None, time.perf_counter() - t0,
-                     self.health_belief.flags())
+                     self.health_belief.flags(), leg_wind, leg_resid, surprise)
         self._last_route = tuple(route[1:])
         self.decisions.append(d)
         if nxt is not None:

@@ -407,7 +407,8 @@ def attention_plan(mission: Mission | dict, net: AttentionPolicy | None = None, 
     left = [mission.destinations[k].name for k in range(n) if not best.visited[k]
             and np.isfinite(tok.charge[n, k]) and np.isfinite(tok.charge[k, n])]
     if left and safety_filter:
-        msgs.append(f"not visited: {', '.join(left)} (no safe place found for them)")
+        msgs.append(f"not visited: {', '.join(left)} (no safe place in the route found for "
+                        f"{'it' if len(left) == 1 else 'them'})")
     return done(names, alts)
 
 
