@@ -102,5 +102,11 @@ def test_flown_legs_are_numbered_with_their_altitude_on_the_map(state):
     import holoviews as hv
 
     assert hv.render(view._map()).toolbar.active_scroll is None  # the mouse wheel scrolls the page
-    assert _leg_labels([(0.0, 0.0), (10.0, 0.0), (10.0, 0.0)], [500.0, 1000.0]) == {
-        "x": [5.0], "y": [0.0], "text": ["#1 500 m"]}
+    one = _leg_labels([(0.0, 0.0), (10.0, 0.0), (10.0, 0.0)], [500.0, 1000.0], state.mission_flown)
+    assert one["text"] == ["#1 500 m"] and 0.0 <= one["x"][0] <= 10.0 and one["y"][0] != 0.0  # beside the leg
+    # placed as the Planner's labels: clear of the places, their names and each other
+    from uam_studio.app.map_geometry import label_overlaps
+
+    m = state.mission_flown
+    assert label_overlaps(labels, [(m.vertiport.x_km, m.vertiport.y_km), *[(d.x_km, d.y_km) for d in m.destinations]],
+                          ["", *[f"{d.name} {'*' * d.priority}" for d in m.destinations]]) == []

@@ -669,6 +669,24 @@ def test_comparison_marks_where_the_papers_dqn_cannot_run():
     s.close()
 
 
+@pytest.mark.parametrize("policy, keys", [
+    ("attention", ["agent", "paper", "greedy", "oracle"]),
+    ("dqn", ["agent", "default", "greedy", "oracle"]),
+    ("greedy", ["agent", "paper", "greedy", "oracle"]),
+])
+def test_comparison_always_shows_the_default_planner_and_the_papers_dqn(policy, keys):
+    """Choosing the paper's DQN keeps the default attention planner's row: the two side by side."""
+    from uam_studio.app.comparison import comparison_table
+
+    s = PlannerState(compare="inline", policy=policy)
+    rows = comparison_table(s.comparison)
+    assert [r["key"] for r in rows] == keys
+    labels = [r["label"] for r in rows]
+    assert "Attention (default)" in labels and "DQN (paper)" in labels, labels
+    assert {r["status"] for r in rows} == {"done"}
+    s.close()
+
+
 def test_comparison_in_a_thread_waits_for_the_plan_to_settle_and_keeps_the_newest():
     from uam_studio.app.comparison import comparison_runner
 

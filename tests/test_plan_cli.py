@@ -110,7 +110,7 @@ def test_plan_greedy_json_and_table(capsys):
     assert res["policy"] == "greedy" and res["safe"] and res["reached"]
     assert main(["plan", str(EXAMPLE), "--policy", "greedy"]) == 0
     out = capsys.readouterr().out
-    assert "route: vertiport -> " in out and "safe: yes" in out and "recharges: 1" in out
+    assert "route: vertiport -> " in out and "safe: yes" in out and "charging cycles: 1" in out
 
 
 def test_a_cell_that_cannot_take_off_is_not_called_safe(capsys):

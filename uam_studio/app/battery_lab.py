@@ -71,7 +71,7 @@ class BatteryLabView(pn.viewable.Viewer):
         self.message = pn.pane.Alert("", alert_type="warning", visible=False, css_classes=["uam-lab-error"],
                                      sizing_mode="stretch_width")
         self.busy = pn.indicators.LoadingSpinner(value=s.busy, size=18, css_classes=["uam-lab-busy"],
-                                                 margin=(0, 5))
+                                                 margin=(0, 5), visible=bool(s.busy))
         self.current_plot = pn.pane.HoloViews(linked_axes=False, sizing_mode="stretch_width",
                                               css_classes=["uam-lab-current"])
         self.voltage_plot = pn.pane.HoloViews(linked_axes=False, sizing_mode="stretch_width",
@@ -113,9 +113,10 @@ class BatteryLabView(pn.viewable.Viewer):
         """Served, the busy indicator appears only once a change has taken :data:`BUSY_AFTER_MS`
         (each change sent to the browser costs it a page layout; a fast change would pay twice)."""
         if event.new:
-            self._busy_later(lambda: setattr(self.busy, "value", bool(self.state.busy)))
+            self._busy_later(lambda: self.busy.param.update(value=bool(self.state.busy),
+                                                            visible=bool(self.state.busy)))
         else:
-            self.busy.value = False
+            self.busy.param.update(value=False, visible=False)  # no idle ring beside the heading
 
     def _on_result(self, *events: Any) -> None:
         c = self.state.result

@@ -50,7 +50,8 @@ COMPARE_MODES = ("process", "thread", "inline", "off")
 COMPARE_DELAY_S = 0.3  # a comparison starts once the shown plan has been stable this long (s; slider drags)
 COMPARE_CACHE_SIZE = 512
 
-COMPARE_ROWS = ("agent", "paper", "greedy", "oracle")
+COMPARE_ROWS = ("agent", "default", "paper", "greedy", "oracle")
+DEFAULT_POLICY = "attention"  # the "default" row: the default planner, unless the agent row is it already
 PAPER_POLICY = "dqn"  # the "paper" row: the paper's method beside ours, unless the agent row is a DQN already
 COMPARE_LABELS = {"attention": "Attention (default)", "dqn": "DQN (paper)"}
 """Short labels of the learned planners in the comparison table (its rows do not wrap)."""

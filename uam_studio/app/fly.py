@@ -19,30 +19,49 @@ import panel as pn
 import param
 
 from uam_studio.app.fly_state import SPEEDS, FlyState
-from uam_studio.app.map_geometry import leg_label
+from uam_studio.app.map_geometry import altitude_labels
 from uam_studio.app.session import ensure_bokeh_backend
-from uam_studio.app.style import NAME_OFFSET_PX, label_background, no_scroll_zoom, pixel_offset
-from uam_studio.planning import VERTIPORT
+from uam_studio.app.style import (
+    MEASURED_COLOR,
+    NAME_OFFSET_PX,
+    PHYSICS_COLOR,
+    PREDICTED_COLOR,
+    label_background,
+    no_scroll_zoom,
+    pixel_offset,
+)
+from uam_studio.planning import VERTIPORT, Mission
 from uam_studio.planning.operations import record_csv
 
 TICK_MS = 250
-MAP_PX = 340
+MAP_PX = 400
 EOD_COLOR = "#d62728"
 EVENT_COLOR = "#e377c2"  # injected wind changes
+# The voltage figure's series: (the record's key, legend label, style); colours as the Planner's.
+VOLTAGE_SERIES = (
+    ("predicted", "predicted (operator)", {"color": PREDICTED_COLOR, "line_dash": "dashed", "line_width": 2}),
+    ("true", "true (hidden)", {"color": PHYSICS_COLOR, "line_width": 2}),
+    ("measured", "measured", {"color": MEASURED_COLOR, "line_width": 1, "alpha": 0.8}),
+)
+DECISION_STYLE = {"marker": "triangle", "size": 11, "color": "black", "line_color": "white", "tools": ["hover"]}
 TIME_DIM, VOLT_DIM = hv.Dimension("time_min", label="time (min)"), hv.Dimension("voltage_v", label="voltage (V)")
 ROUTE_COLORS = ("#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b")
 
 
-def _leg_labels(path: list[tuple[float, float]], altitudes_m: list[float]) -> dict[str, list]:
-    """A label ``"#k altitude m"`` at the middle of each leg of ``path`` (km; the last one is the
-    aircraft, so the leg it flies is labelled from its take-off on)."""
-    out: dict[str, list] = {"x": [], "y": [], "text": []}
+def _leg_labels(path: list[tuple[float, float]], altitudes_m: list[float], mission: Mission) -> dict[str, list]:
+    """A label ``"#k altitude m"`` beside each leg of ``path`` (km; the last point is the aircraft, so
+    the leg it flies is labelled from its take-off on), placed as the Planner's map places them
+    (:func:`~uam_studio.app.map_geometry.altitude_labels`: clear of the places, their names and each
+    other)."""
+    legs: dict[str, list] = {c: [] for c in ("from", "to", "altitude_m", "x0", "y0", "x1", "y1")}
     for k, ((x0, y0), (x1, y1)) in enumerate(zip(path, path[1:])):
         if k < len(altitudes_m) and (x0, y0) != (x1, y1):
-            out["x"].append((x0 + x1) / 2)
-            out["y"].append((y0 + y1) / 2)
-            out["text"].append(leg_label(k + 1, altitudes_m[k]))
-    return out
+            for c, v in zip(legs, (f"{x0:.3f},{y0:.3f}", f"leg {k}", altitudes_m[k], x0, y0, x1, y1)):
+                legs[c].append(v)
+    nodes = [(d.x_km, d.y_km) for d in mission.destinations]
+    names = [f"{d.name} {'*' * d.priority}" for d in mission.destinations]
+    # altitude_labels numbers the legs it is given from #1: here every leg flown so far, in order
+    return altitude_labels(legs, [(mission.vertiport.x_km, mission.vertiport.y_km), *nodes], ["", *names])
 
 
 class FlyView(pn.viewable.Viewer):
@@ -79,10 +98,11 @@ class FlyView(pn.viewable.Viewer):
                                                               "next", "reason"]),
                                         disabled=True, show_index=False, height=300, sizing_mode="stretch_width",
                                         css_classes=["uam-fly-log"], layout="fit_columns",
+                                        configuration={"columnDefaults": {"headerWordWrap": True}},
                                         formatters={"reason": {"type": "textarea"}},
-                                        widths={"t (s)": 60, "at": 90, "q_max (C)": 100, "R0 (ohm)": 70,
-                                                "fit flags": 70, "leg wind vs forecast (kt)": 120,
-                                                "common shift (kt)": 100, "next": 80})
+                                        widths={"t (s)": 55, "at": 85, "q_max (C)": 95, "R0 (ohm)": 85,
+                                                "fit flags": 80, "leg wind vs forecast (kt)": 190,
+                                                "common shift (kt)": 135, "next": 85})
         self.pos = hv.streams.Pipe(data=[])
         self.leg_labels = hv.streams.Pipe(data={"x": [], "y": [], "text": []})
         self.seen = hv.streams.Pipe(data=[])
@@ -107,10 +127,10 @@ class FlyView(pn.viewable.Viewer):
         s.param.watch(self._on_text, ["status", "error"])
         self._callback = None
         self._layout = pn.Row(
-            pn.Column(self.fly_button, self.progress, self.play, self.speed, self.clock, pn.Spacer(height=10),
+            pn.Column(self.fly_button, self.play, self.speed, self.clock, pn.Spacer(height=10),
                       self.inject_kts, self.inject_button, self.clear_button, pn.Spacer(height=10),
                       self.seed, self.sigma, self.noise, pn.Spacer(height=10), self.download, width=230),
-            pn.Column(self.error, self.status, pn.Row(self.map_pane, self.volt_pane, sizing_mode="stretch_width"),
+            pn.Column(self.error, pn.Row(self.progress, self.status, sizing_mode="stretch_width"), pn.Row(self.map_pane, self.volt_pane, sizing_mode="stretch_width"),
                       self.log, sizing_mode="stretch_width"),
             sizing_mode="stretch_width", css_classes=["uam-fly"])
         if s.record is not None:
@@ -137,7 +157,7 @@ class FlyView(pn.viewable.Viewer):
             marker="triangle", size=16, color=EOD_COLOR), streams=[self.pos])
         pad = 8.0
         allx, ally = np.array(xs + [m.vertiport.x_km]), np.array(ys + [m.vertiport.y_km])
-        x0, x1, y0, y1 = allx.min() - pad, allx.max() + pad, ally.min() - pad, ally.max() + pad
+        x0, x1, y0, y1 = allx.min() - pad, allx.max() + pad, ally.min() - pad, ally.max() + 2 * pad  # room for names
         span = max(x1 - x0, y1 - y0)  # equal scales on both axes in a square frame
         cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
         return (vp * dests * labels * flown * legs * craft).opts(
@@ -153,22 +173,22 @@ class FlyView(pn.viewable.Viewer):
         r = s.record
         eod = (s.mission_flown or s._mission()).eod_v
         cutoff = hv.HLine(eod, label="EOD cut-off").opts(color=EOD_COLOR, line_dash="dashed", line_width=2)
-        if r is None or r.time_s.size == 0:
-            empty = hv.Curve([], TIME_DIM, VOLT_DIM).opts(responsive=True, height=MAP_PX)
-            return (empty * cutoff).opts(title="voltage: fly the mission to see it", ylim=(eod - 0.1, 4.25),
-                                         hooks=[no_scroll_zoom])
+        legend = dict(legend_position="top", legend_opts={"orientation": "horizontal"}, hooks=[no_scroll_zoom], responsive=True, height=MAP_PX)
+        if r is None or r.time_s.size == 0:  # the same legend as a flight's, so that nothing moves after it
+            empty = [hv.Curve([], TIME_DIM, VOLT_DIM, label=label).opts(**style) for _, label, style in VOLTAGE_SERIES]
+            marks = hv.Points([], [TIME_DIM, VOLT_DIM], label="decisions").opts(**DECISION_STYLE)
+            return hv.Overlay([*empty, cutoff, marks]).opts(title="voltage: fly the mission to see it",
+                                                           ylim=(eod - 0.1, 4.25), **legend)
         lo = min(eod, float(r.true_voltage_v.min())) - 0.08
 
-        def curve(key: str, label: str, **style: Any) -> hv.DynamicMap:
+        def curve(key: str, label: str, style: dict[str, Any]) -> hv.DynamicMap:
             return hv.DynamicMap(lambda data: hv.Curve(data[key], TIME_DIM, VOLT_DIM, label=label).opts(**style),
                                  streams=[self.series])
 
-        predicted = curve("predicted", "predicted by the operator", color="#1f77b4", line_dash="dashed", line_width=2)
-        true = curve("true", "true (hidden from the operator)", color="#2ca02c", line_width=1, alpha=0.8)
-        measured = curve("measured", "measured (sensor)", color="#333333", line_width=1.5)
+        predicted, true, measured = (curve(*spec) for spec in VOLTAGE_SERIES)
         marks = hv.DynamicMap(lambda data: hv.Points(
             [(t, v, reason) for t, v, reason in data["decisions"]], [TIME_DIM, VOLT_DIM], ["decision"],
-            label="decisions").opts(marker="triangle", size=11, color="#ff7f0e", line_color="black", tools=["hover"]),
+            label="decisions").opts(**DECISION_STYLE),
             streams=[self.series])
         changes = hv.DynamicMap(lambda data: hv.VLines([t for t, _ in data["changes"]], TIME_DIM).opts(
             color=EVENT_COLOR, line_width=2, line_dash="dashdot") * hv.Labels(
@@ -179,9 +199,8 @@ class FlyView(pn.viewable.Viewer):
         now = hv.DynamicMap(lambda data: hv.VLine(float(data) / 60.0 if np.ndim(data) == 0 else 0.0).opts(
             color="black", line_width=1), streams=[self.now])
         return (predicted * true * measured * cutoff * marks * changes * now).opts(
-            title="voltage: measured vs predicted, and the cut-off", responsive=True, height=MAP_PX,
-            legend_position="right", ylim=(lo, 4.25), xlim=(0, float(r.time_s[-1]) / 60.0 * 1.02),
-            hooks=[no_scroll_zoom])
+            title="voltage: measured vs predicted, and the cut-off", ylim=(lo, 4.25),
+            xlim=(0, float(r.time_s[-1]) / 60.0 * 1.02), **legend)
 
     # ------------------------------------------------------------------ updates
     def _on_record(self, *_: Any) -> None:
@@ -203,7 +222,7 @@ class FlyView(pn.viewable.Viewer):
         nodes = [VERTIPORT] + list(s.record.route)
         path = [(m.node(n).x_km, m.node(n).y_km) for n in nodes[: max(leg, 0) + 1]] + [(x, y)]
         self.seen.send([path])
-        self.leg_labels.send(_leg_labels(path, s.record.altitudes_m))
+        self.leg_labels.send(_leg_labels(path, s.record.altitudes_m, m))
         self.pos.send([(x, y)])
         self.series.send(s.series_until())
         self.now.send(float(s.t_s))

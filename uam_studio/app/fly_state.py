@@ -34,6 +34,7 @@ from uam_studio.planning.operations.world import (
     MAX_NOISE_MV,
     MAX_SIGMA_KT,
 )
+from uam_studio.wording import charging_cycles_text
 
 SPEEDS = (10, 30, 100, 300, 1000)  # playback speed-ups (simulated s per wall s)
 ERROR_CHARS = 300  # an error line is cut here
@@ -217,7 +218,7 @@ class FlyState(param.Parameterized):
                     f"{', '.join(reached) or 'none'} · the results show at the landing")
         own = "BREACHED the cut-off (priority 0)" if r.breached else f"priority {r.reached_priority}"
         blind = "breached" if r.static_breached else f"priority {r.static_priority}"
-        return (f"flown: {own}, {r.charging_cycles} recharge{'' if r.charging_cycles == 1 else 's'}, min {r.min_voltage_v:.3f} V · blind pre-flight "
+        return (f"flown: {own}, {charging_cycles_text(r.charging_cycles)}, min {r.min_voltage_v:.3f} V · blind pre-flight "
                 f"plan: {blind} · hindsight oracle{'' if r.hindsight_exact else ' (best known plan)'}: "
                 f"priority {r.hindsight_priority}")
 

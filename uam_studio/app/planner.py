@@ -187,7 +187,7 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
         self.summary = pn.pane.HTML(summary_html(s), sizing_mode="stretch_width", margin=(0, 10))
         self.compare = pn.pane.HTML(comparison_html(s), sizing_mode="stretch_width", margin=(0, 10))
         self.busy = pn.indicators.LoadingSpinner(value=s.busy, size=18, name="planning..." if s.busy else "",
-                                                 css_classes=["uam-busy"], margin=(0, 5))
+                                                 css_classes=["uam-busy"], margin=(0, 5), visible=bool(s.busy))
         # onlychanged=False: param's own equality test walks every sample of a plan (tens of ms);
         # _send compares the plot data itself
         s.param.watch(self._on_plan, ["plan", "plan_error", "plan_request", "band", "takeoff"], onlychanged=False)
@@ -219,7 +219,7 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
         if in_server_session():
             extras = tuple(pn.panel(lambda p=p: p, defer_load=True) for p in extras)
         results = pn.Column(pn.Row(heading("Plan"), self.busy), self.summary,
-                            self.voltage_plot, self.compare, min_width=WIDE_MIN_PX, sizing_mode="stretch_width",
+                            self.compare, self.voltage_plot, min_width=WIDE_MIN_PX, sizing_mode="stretch_width",
                             styles={"flex": f"1 1 {WIDE_MIN_PX}px"}, css_classes=["uam-results"])
         more = pn.FlexBox(*extras, flex_wrap="wrap", gap="10px", min_width=WIDE_MIN_PX,
                           sizing_mode="stretch_width", styles={"flex": f"1 1 {WIDE_MIN_PX}px"},
@@ -295,15 +295,13 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
         elif self._busy_shown:
             self._busy_shown = False
             self.summary.object = summary_html(self.state)  # data-busy
-            self.busy.value = False
-            self.busy.name = ""
+            self.busy.param.update(value=False, name="", visible=False)  # no idle ring beside "Plan"
 
     def _show_busy(self) -> None:
         if self.state.busy and not self._busy_shown:
             self._busy_shown = True
             self.summary.object = summary_html(self.state)  # data-busy
-            self.busy.value = True
-            self.busy.name = "planning..."
+            self.busy.param.update(value=True, name="planning...", visible=True)
 
     def _on_error(self, *events: param.parameterized.Event) -> None:
         s = self.state

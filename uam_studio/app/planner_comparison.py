@@ -11,6 +11,7 @@ from typing import Any
 from uam_studio.app.comparison import (
     COMPARE_DELAY_S,
     COMPARE_LABELS,
+    DEFAULT_POLICY,
     ORACLE_REFERENCE_LABEL,
     PAPER_POLICY,
     cached_row,
@@ -33,7 +34,8 @@ class PlannerComparison:
     def _compare_specs(self, req: PlanRequest) -> dict[str, tuple[str, str]]:
         """Row name -> (policy value, label): the agent (the selected learned planner: the attention
         planner, the paper's DQN or a retrained agent; with greedy or the oracle selected, the
-        default learned planner), the paper's DQN beside an attention agent, greedy and the oracle."""
+        default learned planner), the default attention planner beside any other agent, the paper's DQN
+        beside an attention agent, greedy and the oracle."""
         from uam_studio.planning.solvers.oracle import EXACT_MAX
 
         if req.policy in LEARNED_POLICIES or req.policy.startswith(AGENT_PREFIX):
@@ -44,6 +46,8 @@ class PlannerComparison:
         oracle = "Oracle (exact)" if len(req.mission.destinations) <= EXACT_MAX else ORACLE_REFERENCE_LABEL
         label = COMPARE_LABELS.get(agent) or self.policy_label(agent)
         specs = {"agent": (agent, label)}
+        if agent != DEFAULT_POLICY:  # the default planner is always in the table (beside DQN or a retrained agent)
+            specs["default"] = (DEFAULT_POLICY, COMPARE_LABELS[DEFAULT_POLICY])
         if agent_policy(agent)[0] != PAPER_POLICY:  # a (retrained) DQN is the paper's method
             specs["paper"] = (PAPER_POLICY, COMPARE_LABELS[PAPER_POLICY])
         return {**specs, "greedy": ("greedy", "Greedy"), "oracle": ("oracle", oracle)}

@@ -13,12 +13,21 @@ import pandas as pd
 
 from uam_studio.app.map_geometry import FAILED_COLOR, altitude_labels, leg_arrows, route_legs
 from uam_studio.app.services import population
-from uam_studio.app.style import NAME_OFFSET_PX, label_background, no_scroll_zoom, pixel_offset
+from uam_studio.app.style import (
+    NAME_OFFSET_PX,
+    PHYSICS_COLOR,
+    PREDICTED_COLOR,
+    label_background,
+    no_scroll_zoom,
+    pixel_offset,
+    tight_legend_above,
+)
 from uam_studio.planning.missions.mission import VERTIPORT
 
 VOLTAGE_POINTS = 800  # samples per series drawn in the voltage plot (its lowest points always kept)
 WIDE_MIN_PX = 440  # narrowest width of the plan column and of the extra plots' column
-VOLTAGE_HEIGHT_PX = 340  # the voltage plot: over a third of the tab's height at 1366x768 and 1920x1080
+VOLTAGE_HEIGHT_PX = 326  # the voltage plot: over a third of the tab's height at 1366x768 and 1920x1080,
+# below the planners' comparison and above the fold at 1366x768 with the example mission
 
 
 def _display_index(values: np.ndarray, limit: int) -> np.ndarray:
@@ -47,6 +56,12 @@ def _route_legend(plot: Any, element: Any) -> None:
         legend = Legend(items=[], name="uam-route-legend", location="top_left", label_text_font_size="8pt",
                         padding=4, spacing=0, background_fill_alpha=0.8)
         fig.add_layout(legend)
+    # no route, no legend box: the legs' data decide; the lost legs' data only ever add one
+    field_name = "failed" if "failed" in [d.name for d in element.vdims] else "legend"
+    if field_name == "legend":
+        legend.visible = len(element) > 0
+    elif len(element):
+        legend.visible = True
     if not any(renderer in item.renderers for item in legend.items):
         # one column name per renderer: BokehJS reads a field label from its item's first renderer only
         field = "failed" if "failed" in [d.name for d in element.vdims] else "legend"
@@ -131,8 +146,9 @@ class PlannerPlots:
                               "color": list(data["color"]), "leg": list(data["leg"]), "altitude_m": alt},
                              kdims=["x0", "y0", "x1", "y1"], vdims=["color", "leg", "altitude_m"]).opts(
             color="color", line_color="white", tools=["hover"])
-        labels = hv.Labels({"x": idx, "y": alt + 120, "text": [f"{a:g}" for a in alt]},
-                           kdims=["x", "y"], vdims="text").opts(text_font_size="8pt", text_color="#222222")
+        text = {"x": idx, "y": alt + 120, "text": [f"{a:g}" for a in alt]} if n else \
+            {"x": [1.0], "y": [1650.0], "text": ["no route: nothing is flown"]}
+        labels = hv.Labels(text, kdims=["x", "y"], vdims="text").opts(text_font_size="8pt", text_color="#222222")
         ticks = [(float(i), str(lbl)) for i, lbl in zip(idx, data["leg"])] if n else [(1.0, "")]
         return (bars * labels).opts(
             hv.opts.Rectangles(xticks=ticks, xrotation=30, xlim=(0.4, max(n, 1) + 0.6), ylim=(0, 3300),
@@ -180,15 +196,15 @@ class PlannerPlots:
         leg_lines = hv.VLines([], kd).opts(color="#777777", line_dash="dotted", line_width=1)
         leg_names = hv.Labels({"x": [], "y": [], "text": []}, ["x", "y"], "text").opts(
             text_font_size="8pt", text_color="#444444", text_align="left", text_baseline="top", xoffset=0.0)
-        phys = hv.Curve(empty, kd, vd, label="physics").opts(color="#1f77b4", line_width=2, framewise=True)
-        pred = hv.Curve(empty, kd, vd, label="Dynaformer").opts(color="#ff7f0e", line_width=2, line_dash="dashed",
+        phys = hv.Curve(empty, kd, vd, label="physics").opts(color=PHYSICS_COLOR, line_width=2, framewise=True)
+        pred = hv.Curve(empty, kd, vd, label="Dynaformer").opts(color=PREDICTED_COLOR, line_width=2, line_dash="dashed",
                                                                framewise=True)
         eod = hv.Curve(empty, kd, vd, label="EOD").opts(color=FAILED_COLOR, line_width=1.5, line_dash="dotted",
                                                         framewise=True)
         overlay = (band * phys * pred * eod * leg_lines * leg_names).opts(
-            responsive=True, height=VOLTAGE_HEIGHT_PX, legend_position="top", legend_cols=4, show_grid=True,
+            responsive=True, height=VOLTAGE_HEIGHT_PX, legend_position="top", legend_opts={"orientation": "horizontal"}, show_grid=True,
             fontsize={"legend": "8pt", "title": "10pt"},
-            title="Voltage: physics (what happens) vs Dynaformer (predicted)", hooks=[no_scroll_zoom])
+            title="Voltage: physics (what happens) vs Dynaformer (predicted)", hooks=[no_scroll_zoom, tight_legend_above])
         return {"overlay": overlay, "band": band, "physics": phys, "predicted": pred, "eod": eod,
                 "leg_lines": leg_lines, "leg_names": leg_names}
 
@@ -218,7 +234,10 @@ class PlannerPlots:
             df = pd.DataFrame({"PC1": [], "PC2": [], "R0 (ohm)": [], "q_max (C)": []})
         else:
             df = pd.DataFrame({"PC1": pop.pc1, "PC2": pop.pc2, "R0 (ohm)": pop.r0, "q_max (C)": pop.q_max})
+        # headroom above the population for the legend, so that it never covers a cell's star
+        lo, hi = (float(df["PC2"].min()), float(df["PC2"].max())) if len(df) else (-1.0, 1.0)
         return hv.Points(df, ["PC1", "PC2"], ["R0 (ohm)", "q_max (C)"], label="training population").opts(
+            ylim=(lo - 0.05 * (hi - lo), hi + 0.4 * (hi - lo)),
             color="R0 (ohm)", cmap="viridis", colorbar=True, size=5, alpha=0.6, tools=["hover"],
             width=WIDE_MIN_PX, height=280, title="Health estimate (Dynaformer PCs) vs population", show_grid=True,
             legend_position="top", legend_cols=2, xlabel="PC1 (tracks R0)", ylabel="PC2 (tracks q_max)",

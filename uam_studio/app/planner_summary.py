@@ -63,7 +63,7 @@ def _summary_body(state: PlannerState) -> str:
         return "<p>planning...</p>"
     m = req.mission
     parts = [_p(f"<b>Policy:</b> {e(state.plan_label())} &middot; <b>scenario:</b> {e(m.scenario)} "
-                f"&middot; q_max {m.battery.q_max:g} C, R0 {m.battery.r0:g} ohm, EOD {m.eod_v:g} V")]
+                f"&middot; q_max {m.battery.q_max:.0f} C, R0 {m.battery.r0:.4g} ohm, EOD {m.eod_v:g} V")]
     if plan["route"]:
         legs = []
         cycle = 1
@@ -105,7 +105,7 @@ def comparison_html(state: PlannerState) -> str:
     pending = str(state.comparison_pending()).lower()
     inputs = html.escape(c["inputs"], quote=True) if c else ""
     head = (f"<div class='uam-plan-compare' data-pending='{pending}' data-inputs='{inputs}' "
-            "style='font-size:13px'>")
+            "style='font-size:12px;line-height:1.25'>")
     if c is None:
         return head + "<p style='margin:0;color:#666'>Planner comparison: off.</p></div>"
     shown = state.plan_request.policy if state.plan_request is not None else ""

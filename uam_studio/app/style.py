@@ -8,6 +8,11 @@ from typing import Any
 import panel as pn
 
 NOTE_STYLE = {"font-size": "12px", "color": "#555"}
+# The voltage figures' colours, the same in every tab: what the physics model (the true cell) does,
+# what the learned model or the operator predicts, what the sensor measures.
+PHYSICS_COLOR = "#1f77b4"
+PREDICTED_COLOR = "#ff7f0e"
+MEASURED_COLOR = "#333333"
 NAME_OFFSET_PX = 10  # map names sit this many screen pixels above their place (the vertiport's below it)
 
 
@@ -34,6 +39,14 @@ def pixel_offset(y_px: float) -> Any:
         plot.handles["glyph"].y_offset = y_px
 
     return hook
+
+
+def tight_legend_above(plot: Any, element: Any) -> None:
+    """Bokeh hook: a legend above the plot in one row, without the empty band Bokeh leaves above it."""
+    for legend in plot.state.legend:
+        legend.margin = 0
+        legend.padding = 4
+    plot.state.min_border_top = 0
 
 
 def no_scroll_zoom(plot: Any, element: Any) -> None:

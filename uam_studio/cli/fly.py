@@ -8,6 +8,7 @@ import json
 import sys
 
 from uam_studio.cli.common import EXIT_OK, Command, seed_arg
+from uam_studio.wording import charging_cycles_text
 
 
 def _add_fly_arguments(p: argparse.ArgumentParser) -> None:
@@ -59,7 +60,7 @@ def _run_fly(args: argparse.Namespace) -> int:
                   f"lands at {end:.0f} s")
     reached = ", ".join(rec.reached) or "none"
     verdict = "BREACHED the cut-off: priority 0" if rec.breached else f"priority {rec.reached_priority}"
-    print(f"flown: reached {reached}; {verdict}; {rec.charging_cycles} recharge{'' if rec.charging_cycles == 1 else 's'}; min {rec.min_voltage_v:.3f} V")
+    print(f"flown: reached {reached}; {verdict}; {charging_cycles_text(rec.charging_cycles)}; min {rec.min_voltage_v:.3f} V")
     print(f"blind pre-flight plan: {' -> '.join(rec.static_route) or 'nothing'}: "
           f"{'BREACHED, priority 0' if rec.static_breached else f'priority {rec.static_priority}'}")
     exact = "" if rec.hindsight_exact else (" at each leg's time; the best of the exact plans for each period of "

@@ -62,7 +62,7 @@ def _run_plan(args: argparse.Namespace) -> int:
         print("route: none (nothing is flown)")
     reached = ", ".join(res.reached) or "none"
     print(f"reached: {reached} (priority {res.reached_priority})")
-    print(f"recharges: {res.charging_cycles}")
+    print(f"charging cycles: {res.charging_cycles}")
     if not res.route:
         attempt = takeoff_attempt(mission.with_battery(args.q_max, args.r0))
         if attempt is not None:

@@ -7,6 +7,7 @@ import json
 import sys
 
 from uam_studio.cli.common import EXIT_OK, Command, parse_floats, parse_list
+from uam_studio.wording import charging_cycles_text
 
 
 def _add_simulate_arguments(p: argparse.ArgumentParser) -> None:
@@ -44,7 +45,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
     for i, g in enumerate(sim.legs, 1):
         print(f"{i:>3}  {g.from_node:<{name_w}}  {g.to:<{name_w}}  {g.distance_km:>6.1f}  {g.altitude_m:>6g}  "
               f"{fmt(g.start_s, '.0f'):>8}  {fmt(g.end_s, '.0f'):>8}  {fmt(g.min_voltage_v, '.3f'):>6}")
-    recharges = f"{sim.charging_cycles} recharge{'' if sim.charging_cycles == 1 else 's'}"
+    recharges = charging_cycles_text(sim.charging_cycles)
     if sim.safe and not sim.complete:
         print(f"EOD: not reached ({recharges}, min {sim.min_voltage_v:.3f} V); NOT A COMPLETE PLAN: the route "
               f"ends at {sim.legs[-1].to}, not back at the vertiport")

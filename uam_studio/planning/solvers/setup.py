@@ -48,7 +48,7 @@ def takeoff_failure(cell: Cell) -> str | None:
         return None
     return (f"the battery cannot finish takeoff: the voltage falls below {cell.eod_v:.2f} V after "
             f"{res.eod_s:.0f} s of the {res.time_s.size} s take-off and climb to 500 m "
-            f"(q_max {cell.q_max:.0f} C, r0 {cell.r0:.3f} ohm)")
+            f"(q_max {cell.q_max:.0f} C, R0 {cell.r0:.3f} ohm)")
 
 
 def single_flight_note(mission: Mission) -> str | None:
