@@ -432,6 +432,19 @@ def test_retrain_process_reports_a_failure_in_the_child(home):
     assert proc.error.startswith(("FileExistsError", "NotADirectoryError")), proc.error
 
 
+def test_stop_before_the_first_episode_ends_the_child_at_once_and_saves_nothing(home):
+    """The child may still be importing torch (seconds on a busy machine): Stop does not wait for it."""
+    from uam_studio.planning.agents.retrain import RetrainProcess
+
+    path = home / "agents" / "early.zip"
+    proc = RetrainProcess(path, steps=5000, seed=0)
+    proc.start()
+    t0 = time.monotonic()
+    proc.stop()
+    assert time.monotonic() - t0 < 6.0 and proc.finished and proc.result is None and proc.error is None
+    assert not proc._proc.is_alive() and not path.exists()
+
+
 def test_retrain_on_a_bad_map_is_a_message():
     planner = _state()
     assert planner.set_destinations([{"name": "Near", "x_km": 2.0, "y_km": 1.0, "priority": 1, "wind_kts": 0}])

@@ -172,6 +172,18 @@ def test_failed_takeoff_draws_the_takeoff_not_an_empty_plot():
     labels = [item.label.value for legend in fig.legend for item in legend.items]
     assert labels and all("Dynaformer" not in lbl for lbl in labels) and "physics" in labels, labels
     assert data["legs"] == ([], [])  # no leg took off
+    # no route: the altitude chart says so, and the map shows no empty legend box
+    alt = hv.render(view._altitude_element(view._route_data()))
+    texts = [t for r in alt.renderers for t in r.data_source.data.get("text", [])]
+    assert texts == ["no route: nothing is flown"], texts
+    state.apply(r0=0.117)
+    root = view.__panel__().get_root(Document())
+    legend = next(m for m in root.references() if type(m).__name__ == "Legend" and m.name == "uam-route-legend")
+    assert legend.visible is True
+    state.apply(r0=0.45)
+    assert legend.visible is False
+    state.apply(r0=0.117)  # a route again: the legend is back
+    assert legend.visible is True
     state.close()
 
 
