@@ -240,3 +240,30 @@ def test_allowed_hosts():
     assert allowed_hosts(5006, "::1") == ["127.0.0.1:5006", "localhost:5006", "[::1]:5006"]
     assert split_host("[::1]:5006") == ("[::1]", 5006)
     assert split_host("Example.ORG") == ("example.org", None)
+
+
+def test_a_page_closing_mid_message_is_one_log_line_not_a_traceback(caplog):
+    """The served loop's exception handler: tornado's closed-connection errors from tasks nobody awaited
+    are one info line; any other task exception still reaches asyncio's default handler."""
+    import logging
+
+    from tornado.iostream import StreamClosedError
+    from tornado.websocket import WebSocketClosedError
+
+    from uam_studio.app.serve import quiet_closed_connections
+
+    loop = asyncio.new_event_loop()
+    seen: list[dict] = []
+    loop.default_exception_handler = seen.append  # what asyncio would print as a traceback
+    try:
+        with caplog.at_level(logging.INFO, logger="uam_studio.serve"):
+            for exc in (WebSocketClosedError(), StreamClosedError()):
+                quiet_closed_connections(loop, {"message": "Task exception was never retrieved", "exception": exc})
+            other = {"message": "Task exception was never retrieved", "exception": ValueError("a real bug")}
+            quiet_closed_connections(loop, other)
+    finally:
+        loop.close()
+    assert seen == [other]
+    lines = [r.getMessage() for r in caplog.records if r.name == "uam_studio.serve"]
+    assert lines == ["a page closed with messages on their way (WebSocketClosedError)",
+                     "a page closed with messages on their way (StreamClosedError)"]

@@ -130,6 +130,22 @@ def install_host_guard(server: Any, allowed: Sequence[str]) -> None:
     app.websocket_origins.update(allowed)
 
 
+def quiet_closed_connections(loop: Any, context: dict[str, Any]) -> None:
+    """The server loop's asyncio exception handler: a page that closed while messages were on their way
+    (tornado's ``WebSocketClosedError`` / ``StreamClosedError`` in a task nobody awaited) is one log
+    line, not a "Task exception was never retrieved" traceback; anything else goes to asyncio's
+    default handler."""
+    from tornado.iostream import StreamClosedError
+    from tornado.websocket import WebSocketClosedError
+
+    exc = context.get("exception")
+    if isinstance(exc, (WebSocketClosedError, StreamClosedError)):
+        logging.getLogger("uam_studio.serve").info("a page closed with messages on their way (%s)",
+                                                   type(exc).__name__)
+        return
+    loop.default_exception_handler(context)
+
+
 def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = None,
           allow_origin: Sequence[str] = ()) -> None:
     """Start a Panel server with the app at ``/`` and block until it is stopped (Ctrl-C).
@@ -156,6 +172,7 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
     install_host_guard(server, allowed_hosts(server.port, address, allow_origin))
     warm = threading.Thread(target=warm_up, daemon=True, name="uam-warm-up")
     warm.start()
+    server.io_loop.asyncio_loop.set_exception_handler(quiet_closed_connections)
     try:
         server.start()
         server.io_loop.start()  # until Ctrl-C (panel's SIGINT handler stops the loop)
