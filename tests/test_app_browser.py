@@ -374,7 +374,7 @@ def test_layout_fits_the_screen_with_the_plan_above_the_fold(browser, app_url, s
         page.wait_for_function("() => [...window.Bokeh.index.all_views()].filter("
                                "v => v.model.type === 'Figure').length >= 4")  # map, voltage and the deferred plots
         for name, locator in (("summary", summary), ("map", page.locator(".uam-map").first),
-                              ("voltage plot", page.locator(".uam-voltage").first)):
+                              ("planner comparison", compare), ("voltage plot", page.locator(".uam-voltage").first)):
             box = locator.bounding_box()
             assert box is not None, name
             assert box["x"] >= 0 and box["y"] >= 0, (name, box)
