@@ -1,0 +1,118 @@
+"""A fleet's day (uam_studio.fleet): demand files, the dispatchers' view, the SimPy day, the CLI."""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import json
+from pathlib import Path
+
+import pytest
+
+from uam_studio.cli import main
+from uam_studio.errors import InputError
+from uam_studio.fleet.aging import PackHealth
+from uam_studio.fleet.day import Fleet, simulate_day
+from uam_studio.fleet.demand import Request, load_demand, poisson_demand
+from uam_studio.fleet.dispatch import AircraftView, PackBelief, assign
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def day_demand():
+    return poisson_demand(5, rate_per_h=3.0, day_s=4 * 3600.0)
+
+
+def test_a_day_is_seeded_serves_within_the_fleet_and_ages_the_packs(day_demand):
+    runs = []
+    for _ in range(2):
+        fleet = Fleet.new(3, seed=2)
+        before = [t.delivered_c for t in fleet.truth]
+        runs.append((simulate_day(fleet, day_demand, "aware", seed=9), fleet, before))
+    (a, fleet, before), (b, _, _) = runs
+    assert a == b  # the same inputs, the same day
+    assert a.served + a.breaches + a.refused == len(day_demand) and a.flights == a.served + a.breaches
+    assert a.priority == sum(r.priority for r in day_demand if r.name in {n for _, _, n, _ in a.log}) or a.breaches
+    flown = {i for _, i, _, _ in a.log}
+    for i, t in enumerate(fleet.truth):  # the packs that flew delivered charge and aged
+        assert (t.delivered_c > before[i]) == (i in flown)
+    assert all(b.delivered_c >= 0 for b in fleet.belief)
+    json.dumps(a.to_dict(), allow_nan=False)
+
+
+def test_the_dispatcher_never_reads_the_true_cell(day_demand):
+    """Swap test: two fleets with the same beliefs and very different true packs get the same
+    assignments from the health-aware and the health-blind rules (only hindsight may differ)."""
+    strong = [PackHealth(7900.0, 0.10) for _ in range(3)]
+    weak = [PackHealth(6200.0, 0.30) for _ in range(3)]
+    beliefs = [PackBelief.new_pack(k * 50 * 7600.0) for k in range(3)]
+    for rule in ("aware", "blind"):
+        days = [simulate_day(Fleet(truth, list(beliefs)), day_demand[:3], rule, seed=1) for truth in (strong, weak)]
+        first = [(t, i, name) for t, i, name, _ in days[0].log][:3]
+        second = [(t, i, name) for t, i, name, _ in days[1].log][:3]
+        assert first == second, rule
+    # and statically: the dispatch module has no way to the world's truth
+    src = (ROOT / "uam_studio" / "fleet" / "dispatch.py").read_text()
+    names = {n.id for n in ast.walk(ast.parse(src)) if isinstance(n, ast.Name)}
+    assert "PackHealth" not in names and "truth" not in src.split('"""', 2)[2]
+    assert {f.name for f in dataclasses.fields(AircraftView)} == {"name", "belief", "key"}
+
+
+def test_assign_gives_most_stars_first_to_the_tightest_aircraft_that_passes():
+    reqs = [Request(0.0, "low", 20.0, 0.0, 1), Request(5.0, "high", 0.0, 20.0, 3)]
+    views = [AircraftView("0", PackBelief.new_pack(), 0), AircraftView("1", PackBelief.new_pack(), 0)]
+    margins = {("high", "0"): 0.3, ("high", "1"): 0.1, ("low", "0"): 0.2, ("low", "1"): -0.1}
+    out = assign(reqs, views, lambda r, a: margins[(r.name, a.name)], 0.0)
+    assert [(r.name, a.name) for r, a in out] == [("high", "1"), ("low", "0")]
+    assert assign(reqs, views[1:], lambda r, a: margins[(r.name, a.name)], 0.0) == [(reqs[1], views[1])]
+
+
+def test_the_belief_ages_with_charge_and_learns_from_a_fit():
+    b = PackBelief.new_pack()
+    old = b.aged(7600.0 * 200)
+    assert old.q_max < b.q_max and old.r0 > b.r0 and old.q_max_sd >= b.q_max_sd
+    learned = old.update(6500.0, 50.0, 0.15, 0.005)
+    assert abs(learned.q_max - 6500.0) < abs(old.q_max - 6500.0) and learned.q_max_sd < 50.0
+    with pytest.raises(InputError, match="^charge_c: "):
+        b.aged(-1.0)
+
+
+@pytest.mark.parametrize("text, field", [
+    ("t_s,name,x_km,y_km,priority\n100,A,10,10,5\n", "priority"),
+    ("t_s,name,x_km,y_km,priority\n100,A,1,1,2\n", "x_km"),
+    ("t_s,name,x_km,y_km,priority\n-5,A,10,10,2\n", "t_s"),
+    ("t_s,name,x_km,y_km\n100,A,10,10\n", "priority"),
+    ("t_s,name,x_km,y_km,priority\nabc,A,10,10,2\n", "demand"),
+    ("t_s,name,x_km,y_km,priority,wind_kts\n100,A,10,10,2,nan\n", "wind_kts"),
+    ("t_s,name,x_km,y_km,priority\n100,A,10,10,2\n200,A,12,12,1\n", "name"),
+])
+def test_bad_demand_files_are_one_line_naming_the_field(tmp_path, capsys, text, field):
+    path = tmp_path / "day.csv"
+    path.write_text(text)
+    with pytest.raises(InputError, match=f"^{field}: "):
+        load_demand(path)
+    assert main(["fleet", "--demand", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"error: {field}: ") and "\n" not in err
+
+
+def test_a_demand_file_round_trips_and_the_cli_flies_it(tmp_path, capsys):
+    from uam_studio.fleet.demand import demand_rows
+
+    reqs = poisson_demand(3, rate_per_h=2.0, day_s=2 * 3600.0)
+    path = tmp_path / "day.json"
+    path.write_text(json.dumps(demand_rows(reqs)))
+    assert load_demand(path) == reqs
+    assert main(["fleet", "--demand", str(path), "--aircraft", "2", "--json", "--dispatcher", "aware"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    day = out["aware"]["days"][0]
+    assert day["served"] + day["refused"] + day["breaches"] == len(reqs)
+
+
+@pytest.mark.parametrize("args, flag", [(["--aircraft", "0"], "--aircraft"), (["--days", "0"], "--days"),
+                                        (["--rate", "nan"], "--rate"), (["--chargers", "99"], "--chargers")])
+def test_cli_bad_settings_are_one_line(capsys, args, flag):
+    assert main(["fleet", *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"error: {flag}: ") and "\n" not in err

@@ -1,0 +1,81 @@
+"""``uam-studio fleet``: a fleet's day or life (SimPy, packs aging in a hidden world), health-aware,
+health-blind and hindsight dispatchers side by side on the same demand and the same packs."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from uam_studio.cli.common import EXIT_OK, Command, seed_arg
+
+
+def _add_fleet_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--aircraft", type=int, default=6, help="aircraft in the fleet (1-50; default 6)")
+    p.add_argument("--days", type=int, default=1, help="operating days of 12 h (1-3650; default 1)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="seeds the packs, the demand and the world")
+    p.add_argument("--rate", type=float, default=4.0, metavar="PER_H",
+                   help="Poisson demand: requests per hour (0-60; default 4)")
+    p.add_argument("--demand", default=None, metavar="FILE",
+                   help="a day's requests from a CSV or JSON file instead (columns t_s,name,x_km,y_km,"
+                        "priority,wind_kts,window_s); flown on every day")
+    p.add_argument("--chargers", type=int, default=2, help="chargers at the vertiport (1-50; default 2)")
+    p.add_argument("--age-spread", type=float, default=300.0, metavar="EFC",
+                   help="the packs' age at the start: U(0, EFC) equivalent full cycles (0-2000; default 300)")
+    p.add_argument("--dispatcher", action="append", choices=["aware", "blind", "hindsight"], default=None,
+                   help="which dispatchers (repeatable; default all three)")
+    p.add_argument("--json", action="store_true", help="print every day's numbers as JSON")
+
+
+def _run_fleet(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from uam_studio.fleet.day import Fleet, simulate_day, simulate_life
+    from uam_studio.fleet.demand import load_demand
+
+    from uam_studio.errors import check_range
+
+    for flag, value, lo, hi in (("--aircraft", args.aircraft, 1, 50), ("--days", args.days, 1, 3650),
+                                ("--rate", args.rate, 0.0, 60.0), ("--chargers", args.chargers, 1, 50),
+                                ("--age-spread", args.age_spread, 0.0, 2000.0)):
+        check_range(flag, value, lo, hi)  # before any work: one line naming the flag
+    dispatchers = args.dispatcher or ["aware", "blind", "hindsight"]
+    out = {}
+    if args.demand is not None:
+        demand = load_demand(args.demand)
+        for d in dispatchers:
+            fleet = Fleet.new(args.aircraft, args.seed, args.age_spread)
+            days = [simulate_day(fleet, demand, d, args.seed * 100_003 + k, args.chargers).to_dict()
+                    for k in range(int(args.days))]
+            out[d] = {"dispatcher": d, "days": days}
+    else:
+        with tqdm(total=len(dispatchers) * int(args.days), desc="fleet days", disable=args.json,
+                  file=sys.stderr) as bar:
+            for d in dispatchers:
+                out[d] = simulate_life(args.aircraft, args.days, args.seed, d, args.rate, args.chargers,
+                                       args.age_spread, progress=lambda _k: bar.update())
+    if args.json:
+        json.dump(out, sys.stdout, allow_nan=False)
+        sys.stdout.write("\n")
+        return EXIT_OK
+    print(f"{args.aircraft} aircraft, {args.days} day(s), seed {args.seed}, "
+          f"{'demand ' + args.demand if args.demand else f'Poisson {args.rate:g} requests/h'}, "
+          f"{args.chargers} charger(s)")
+    print(f"{'dispatcher':10} {'priority/day':>12} {'served':>7} {'refused':>8} {'breaches':>9} {'flights':>8} "
+          f"{'charge Ah/day':>13} {'retired packs':>13}")
+    for d, life in out.items():
+        days = life["days"]
+        n = len(days)
+        retired = [r for r in life.get("retired_day", []) if r is not None]
+        print(f"{d:10} {sum(x['priority'] for x in days) / n:12.1f} {sum(x['served'] for x in days):7d} "
+              f"{sum(x['refused'] for x in days):8d} {sum(x['breaches'] for x in days):9d} "
+              f"{sum(x['flights'] for x in days):8d} {sum(x['charge_ah'] for x in days) / n:13.1f} "
+              f"{len(retired):13d}")
+    return EXIT_OK
+
+
+COMMAND = Command(
+    "a fleet's day or life: health-aware, health-blind and hindsight dispatchers on the same demand and packs",
+    _add_fleet_arguments,
+    _run_fleet,
+)

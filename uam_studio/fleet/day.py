@@ -1,0 +1,237 @@
+"""A fleet's operating day and life as a discrete-event simulation (SimPy), flown in a hidden world.
+
+The world holds each pack's true health (:class:`~uam_studio.fleet.aging.PackHealth`, aging with the
+charge it delivers) and the actual winds (the forecast plus a seeded error). Dispatchers see only
+:class:`~uam_studio.fleet.dispatch.AircraftView` s (each aircraft's own belief). A served request is a
+round trip at 500 m from full charge, flown on the true cell in the actual winds: below the cut-off
+is a breach (the request scores 0 and the aircraft is grounded for the day). Each flight's first
+:data:`FIT_WINDOW_S` s of noisy readings update its aircraft's belief (the health fit). Landed, the
+aircraft charges at 1 C back to full on one of the vertiport's chargers (a queue when all are busy).
+
+Public API: :func:`simulate_day`, :func:`simulate_life`, :class:`DayResult`, :class:`Fleet`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import simpy
+
+from uam_studio.errors import InputError, check_range
+from uam_studio.fleet.aging import PackHealth
+from uam_studio.fleet.demand import DAY_S, DEFAULT_RATE_PER_H, Request, poisson_demand
+from uam_studio.fleet.dispatch import (
+    BLIND_RESERVE_V,
+    DISPATCHERS,
+    HEALTH_Z,
+    NOMINAL,
+    WIND_Z,
+    AircraftView,
+    PackBelief,
+    assign,
+    round_trip,
+    round_trip_margin,
+)
+
+__all__ = ["DayResult", "Fleet", "FIT_WINDOW_S", "simulate_day", "simulate_life"]
+
+FIT_WINDOW_S = 600  # s of each flight's readings fitted for its pack's health
+FORECAST_SIGMA_KT = 8.0  # kt: the actual wind is the forecast plus N(0, this)
+NOISE_V, NOISE_A = 0.005, 0.020  # sensor noise std (V, A)
+CHARGE_C_RATE = 1.0  # charge current, in q_max per hour
+
+
+@dataclass
+class Fleet:
+    """The aircraft: each one's true pack (``truth``, the world's) and its own ``belief``; ``in_service``
+    false once a pack has retired (below 80% of its first capacity)."""
+
+    truth: list[PackHealth]
+    belief: list[PackBelief]
+    in_service: list[bool] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if len(self.truth) != len(self.belief) or not 1 <= len(self.truth) <= 50:
+            raise InputError("aircraft", f"{len(self.truth)} aircraft: allowed 1-50, a belief for each")
+        if not self.in_service:
+            self.in_service = [not t.retired for t in self.truth]
+
+    @classmethod
+    def new(cls, n: int, seed: int, age_spread_efc: float = 300.0) -> Fleet:
+        """``n`` aircraft whose packs left the factory with q_max ~ U(7300, 7900) C and R0 ~ U(0.10, 0.13)
+        ohm and have since delivered U(0, ``age_spread_efc``) equivalent full cycles; each belief
+        starts from the nominal new pack aged by the logged throughput."""
+        n = int(check_range("aircraft", n, 1, 50))
+        spread = check_range("age_spread_efc", age_spread_efc, 0.0, 2000.0)
+        rng = np.random.default_rng([int(check_range("seed", seed, 0, 2**63 - 1)), 42])
+        truth, belief = [], []
+        for _ in range(n):
+            q0, r0 = float(rng.uniform(7300.0, 7900.0)), float(rng.uniform(0.10, 0.13))
+            delivered = float(rng.uniform(0.0, spread)) * q0
+            truth.append(PackHealth(q0, r0, delivered))
+            belief.append(PackBelief.new_pack(delivered))
+        return cls(truth, belief)
+
+
+@dataclass(frozen=True)
+class DayResult:
+    """One day: ``priority`` served (stars of the requests flown without a breach), ``served``,
+    ``refused`` (never flown), ``breaches``, ``flights``, ``charge_ah`` (per cell, delivered),
+    ``charger_wait_s`` (summed), and each flight as (t_s, aircraft, request, margin_v true)."""
+
+    priority: int
+    served: int
+    refused: int
+    breaches: int
+    flights: int
+    charge_ah: float
+    charger_wait_s: float
+    log: tuple[tuple[float, int, str, float], ...]
+
+    def to_dict(self) -> dict:
+        return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in self.__dict__.items() if k != "log"}
+
+
+def _world_winds(demand: list[Request], seed: int) -> dict[str, tuple[float, float]]:
+    rng = np.random.default_rng([seed, 7])
+    return {r.name: (r.wind_kts + float(rng.normal(0.0, FORECAST_SIGMA_KT)),
+                     -r.wind_kts + float(rng.normal(0.0, FORECAST_SIGMA_KT))) for r in demand}
+
+
+def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int, chargers: int = 2) -> DayResult:
+    """Fly one day of ``demand`` with ``fleet`` under ``dispatcher`` (:data:`DISPATCHERS`); the fleet's
+    truth and beliefs are updated in place (packs age, beliefs learn). Seeded: the same inputs give the
+    same day."""
+    if dispatcher not in DISPATCHERS:
+        raise InputError("dispatcher", f"{dispatcher!r}: allowed {', '.join(DISPATCHERS)}")
+    chargers = int(check_range("chargers", chargers, 1, 50))
+    seed = int(check_range("seed", seed, 0, 2**63 - 1))
+    env = simpy.Environment()
+    plugs = simpy.Resource(env, capacity=chargers)
+    winds = _world_winds(demand, seed)
+    noise = np.random.default_rng([seed, 11])
+    n = len(fleet.truth)
+    free = [fleet.in_service[i] for i in range(n)]
+    version = [0] * n
+    waiting: list[Request] = []
+    cache: dict[tuple[str, int, int], float] = {}
+    stats = {"priority": 0, "served": 0, "breaches": 0, "flights": 0, "charge_c": 0.0, "wait_s": 0.0}
+    log: list[tuple[float, int, str, float]] = []
+
+    def margin(req: Request, a: AircraftView) -> float:
+        i = int(a.name)
+        key = (req.name, i, a.key)
+        if key not in cache:
+            if dispatcher == "aware":
+                b = a.belief
+                cache[key] = round_trip_margin(req, b.q_max - HEALTH_Z * b.q_max_sd, b.r0 + HEALTH_Z * b.r0_sd,
+                                               req.wind_kts + WIND_Z * FORECAST_SIGMA_KT,
+                                               -req.wind_kts + WIND_Z * FORECAST_SIGMA_KT)
+            elif dispatcher == "blind":
+                cache[key] = round_trip_margin(req, *NOMINAL, req.wind_kts, -req.wind_kts)
+            else:  # hindsight: the truth (the world's), never the aircraft's view
+                t = fleet.truth[i]
+                cache[key] = round_trip_margin(req, t.q_max, t.r0, *winds[req.name])
+        return cache[key]
+
+    required = BLIND_RESERVE_V if dispatcher == "blind" else 0.0
+
+    def dispatch() -> None:
+        now = env.now
+        waiting[:] = [r for r in waiting if r.t_s + r.window_s >= now]
+        views = [AircraftView(str(i), fleet.belief[i], version[i]) for i in range(n) if free[i]]
+        for req, view in assign(waiting, views, margin, required):
+            i = int(view.name)
+            waiting.remove(req)
+            free[i] = False
+            env.process(fly(i, req))
+
+    def fly(i: int, req: Request):
+        truth = fleet.truth[i]
+        sim = round_trip(req, truth.q_max, truth.r0, *winds[req.name])
+        k = int(np.count_nonzero(sim.valid)) if sim.eod_s is not None else len(sim.current_a)
+        cur = np.asarray(sim.current_a[:k], dtype=float)
+        charge = float(np.sum(np.clip(cur, 0.0, None)) * sim.dt_s)
+        breached = not bool(sim.safe)
+        stats["flights"] += 1
+        stats["charge_c"] += charge
+        log.append((float(env.now), i, req.name, float(sim.min_voltage_v) - 3.0))
+        yield env.timeout(float(k * sim.dt_s))
+        fleet.truth[i] = truth.after(charge)
+        belief = fleet.belief[i].aged(charge)
+        m = min(FIT_WINDOW_S, k)
+        if m >= 30:
+            est = _fit(cur[:m] + noise.normal(0.0, NOISE_A, m),
+                       np.asarray(sim.voltage_v[:m]) + noise.normal(0.0, NOISE_V, m), sim.dt_s)
+            if est is not None:
+                belief = belief.update(*est)
+        fleet.belief[i] = belief
+        version[i] += 1
+        if breached:
+            stats["breaches"] += 1
+            return  # grounded for the day
+        stats["priority"] += req.priority
+        stats["served"] += 1
+        t0 = env.now
+        with plugs.request() as plug:
+            yield plug
+            stats["wait_s"] += env.now - t0
+            yield env.timeout(charge / (CHARGE_C_RATE * fleet.truth[i].q_max) * 3600.0)
+        if fleet.truth[i].retired:
+            fleet.in_service[i] = False
+            return
+        free[i] = True
+        dispatch()
+
+    def arrivals():
+        for req in demand:
+            yield env.timeout(max(0.0, req.t_s - env.now))
+            waiting.append(req)
+            dispatch()
+        while env.now < DAY_S:  # the last requests wait until their windows close or an aircraft is free
+            yield env.timeout(min(600.0, DAY_S - env.now))
+            dispatch()
+
+    env.process(arrivals())
+    env.run(until=DAY_S + 6 * 3600.0)  # flights in the air at the day's end land
+    flown = {name for _, _, name, _ in log}
+    return DayResult(stats["priority"], stats["served"], len(demand) - len(flown), stats["breaches"],
+                     stats["flights"], stats["charge_c"] / 3600.0, stats["wait_s"], tuple(log))
+
+
+def _fit(current: np.ndarray, voltage: np.ndarray, dt_s: float) -> tuple[float, float, float, float] | None:
+    """One flight's health fit: (q_max, its std C, R0, its std ohm), or None where the fit refuses it."""
+    from uam_studio.battery import fit_health
+
+    try:
+        est = fit_health(current, voltage, dt_s, start="full")
+    except InputError:
+        return None
+    q_sd, r_sd = est.std
+    return float(est.q_max), float(q_sd), float(est.r0), float(r_sd)
+
+
+def simulate_life(aircraft: int, days: int, seed: int, dispatcher: str, rate_per_h: float = DEFAULT_RATE_PER_H,
+                  chargers: int = 2, age_spread_efc: float = 300.0,
+                  progress: Callable[[int], None] | None = None) -> dict:
+    """A fleet's life over ``days`` operating days of Poisson demand (the same days for every
+    dispatcher with the same ``seed``): per day its :class:`DayResult`; per pack the day it retired
+    (None: still in service); the fleet at the end (truth and belief)."""
+    days = int(check_range("days", days, 1, 3650))
+    fleet = Fleet.new(aircraft, seed, age_spread_efc)
+    results, retired = [], [None if s else 0 for s in fleet.in_service]
+    for d in range(days):
+        demand = poisson_demand(seed * 100_003 + d, rate_per_h)
+        results.append(simulate_day(fleet, demand, dispatcher, seed * 100_003 + d, chargers))
+        for i, s in enumerate(fleet.in_service):
+            if not s and retired[i] is None:
+                retired[i] = d + 1
+        if progress is not None:
+            progress(d + 1)
+    return {"dispatcher": dispatcher, "days": [r.to_dict() for r in results], "retired_day": retired,
+            "truth": [(t.q_max, t.r0, t.fraction) for t in fleet.truth],
+            "belief": [(b.q_max, b.q_max_sd, b.r0, b.r0_sd) for b in fleet.belief]}
+
+
