@@ -30,10 +30,9 @@ def _add_fleet_arguments(p: argparse.ArgumentParser) -> None:
 def _run_fleet(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from uam_studio.errors import check_range
     from uam_studio.fleet.day import Fleet, simulate_day, simulate_life
     from uam_studio.fleet.demand import load_demand
-
-    from uam_studio.errors import check_range
 
     for flag, value, lo, hi in (("--aircraft", args.aircraft, 1, 50), ("--days", args.days, 1, 3650),
                                 ("--rate", args.rate, 0.0, 60.0), ("--chargers", args.chargers, 1, 50),
