@@ -61,6 +61,15 @@ GLOSSARY: dict[str, str] = {
                      "runs out; the agent learns from the reward of its episodes (trial and error).",
     "Epoch (attention)": "One pass of the attention planner's training over all its examples: the "
                          "decisions of the exact oracle on the training missions (learning by imitation).",
+    "Equivalent full cycle": "The charge a pack has delivered over its first capacity: 100 flights that "
+                             "each use a fifth of the pack are 20 equivalent full cycles. The fleet's packs "
+                             "age on this clock (uam_studio.fleet.aging).",
+    "Pack aging law": "How a pack's capacity falls and its resistance rises with the equivalent full cycles it "
+                      "has delivered, fitted to four real cells flown to their end of life (CMU eVTOL "
+                      "data). A pack retires below 80% of its first capacity.",
+    "Dispatcher": "The rule that gives a fleet's requests to its aircraft. Health-aware: by each aircraft's "
+                  "own estimate of its pack, on its cautious side; health-blind: every pack taken as new, "
+                  "with a fixed voltage reserve; hindsight: knowing every pack's truth (an upper bound).",
 }
 
 
