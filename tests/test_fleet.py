@@ -116,3 +116,35 @@ def test_cli_bad_settings_are_one_line(capsys, args, flag):
     assert main(["fleet", *args]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith(f"error: {flag}: ") and "\n" not in err
+
+
+# --------------------------------------------------------------------------- many lives on Dask
+
+
+def test_lives_on_a_two_worker_local_cluster_equal_the_same_lives_run_here():
+    """The engine: each life seeded by its task, so 2 Dask workers give what one process gives."""
+    from uam_studio.fleet.study import fleet_study, summarize
+
+    kw = dict(aircraft=(2,), days=1, seeds=(0, 1), dispatchers=("aware", "blind"), rate_per_h=3.0)
+    here = fleet_study(**kw, workers=0)
+    seen = []
+    on_dask = fleet_study(**kw, workers=2, progress=lambda done, n: seen.append((done, n)))
+    assert on_dask == here and seen[-1] == (4, 4)
+    rows = summarize(here)
+    assert [(r["aircraft"], r["dispatcher"], r["lives"]) for r in rows] == [(2, "aware", 2), (2, "blind", 2)]
+    assert all(r["p5"] <= r["priority_per_day"] <= r["p95"] for r in rows)
+
+
+def test_lives_on_a_running_scheduler_by_its_address(capsys):
+    """--address: the CLI sends the lives to a scheduler it did not start (a local one here)."""
+    from dask.distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+                      silence_logs=40) as cluster:
+        assert main(["fleet", "--aircraft", "2", "--rate", "2", "--dispatcher", "aware", "--seeds", "2",
+                     "--address", cluster.scheduler_address, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert [r["seed"] for r in out["lives"]] == [0, 1] and out["summary"][0]["lives"] == 2
+    assert main(["fleet", "--aircraft", "2", "--rate", "2", "--dispatcher", "aware", "--seeds", "2",
+                 "--workers", "0", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["lives"] == out["lives"]  # the same lives, run here

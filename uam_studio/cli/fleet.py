@@ -24,6 +24,13 @@ def _add_fleet_arguments(p: argparse.ArgumentParser) -> None:
                    help="the packs' age at the start: U(0, EFC) equivalent full cycles (0-2000; default 300)")
     p.add_argument("--dispatcher", action="append", choices=["aware", "blind", "hindsight"], default=None,
                    help="which dispatchers (repeatable; default all three)")
+    p.add_argument("--seeds", type=int, default=1, help="lives per dispatcher, seeded --seed, --seed+1, ... "
+                                                        "(1-1000; default 1)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="Dask workers of the local cluster that runs the lives (default: one per core; 0: "
+                        "no cluster, one life after another here)")
+    p.add_argument("--address", default=None, metavar="tcp://HOST:PORT",
+                   help="run the lives on this running Dask scheduler instead of a local cluster")
     p.add_argument("--json", action="store_true", help="print every day's numbers as JSON")
 
 
@@ -31,7 +38,7 @@ def _run_fleet(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from uam_studio.errors import check_range
-    from uam_studio.fleet.day import Fleet, simulate_day, simulate_life
+    from uam_studio.fleet.day import Fleet, simulate_day
     from uam_studio.fleet.demand import load_demand
 
     for flag, value, lo, hi in (("--aircraft", args.aircraft, 1, 50), ("--days", args.days, 1, 3650),
@@ -48,11 +55,29 @@ def _run_fleet(args: argparse.Namespace) -> int:
                     for k in range(int(args.days))]
             out[d] = {"dispatcher": d, "days": days}
     else:
-        with tqdm(total=len(dispatchers) * int(args.days), desc="fleet days", disable=args.json,
-                  file=sys.stderr) as bar:
-            for d in dispatchers:
-                out[d] = simulate_life(args.aircraft, args.days, args.seed, d, args.rate, args.chargers,
-                                       args.age_spread, progress=lambda _k: bar.update())
+        from uam_studio.fleet.study import fleet_study, summarize
+
+        check_range("--seeds", args.seeds, 1, 1000)
+        if args.workers is not None:
+            check_range("--workers", args.workers, 0, 256)
+        seeds = range(args.seed, args.seed + int(args.seeds))
+        with tqdm(total=len(dispatchers) * len(seeds), desc="fleet lives", disable=args.json, file=sys.stderr) as bar:
+            rows = fleet_study((args.aircraft,), args.days, seeds, dispatchers, args.rate, args.chargers,
+                               args.age_spread, workers=args.workers, address=args.address,
+                               progress=lambda done, _n: bar.update(done - bar.n))
+        if args.json:
+            json.dump({"lives": rows, "summary": summarize(rows)}, sys.stdout, allow_nan=False)
+            sys.stdout.write("\n")
+            return EXIT_OK
+        print(f"{args.aircraft} aircraft, {args.days} day(s) x {len(seeds)} seed(s) from {args.seed}, Poisson "
+              f"{args.rate:g} requests/h, {args.chargers} charger(s), packs aged U(0, {args.age_spread:g}) cycles")
+        print(f"{'dispatcher':10} {'priority/day':>12} {'5-95%':>9} {'served':>7} {'refused':>8} {'breaches':>9} "
+              f"{'packs retired':>13} {'mean day':>8}")
+        for r in summarize(rows):
+            day = "-" if r["mean_retirement_day"] is None else f"{r['mean_retirement_day']:.0f}"
+            print(f"{r['dispatcher']:10} {r['priority_per_day']:12.1f} {r['p5']:4.0f}-{r['p95']:<4.0f} "
+                  f"{r['served']:7d} {r['refused']:8d} {r['breaches']:9d} {r['packs_retired']:13d} {day:>8}")
+        return EXIT_OK
     if args.json:
         json.dump(out, sys.stdout, allow_nan=False)
         sys.stdout.write("\n")

@@ -1,0 +1,98 @@
+"""Many fleet lives at once on Dask: one task per (fleet size, seed, dispatcher), on a local cluster by
+default or on a running Dask scheduler (``address``). Each task is seeded by its own key, so the
+results are the same whatever the number of workers.
+
+Public API: :func:`fleet_study` (the results, one row per task, in task order) and :func:`summarize`
+(per dispatcher and fleet size: priority per day with its 5-95% range, refusals, breaches, retirements).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from itertools import product
+
+import numpy as np
+
+from uam_studio.errors import InputError, check_range
+from uam_studio.fleet.day import simulate_life
+from uam_studio.fleet.dispatch import DISPATCHERS
+
+__all__ = ["fleet_study", "summarize"]
+
+
+def _life_row(size: int, seed: int, dispatcher: str, days: int, rate: float, chargers: int, spread: float) -> dict:
+    """One task: a fleet's life, reduced to what the summary needs (picklable, small)."""
+    life = simulate_life(size, days, seed, dispatcher, rate, chargers, spread)
+    return {"aircraft": size, "seed": seed, "dispatcher": dispatcher,
+            "priority": [d["priority"] for d in life["days"]], "refused": [d["refused"] for d in life["days"]],
+            "breaches": [d["breaches"] for d in life["days"]], "served": [d["served"] for d in life["days"]],
+            "retired_day": life["retired_day"]}
+
+
+def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[int] = (0, 1, 2, 3, 4),
+                dispatchers: Sequence[str] = DISPATCHERS, rate_per_h: float = 4.0, chargers: int = 2,
+                age_spread_efc: float = 300.0, workers: int | None = None, address: str | None = None,
+                progress: Callable[[int, int], None] | None = None) -> list[dict]:
+    """Every (fleet size, seed, dispatcher) life as a Dask task: on the scheduler at ``address``
+    (``tcp://host:8786``) if given, else on a local cluster of ``workers`` processes (default: one per
+    core), one thread each. ``workers=0`` runs the tasks here, one after another (no Dask).
+
+    :return: one row per task in task order (sizes, then seeds, then dispatchers): per day its
+        priority, refusals, breaches and served requests, and each pack's retirement day.
+    """
+    for d in dispatchers:
+        if d not in DISPATCHERS:
+            raise InputError("dispatcher", f"{d!r}: allowed {', '.join(DISPATCHERS)}")
+    days = int(check_range("days", days, 1, 3650))
+    tasks = [(int(check_range("aircraft", a, 1, 50)), int(check_range("seed", s, 0, 2**63 - 1)), d)
+             for a, s, d in product(aircraft, seeds, dispatchers)]
+    if not tasks:
+        raise InputError("seeds", "no task: give at least one fleet size, seed and dispatcher")
+    args = (days, float(rate_per_h), int(chargers), float(age_spread_efc))
+    if address is None and workers == 0:
+        out = []
+        for k, t in enumerate(tasks):
+            out.append(_life_row(*t, *args))
+            if progress is not None:
+                progress(k + 1, len(tasks))
+        return out
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    n = int(check_range("workers", workers if workers is not None else (os.cpu_count() or 1), 1, 256))
+    cluster = None
+    if address is None:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=40)
+    try:
+        with Client(address if address is not None else cluster) as client:
+            futures = [client.submit(_life_row, *t, *args, key=f"fleet-{a}-{s}-{d}-{days}", pure=False)
+                       for t, (a, s, d) in zip(tasks, tasks)]
+            index = {f.key: k for k, f in enumerate(futures)}
+            out: list[dict | None] = [None] * len(tasks)
+            for done, fut in enumerate(as_completed(futures), 1):
+                out[index[fut.key]] = fut.result()
+                if progress is not None:
+                    progress(done, len(tasks))
+    finally:
+        if cluster is not None:
+            cluster.close()
+    return [r for r in out if r is not None]
+
+
+def summarize(rows: list[dict]) -> list[dict]:
+    """Per (fleet size, dispatcher): served priority per day (mean, 5% and 95% over every day of every
+    seed), refusals, breaches and packs retired (with the mean retirement day) over all lives."""
+    out = []
+    keys = sorted({(r["aircraft"], r["dispatcher"]) for r in rows}, key=lambda k: (k[0], DISPATCHERS.index(k[1])))
+    for size, d in keys:
+        group = [r for r in rows if (r["aircraft"], r["dispatcher"]) == (size, d)]
+        p = np.concatenate([np.asarray(r["priority"], dtype=float) for r in group])
+        retired = [day for r in group for day in r["retired_day"] if day is not None]
+        out.append({"aircraft": size, "dispatcher": d, "lives": len(group), "days": int(p.size),
+                    "priority_per_day": float(p.mean()), "p5": float(np.percentile(p, 5)),
+                    "p95": float(np.percentile(p, 95)), "refused": int(sum(sum(r["refused"]) for r in group)),
+                    "breaches": int(sum(sum(r["breaches"]) for r in group)),
+                    "served": int(sum(sum(r["served"]) for r in group)), "packs_retired": len(retired),
+                    "mean_retirement_day": float(np.mean(retired)) if retired else None})
+    return out
