@@ -67,8 +67,8 @@ def test_fly_tab_flies_plays_and_takes_a_wind_change(browser, app_url):
     log = page.locator(".uam-fly-log")
     log.get_by_text("vertiport").first.wait_for(timeout=TIMEOUT_MS)
     # while it plays, nothing from its future: no result, no curve or decision after the playback time
-    text = status.inner_text()
-    assert "hindsight" not in text and "flown:" not in text, text
+    text = status.get_by_text("flying:").inner_text()  # the status line (inside the pane's shadow root)
+    assert text.startswith("flying:") and "hindsight" not in text and "flown:" not in text, text
     facts = page.evaluate(JS_VOLTAGE)
     assert facts["now_min"] is not None and facts["curve_max_min"] <= facts["now_min"] + 0.1, facts
     assert facts["last_decision_min"] <= facts["now_min"] + 0.1, facts
@@ -103,4 +103,26 @@ def test_fly_tab_flies_plays_and_takes_a_wind_change(browser, app_url):
     width = page.evaluate("() => document.documentElement.scrollWidth")
     assert width <= 1366 + 1, width
     assert not outside, outside[:5]
+    page.close()
+
+
+def test_fleet_tab_runs_a_day_for_the_three_dispatchers(browser, app_url):
+    """The Fleet tab at 1366x768: one click flies a day for the three dispatchers; the status names each,
+    the three figures are drawn, nothing overflows sideways (screenshot with UAM_SCREENSHOTS=1)."""
+    page = browser.new_page(viewport={"width": 1366, "height": 768})
+    page.goto(app_url, timeout=TIMEOUT_MS)
+    page.locator(".bk-tab", has_text="Fleet").click(timeout=TIMEOUT_MS)
+    page.locator(".uam-fleet-run button").click(timeout=TIMEOUT_MS)
+    status = page.locator(".uam-fleet-status")
+    line = status.get_by_text("day 1:")
+    line.wait_for(timeout=TIMEOUT_MS)
+    text = line.inner_text()
+    assert all(word in text for word in ("health-aware", "health-blind", "hindsight")), text
+    titles = page.evaluate("() => [...window.Bokeh.index.all_views()].filter(v => v.model.type === 'Figure' && "
+                           "v.model.title && v.model.title.text).map(v => v.model.title.text)")
+    for start in ("Served priority", "Last day, health-aware", "Each pack after"):
+        assert any(t.startswith(start) for t in titles), titles
+    if os.environ.get("UAM_SCREENSHOTS") == "1":
+        page.screenshot(path=str(ROOT / "assets" / "screenshots" / "fleet_tab.png"))
+    assert page.evaluate("() => document.documentElement.scrollWidth") <= 1366 + 1
     page.close()

@@ -33,8 +33,8 @@ def test_a_day_is_seeded_serves_within_the_fleet_and_ages_the_packs(day_demand):
     (a, fleet, before), (b, _, _) = runs
     assert a == b  # the same inputs, the same day
     assert a.served + a.breaches + a.refused == len(day_demand) and a.flights == a.served + a.breaches
-    assert a.priority == sum(r.priority for r in day_demand if r.name in {n for _, _, n, _ in a.log}) or a.breaches
-    flown = {i for _, i, _, _ in a.log}
+    assert a.priority == sum(r.priority for r in day_demand if r.name in {entry[2] for entry in a.log}) or a.breaches
+    flown = {entry[1] for entry in a.log}
     for i, t in enumerate(fleet.truth):  # the packs that flew delivered charge and aged
         assert (t.delivered_c > before[i]) == (i in flown)
     assert all(b.delivered_c >= 0 for b in fleet.belief)
@@ -49,8 +49,8 @@ def test_the_dispatcher_never_reads_the_true_cell(day_demand):
     beliefs = [PackBelief.new_pack(k * 50 * 7600.0) for k in range(3)]
     for rule in ("aware", "blind"):
         days = [simulate_day(Fleet(truth, list(beliefs)), day_demand[:3], rule, seed=1) for truth in (strong, weak)]
-        first = [(t, i, name) for t, i, name, _ in days[0].log][:3]
-        second = [(t, i, name) for t, i, name, _ in days[1].log][:3]
+        first = [entry[:3] for entry in days[0].log][:3]
+        second = [entry[:3] for entry in days[1].log][:3]
         assert first == second, rule
     # and statically: the dispatch module has no way to the world's truth
     src = (ROOT / "uam_studio" / "fleet" / "dispatch.py").read_text()

@@ -1,4 +1,4 @@
-"""The app: tabs (Planner, Fly, Battery lab, Retrain) on one set of state models.
+"""The app: tabs (Planner, Fly, Battery lab, Retrain, Fleet, Glossary) on one set of state models.
 
     panel serve uam_studio/app/main.py        # or: uam-studio serve [--port P]
 
@@ -77,6 +77,13 @@ def _fly_tab(session: AppSession) -> Any:
     return view
 
 
+def _fleet_tab(session: AppSession) -> Any:
+    from uam_studio.app.fleet import FleetView
+    from uam_studio.app.fleet_state import FleetState
+
+    return FleetView(FleetState(background=session.served, dispatch=session.dispatch))
+
+
 def _glossary_tab(session: AppSession) -> Any:
     from uam_studio.glossary import glossary_markdown
 
@@ -89,6 +96,7 @@ TABS: list[tuple[str, Callable[[AppSession], Any]]] = [
     ("Fly", _fly_tab),
     ("Battery lab", _battery_lab_tab),
     ("Retrain", _retrain_tab),
+    ("Fleet", _fleet_tab),
     ("Glossary", _glossary_tab),
 ]
 """The tabs in order: (title, build). Append a pair to add a tab."""

@@ -79,7 +79,8 @@ class Fleet:
 class DayResult:
     """One day: ``priority`` served (stars of the requests flown without a breach), ``served``,
     ``refused`` (never flown), ``breaches``, ``flights``, ``charge_ah`` (per cell, delivered),
-    ``charger_wait_s`` (summed), and each flight as (t_s, aircraft, request, margin_v true)."""
+    ``charger_wait_s`` (summed), and each flight as (take-off s, aircraft, request, true margin V,
+    duration s)."""
 
     priority: int
     served: int
@@ -88,7 +89,7 @@ class DayResult:
     flights: int
     charge_ah: float
     charger_wait_s: float
-    log: tuple[tuple[float, int, str, float], ...]
+    log: tuple[tuple[float, int, str, float, float], ...]
 
     def to_dict(self) -> dict:
         return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in self.__dict__.items() if k != "log"}
@@ -118,7 +119,7 @@ def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int
     waiting: list[Request] = []
     cache: dict[tuple[str, int, int], float] = {}
     stats = {"priority": 0, "served": 0, "breaches": 0, "flights": 0, "charge_c": 0.0, "wait_s": 0.0}
-    log: list[tuple[float, int, str, float]] = []
+    log: list[tuple[float, int, str, float, float]] = []
 
     def margin(req: Request, a: AircraftView) -> float:
         i = int(a.name)
@@ -157,7 +158,7 @@ def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int
         breached = not bool(sim.safe)
         stats["flights"] += 1
         stats["charge_c"] += charge
-        log.append((float(env.now), i, req.name, float(sim.min_voltage_v) - 3.0))
+        log.append((float(env.now), i, req.name, float(sim.min_voltage_v) - 3.0, float(k * sim.dt_s)))
         yield env.timeout(float(k * sim.dt_s))
         fleet.truth[i] = truth.after(charge)
         belief = fleet.belief[i].aged(charge)
@@ -196,7 +197,7 @@ def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int
 
     env.process(arrivals())
     env.run(until=DAY_S + 6 * 3600.0)  # flights in the air at the day's end land
-    flown = {name for _, _, name, _ in log}
+    flown = {entry[2] for entry in log}
     return DayResult(stats["priority"], stats["served"], len(demand) - len(flown), stats["breaches"],
                      stats["flights"], stats["charge_c"] / 3600.0, stats["wait_s"], tuple(log))
 
