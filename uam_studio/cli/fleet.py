@@ -19,6 +19,8 @@ def _add_fleet_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--demand", default=None, metavar="FILE",
                    help="a day's requests from a CSV or JSON file instead (columns t_s,name,x_km,y_km,"
                         "priority,wind_kts,window_s); flown on every day")
+    p.add_argument("--max-km", type=float, default=45.0, metavar="KM",
+                   help="Poisson demand: the farthest request (8-100 km; default 45)")
     p.add_argument("--chargers", type=int, default=2, help="chargers at the vertiport (1-50; default 2)")
     p.add_argument("--age-spread", type=float, default=300.0, metavar="EFC",
                    help="the packs' age at the start: U(0, EFC) equivalent full cycles (0-2000; default 300)")
@@ -43,7 +45,7 @@ def _run_fleet(args: argparse.Namespace) -> int:
 
     for flag, value, lo, hi in (("--aircraft", args.aircraft, 1, 50), ("--days", args.days, 1, 3650),
                                 ("--rate", args.rate, 0.0, 60.0), ("--chargers", args.chargers, 1, 50),
-                                ("--age-spread", args.age_spread, 0.0, 2000.0)):
+                                ("--age-spread", args.age_spread, 0.0, 2000.0), ("--max-km", args.max_km, 8.0, 100.0)):
         check_range(flag, value, lo, hi)  # before any work: one line naming the flag
     dispatchers = args.dispatcher or ["aware", "blind", "hindsight"]
     out = {}
@@ -64,13 +66,13 @@ def _run_fleet(args: argparse.Namespace) -> int:
         with tqdm(total=len(dispatchers) * len(seeds), desc="fleet lives", disable=args.json, file=sys.stderr) as bar:
             rows = fleet_study((args.aircraft,), args.days, seeds, dispatchers, args.rate, args.chargers,
                                args.age_spread, workers=args.workers, address=args.address,
-                               progress=lambda done, _n: bar.update(done - bar.n))
+                               progress=lambda done, _n: bar.update(done - bar.n), max_km=args.max_km)
         if args.json:
             json.dump({"lives": rows, "summary": summarize(rows)}, sys.stdout, allow_nan=False)
             sys.stdout.write("\n")
             return EXIT_OK
         print(f"{args.aircraft} aircraft, {args.days} day(s) x {len(seeds)} seed(s) from {args.seed}, Poisson "
-              f"{args.rate:g} requests/h, {args.chargers} charger(s), packs aged U(0, {args.age_spread:g}) cycles")
+              f"{args.rate:g} requests/h up to {args.max_km:g} km, {args.chargers} charger(s), packs aged U(0, {args.age_spread:g}) cycles")
         print(f"{'dispatcher':10} {'priority/day':>12} {'5-95%':>9} {'served':>7} {'refused':>8} {'breaches':>9} "
               f"{'packs retired':>13} {'mean day':>8}")
         for r in summarize(rows):

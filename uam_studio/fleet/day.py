@@ -21,7 +21,7 @@ import simpy
 
 from uam_studio.errors import InputError, check_range
 from uam_studio.fleet.aging import PackHealth
-from uam_studio.fleet.demand import DAY_S, DEFAULT_RATE_PER_H, Request, poisson_demand
+from uam_studio.fleet.demand import DAY_S, DEFAULT_MAX_KM, DEFAULT_RATE_PER_H, Request, poisson_demand
 from uam_studio.fleet.dispatch import (
     BLIND_RESERVE_V,
     DISPATCHERS,
@@ -216,15 +216,15 @@ def _fit(current: np.ndarray, voltage: np.ndarray, dt_s: float) -> tuple[float, 
 
 def simulate_life(aircraft: int, days: int, seed: int, dispatcher: str, rate_per_h: float = DEFAULT_RATE_PER_H,
                   chargers: int = 2, age_spread_efc: float = 300.0,
-                  progress: Callable[[int], None] | None = None) -> dict:
-    """A fleet's life over ``days`` operating days of Poisson demand (the same days for every
-    dispatcher with the same ``seed``): per day its :class:`DayResult`; per pack the day it retired
+                  progress: Callable[[int], None] | None = None, max_km: float = DEFAULT_MAX_KM) -> dict:
+    """A fleet's life over ``days`` operating days of Poisson demand, requests up to ``max_km`` (km) away
+    (the same days for every dispatcher with the same ``seed``): per day its :class:`DayResult`; per pack the day it retired
     (None: still in service); the fleet at the end (truth and belief)."""
     days = int(check_range("days", days, 1, 3650))
     fleet = Fleet.new(aircraft, seed, age_spread_efc)
     results, retired = [], [None if s else 0 for s in fleet.in_service]
     for d in range(days):
-        demand = poisson_demand(seed * 100_003 + d, rate_per_h)
+        demand = poisson_demand(seed * 100_003 + d, rate_per_h, max_km=max_km)
         results.append(simulate_day(fleet, demand, dispatcher, seed * 100_003 + d, chargers))
         for i, s in enumerate(fleet.in_service):
             if not s and retired[i] is None:

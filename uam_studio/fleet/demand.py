@@ -19,7 +19,8 @@ from uam_studio.errors import InputError, check_range
 __all__ = ["DAY_S", "MAX_REQUESTS", "RADIUS_KM", "Request", "load_demand", "poisson_demand"]
 
 DAY_S = 12 * 3600.0  # s: the operating day (06:00-18:00)
-RADIUS_KM = (8.0, 45.0)  # km: how far requests are from the vertiport (500 m cruise needs over 6.2 km)
+RADIUS_KM = (8.0, 100.0)  # km: how far a request may be from the vertiport (500 m cruise needs over 6.2 km)
+DEFAULT_MAX_KM = 45.0  # km: the Poisson day's farthest request
 WIND_KTS = (-39.0, 39.0)  # kt: the flight tables' range
 MAX_REQUESTS = 2000  # in one day's file
 DEFAULT_RATE_PER_H = 4.0  # requests per hour
@@ -63,18 +64,19 @@ class Request:
 
 
 def poisson_demand(seed: int, rate_per_h: float = DEFAULT_RATE_PER_H, day_s: float = DAY_S,
-                   wind_sd_kts: float = 10.0) -> list[Request]:
+                   wind_sd_kts: float = 10.0, max_km: float = DEFAULT_MAX_KM) -> list[Request]:
     """A day of requests: a Poisson process of ``rate_per_h`` requests per hour over ``day_s`` s, each at
-    a uniform bearing and a distance uniform in :data:`RADIUS_KM` (km), 1-3 stars (half 1, a third 2, a
+    a uniform bearing and a distance uniform in 8-``max_km`` km, 1-3 stars (half 1, a third 2, a
     sixth 3), a forecast wind ~ N(0, ``wind_sd_kts``) clipped to the tables, a 2 h window."""
     seed = int(check_range("seed", seed, 0, 2**63 - 1))
     rate = check_range("rate_per_h", rate_per_h, 0.0, 60.0, " per h")
     day = check_range("day_s", day_s, 0.0, DAY_S, " s")
+    far = check_range("max_km", max_km, RADIUS_KM[0], RADIUS_KM[1], " km")
     rng = np.random.default_rng(seed)
     n = int(rng.poisson(rate * day / 3600.0))
     times = np.sort(rng.uniform(0.0, day, n))
     bearing = rng.uniform(0.0, 2 * math.pi, n)
-    dist = rng.uniform(*RADIUS_KM, n)
+    dist = rng.uniform(RADIUS_KM[0], far, n)
     prio = rng.choice([1, 2, 3], size=n, p=[0.5, 1 / 3, 1 / 6])
     wind = np.clip(rng.normal(0.0, wind_sd_kts, n), *WIND_KTS)
     return [Request(float(t), f"R{k + 1}", round(float(d * math.cos(b)), 2), round(float(d * math.sin(b)), 2),

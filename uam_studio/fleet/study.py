@@ -21,9 +21,10 @@ from uam_studio.fleet.dispatch import DISPATCHERS
 __all__ = ["fleet_study", "summarize"]
 
 
-def _life_row(size: int, seed: int, dispatcher: str, days: int, rate: float, chargers: int, spread: float) -> dict:
+def _life_row(size: int, seed: int, dispatcher: str, days: int, rate: float, chargers: int, spread: float,
+              max_km: float) -> dict:
     """One task: a fleet's life, reduced to what the summary needs (picklable, small)."""
-    life = simulate_life(size, days, seed, dispatcher, rate, chargers, spread)
+    life = simulate_life(size, days, seed, dispatcher, rate, chargers, spread, max_km=max_km)
     return {"aircraft": size, "seed": seed, "dispatcher": dispatcher,
             "priority": [d["priority"] for d in life["days"]], "refused": [d["refused"] for d in life["days"]],
             "breaches": [d["breaches"] for d in life["days"]], "served": [d["served"] for d in life["days"]],
@@ -33,7 +34,7 @@ def _life_row(size: int, seed: int, dispatcher: str, days: int, rate: float, cha
 def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[int] = (0, 1, 2, 3, 4),
                 dispatchers: Sequence[str] = DISPATCHERS, rate_per_h: float = 4.0, chargers: int = 2,
                 age_spread_efc: float = 300.0, workers: int | None = None, address: str | None = None,
-                progress: Callable[[int, int], None] | None = None) -> list[dict]:
+                progress: Callable[[int, int], None] | None = None, max_km: float = 45.0) -> list[dict]:
     """Every (fleet size, seed, dispatcher) life as a Dask task: on the scheduler at ``address``
     (``tcp://host:8786``) if given, else on a local cluster of ``workers`` processes (default: one per
     core), one thread each. ``workers=0`` runs the tasks here, one after another (no Dask).
@@ -49,7 +50,7 @@ def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[
              for a, s, d in product(aircraft, seeds, dispatchers)]
     if not tasks:
         raise InputError("seeds", "no task: give at least one fleet size, seed and dispatcher")
-    args = (days, float(rate_per_h), int(chargers), float(age_spread_efc))
+    args = (days, float(rate_per_h), int(chargers), float(age_spread_efc), float(max_km))
     if address is None and workers == 0:
         out = []
         for k, t in enumerate(tasks):
@@ -66,7 +67,7 @@ def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[
                                silence_logs=40)
     try:
         with Client(address if address is not None else cluster) as client:
-            futures = [client.submit(_life_row, *t, *args, key=f"fleet-{a}-{s}-{d}-{days}", pure=False)
+            futures = [client.submit(_life_row, *t, *args, key=f"fleet-{a}-{s}-{d}-{days}-{max_km:g}", pure=False)
                        for t, (a, s, d) in zip(tasks, tasks)]
             index = {f.key: k for k, f in enumerate(futures)}
             out: list[dict | None] = [None] * len(tasks)
