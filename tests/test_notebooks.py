@@ -26,6 +26,7 @@ EXPECTED = [
     "08_dqn_vs_oracle.ipynb",
     "09_flying_with_surprises.ipynb",
     "10_real_cells.ipynb",
+    "11_fleet.ipynb",
 ]
 
 
