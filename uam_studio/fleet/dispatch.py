@@ -7,7 +7,7 @@
 - :class:`AircraftView`: all a dispatcher is given about an aircraft: its name, whether it is free,
   and its belief. No true cell: the truth lives in :mod:`uam_studio.fleet.day`'s world.
 - Rules (:data:`DISPATCHERS`): ``aware`` flies a request with an aircraft whose cautious belief
-  (1.64 std to the weak side, winds 1.64 std to the head side) lands above the cut-off; ``blind``
+  (1.64 std to the weak side, winds 2.33 std to the head side) lands above the cut-off; ``blind``
   assumes every pack is new (q_max 7600 C, R0 0.117 ohm) with a fixed voltage reserve on the forecast
   winds; ``hindsight`` knows each pack's truth and the actual winds (an upper bound). Each assigns the
   waiting requests, most stars first, to the free aircraft with the least margin that still passes.
@@ -31,8 +31,8 @@ ALTITUDE_M = 500.0  # m: every leg's cruise
 NOMINAL = (7600.0, 0.117215)  # a new NASA pack: q_max (C), R0 (ohm)
 EOD_V = 3.0  # V: the cut-off
 HEALTH_Z = 1.64  # std to the weak side of the belief
-WIND_Z = 1.64  # std of the forecast error to the head side
-BLIND_RESERVE_V = 0.10  # V: the health-blind rule's reserve above the cut-off
+WIND_Z = 2.33  # std of the forecast error to the head side (tuned: RESULTS.md)
+BLIND_RESERVE_V = 0.5  # V: the health-blind rule's reserve above the cut-off (tuned: RESULTS.md)
 DISPATCHERS = ("aware", "blind", "hindsight")
 
 
