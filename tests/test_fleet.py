@@ -8,6 +8,8 @@ import json
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from uam_studio.cli import main
 from uam_studio.errors import InputError
@@ -22,6 +24,14 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="module")
 def day_demand():
     return poisson_demand(5, rate_per_h=3.0, day_s=4 * 3600.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**63 - 1), rate=st.floats(0.0, 60.0), far=st.floats(8.0, 100.0))
+def test_a_poisson_day_is_valid_anywhere_in_its_documented_range(seed, rate, far):
+    reqs = poisson_demand(seed, rate_per_h=rate, max_km=far)
+    assert all(8.0 <= r.distance_km <= max(far, 8.1) for r in reqs)
+    assert [r.t_s for r in reqs] == sorted(r.t_s for r in reqs) and len({r.name for r in reqs}) == len(reqs)
 
 
 def test_a_day_is_seeded_serves_within_the_fleet_and_ages_the_packs(day_demand):

@@ -76,7 +76,7 @@ def poisson_demand(seed: int, rate_per_h: float = DEFAULT_RATE_PER_H, day_s: flo
     n = int(rng.poisson(rate * day / 3600.0))
     times = np.sort(rng.uniform(0.0, day, n))
     bearing = rng.uniform(0.0, 2 * math.pi, n)
-    dist = rng.uniform(RADIUS_KM[0], far, n)
+    dist = rng.uniform(RADIUS_KM[0] + 0.05, max(far - 0.05, RADIUS_KM[0] + 0.05), n)  # inside after rounding to 10 m
     prio = rng.choice([1, 2, 3], size=n, p=[0.5, 1 / 3, 1 / 6])
     wind = np.clip(rng.normal(0.0, wind_sd_kts, n), *WIND_KTS)
     return [Request(float(t), f"R{k + 1}", round(float(d * math.cos(b)), 2), round(float(d * math.sin(b)), 2),
