@@ -48,6 +48,6 @@ def _run_serve(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-COMMAND = Command("start the app in a browser: Planner, Fly, Battery lab, Retrain and Glossary tabs",
+COMMAND = Command("start the app in a browser: Planner, Fly, Battery lab, Retrain, Fleet and Glossary tabs",
                   _add_serve_arguments,
                   _run_serve)

@@ -15,13 +15,14 @@ from pathlib import Path
 import numpy as np
 
 from uam_studio.errors import InputError, check_range
+from uam_studio.flight.tables import WIND_RANGE_KTS
 
 __all__ = ["DAY_S", "MAX_REQUESTS", "RADIUS_KM", "Request", "load_demand", "poisson_demand"]
 
 DAY_S = 12 * 3600.0  # s: the operating day (06:00-18:00)
 RADIUS_KM = (8.0, 100.0)  # km: how far a request may be from the vertiport (500 m cruise needs over 6.2 km)
 DEFAULT_MAX_KM = 45.0  # km: the Poisson day's farthest request
-WIND_KTS = (-39.0, 39.0)  # kt: the flight tables' range
+WIND_KTS = WIND_RANGE_KTS  # kt: the flight tables' range
 MAX_REQUESTS = 2000  # in one day's file
 DEFAULT_RATE_PER_H = 4.0  # requests per hour
 DEFAULT_WINDOW_S = 2 * 3600.0  # s: a request waits this long for an aircraft, then it is refused

@@ -19,16 +19,19 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
+from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0
+from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.errors import InputError
 from uam_studio.fleet.aging import AGING_LAW, AgingLaw
 from uam_studio.fleet.demand import Request
+from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning import Battery, Destination, Mission, Vertiport, simulate_route
 
 __all__ = ["ALTITUDE_M", "BLIND_RESERVE_V", "DISPATCHERS", "NOMINAL", "AircraftView", "PackBelief",
            "assign", "round_trip", "round_trip_margin"]
 
 ALTITUDE_M = 500.0  # m: every leg's cruise
-NOMINAL = (7600.0, 0.117215)  # a new NASA pack: q_max (C), R0 (ohm)
+NOMINAL = (DEFAULT_Q_MAX, DEFAULT_R0)  # a new NASA pack: q_max (C), R0 (ohm)
 EOD_V = 3.0  # V: the cut-off
 HEALTH_Z = 1.64  # std to the weak side of the belief
 WIND_Z = 2.33  # std of the forecast error to the head side (tuned: RESULTS.md)
@@ -95,12 +98,13 @@ def round_trip(req: Request, q_max: float, r0: float, wind_out_kts: float, wind_
     """The physics model's round trip vertiport -> request -> vertiport at :data:`ALTITUDE_M` on a
     cell of ``q_max`` (C), ``r0`` (ohm), in the given winds (kt, + = headwind each way):
     a :class:`~uam_studio.planning.missions.route.RouteSimulation`."""
-    lo, hi = -39.0, 39.0
+    lo, hi = WIND_RANGE_KTS
+    (q_lo, q_hi), (r_lo, r_hi) = PAPER_Q_RANGE, PAPER_R0_RANGE  # the paper's health box
     mission = Mission(req.name, Vertiport(0.0, 0.0, float(min(max(wind_home_kts, lo), hi))),
                       (Destination(req.name, req.x_km, req.y_km, int(req.priority),
                                    float(min(max(wind_out_kts, lo), hi))),),
-                      "single_charge", Battery(float(min(max(q_max, 5000.0), 8000.0)),
-                                               float(min(max(r0, 0.017215), 0.45))), EOD_V)
+                      "single_charge", Battery(float(min(max(q_max, q_lo), q_hi)), float(min(max(r0, r_lo), r_hi))),
+                      EOD_V)
     return simulate_route(mission, [req.name, "vertiport"], [ALTITUDE_M, ALTITUDE_M])
 
 
