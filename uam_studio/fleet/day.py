@@ -19,9 +19,16 @@ from dataclasses import dataclass, field
 import numpy as np
 import simpy
 
-from uam_studio.errors import InputError, check_range
+from uam_studio.errors import InputError, check_range, check_seed
 from uam_studio.fleet.aging import PackHealth
-from uam_studio.fleet.demand import DAY_S, DEFAULT_MAX_KM, DEFAULT_RATE_PER_H, Request, poisson_demand
+from uam_studio.fleet.demand import (
+    DAY_S,
+    DEFAULT_MAX_KM,
+    DEFAULT_RATE_PER_H,
+    Request,
+    day_seed,
+    poisson_demand,
+)
 from uam_studio.fleet.dispatch import (
     BLIND_RESERVE_V,
     DISPATCHERS,
@@ -65,7 +72,7 @@ class Fleet:
         starts from the nominal new pack aged by the logged throughput."""
         n = int(check_range("aircraft", n, 1, 50))
         spread = check_range("age_spread_efc", age_spread_efc, 0.0, 2000.0)
-        rng = np.random.default_rng([int(check_range("seed", seed, 0, 2**63 - 1)), 42])
+        rng = np.random.default_rng([check_seed("seed", seed), 42])
         truth, belief = [], []
         for _ in range(n):
             q0, r0 = float(rng.uniform(7300.0, 7900.0)), float(rng.uniform(0.10, 0.13))
@@ -108,7 +115,7 @@ def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int
     if dispatcher not in DISPATCHERS:
         raise InputError("dispatcher", f"{dispatcher!r}: allowed {', '.join(DISPATCHERS)}")
     chargers = int(check_range("chargers", chargers, 1, 50))
-    seed = int(check_range("seed", seed, 0, 2**63 - 1))
+    seed = day_seed(seed)
     env = simpy.Environment()
     plugs = simpy.Resource(env, capacity=chargers)
     winds = _world_winds(demand, seed)
@@ -221,6 +228,7 @@ def simulate_life(aircraft: int, days: int, seed: int, dispatcher: str, rate_per
     (the same days for every dispatcher with the same ``seed``): per day its :class:`DayResult`; per pack the day it retired
     (None: still in service); the fleet at the end (truth and belief)."""
     days = int(check_range("days", days, 1, 3650))
+    seed = check_seed("seed", seed)
     fleet = Fleet.new(aircraft, seed, age_spread_efc)
     results, retired = [], [None if s else 0 for s in fleet.in_service]
     for d in range(days):

@@ -9,6 +9,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import numbers
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -17,7 +18,7 @@ import numpy as np
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight.tables import WIND_RANGE_KTS
 
-__all__ = ["DAY_S", "MAX_REQUESTS", "RADIUS_KM", "Request", "load_demand", "poisson_demand"]
+__all__ = ["DAY_S", "MAX_REQUESTS", "RADIUS_KM", "Request", "day_seed", "load_demand", "poisson_demand"]
 
 DAY_S = 12 * 3600.0  # s: the operating day (06:00-18:00)
 RADIUS_KM = (8.0, 100.0)  # km: how far a request may be from the vertiport (500 m cruise needs over 6.2 km)
@@ -64,12 +65,21 @@ class Request:
         return math.hypot(self.x_km, self.y_km)
 
 
+def day_seed(value: object) -> int:
+    """A day's seed: any integer >= 0 (a life's seed times a stride plus the day; numpy takes any size).
+
+    :raises InputError: (field ``seed``) for anything else."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or int(value) < 0:
+        raise InputError("seed", f"{str(value)[:40]!r}: expected an integer >= 0")
+    return int(value)
+
+
 def poisson_demand(seed: int, rate_per_h: float = DEFAULT_RATE_PER_H, day_s: float = DAY_S,
                    wind_sd_kts: float = 10.0, max_km: float = DEFAULT_MAX_KM) -> list[Request]:
     """A day of requests: a Poisson process of ``rate_per_h`` requests per hour over ``day_s`` s, each at
     a uniform bearing and a distance uniform in 8-``max_km`` km, 1-3 stars (half 1, a third 2, a
     sixth 3), a forecast wind ~ N(0, ``wind_sd_kts``) clipped to the tables, a 2 h window."""
-    seed = int(check_range("seed", seed, 0, 2**63 - 1))
+    seed = day_seed(seed)
     rate = check_range("rate_per_h", rate_per_h, 0.0, 60.0, " per h")
     day = check_range("day_s", day_s, 0.0, DAY_S, " s")
     far = check_range("max_km", max_km, RADIUS_KM[0], RADIUS_KM[1], " km")

@@ -14,7 +14,7 @@ from itertools import product
 
 import numpy as np
 
-from uam_studio.errors import InputError, check_range
+from uam_studio.errors import InputError, check_range, check_seed
 from uam_studio.fleet.day import simulate_life
 from uam_studio.fleet.dispatch import DISPATCHERS
 
@@ -46,7 +46,7 @@ def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[
         if d not in DISPATCHERS:
             raise InputError("dispatcher", f"{d!r}: allowed {', '.join(DISPATCHERS)}")
     days = int(check_range("days", days, 1, 3650))
-    tasks = [(int(check_range("aircraft", a, 1, 50)), int(check_range("seed", s, 0, 2**63 - 1)), d)
+    tasks = [(int(check_range("aircraft", a, 1, 50)), check_seed("seed", s), d)
              for a, s, d in product(aircraft, seeds, dispatchers)]
     if not tasks:
         raise InputError("seeds", "no task: give at least one fleet size, seed and dispatcher")
