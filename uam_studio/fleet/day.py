@@ -165,7 +165,7 @@ def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int
         breached = not bool(sim.safe)
         stats["flights"] += 1
         stats["charge_c"] += charge
-        log.append((float(env.now), i, req.name, float(sim.min_voltage_v) - 3.0, float(k * sim.dt_s)))
+        log.append((float(env.now), i, req.name, float(sim.min_voltage_v) - sim.eod_v, float(k * sim.dt_s)))
         yield env.timeout(float(k * sim.dt_s))
         fleet.truth[i] = truth.after(charge)
         belief = fleet.belief[i].aged(charge)

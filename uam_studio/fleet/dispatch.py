@@ -4,12 +4,13 @@
   charge it has delivered (C, from its current sensor), carried from flight to flight: aged by the
   aging law between flights (:meth:`PackBelief.aged`), sharpened by each flight's health fit
   (:meth:`PackBelief.update`).
-- :class:`AircraftView`: all a dispatcher is given about an aircraft: its name, whether it is free,
-  and its belief. No true cell: the truth lives in :mod:`uam_studio.fleet.day`'s world.
+- :class:`AircraftView`: all a dispatcher is given about a free aircraft: its name and its belief.
+  No true cell: the truth lives in :mod:`uam_studio.fleet.day`'s world.
 - Rules (:data:`DISPATCHERS`): ``aware`` flies a request with an aircraft whose cautious belief
   (1.64 std to the weak side, winds 2.33 std to the head side) lands above the cut-off; ``blind``
   assumes every pack is new (q_max 7600 C, R0 0.117 ohm) with a fixed voltage reserve on the forecast
-  winds; ``hindsight`` knows each pack's truth and the actual winds (an upper bound). Each assigns the
+  winds; ``hindsight`` knows each pack's truth and the actual winds (a reference, not a proven optimum:
+  it assigns by the same rule). Each assigns the
   waiting requests, most stars first, to the free aircraft with the least margin that still passes.
 """
 
@@ -19,7 +20,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
-from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0
+from uam_studio.battery import DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0
 from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.errors import InputError
 from uam_studio.fleet.aging import AGING_LAW, AgingLaw
@@ -32,7 +33,7 @@ __all__ = ["ALTITUDE_M", "BLIND_RESERVE_V", "DISPATCHERS", "NOMINAL", "AircraftV
 
 ALTITUDE_M = 500.0  # m: every leg's cruise
 NOMINAL = (DEFAULT_Q_MAX, DEFAULT_R0)  # a new NASA pack: q_max (C), R0 (ohm)
-EOD_V = 3.0  # V: the cut-off
+EOD_V = DEFAULT_EOD_V  # V: the cut-off
 HEALTH_Z = 1.64  # std to the weak side of the belief
 WIND_Z = 2.33  # std of the forecast error to the head side (tuned: RESULTS.md)
 BLIND_RESERVE_V = 0.5  # V: the health-blind rule's reserve above the cut-off (tuned: RESULTS.md)
