@@ -18,19 +18,19 @@ import param
 
 from uam_studio.app.services import FLIGHT_POOL, LatestWorker, one_line
 from uam_studio.errors import InputError
-from uam_studio.fleet.day import DayResult, Fleet, simulate_day
+from uam_studio.fleet.day import DayResult, Fleet, day_of_life_seed, simulate_day
 from uam_studio.fleet.demand import poisson_demand
 from uam_studio.fleet.dispatch import DISPATCHERS, HEALTH_Z
 
 LABELS = {"aware": "health-aware", "blind": "health-blind", "hindsight": "hindsight"}
-SEED_STRIDE = 100_003  # a day's seed: seed * SEED_STRIDE + day (as simulate_life)
 
 
 def _fly_day(job: tuple[dict[str, Fleet], int, float, int]) -> tuple[int, dict[str, DayResult], str]:
     fleets, day, rate, seed = job
     try:
-        demand = poisson_demand(seed * SEED_STRIDE + day, rate)
-        return day, {d: simulate_day(f, demand, d, seed * SEED_STRIDE + day) for d, f in fleets.items()}, ""
+        day_seed = day_of_life_seed(seed, day)  # as simulate_life: the same days as `uam-studio fleet`
+        demand = poisson_demand(day_seed, rate)
+        return day, {d: simulate_day(f, demand, d, day_seed) for d, f in fleets.items()}, ""
     except InputError as err:
         return day, {}, one_line(err)
 

@@ -40,7 +40,7 @@ def _run_fleet(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from uam_studio.errors import check_range
-    from uam_studio.fleet.day import Fleet, simulate_day
+    from uam_studio.fleet.day import Fleet, day_of_life_seed, simulate_day
     from uam_studio.fleet.demand import load_demand
 
     for flag, value, lo, hi in (("--aircraft", args.aircraft, 1, 50), ("--days", args.days, 1, 3650),
@@ -53,7 +53,7 @@ def _run_fleet(args: argparse.Namespace) -> int:
         demand = load_demand(args.demand)
         for d in dispatchers:
             fleet = Fleet.new(args.aircraft, args.seed, args.age_spread)
-            days = [simulate_day(fleet, demand, d, args.seed * 100_003 + k, args.chargers).to_dict()
+            days = [simulate_day(fleet, demand, d, day_of_life_seed(args.seed, k), args.chargers).to_dict()
                     for k in range(int(args.days))]
             out[d] = {"dispatcher": d, "days": days}
     else:

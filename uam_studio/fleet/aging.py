@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 
-from uam_studio.battery.cmu_data import data_folder, load_cell_log, reference_discharges
+from uam_studio.battery.cmu_data import data_folder, load_cell_log, reference_discharges, resampled_missions
 from uam_studio.errors import InputError, check_range
 
 __all__ = ["AGING_LAW", "END_OF_LIFE_FRACTION", "LIFE_FILES", "AgingLaw", "LifePoints", "PackHealth",
@@ -106,8 +106,6 @@ class LifePoints:
 def life_points(data: str | Path | None = None) -> list[LifePoints]:
     """The four lives' reference discharges (:class:`LifePoints`), from the dataset's folder (``data``,
     else :func:`~uam_studio.battery.cmu_data.data_folder`'s search)."""
-    from uam_studio.battery.cmu_data import resampled_missions
-
     folder = data_folder(data)
     out = []
     for name in LIFE_FILES:

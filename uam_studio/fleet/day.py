@@ -42,12 +42,18 @@ from uam_studio.fleet.dispatch import (
     round_trip_margin,
 )
 
-__all__ = ["DayResult", "Fleet", "FIT_WINDOW_S", "simulate_day", "simulate_life"]
+__all__ = ["DayResult", "Fleet", "FIT_WINDOW_S", "day_of_life_seed", "simulate_day", "simulate_life"]
 
 FIT_WINDOW_S = 600  # s of each flight's readings fitted for its pack's health
 FORECAST_SIGMA_KT = 8.0  # kt: the actual wind is the forecast plus N(0, this)
 NOISE_V, NOISE_A = 0.005, 0.020  # sensor noise std (V, A)
 CHARGE_C_RATE = 1.0  # charge current, in q_max per hour
+SEED_STRIDE = 100_003  # day d of the life seeded ``seed`` is seeded ``seed * SEED_STRIDE + d``
+
+
+def day_of_life_seed(seed: int, day: int) -> int:
+    """The seed of day ``day`` (0-based) of the life seeded ``seed``: its demand and its world."""
+    return seed * SEED_STRIDE + day
 
 
 @dataclass
@@ -232,8 +238,8 @@ def simulate_life(aircraft: int, days: int, seed: int, dispatcher: str, rate_per
     fleet = Fleet.new(aircraft, seed, age_spread_efc)
     results, retired = [], [None if s else 0 for s in fleet.in_service]
     for d in range(days):
-        demand = poisson_demand(seed * 100_003 + d, rate_per_h, max_km=max_km)
-        results.append(simulate_day(fleet, demand, dispatcher, seed * 100_003 + d, chargers))
+        demand = poisson_demand(day_of_life_seed(seed, d), rate_per_h, max_km=max_km)
+        results.append(simulate_day(fleet, demand, dispatcher, day_of_life_seed(seed, d), chargers))
         for i, s in enumerate(fleet.in_service):
             if not s and retired[i] is None:
                 retired[i] = d + 1

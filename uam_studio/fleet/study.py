@@ -67,8 +67,8 @@ def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[
                                silence_logs=40)
     try:
         with Client(address if address is not None else cluster) as client:
-            futures = [client.submit(_life_row, *t, *args, key=f"fleet-{a}-{s}-{d}-{days}-{max_km:g}", pure=False)
-                       for t, (a, s, d) in zip(tasks, tasks)]
+            futures = [client.submit(_life_row, a, s, d, *args, key=f"fleet-{a}-{s}-{d}-{days}-{max_km:g}", pure=False)
+                       for a, s, d in tasks]
             index = {f.key: k for k, f in enumerate(futures)}
             out: list[dict | None] = [None] * len(tasks)
             for done, fut in enumerate(as_completed(futures), 1):
