@@ -175,8 +175,7 @@ class FlyState(param.Parameterized):
         """The decisions made up to the playback time, newest first, as table rows."""
         if self.record is None:
             return []
-        return [d.row()
-                for d in reversed(self.record.events) if d.time_s <= self.t_s]
+        return [d.row() for d in reversed(self.record.events) if d.time_s <= self.t_s]
 
     @param.depends("t_s", watch=True)
     def _show_status(self) -> None:

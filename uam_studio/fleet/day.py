@@ -127,7 +127,7 @@ def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int
     winds = _world_winds(demand, seed)
     noise = np.random.default_rng([seed, 11])
     n = len(fleet.truth)
-    free = [fleet.in_service[i] for i in range(n)]
+    free = list(fleet.in_service)  # an aircraft is free when in service and not flying or charging
     version = [0] * n
     waiting: list[Request] = []
     cache: dict[tuple[str, int, int], float] = {}
