@@ -26,8 +26,8 @@ from uam_studio.battery.cmu_data import (
     resampled_missions,
 )
 from uam_studio.battery.identify import FitSegment, identify_cell
-from uam_studio.battery.parameters import NASA_18650, VTC6
-from uam_studio.battery.real_cells import START_Q_MAX, START_R0, identify_vtc6, replay_mission, vtc6_start
+from uam_studio.battery.parameters import NASA_18650, VTC6, VTC6_CELL_HELD_OUT
+from uam_studio.battery.real_cells import START_Q_MAX, START_R0, replay_mission, vtc6_start
 from uam_studio.cli import main
 
 DATA = os.environ.get("UAM_STUDIO_CMU_DATA", "")
@@ -249,12 +249,29 @@ def test_vtc6_flies_the_real_mission():
 
 
 @real
-def test_identify_vtc6_reproduces_the_bundled_set():
-    """The bundled VTC6 set is what its one documented command (``uam-studio identify vtc6``) fits."""
-    fitted = identify_vtc6(DATA)
-    assert fitted.q_max == pytest.approx(VTC6.q_max, rel=1e-3) and fitted.r0 == pytest.approx(VTC6.r0, rel=1e-2)
+@pytest.mark.parametrize("hold_out, name", [("none", "VTC6"), ("landing", "VTC6_LANDING_HELD_OUT"),
+                                            ("cell", "VTC6_CELL_HELD_OUT")])
+def test_identify_vtc6_reproduces_the_bundled_set(hold_out, name, capsys):
+    """Each bundled VTC6 set (parameters.py) is what its one documented command prints
+    (``uam-studio identify vtc6 --hold-out ...``): the printed source, run, gives the bundled cell."""
+    from dataclasses import fields, replace
+
+    from uam_studio.battery import parameters
+
+    assert main(["identify", "vtc6", "--data", DATA, "--hold-out", hold_out]) == 0
+    printed = capsys.readouterr().out
+    assert printed.startswith(f"{name}_PARAMS = replace(")
+    space = {"replace": replace, "DEFAULT_CELL": DEFAULT_CELL, "Cell": parameters.Cell,
+             "VTC6_FLEET_Q_RANGE": parameters.VTC6_FLEET_Q_RANGE, "VTC6_FLEET_R0_RANGE": parameters.VTC6_FLEET_R0_RANGE}
+    exec(printed, space)
+    fitted, bundled = space[name], getattr(parameters, name)
+    assert fitted.name == bundled.name
+    assert fitted.q_max == pytest.approx(bundled.q_max, rel=1e-3) and fitted.r0 == pytest.approx(bundled.r0, rel=1e-2)
+    for f in fields(bundled.params):  # loosely (weakly identified terms such as an activation at its bound
+        if f.name not in ("ap", "fleet_q_range", "fleet_r0_range"):  # move); the voltage below is the tight check
+            assert getattr(fitted.params, f.name) == pytest.approx(getattr(bundled.params, f.name), rel=0.1), f.name
     mission = mission_cycle(load_cell_log(Path(DATA) / "VAH01_20.csv"))
-    rmse = [np.sqrt(np.mean((replay_mission(mission, c).voltage_v - mission.log.voltage_v) ** 2)) for c in (fitted, VTC6)]
+    rmse = [np.sqrt(np.mean((replay_mission(mission, c).voltage_v - mission.log.voltage_v) ** 2)) for c in (fitted, bundled)]
     assert rmse[0] == pytest.approx(rmse[1], abs=3e-4)
 
 
@@ -262,11 +279,11 @@ def test_identify_vtc6_reproduces_the_bundled_set():
 def test_real_cell_report_quick():
     from uam_studio.studies.real_cells import format_report, real_cell_report
 
-    report = real_cell_report(DATA, refit=False, capacity=False)
+    report = real_cell_report(DATA, held_out=False, capacity=False)
     text = format_report(report)
     assert "VTC6 (bundled)" in text and "NASA 18650 (default)" in text
     assert [r["context_s"] for r in report.health] == [20, 60, 120]
-    assert {r["set"] for r in report.health} == {"bundled (in-sample)"}  # no held-out refit asked for
+    assert {r["set"] for r in report.health} == {"bundled (in-sample)"}  # no held-out set asked for
     for r in report.health:
         assert np.isfinite([r["predicted_v"], r["low_v"], r["high_v"]]).all() and r["low_v"] <= r["high_v"]
     assert len(report.safety) == 7 * 3
@@ -281,7 +298,7 @@ def test_a_cell_the_set_never_read_is_flagged_and_no_breach_is_cleared():
     from uam_studio.studies.real_cells import SET_CELL, health_rows, safety_rows
 
     mission = mission_cycle(load_cell_log(Path(DATA) / "VAH01_20.csv"))
-    rows = health_rows(identify_vtc6(DATA, hold_out="cell"), mission, np.random.default_rng(20260), label=SET_CELL)
+    rows = health_rows(VTC6_CELL_HELD_OUT, mission, np.random.default_rng(20260), label=SET_CELL)
     measured = float(mission.log.voltage_v[mission.phase_mask(LANDING)].min())
     safety = safety_rows(rows, measured)
     assert sum(r["missed_breach"] for r in safety) == 0 and sum(r["measured_breach"] for r in safety) == 15

@@ -169,3 +169,48 @@ VTC6_PARAMS = replace(
     fleet_r0_range=VTC6_FLEET_R0_RANGE,
 )
 VTC6 = Cell("Sony-Murata VTC6 18650 (identified on the CMU eVTOL dataset)", VTC6_PARAMS, 10942.8444, 0.0208113676)
+
+# The two VTC6 sets that never read what the real-cell validation scores (``uam_studio.studies.real_cells``,
+# ``uam-studio evaluate real``), printed by ``uam-studio identify vtc6 --hold-out landing`` and
+# ``--hold-out cell`` (pasted; the card is pretrained/vtc6_cell.md). Landing held out: the bundled set's
+# data without VAH01's landing and the rest after it. Cell held out: VAH07 alone, VAH01 never read.
+VTC6_LANDING_HELD_OUT_PARAMS = replace(
+    DEFAULT_CELL,
+    kn=9707.01818,
+    kp=10035.471,
+    vol_s_fraction=0.176578701,
+    t_diffusion_s=515823.204,
+    t_ohmic_s=1.5,
+    t_sn_s=42.9655798,
+    t_sp_s=1.5,
+    u0p=3.25575489,
+    ap=(81532.1037, -157885.822, 132486.104, 53348.8044, -421901.982, -1578184.63, 9407073.73, -13304097.1, -1447101.66, 13764802.7, 505376.11, -13195820.3, 6132499.45),
+    t_ambient_k=298.15,
+    thermal_mass=47.0122017,
+    thermal_tau_s=496.9958,
+    r0_activation_k=100.038862,
+    k_activation_k=1.0000111,
+    fleet_q_range=VTC6_FLEET_Q_RANGE,
+    fleet_r0_range=VTC6_FLEET_R0_RANGE,
+)
+VTC6_LANDING_HELD_OUT = Cell("Sony-Murata VTC6 18650 (identified without VAH01's landing)", VTC6_LANDING_HELD_OUT_PARAMS, 10945.9081, 0.0164173665)
+VTC6_CELL_HELD_OUT_PARAMS = replace(
+    DEFAULT_CELL,
+    kn=2141.66723,
+    kp=11128.6207,
+    vol_s_fraction=0.142150377,
+    t_diffusion_s=4063656.33,
+    t_ohmic_s=1.50001953,
+    t_sn_s=36.0005348,
+    t_sp_s=1.59693107,
+    u0p=3.14588414,
+    ap=(106939.729, -180262.385, 167373.852, -63812.2018, -228694.172, -1182272.36, 6591003.23, -7710513.24, -4669960.34, 10870878.6, 3604941.76, -12307626.5, 4979971.07),
+    t_ambient_k=298.15,
+    thermal_mass=31.0818247,
+    thermal_tau_s=369.190262,
+    r0_activation_k=1.85120888,
+    k_activation_k=5801.4725,
+    fleet_q_range=VTC6_FLEET_Q_RANGE,
+    fleet_r0_range=VTC6_FLEET_R0_RANGE,
+)
+VTC6_CELL_HELD_OUT = Cell("Sony-Murata VTC6 18650 (identified without cell VAH01)", VTC6_CELL_HELD_OUT_PARAMS, 11026.1313, 0.00827459222)

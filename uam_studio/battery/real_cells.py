@@ -37,7 +37,14 @@ from .cmu_data import (
     resampled_missions,
 )
 from .identify import FitSegment, identify_cell
-from .parameters import DEFAULT_CELL, VTC6_FLEET_Q_RANGE, VTC6_FLEET_R0_RANGE, Cell, CellParameters
+from .parameters import (
+    DEFAULT_CELL,
+    VTC6_FLEET_Q_RANGE,
+    VTC6_FLEET_R0_RANGE,
+    VTC6_PARAMS,
+    Cell,
+    CellParameters,
+)
 from .simulate import SimulationResult, simulate, simulate_constant_power
 
 IDENTIFICATION_FILE = "VAH07.csv.mat"
@@ -142,16 +149,33 @@ def replay_mission(mission: MissionLog, cell: Cell, by_power: bool = True) -> Si
 
 
 
-def cell_literal(cell: Cell, name: str = "VTC6") -> str:
-    """Python source of ``cell`` as parameters.py holds it (what ``uam-studio identify vtc6`` prints)."""
+# The fleet ranges' names in parameters.py, printed in place of their values.
+FLEET_RANGE_NAMES = {"fleet_q_range": "VTC6_FLEET_Q_RANGE", "fleet_r0_range": "VTC6_FLEET_R0_RANGE"}
+
+# The name of each identification's literals in parameters.py and its Cell's label, by what it holds out.
+LITERAL_NAMES = {
+    "none": ("VTC6", "Sony-Murata VTC6 18650 (identified on the CMU eVTOL dataset)"),
+    "landing": ("VTC6_LANDING_HELD_OUT", "Sony-Murata VTC6 18650 (identified without VAH01's landing)"),
+    "cell": ("VTC6_CELL_HELD_OUT", "Sony-Murata VTC6 18650 (identified without cell VAH01)"),
+}
+
+
+def cell_literal(cell: Cell, hold_out: str = "none") -> str:
+    """Python source of ``cell`` as parameters.py holds it (what ``uam-studio identify vtc6`` prints),
+    named for what its identification held out (:data:`LITERAL_NAMES`)."""
+    name, label = LITERAL_NAMES[hold_out]
     p = cell.params
     changed = [f.name for f in fields(p) if getattr(p, f.name) != getattr(DEFAULT_CELL, f.name)]
     lines = [f"{name}_PARAMS = replace(", "    DEFAULT_CELL,"]
     for n in changed:
         v = getattr(p, n)
-        text = "(" + ", ".join(f"{float(x):.9g}" for x in v) + ")" if isinstance(v, tuple) else f"{float(v):.9g}"
+        if n in FLEET_RANGE_NAMES and v == getattr(VTC6_PARAMS, n):
+            text = FLEET_RANGE_NAMES[n]
+        elif isinstance(v, tuple):
+            text = "(" + ", ".join(f"{float(x):.9g}" for x in v) + ")"
+        else:
+            text = f"{float(v):.9g}"
         lines.append(f"    {n}={text},")
     lines.append(")")
-    lines.append(f'{name} = Cell("Sony-Murata VTC6 18650 (identified on the CMU eVTOL dataset)", {name}_PARAMS, '
-                 f"{cell.q_max:.9g}, {cell.r0:.9g})")
+    lines.append(f'{name} = Cell("{label}", {name}_PARAMS, {cell.q_max:.9g}, {cell.r0:.9g})')
     return "\n".join(lines)

@@ -16,8 +16,11 @@ def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", default=None, metavar="PATH",
                    help="real: the CMU eVTOL dataset's folder (default: $UAM_STUDIO_CMU_DATA; DOI 10.1184/R1/14226830)")
     p.add_argument("--quick", action="store_true",
-                   help="real: skip the two held-out refits of the VTC6 set (about 10 s each): the health and "
-                        "safety rows are then only the bundled set's, in-sample")
+                   help="real: skip the two held-out VTC6 sets: the health and safety rows are then only the "
+                        "bundled set's, in-sample")
+    p.add_argument("--refit", action="store_true",
+                   help="real: identify the two held-out VTC6 sets again from --data (about 10 s each) instead of "
+                        "reading their bundled literals")
     p.add_argument("--weights", default=None, help="weights file (default: the bundled model)")
     p.add_argument("--table", choices=["default", "noise"], default="default",
                    help="default: the held-out sets, beside the physics fit; noise: EOD timing over sensor noise "
@@ -40,11 +43,11 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         from ..studies.real_cells import format_report as format_real
         from ..studies.real_cells import real_cell_report
 
-        report = real_cell_report(args.data, refit=not args.quick)
+        report = real_cell_report(args.data, held_out=not args.quick, refit=args.refit)
         print(json.dumps(report.as_dict(), indent=2) if args.json else format_real(report))
         return EXIT_OK
-    if args.data is not None or args.quick:
-        raise CliExit("--data, --quick: only with 'evaluate real'", EXIT_INPUT)
+    if args.data is not None or args.quick or args.refit:
+        raise CliExit("--data, --quick, --refit: only with 'evaluate real'", EXIT_INPUT)
     n = args.n if args.n is not None else (200 if args.table == "noise" else 400)
     if n < 10:
         raise CliExit("--n: must be >= 10", EXIT_INPUT)

@@ -12,14 +12,15 @@ def _add_identify_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", default=None, metavar="PATH",
                    help="the CMU eVTOL dataset's folder (default: $UAM_STUDIO_CMU_DATA; DOI 10.1184/R1/14226830)")
     p.add_argument("--hold-out", choices=["none", "landing", "cell"], default="none",
-                   help="none: the bundled set; landing: without VAH01's landing and rest; cell: without VAH01")
+                   help="none: the bundled set (VTC6); landing: without VAH01's landing and rest (VTC6_LANDING_HELD_OUT); "
+                        "cell: without VAH01 (VTC6_CELL_HELD_OUT)")
 
 
 def _run_identify(args: argparse.Namespace) -> int:
     from ..battery.cmu_data import data_folder
     from ..battery.real_cells import cell_literal, identify_vtc6
 
-    print(cell_literal(identify_vtc6(data_folder(args.data), hold_out=args.hold_out)))
+    print(cell_literal(identify_vtc6(data_folder(args.data), hold_out=args.hold_out), args.hold_out))
     return EXIT_OK
 
 

@@ -12,8 +12,10 @@ models on a real VTC6? Every row is scored on measurements; the held-out status 
   default), the landing's lowest voltage predicted by power with its 90% interval (draws of the fit's
   uncertainty, model-discrepancy factor and flags included: :mod:`uam_studio.battery.fit_quality`);
   and the same without the prior (the likelihood alone). On three parameter sets: the two refits that
-  never read the scored landing (:data:`SET_LANDING`, :data:`SET_CELL`; held out, the default), and the
-  bundled set as the in-sample reference (:data:`SET_BUNDLED`; only it with ``refit=False``);
+  never read the scored landing (:data:`SET_LANDING`, :data:`SET_CELL`; held out, the default: the
+  bundled literals ``VTC6_LANDING_HELD_OUT`` and ``VTC6_CELL_HELD_OUT``, or identified again from the
+  data with ``refit=True``), and the bundled set as the in-sample reference (:data:`SET_BUNDLED`; only
+  it with ``held_out=False``);
 - Dynaformer: the bundled model (trained on the NASA cell, 0.05-3 A; held out), and the one fine-tuned
   on the bundled VTC6 set's synthetic data (``dynaformer_vtc6.pt``; in-sample: that set read this
   landing), on the same contexts along the measured current; beside each, the reference in the same run: the same physics fit flown along the same current;
@@ -43,7 +45,7 @@ from uam_studio.battery.cmu_data import (
     mission_cycle,
     reference_discharges,
 )
-from uam_studio.battery.parameters import NASA_18650, VTC6, Cell
+from uam_studio.battery.parameters import NASA_18650, VTC6, VTC6_CELL_HELD_OUT, VTC6_LANDING_HELD_OUT, Cell
 from uam_studio.battery.real_cells import ZERO_C, identify_vtc6, replay_mission
 from uam_studio.errors import InputError
 
@@ -199,22 +201,25 @@ def safety_rows(health: list[dict], measured_min: float) -> list[dict]:
     return rows
 
 
-def real_cell_report(data: str | Path | None = None, refit: bool = True, capacity: bool = True,
-                     seed: int = 20260) -> RealCellReport:
+def real_cell_report(data: str | Path | None = None, held_out: bool = True, refit: bool = False,
+                     capacity: bool = True, seed: int = 20260) -> RealCellReport:
     """The validation table (module docstring) from the dataset's folder (``data`` or
-    ``$UAM_STUDIO_CMU_DATA``). ``refit=False`` skips the two held-out refits (a minute each);
-    ``capacity=False`` skips the reference discharges (62 in the four resampled lives)."""
+    ``$UAM_STUDIO_CMU_DATA``). ``held_out=False`` scores only the bundled (in-sample) set;
+    ``refit=True`` identifies the two held-out sets again from the data (about 10 s each) instead of
+    reading their bundled literals; ``capacity=False`` skips the reference discharges (62 in the four
+    resampled lives)."""
     folder = data_folder(data)
     mission = mission_cycle(load_cell_log(folder / MISSION_FILE))
     report = RealCellReport(measured_landing_min_v=float(_landing_min(mission.log.voltage_v, mission)))
     report.physics.append(physics_row("VTC6 (bundled)", "none: its fit read this mission", VTC6, mission))
     sets = []  # (label, cell): the held-out sets first, the bundled set as the in-sample reference
-    if refit:
-        for hold_out, label, what in (("landing", SET_LANDING, "this mission's landing and rest"),
-                                      ("cell", SET_CELL, "cell VAH01 (fit on VAH07 only)")):
-            refitted = identify_vtc6(folder, hold_out=hold_out)
-            report.physics.append(physics_row("VTC6 refit", what, refitted, mission))
-            sets.append((label, refitted))
+    if held_out:
+        for hold_out, label, what, bundled in (
+                ("landing", SET_LANDING, "this mission's landing and rest", VTC6_LANDING_HELD_OUT),
+                ("cell", SET_CELL, "cell VAH01 (fit on VAH07 only)", VTC6_CELL_HELD_OUT)):
+            cell = identify_vtc6(folder, hold_out=hold_out) if refit else bundled
+            report.physics.append(physics_row("VTC6 refit", what, cell, mission))
+            sets.append((label, cell))
     sets.append((SET_BUNDLED, VTC6))
     report.physics.append(physics_row("NASA 18650 (default)", "all (not fitted)", NASA_18650, mission))
     report.physics.append(physics_row("NASA set, q_max/R0 fitted", "none", _mission_fitted_nasa(mission), mission))
