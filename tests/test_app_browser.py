@@ -340,6 +340,20 @@ def test_training_session_does_not_block_another_session(browser, app_url):
         planner.close()
 
 
+def _settled_without_overflow(page, what) -> None:
+    """Wait (at most 5 s) for a tab's layout to settle with nothing past the right edge; fail naming what
+    still overflows. Settled: two animation frames after the check first passes, it passes again."""
+    js = f"""async () => {{ const frame = () => new Promise(r => requestAnimationFrame(() => r()));
+      for (let i = 0; i < 2; i++) await frame();
+      return ({JS_OVERFLOW})().length === 0; }}"""
+    deadline = time.monotonic() + 5.0
+    while time.monotonic() < deadline:
+        if page.evaluate(js) and page.evaluate(js):
+            return
+        page.wait_for_timeout(100)
+    assert page.evaluate(JS_OVERFLOW) == [], what
+
+
 def _outside_requests(page) -> list[str]:
     """Collect (in the returned list) every request the page makes to a host other than this machine."""
     from urllib.parse import urlsplit
@@ -410,8 +424,7 @@ def test_layout_fits_the_screen_with_the_plan_above_the_fold(browser, app_url, s
                 page.locator(".uam-lab-summary").get_by_text("this setting").wait_for()
             elif tab == "Retrain":
                 page.locator(".uam-train-status").get_by_text("episodes:").wait_for()
-            page.wait_for_timeout(1000)  # layout settles
-            assert page.evaluate(JS_OVERFLOW) == [], (tab, size)
+            _settled_without_overflow(page, (tab, size))
         # the mouse wheel scrolls the page over every figure of every tab: no figure zooms on it
         zooming = page.evaluate("() => [...window.Bokeh.index.all_views()].filter(v => v.model.type === 'Figure'"
                                 " && v.model.toolbar.active_scroll != null).map(v => v.model.title ? "
