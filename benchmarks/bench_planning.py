@@ -222,44 +222,11 @@ def retrain(n_maps: int, budget_s: float, seed: int, init_agent: str | None = No
 
 
 def findings(quick: bool) -> dict:
-    from uam_studio.studies.findings import altitude_by_distance, fixed_altitude_reach, reward_sweep
+    """The paper's four findings (``uam-studio findings``): the same library function and text."""
+    from uam_studio.studies.findings import format_findings, paper_findings
 
-    out: dict = {}
-    print("1. best altitude by leg length (fresh cell; charge C per altitude 500/1000/2000/3000 m)")
-    out["altitude"] = []
-    for wind in (-39.0, 0.0, 39.0):
-        rows = altitude_by_distance([25, 40, 55.56, 80, 100], wind_kts=wind)
-        out["altitude"] += rows
-        for r in rows:
-            ch = " ".join(f"{r['by_altitude'][a]['charge_c']:5.0f}" if a in r["by_altitude"] else "    -"
-                          for a in (500.0, 1000.0, 2000.0, 3000.0))
-            print(f"   wind {wind:+5.0f} kt, {r['distance_km']:6.2f} km: {ch}  least charge {r['least_charge_m']}, "
-                  f"highest min voltage {r['best_voltage_m']}")
-    n = 10 if quick else 40
-    rows = fixed_altitude_reach(held_out_missions(n, 2024), (1000.0, 3000.0), wind_kts=39.0)
-    r1 = np.mean([r["reached"][1000.0] for r in rows])
-    r3 = np.mean([r["reached"][3000.0] for r in rows])
-    more = sum(r["reached"][1000.0] > r["reached"][3000.0] for r in rows)
-    print(f"2. 39 kt headwind, every leg at one level (oracle), {n} missions: mean destinations 1000 m {r1:.2f}, "
-          f"3000 m {r3:.2f}; 1000 m reaches more on {more}/{n}, fewer on "
-          f"{sum(r['reached'][1000.0] < r['reached'][3000.0] for r in rows)}")
-    out["headwind"] = {"rows": rows, "mean_1000": r1, "mean_3000": r3}
-    steps = 20_000 if quick else 80_000
-    ev = 30 if quick else 100
-    g = reward_sweep("gamma", [0.0, 5.0, 50.0], "single_charge", steps=steps, n_eval=ev)
-    print(f"3. gamma sweep (single charge, {steps} steps each, {ev} held-out missions):")
-    for r in g:
-        print(f"   gamma {r['gamma']:5.1f}: EOD breach {100 * r['eod_breach_rate']:5.1f}% (training tail "
-              f"{100 * r['train_eod_rate']:5.1f}%), mean destinations {r['mean_reached']:.2f}, "
-              f"margin {1000 * r['mean_margin_v']:.0f} mV")
-    out["gamma"] = g
-    b = reward_sweep("beta", [0.0, 1.0, 5.0], "multi_charge", steps=steps, n_eval=ev)
-    print(f"4. beta sweep (multi charge, {steps} steps each, {ev} held-out missions):")
-    for r in b:
-        print(f"   beta {r['beta']:4.1f}: charging cycles per destination {r['cycles_per_destination']:.2f}, "
-              f"mean cycles {r['mean_cycles']:.2f}, destinations {r['mean_reached']:.2f}, "
-              f"EOD breach {100 * r['eod_breach_rate']:.1f}%")
-    out["beta"] = b
+    out = paper_findings(quick=quick)
+    print(format_findings(out))
     return out
 
 

@@ -8,7 +8,7 @@ rejects) prints one line ``error: ...`` to stderr and exits with code 2.
 Commands: ``serve`` (start the Panel app), ``simulate`` (fly a route of a mission file and report voltage and EOD), ``plan`` (plan
 a mission with the DQN agent, the oracle or the greedy baseline; physics-checked), ``fly`` (fly it in
 a world the operator cannot see, re-planning from its sensors), ``fleet`` (a fleet's day or life under
-three dispatchers), ``train``
+three dispatchers), ``findings`` (the paper's four findings, agents trained on the Dask engine), ``train``
 (``dynaformer`` or ``dqn``; never into ``pretrained/``), ``evaluate`` (a model on held-out data, or ``real``: the models on
 the CMU eVTOL dataset's real cells) and ``identify`` (a real cell's parameter set), each in the module of
 its name; :mod:`uam_studio.cli.common` holds what they share.
@@ -22,7 +22,7 @@ import sys
 from collections.abc import Sequence
 
 from uam_studio import __version__
-from uam_studio.cli import evaluate, fleet, fly, identify, plan, serve, simulate, train
+from uam_studio.cli import evaluate, findings, fleet, fly, identify, plan, serve, simulate, train
 from uam_studio.cli.common import EXIT_BROKEN_PIPE, EXIT_INPUT, EXIT_INTERRUPTED, CliExit, Command, Parser
 from uam_studio.errors import InputError
 
@@ -31,6 +31,7 @@ COMMANDS: dict[str, Command] = {
     "plan": plan.COMMAND,
     "fly": fly.COMMAND,
     "fleet": fleet.COMMAND,
+    "findings": findings.COMMAND,
     "train": train.COMMAND,
     "evaluate": evaluate.COMMAND,
     "identify": identify.COMMAND,

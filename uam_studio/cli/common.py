@@ -68,3 +68,20 @@ def seed_arg(text: str) -> int:
         return check_seed("--seed", value)
     except InputError as err:
         raise argparse.ArgumentTypeError(str(err)[len("--seed: "):]) from None
+
+
+def add_engine_arguments(p: argparse.ArgumentParser, what: str) -> None:
+    """``--workers`` and ``--address``: where :func:`uam_studio.engine.run_tasks` runs ``what``."""
+    p.add_argument("--workers", type=int, default=None,
+                   help=f"Dask workers of the local cluster that runs the {what} (default: one per core; 0: "
+                        "no cluster, one after another here)")
+    p.add_argument("--address", default=None, metavar="tcp://HOST:PORT",
+                   help=f"run the {what} on this running Dask scheduler instead of a local cluster")
+
+
+def check_workers(args: argparse.Namespace) -> None:
+    """``--workers`` within 0-256 (one line naming the flag otherwise)."""
+    from uam_studio.errors import check_range
+
+    if args.workers is not None:
+        check_range("--workers", args.workers, 0, 256)

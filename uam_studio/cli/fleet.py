@@ -7,7 +7,7 @@ import argparse
 import json
 import sys
 
-from uam_studio.cli.common import EXIT_OK, Command, seed_arg
+from uam_studio.cli.common import EXIT_OK, Command, add_engine_arguments, check_workers, seed_arg
 
 
 def _add_fleet_arguments(p: argparse.ArgumentParser) -> None:
@@ -28,11 +28,7 @@ def _add_fleet_arguments(p: argparse.ArgumentParser) -> None:
                    help="which dispatchers (repeatable; default all three)")
     p.add_argument("--seeds", type=int, default=1, help="lives per dispatcher, seeded --seed, --seed+1, ... "
                                                         "(1-1000; default 1)")
-    p.add_argument("--workers", type=int, default=None,
-                   help="Dask workers of the local cluster that runs the lives (default: one per core; 0: "
-                        "no cluster, one life after another here)")
-    p.add_argument("--address", default=None, metavar="tcp://HOST:PORT",
-                   help="run the lives on this running Dask scheduler instead of a local cluster")
+    add_engine_arguments(p, "lives")
     p.add_argument("--json", action="store_true", help="print every day's numbers as JSON")
 
 
@@ -60,8 +56,7 @@ def _run_fleet(args: argparse.Namespace) -> int:
         from uam_studio.fleet.study import fleet_study, summarize
 
         check_range("--seeds", args.seeds, 1, 1000)
-        if args.workers is not None:
-            check_range("--workers", args.workers, 0, 256)
+        check_workers(args)
         seeds = range(args.seed, args.seed + int(args.seeds))
         with tqdm(total=len(dispatchers) * len(seeds), desc="fleet lives", disable=args.json, file=sys.stderr) as bar:
             rows = fleet_study((args.aircraft,), args.days, seeds, dispatchers, args.rate, args.chargers,

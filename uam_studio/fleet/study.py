@@ -8,12 +8,12 @@ Public API: :func:`fleet_study` (the results, one row per task, in task order) a
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Sequence
 from itertools import product
 
 import numpy as np
 
+from uam_studio.engine import run_tasks
 from uam_studio.errors import InputError, check_range, check_seed
 from uam_studio.fleet.day import simulate_life
 from uam_studio.fleet.dispatch import DISPATCHERS
@@ -35,9 +35,10 @@ def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[
                 dispatchers: Sequence[str] = DISPATCHERS, rate_per_h: float = 4.0, chargers: int = 2,
                 age_spread_efc: float = 300.0, workers: int | None = None, address: str | None = None,
                 progress: Callable[[int, int], None] | None = None, max_km: float = 45.0) -> list[dict]:
-    """Every (fleet size, seed, dispatcher) life as a Dask task: on the scheduler at ``address``
-    (``tcp://host:8786``) if given, else on a local cluster of ``workers`` processes (default: one per
-    core), one thread each. ``workers=0`` runs the tasks here, one after another (no Dask).
+    """Every (fleet size, seed, dispatcher) life as a Dask task (:func:`uam_studio.engine.run_tasks`): on
+    the scheduler at ``address`` (``tcp://host:8786``) if given, else on a local cluster of ``workers``
+    processes (default: one per core), one thread each. ``workers=0`` runs the tasks here, one after
+    another (no Dask).
 
     :return: one row per task in task order (sizes, then seeds, then dispatchers): per day its
         priority, refusals, breaches and served requests, and each pack's retirement day.
@@ -51,34 +52,8 @@ def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[
     if not tasks:
         raise InputError("seeds", "no task: give at least one fleet size, seed and dispatcher")
     args = (days, float(rate_per_h), int(chargers), float(age_spread_efc), float(max_km))
-    if address is None and workers == 0:
-        out = []
-        for k, t in enumerate(tasks):
-            out.append(_life_row(*t, *args))
-            if progress is not None:
-                progress(k + 1, len(tasks))
-        return out
-    from dask.distributed import Client, LocalCluster, as_completed
-
-    n = int(check_range("workers", workers if workers is not None else (os.cpu_count() or 1), 1, 256))
-    cluster = None
-    if address is None:
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=40)
-    try:
-        with Client(address if address is not None else cluster) as client:
-            futures = [client.submit(_life_row, a, s, d, *args, key=f"fleet-{a}-{s}-{d}-{days}-{max_km:g}", pure=False)
-                       for a, s, d in tasks]
-            index = {f.key: k for k, f in enumerate(futures)}
-            out: list[dict | None] = [None] * len(tasks)
-            for done, fut in enumerate(as_completed(futures), 1):
-                out[index[fut.key]] = fut.result()
-                if progress is not None:
-                    progress(done, len(tasks))
-    finally:
-        if cluster is not None:
-            cluster.close()
-    return [r for r in out if r is not None]
+    return run_tasks(_life_row, [(*t, *args) for t in tasks], workers=workers, address=address,
+                     progress=progress, name="fleet-life")
 
 
 def summarize(rows: list[dict]) -> list[dict]:
