@@ -65,18 +65,15 @@ MULTI_WIDE_MAX_DEST = 10  # multi_charge maps up to this size get the wide searc
 
 def default_search(scenario: str, n_dest: int) -> tuple[int, int]:
     """``(beam width, moves proposed per beam)`` of the default planner: (16, 4), and (8, 2) for
-    multi_charge maps of more than :data:`MULTI_WIDE_MAX_DEST` destinations (about n + sorties steps
-    of physics checks against about n / 3 in single charge: the narrower search keeps a
-    20-destination plan fast; benchmarks/RESULTS.md has the measurements)."""
+    multi_charge maps of more than :data:`MULTI_WIDE_MAX_DEST` destinations (about n + sorties steps of physics
+    checks against about n / 3 in single charge: it keeps a 20-destination plan fast; benchmarks/RESULTS.md)."""
     if scenario_rules(scenario).recharges and n_dest > MULTI_WIDE_MAX_DEST:
         return 8, 2
     return 16, 4
 
+
 __all__ = ["FORMAT", "WEIGHTS_NAME", "attention_plan", "bundled_weights_path", "continue_route", "default_search",
            "load_policy", "load_policy_cached"]
-
-
-# ----------------------------------------------------------------------------- weights
 
 
 def bundled_weights_path() -> Path:
