@@ -422,6 +422,10 @@ def test_layout_fits_the_screen_with_the_plan_above_the_fold(browser, app_url, s
                 page.locator(".uam-glossary").get_by_text("Hindsight oracle").wait_for()
             elif tab == "Battery lab":
                 page.locator(".uam-lab-summary").get_by_text("this setting").wait_for()
+                _settled_without_overflow(page, (tab, size))
+                # the two plots fill the window's height, whole: no third of a 1920x1080 screen left empty
+                bottom = page.evaluate(JS_LAB_VOLTAGE_BOTTOM)
+                assert 0.85 * height <= bottom <= height, (bottom, size)
             elif tab == "Retrain":
                 page.locator(".uam-train-status").get_by_text("episodes:").wait_for()
             _settled_without_overflow(page, (tab, size))
@@ -433,6 +437,11 @@ def test_layout_fits_the_screen_with_the_plan_above_the_fold(browser, app_url, s
         assert requests and outside == [], outside
     finally:
         page.close()
+
+
+# The bottom (px) of the Battery lab's voltage figure.
+JS_LAB_VOLTAGE_BOTTOM = """() => Math.max(...[...window.Bokeh.index.all_views()].filter(v => v.model.type === 'Figure' &&
+  v.model.title && v.model.title.text.startsWith('Voltage (physics')).map(v => v.el.getBoundingClientRect().bottom))"""
 
 
 # The x ranges of the Battery lab's two figures and the legend labels of its voltage figure.

@@ -28,7 +28,12 @@ from uam_studio.flight.tables import ALTITUDE_RANGE_M, WIND_RANGE_KTS
 FAMILY_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2")
 EOD_COLOR = "#d62728"
 SETTING = "this setting"
-BUSY_AFTER_MS = 150  # served: a change taking longer than this shows the busy indicator
+BUSY_AFTER_MS = 150
+# The plots share the window's height below the tab's heading (about 230 px down): 46% / 54%, at least
+# 250 / 290 px (a 1366x768 screen shows both whole; a 1920x1080 one fills its height instead of a third
+# of it staying empty).
+CURRENT_HEIGHT_CSS = "max(250px, calc((100vh - 230px) * 0.46))"
+VOLTAGE_HEIGHT_CSS = "max(290px, calc((100vh - 230px) * 0.54))"  # served: a change taking longer than this shows the busy indicator
 
 
 def eod_text(curve: dict[str, Any]) -> str:
@@ -72,9 +77,9 @@ class BatteryLabView(pn.viewable.Viewer):
                                      sizing_mode="stretch_width")
         self.busy = pn.indicators.LoadingSpinner(value=s.busy, size=18, css_classes=["uam-lab-busy"],
                                                  margin=(0, 5), visible=bool(s.busy))
-        self.current_plot = pn.pane.HoloViews(linked_axes=False, sizing_mode="stretch_width",
+        self.current_plot = pn.pane.HoloViews(linked_axes=False, sizing_mode="stretch_both",
                                               css_classes=["uam-lab-current"])
-        self.voltage_plot = pn.pane.HoloViews(linked_axes=False, sizing_mode="stretch_width",
+        self.voltage_plot = pn.pane.HoloViews(linked_axes=False, sizing_mode="stretch_both",
                                               css_classes=["uam-lab-voltage"])
         # The class sits on the content (inside the pane's shadow root), as the Planner's summary.
         self.eod_table = pn.pane.HTML(sizing_mode="stretch_width")
@@ -95,7 +100,9 @@ class BatteryLabView(pn.viewable.Viewer):
             "setting of the sliders.", sizing_mode="stretch_width", styles={"font-size": "13px"})
         controls = pn.Column(heading("Leg and cell"), *self.widgets.values(), width=270)
         plots = pn.Column(pn.Row(heading("Current and voltage"), self.busy),
-                          self.current_plot, self.voltage_plot, min_width=560, sizing_mode="stretch_width",
+                          pn.Column(self.current_plot, sizing_mode="stretch_width", styles={"height": CURRENT_HEIGHT_CSS}),
+                          pn.Column(self.voltage_plot, sizing_mode="stretch_width", styles={"height": VOLTAGE_HEIGHT_CSS}),
+                          min_width=560, sizing_mode="stretch_width",
                           styles={"flex": "1 1 560px"})
         table = pn.Column(heading("End of discharge"), self.eod_table, width=300)
         body = pn.FlexBox(controls, plots, table, flex_wrap="wrap", gap="10px", sizing_mode="stretch_width")
@@ -177,7 +184,7 @@ class BatteryLabView(pn.viewable.Viewer):
 
     def _current_element(self, data: dict[str, Any], labels: list[str], factor: str) -> hv.Overlay:
         return hv.Overlay(self._curves(data["current"], labels, "current (A)")).opts(
-            hv.opts.Overlay(responsive=True, height=250, title=f"Per-cell current, varying {factor}", hooks=[no_scroll_zoom],
+            hv.opts.Overlay(responsive=True, title=f"Per-cell current, varying {factor}", hooks=[no_scroll_zoom],
                             legend_position="right", show_grid=True, xlim=data["xlim"],
                             fontsize={"title": "10pt", "legend": "8pt"}),
             hv.opts.Curve(framewise=True))
@@ -188,7 +195,7 @@ class BatteryLabView(pn.viewable.Viewer):
         line = hv.Curve(([x0, x1], [eod, eod]), "time (min)", "voltage (V)", label=f"EOD {eod:g} V").opts(
             color=EOD_COLOR, line_width=1.5, line_dash="dashed")
         return hv.Overlay([*self._curves(data["voltage"], labels, "voltage (V)"), line]).opts(
-            hv.opts.Overlay(responsive=True, height=290, title=f"Voltage (physics model), varying {factor}", hooks=[no_scroll_zoom],
+            hv.opts.Overlay(responsive=True, title=f"Voltage (physics model), varying {factor}", hooks=[no_scroll_zoom],
                             legend_position="right", show_grid=True, xlim=data["xlim"], ylim=data["ylim"],
                             fontsize={"title": "10pt", "legend": "8pt"}),
             hv.opts.Curve(framewise=True))
