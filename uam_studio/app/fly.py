@@ -29,12 +29,15 @@ from uam_studio.app.style import (
     label_background,
     no_scroll_zoom,
     pixel_offset,
+    tight_legend_above,
 )
 from uam_studio.planning import VERTIPORT, Mission
 from uam_studio.planning.operations import record_csv
 
 TICK_MS = 250
 MAP_PX = 400
+# The decision log takes the window's height left below the figures (about 600 px down), at least 300 px.
+LOG_HEIGHT_CSS = "max(300px, calc(100vh - 600px))"
 EOD_COLOR = "#d62728"
 EVENT_COLOR = "#e377c2"  # injected wind changes
 # The voltage figure's series: (the record's key, legend label, style); colours as the Planner's.
@@ -96,7 +99,7 @@ class FlyView(pn.viewable.Viewer):
         self.log = pn.widgets.Tabulator(pd.DataFrame(columns=["t (s)", "at", "q_max (C)", "R0 (ohm)", "fit flags",
                                                               "leg wind vs forecast (kt)", "common shift (kt)",
                                                               "next", "reason"]),
-                                        disabled=True, show_index=False, height=300, sizing_mode="stretch_width",
+                                        disabled=True, show_index=False, sizing_mode="stretch_both",
                                         css_classes=["uam-fly-log"], layout="fit_columns",
                                         configuration={"columnDefaults": {"headerWordWrap": True}},
                                         formatters={"reason": {"type": "textarea"}},
@@ -131,7 +134,8 @@ class FlyView(pn.viewable.Viewer):
                       self.inject_kts, self.inject_button, self.clear_button, pn.Spacer(height=10),
                       self.seed, self.sigma, self.noise, pn.Spacer(height=10), self.download, width=230),
             pn.Column(self.error, pn.Row(self.progress, self.status, sizing_mode="stretch_width"), pn.Row(self.map_pane, self.volt_pane, sizing_mode="stretch_width"),
-                      self.log, sizing_mode="stretch_width"),
+                      pn.Column(self.log, sizing_mode="stretch_width", styles={"height": LOG_HEIGHT_CSS}),
+                      sizing_mode="stretch_width"),
             sizing_mode="stretch_width", css_classes=["uam-fly"])
         if s.record is not None:
             self._on_record()
@@ -173,7 +177,7 @@ class FlyView(pn.viewable.Viewer):
         r = s.record
         eod = (s.mission_flown or s._mission()).eod_v
         cutoff = hv.HLine(eod, label="EOD cut-off").opts(color=EOD_COLOR, line_dash="dashed", line_width=2)
-        legend = dict(legend_position="top", legend_opts={"orientation": "horizontal"}, hooks=[no_scroll_zoom], responsive=True, height=MAP_PX)
+        legend = dict(legend_position="top", legend_opts={"orientation": "horizontal"}, hooks=[no_scroll_zoom, tight_legend_above], responsive=True, height=MAP_PX)
         if r is None or r.time_s.size == 0:  # the same legend as a flight's, so that nothing moves after it
             empty = [hv.Curve([], TIME_DIM, VOLT_DIM, label=label).opts(**style) for _, label, style in VOLTAGE_SERIES]
             marks = hv.Points([], [TIME_DIM, VOLT_DIM], label="decisions").opts(**DECISION_STYLE)
