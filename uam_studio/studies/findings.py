@@ -242,7 +242,7 @@ def reward_sweep(
 
 
 FINDINGS_DISTANCES_KM = (25.0, 40.0, 55.56, 80.0, 100.0)  # finding 1's leg lengths
-FINDINGS_WINDS_KTS = (-39.0, 0.0, 39.0)  # finding 1's winds: tail, calm, head
+FINDINGS_WINDS_KTS = (WIND_RANGE_KTS[0], 0.0, WIND_RANGE_KTS[1])  # finding 1's winds: tail, calm, head (kt)
 HEADWIND_SEED = 2024  # finding 2's held-out missions
 GAMMAS = (0.0, 5.0, 50.0)  # finding 3
 BETAS = (0.0, 1.0, 5.0)  # finding 4
@@ -267,7 +267,7 @@ def paper_findings(quick: bool = False, workers: int | None = None, address: str
     out: dict[str, Any] = {"altitude": [row for wind in FINDINGS_WINDS_KTS
                                         for row in altitude_by_distance(FINDINGS_DISTANCES_KM, wind_kts=wind)]}
     n = n_missions if n_missions is not None else (10 if quick else 40)
-    rows = fixed_altitude_reach(held_out_missions(n, HEADWIND_SEED), (1000.0, 3000.0), wind_kts=39.0,
+    rows = fixed_altitude_reach(held_out_missions(n, HEADWIND_SEED), (1000.0, 3000.0), wind_kts=WIND_RANGE_KTS[1],
                                 workers=workers, address=address)
     out["headwind"] = {"rows": rows, "n": n, "mean_1000": float(np.mean([r["reached"][1000.0] for r in rows])),
                        "mean_3000": float(np.mean([r["reached"][3000.0] for r in rows]))}
