@@ -70,10 +70,18 @@ async def first_load(url: str, pool: ThreadPoolExecutor) -> tuple[float, object]
 
 
 def rss_mb(pid: int) -> float:
+    """Resident memory (MB) of the process and all its descendants (the server's forked processes)."""
+    total = 0.0
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
         if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024.0
-    return float("nan")
+            total += int(line.split()[1]) / 1024.0
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        for child in (task / "children").read_text().split():
+            try:
+                total += rss_mb(int(child))
+            except (OSError, ValueError):
+                pass
+    return total
 
 
 async def run(url: str, n: int, pid: int, hold_s: float) -> dict:
@@ -94,8 +102,10 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--sessions", type=int, nargs="+", default=[1, 30, 60])
     ap.add_argument("--hold", type=float, default=5.0, help="s with all sessions open before RSS is read")
+    ap.add_argument("--num-procs", type=int, default=None, help="the server's --num-procs (default: its own)")
     args = ap.parse_args()
-    with tempfile.TemporaryDirectory() as home, ServedApp(Path(home)) as app:
+    serve_args = [] if args.num_procs is None else ["--num-procs", str(args.num_procs)]
+    with tempfile.TemporaryDirectory() as home, ServedApp(Path(home), args=serve_args) as app:
         print(f"server up in {app.startup_s:.1f} s (liveness, one app build); RSS {rss_mb(app.proc.pid):.0f} MB")
         for n in args.sessions:
             before = app.log_path.read_text().count("W-1005")

@@ -267,3 +267,29 @@ def test_a_page_closing_mid_message_is_one_log_line_not_a_traceback(caplog):
     lines = [r.getMessage() for r in caplog.records if r.name == "uam_studio.serve"]
     assert lines == ["a page closed with messages on their way (WebSocketClosedError)",
                      "a page closed with messages on their way (StreamClosedError)"]
+
+
+@pytest.mark.parametrize("value", ["-1", "65"])
+def test_num_procs_out_of_range_is_one_line(value, capsys):
+    from uam_studio.cli import main
+
+    assert main(["serve", "--no-show", "--num-procs", value]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: --num-procs:") and "[0, 64]" in err and len(err.splitlines()) == 1, err
+
+
+def test_every_process_of_a_two_process_server_refuses_a_foreign_host(tmp_path):
+    """``--num-procs 2``: the host guard is installed in each forked process (the kernel hands each of
+    the 16 connections to either process: every foreign one is refused, every own one served)."""
+    import http.client
+
+    from uam_studio.app.serve import ServedApp
+
+    with ServedApp(tmp_path, args=["--num-procs", "2"]) as app:
+        codes = []
+        for host in [f"evil.example:{app.port}"] * 12 + [f"127.0.0.1:{app.port}"] * 4:
+            conn = http.client.HTTPConnection("127.0.0.1", app.port, timeout=120)
+            conn.request("GET", "/", headers={"Host": host})
+            codes.append(conn.getresponse().status)
+            conn.close()
+    assert codes == [403] * 12 + [200] * 4, codes

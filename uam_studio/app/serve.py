@@ -147,7 +147,7 @@ def quiet_closed_connections(loop: Any, context: dict[str, Any]) -> None:
 
 
 def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = None,
-          allow_origin: Sequence[str] = ()) -> None:
+          allow_origin: Sequence[str] = (), num_procs: int = 1) -> None:
     """Start a Panel server with the app at ``/`` and block until it is stopped (Ctrl-C).
 
     It listens on ``address`` (default ``127.0.0.1``: this machine only) and answers only requests
@@ -168,7 +168,7 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
     configure_server_threads()
     pn.extension(*EXTENSIONS)
     server = pn.serve({"/": create_app}, port=port, address=address, show=show, title=TITLE, start=False,
-                      threaded=False, liveness=True)
+                      threaded=False, liveness=True, num_procs=num_procs)
     install_host_guard(server, allowed_hosts(server.port, address, allow_origin))
     warm = threading.Thread(target=warm_up, daemon=True, name="uam-warm-up")
     warm.start()
@@ -218,8 +218,9 @@ class ServedApp:
     :param timeout_s: how long to wait for the server (s); :class:`RuntimeError` with the log's tail after.
     """
 
-    def __init__(self, home, timeout_s: float = 300.0, **env: str) -> None:
+    def __init__(self, home, timeout_s: float = 300.0, args: Sequence[str] = (), **env: str) -> None:
         self.home = Path(home)
+        self.args = list(args)
         self.timeout_s = timeout_s
         self.extra_env = env
         self.log_path = self.home / "serve.log"
@@ -234,7 +235,7 @@ class ServedApp:
         root = Path(self.home)  # outside any checkout: the installed package is what runs
         t0 = time.perf_counter()
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "uam_studio.cli", "serve", "--no-show", "--port", str(self.port)],
+            [sys.executable, "-m", "uam_studio.cli", "serve", "--no-show", "--port", str(self.port), *self.args],
             cwd=root, env=env, stdout=self._log, stderr=subprocess.STDOUT)
         deadline = time.monotonic() + self.timeout_s
         liveness = f"http://127.0.0.1:{self.port}/liveness?endpoint=/"
