@@ -32,3 +32,17 @@ def test_a_day_at_a_time_matches_the_library_life_and_the_view_draws_it():
         assert hv.render(fig).toolbar.active_scroll is None
     s.aircraft = 2  # a new setting: new fleets, no day flown
     assert s.days == [] and len(s.packs("blind")) == 2 and "2 aircraft ready" in s.status
+
+
+def test_vertiports_in_the_tab_fly_the_library_day_and_too_many_is_one_line():
+    s = FleetState(aircraft=4, vertiports=2, rate_per_h=3.0, seed=6)
+    s.next_day()
+    assert s.error == "" and "at 2 vertiports" not in s.status  # the status now names the day flown
+    life = simulate_life(4, 1, 6, "blind", rate_per_h=3.0, vertiports=2)
+    assert [row["blind"] for row in s.days] == life["days"]
+    s.param.update(aircraft=2, vertiports=3)  # more vertiports than aircraft: no fleet, one line
+    assert s.error.startswith("vertiports: ") and "\n" not in s.error and s.days == []
+    s.next_day()  # nothing to fly: no crash, no day
+    assert s.days == [] and not s.running
+    s.vertiports = 2
+    assert s.error == "" and "2 aircraft at 2 vertiports ready" in s.status

@@ -96,6 +96,8 @@ def test_the_belief_ages_with_charge_and_learns_from_a_fit():
     ("t_s,name,x_km,y_km,priority\nabc,A,10,10,2\n", "demand"),
     ("t_s,name,x_km,y_km,priority,wind_kts\n100,A,10,10,2,nan\n", "wind_kts"),
     ("t_s,name,x_km,y_km,priority\n100,A,10,10,2\n200,A,12,12,1\n", "name"),
+    ("t_s,name,x_km,y_km,priority,vertiport\n100,A,10,10,2,x\n", "vertiport"),
+    ("t_s,name,x_km,y_km,priority,vertiport\n100,A,10,10,2,10\n", "vertiport"),
 ])
 def test_bad_demand_files_are_one_line_naming_the_field(tmp_path, capsys, text, field):
     path = tmp_path / "day.csv"
@@ -121,11 +123,41 @@ def test_a_demand_file_round_trips_and_the_cli_flies_it(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("args, flag", [(["--aircraft", "0"], "--aircraft"), (["--days", "0"], "--days"),
-                                        (["--rate", "nan"], "--rate"), (["--chargers", "99"], "--chargers")])
+                                        (["--rate", "nan"], "--rate"), (["--chargers", "99"], "--chargers"),
+                                        (["--aircraft", "2", "--vertiports", "3"], "--vertiports")])
 def test_cli_bad_settings_are_one_line(capsys, args, flag):
     assert main(["fleet", *args]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith(f"error: {flag}: ") and "\n" not in err
+
+
+# --------------------------------------------------------------------------- several vertiports
+
+
+def test_each_aircraft_serves_its_own_vertiport_and_charges_on_its_chargers():
+    """Two vertiports, aircraft based alternately: every flight is flown by an aircraft of the request's
+    vertiport; two aircraft landing together at different vertiports of one charger each do not wait,
+    at the same vertiport they queue."""
+    far = [Request(0.0, "A", 20.0, 0.0, 2), Request(0.0, "B", 0.0, 20.0, 3, vertiport=1),
+           Request(7200.0, "C", -15.0, 5.0, 1, vertiport=1)]
+    apart = simulate_day(Fleet.new(4, seed=1, vertiports=2), far, "aware", seed=4, chargers=[1, 1])
+    by_name = {r.name: r for r in far}
+    assert apart.served == 3 and {entry[2] for entry in apart.log} == {"A", "B", "C"}
+    assert all(i % 2 == by_name[name].vertiport for _, i, name, _, _ in apart.log)  # base of aircraft i: i % 2
+    assert apart.charger_wait_s == 0.0
+    together = [dataclasses.replace(r, vertiport=0) for r in far[:2]]
+    queued = simulate_day(Fleet.new(4, seed=1, vertiports=2), together, "aware", seed=4, chargers=[1, 1])
+    assert queued.served == 2 and all(i % 2 == 0 for _, i, _, _, _ in queued.log) and queued.charger_wait_s > 0.0
+    with pytest.raises(InputError, match="^vertiport: "):
+        simulate_day(Fleet.new(4, seed=1, vertiports=2), [Request(0.0, "Z", 20.0, 0.0, 1, vertiport=2)], "aware", 4)
+    with pytest.raises(InputError, match="^chargers: "):
+        simulate_day(Fleet.new(4, seed=1, vertiports=2), far, "aware", 4, chargers=[1, 1, 1])
+
+
+def test_a_poisson_day_at_several_vertiports_draws_the_same_requests_spread_over_them():
+    one, three = poisson_demand(8, rate_per_h=10.0), poisson_demand(8, rate_per_h=10.0, vertiports=3)
+    assert [dataclasses.replace(r, vertiport=0) for r in three] == one and {r.vertiport for r in one} == {0}
+    assert {r.vertiport for r in three} == {0, 1, 2}
 
 
 # --------------------------------------------------------------------------- many lives on Dask

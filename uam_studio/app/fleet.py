@@ -1,6 +1,6 @@
 """The Fleet tab: a fleet's days under three dispatchers, side by side, one button per day.
 
-Controls: aircraft, demand (requests per hour), the packs' age spread, seed, and *Run the next day*.
+Controls: aircraft, vertiports, demand (requests per hour), the packs' age spread, seed, and *Run the next day*.
 Figures: the last day's flights per aircraft (health-aware), each pack's belief band against its
 truth, and the served priority per day for the three dispatchers. The numbers come from
 :class:`~uam_studio.app.fleet_state.FleetState`, which calls the library's
@@ -37,6 +37,8 @@ class FleetView(pn.viewable.Viewer):
         s, w = state, 250
         self.widgets = {
             "aircraft": pn.widgets.IntSlider(name="Aircraft", start=1, end=12, value=s.aircraft, width=w),
+            "vertiports": pn.widgets.IntSlider(name="Vertiports (2 chargers each)", start=1, end=4,
+                                               value=s.vertiports, width=w),
             "rate_per_h": pn.widgets.FloatSlider(name="Requests per hour", start=0.5, end=20, step=0.5,
                                                  value=s.rate_per_h, width=w),
             "age_spread_efc": pn.widgets.FloatSlider(name="Packs' age spread (equivalent full cycles)", start=0,

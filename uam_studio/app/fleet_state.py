@@ -25,11 +25,11 @@ from uam_studio.fleet.dispatch import DISPATCHERS, HEALTH_Z
 LABELS = {"aware": "health-aware", "blind": "health-blind", "hindsight": "hindsight"}
 
 
-def _fly_day(job: tuple[dict[str, Fleet], int, float, int]) -> tuple[int, dict[str, DayResult], str]:
-    fleets, day, rate, seed = job
+def _fly_day(job: tuple[dict[str, Fleet], int, float, int, int]) -> tuple[int, dict[str, DayResult], str]:
+    fleets, day, rate, seed, vertiports = job
     try:
         day_seed = day_of_life_seed(seed, day)  # as simulate_life: the same days as `uam-studio fleet`
-        demand = poisson_demand(day_seed, rate)
+        demand = poisson_demand(day_seed, rate, vertiports=vertiports)
         return day, {d: simulate_day(f, demand, d, day_seed) for d, f in fleets.items()}, ""
     except InputError as err:
         return day, {}, one_line(err)
@@ -42,13 +42,15 @@ def _day_failed(job: Any, exc: BaseException) -> tuple[int, dict[str, DayResult]
 class FleetState(param.Parameterized):
     """A fleet per dispatcher and the days flown (see the module docstring).
 
-    Inputs: ``aircraft``, ``rate_per_h`` (requests per hour), ``age_spread_efc`` (equivalent full
-    cycles), ``seed``. Outputs: ``days`` (one dict per day: the day and each dispatcher's
+    Inputs: ``aircraft``, ``vertiports`` (the aircraft spread over them, each with its own requests and
+    two chargers; at most one per aircraft), ``rate_per_h`` (requests per hour, all vertiports),
+    ``age_spread_efc`` (equivalent full cycles), ``seed``. Outputs: ``days`` (one dict per day: the day and each dispatcher's
     :meth:`DayResult.to_dict`), ``last`` (the last day's :class:`DayResult` per dispatcher), ``running``,
     ``status``, ``error`` (one line).
     """
 
     aircraft = param.Integer(default=6, bounds=(1, 12))
+    vertiports = param.Integer(default=1, bounds=(1, 4))
     rate_per_h = param.Number(default=4.0, bounds=(0.5, 20.0))
     age_spread_efc = param.Number(default=300.0, bounds=(0.0, 600.0))
     seed = param.Integer(default=0, bounds=(0, 10**9))
@@ -67,18 +69,25 @@ class FleetState(param.Parameterized):
                                                             pool=FLIGHT_POOL)
         self.reset()
 
-    @param.depends("aircraft", "age_spread_efc", "seed", "rate_per_h", watch=True)
+    @param.depends("aircraft", "vertiports", "age_spread_efc", "seed", "rate_per_h", watch=True)
     def reset(self) -> None:
         """New fleets (the same packs for every dispatcher) and no day flown."""
-        self.fleets = {d: Fleet.new(self.aircraft, self.seed, self.age_spread_efc) for d in DISPATCHERS}
+        try:
+            self.fleets = {d: Fleet.new(self.aircraft, self.seed, self.age_spread_efc, self.vertiports)
+                           for d in DISPATCHERS}
+        except InputError as err:  # more vertiports than aircraft
+            self.fleets = {}
+            self.param.update(days=[], last={}, error=one_line(err), status="")
+            return
+        where = f" at {self.vertiports} vertiports" if self.vertiports > 1 else ""
         self.param.update(days=[], last={}, error="",
-                          status=f"{self.aircraft} aircraft ready; run a day to see the dispatchers side by side")
+                          status=f"{self.aircraft} aircraft{where} ready; run a day to see the dispatchers side by side")
 
     def next_day(self) -> None:
         """Fly the next day for the three dispatchers (in the pool when ``background``)."""
-        if self.running:
+        if self.running or not self.fleets:
             return
-        job = (self.fleets, len(self.days), float(self.rate_per_h), int(self.seed))
+        job = (self.fleets, len(self.days), float(self.rate_per_h), int(self.seed), int(self.vertiports))
         self.param.update(running=True, status=f"flying day {len(self.days) + 1}...")
         if self.background:
             self._worker.submit(job)

@@ -18,10 +18,13 @@ def _add_fleet_arguments(p: argparse.ArgumentParser) -> None:
                    help="Poisson demand: requests per hour (0-60; default 4)")
     p.add_argument("--demand", default=None, metavar="FILE",
                    help="a day's requests from a CSV or JSON file instead (columns t_s,name,x_km,y_km,"
-                        "priority,wind_kts,window_s); flown on every day")
+                        "priority,wind_kts,window_s,vertiport); flown on every day")
     p.add_argument("--max-km", type=float, default=45.0, metavar="KM",
                    help="Poisson demand: the farthest request (8-100 km; default 45)")
-    p.add_argument("--chargers", type=int, default=2, help="chargers at the vertiport (1-50; default 2)")
+    p.add_argument("--chargers", type=int, default=2, help="chargers at each vertiport (1-50; default 2)")
+    p.add_argument("--vertiports", type=int, default=1,
+                   help="vertiports the aircraft are spread over, each with its own chargers and requests "
+                        "(1-10, at most one per aircraft; default 1)")
     p.add_argument("--age-spread", type=float, default=300.0, metavar="EFC",
                    help="the packs' age at the start: U(0, EFC) equivalent full cycles (0-2000; default 300)")
     p.add_argument("--dispatcher", action="append", choices=["aware", "blind", "hindsight"], default=None,
@@ -41,14 +44,15 @@ def _run_fleet(args: argparse.Namespace) -> int:
 
     for flag, value, lo, hi in (("--aircraft", args.aircraft, 1, 50), ("--days", args.days, 1, 3650),
                                 ("--rate", args.rate, 0.0, 60.0), ("--chargers", args.chargers, 1, 50),
-                                ("--age-spread", args.age_spread, 0.0, 2000.0), ("--max-km", args.max_km, 8.0, 100.0)):
+                                ("--age-spread", args.age_spread, 0.0, 2000.0), ("--max-km", args.max_km, 8.0, 100.0),
+                                ("--vertiports", args.vertiports, 1, min(10, args.aircraft))):
         check_range(flag, value, lo, hi)  # before any work: one line naming the flag
     dispatchers = args.dispatcher or ["aware", "blind", "hindsight"]
     out = {}
     if args.demand is not None:
         demand = load_demand(args.demand)
         for d in dispatchers:
-            fleet = Fleet.new(args.aircraft, args.seed, args.age_spread)
+            fleet = Fleet.new(args.aircraft, args.seed, args.age_spread, args.vertiports)
             days = [simulate_day(fleet, demand, d, day_of_life_seed(args.seed, k), args.chargers).to_dict()
                     for k in range(int(args.days))]
             out[d] = {"dispatcher": d, "days": days}
@@ -61,13 +65,15 @@ def _run_fleet(args: argparse.Namespace) -> int:
         with tqdm(total=len(dispatchers) * len(seeds), desc="fleet lives", disable=args.json, file=sys.stderr) as bar:
             rows = fleet_study((args.aircraft,), args.days, seeds, dispatchers, args.rate, args.chargers,
                                args.age_spread, workers=args.workers, address=args.address,
-                               progress=lambda done, _n: bar.update(done - bar.n), max_km=args.max_km)
+                               progress=lambda done, _n: bar.update(done - bar.n), max_km=args.max_km,
+                               vertiports=args.vertiports)
         if args.json:
             json.dump({"lives": rows, "summary": summarize(rows)}, sys.stdout, allow_nan=False)
             sys.stdout.write("\n")
             return EXIT_OK
-        print(f"{args.aircraft} aircraft, {args.days} day(s) x {len(seeds)} seed(s) from {args.seed}, Poisson "
-              f"{args.rate:g} requests/h up to {args.max_km:g} km, {args.chargers} charger(s), packs aged U(0, {args.age_spread:g}) cycles")
+        print(f"{args.aircraft} aircraft at {args.vertiports} vertiport(s), {args.days} day(s) x {len(seeds)} seed(s) "
+              f"from {args.seed}, Poisson {args.rate:g} requests/h up to {args.max_km:g} km, {args.chargers} charger(s) "
+              f"per vertiport, packs aged U(0, {args.age_spread:g}) cycles")
         print(f"{'dispatcher':10} {'priority/day':>12} {'5-95%':>9} {'served':>7} {'refused':>8} {'breaches':>9} "
               f"{'packs retired':>13} {'mean day':>8}")
         for r in summarize(rows):
@@ -79,9 +85,9 @@ def _run_fleet(args: argparse.Namespace) -> int:
         json.dump(out, sys.stdout, allow_nan=False)
         sys.stdout.write("\n")
         return EXIT_OK
-    print(f"{args.aircraft} aircraft, {args.days} day(s), seed {args.seed}, "
+    print(f"{args.aircraft} aircraft at {args.vertiports} vertiport(s), {args.days} day(s), seed {args.seed}, "
           f"{'demand ' + args.demand if args.demand else f'Poisson {args.rate:g} requests/h'}, "
-          f"{args.chargers} charger(s)")
+          f"{args.chargers} charger(s) per vertiport")
     print(f"{'dispatcher':10} {'priority/day':>12} {'served':>7} {'refused':>8} {'breaches':>9} {'flights':>8} "
           f"{'charge Ah/day':>13} {'retired packs':>13}")
     for d, life in out.items():

@@ -6,14 +6,16 @@ charge it delivers) and the actual winds (the forecast plus a seeded error). Dis
 round trip at 500 m from full charge, flown on the true cell in the actual winds: below the cut-off
 is a breach (the request scores 0 and the aircraft is grounded for the day). Each flight's first
 :data:`FIT_WINDOW_S` s of noisy readings update its aircraft's belief (the health fit). Landed, the
-aircraft charges at 1 C back to full on one of the vertiport's chargers (a queue when all are busy).
+aircraft charges at 1 C back to full on one of its vertiport's chargers (a queue when all are busy).
+A fleet may be based at several vertiports: each aircraft serves the requests of its own vertiport
+and charges there.
 
 Public API: :func:`simulate_day`, :func:`simulate_life`, :class:`DayResult`, :class:`Fleet`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,6 +27,7 @@ from uam_studio.fleet.demand import (
     DAY_S,
     DEFAULT_MAX_KM,
     DEFAULT_RATE_PER_H,
+    MAX_VERTIPORTS,
     Request,
     day_seed,
     poisson_demand,
@@ -59,24 +62,37 @@ def day_of_life_seed(seed: int, day: int) -> int:
 @dataclass
 class Fleet:
     """The aircraft: each one's true pack (``truth``, the world's) and its own ``belief``; ``in_service``
-    false once a pack has retired (below 80% of its first capacity)."""
+    false once a pack has retired (below 80% of its first capacity); ``base``: each one's vertiport
+    (default all at vertiport 0)."""
 
     truth: list[PackHealth]
     belief: list[PackBelief]
     in_service: list[bool] = field(default_factory=list)
+    base: list[int] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         if len(self.truth) != len(self.belief) or not 1 <= len(self.truth) <= 50:
             raise InputError("aircraft", f"{len(self.truth)} aircraft: allowed 1-50, a belief for each")
         if not self.in_service:
             self.in_service = [not t.retired for t in self.truth]
+        if not self.base:
+            self.base = [0] * len(self.truth)
+        if len(self.base) != len(self.truth) or not all(0 <= b < MAX_VERTIPORTS for b in self.base):
+            raise InputError("vertiports", f"a base vertiport 0-{MAX_VERTIPORTS - 1} for each aircraft")
+
+    @property
+    def vertiports(self) -> int:
+        """How many vertiports the fleet is based at (numbered from 0)."""
+        return max(self.base) + 1
 
     @classmethod
-    def new(cls, n: int, seed: int, age_spread_efc: float = 300.0) -> Fleet:
+    def new(cls, n: int, seed: int, age_spread_efc: float = 300.0, vertiports: int = 1) -> Fleet:
         """``n`` aircraft whose packs left the factory with q_max ~ U(7300, 7900) C and R0 ~ U(0.10, 0.13)
         ohm and have since delivered U(0, ``age_spread_efc``) equivalent full cycles; each belief
-        starts from the nominal new pack aged by the logged throughput."""
+        starts from the nominal new pack aged by the logged throughput. Aircraft ``i`` is based at
+        vertiport ``i % vertiports`` (1-10, at most one per aircraft)."""
         n = int(check_range("aircraft", n, 1, 50))
+        ports = int(check_range("vertiports", vertiports, 1, min(MAX_VERTIPORTS, n)))
         spread = check_range("age_spread_efc", age_spread_efc, 0.0, 2000.0)
         rng = np.random.default_rng([check_seed("seed", seed), 42])
         truth, belief = [], []
@@ -85,7 +101,7 @@ class Fleet:
             delivered = float(rng.uniform(0.0, spread)) * q0
             truth.append(PackHealth(q0, r0, delivered))
             belief.append(PackBelief.new_pack(delivered))
-        return cls(truth, belief)
+        return cls(truth, belief, base=[i % ports for i in range(n)])
 
 
 @dataclass(frozen=True)
@@ -114,16 +130,26 @@ def _world_winds(demand: list[Request], seed: int) -> dict[str, tuple[float, flo
                      -r.wind_kts + float(rng.normal(0.0, FORECAST_SIGMA_KT))) for r in demand}
 
 
-def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int, chargers: int = 2) -> DayResult:
+def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int,
+                 chargers: int | Sequence[int] = 2) -> DayResult:
     """Fly one day of ``demand`` with ``fleet`` under ``dispatcher`` (:data:`DISPATCHERS`); the fleet's
-    truth and beliefs are updated in place (packs age, beliefs learn). Seeded: the same inputs give the
-    same day."""
+    truth and beliefs are updated in place (packs age, beliefs learn). ``chargers``: per vertiport (one
+    count for all, or one each, 1-50). Each request is served by an aircraft based at its vertiport.
+    Seeded: the same inputs give the same day."""
     if dispatcher not in DISPATCHERS:
         raise InputError("dispatcher", f"{dispatcher!r}: allowed {', '.join(DISPATCHERS)}")
-    chargers = int(check_range("chargers", chargers, 1, 50))
+    ports = fleet.vertiports
+    counts = [chargers] * ports if isinstance(chargers, (int, np.integer)) else list(chargers)
+    if len(counts) != ports:
+        raise InputError("chargers", f"{len(counts)} counts for {ports} vertiports: give one, or one per vertiport")
+    counts = [int(check_range("chargers", c, 1, 50)) for c in counts]
+    for req in demand:
+        if req.vertiport >= ports:
+            raise InputError("vertiport", f"request {req.name!r} at vertiport {req.vertiport}: the fleet is based "
+                                          f"at vertiports 0-{ports - 1}")
     seed = day_seed(seed)
     env = simpy.Environment()
-    plugs = simpy.Resource(env, capacity=chargers)
+    plugs = [simpy.Resource(env, capacity=c) for c in counts]
     winds = _world_winds(demand, seed)
     noise = np.random.default_rng([seed, 11])
     n = len(fleet.truth)
@@ -155,12 +181,15 @@ def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int
     def dispatch() -> None:
         now = env.now
         waiting[:] = [r for r in waiting if r.t_s + r.window_s >= now]
-        views = [AircraftView(str(i), fleet.belief[i], version[i]) for i in range(n) if free[i]]
-        for req, view in assign(waiting, views, margin, required):
-            i = int(view.name)
-            waiting.remove(req)
-            free[i] = False
-            env.process(fly(i, req))
+        for port in range(ports):
+            views = [AircraftView(str(i), fleet.belief[i], version[i]) for i in range(n)
+                     if free[i] and fleet.base[i] == port]
+            asks = [r for r in waiting if r.vertiport == port]
+            for req, view in assign(asks, views, margin, required) if views and asks else ():
+                i = int(view.name)
+                waiting.remove(req)
+                free[i] = False
+                env.process(fly(i, req))
 
     def fly(i: int, req: Request):
         truth = fleet.truth[i]
@@ -189,7 +218,7 @@ def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int
         stats["priority"] += req.priority
         stats["served"] += 1
         t0 = env.now
-        with plugs.request() as plug:
+        with plugs[fleet.base[i]].request() as plug:
             yield plug
             stats["wait_s"] += env.now - t0
             yield env.timeout(charge / (CHARGE_C_RATE * fleet.truth[i].q_max) * 3600.0)
@@ -229,16 +258,18 @@ def _fit(current: np.ndarray, voltage: np.ndarray, dt_s: float) -> tuple[float, 
 
 def simulate_life(aircraft: int, days: int, seed: int, dispatcher: str, rate_per_h: float = DEFAULT_RATE_PER_H,
                   chargers: int = 2, age_spread_efc: float = 300.0,
-                  progress: Callable[[int], None] | None = None, max_km: float = DEFAULT_MAX_KM) -> dict:
+                  progress: Callable[[int], None] | None = None, max_km: float = DEFAULT_MAX_KM,
+                  vertiports: int = 1) -> dict:
     """A fleet's life over ``days`` operating days of Poisson demand, requests up to ``max_km`` (km) away
-    (the same days for every dispatcher with the same ``seed``): per day its :class:`DayResult`; per pack the day it retired
+    (the same days for every dispatcher with the same ``seed``), the aircraft spread over ``vertiports``
+    vertiports of ``chargers`` chargers each: per day its :class:`DayResult`; per pack the day it retired
     (None: still in service); the fleet at the end (truth and belief)."""
     days = int(check_range("days", days, 1, 3650))
     seed = check_seed("seed", seed)
-    fleet = Fleet.new(aircraft, seed, age_spread_efc)
+    fleet = Fleet.new(aircraft, seed, age_spread_efc, vertiports)
     results, retired = [], [None if s else 0 for s in fleet.in_service]
     for d in range(days):
-        demand = poisson_demand(day_of_life_seed(seed, d), rate_per_h, max_km=max_km)
+        demand = poisson_demand(day_of_life_seed(seed, d), rate_per_h, max_km=max_km, vertiports=vertiports)
         results.append(simulate_day(fleet, demand, dispatcher, day_of_life_seed(seed, d), chargers))
         for i, s in enumerate(fleet.in_service):
             if not s and retired[i] is None:

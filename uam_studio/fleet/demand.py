@@ -18,7 +18,7 @@ import numpy as np
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight.tables import WIND_RANGE_KTS
 
-__all__ = ["DAY_S", "MAX_REQUESTS", "RADIUS_KM", "Request", "day_seed", "load_demand", "poisson_demand"]
+__all__ = ["DAY_S", "MAX_REQUESTS", "MAX_VERTIPORTS", "RADIUS_KM", "Request", "day_seed", "load_demand", "poisson_demand"]
 
 DAY_S = 12 * 3600.0  # s: the operating day (06:00-18:00)
 RADIUS_KM = (8.0, 100.0)  # km: how far a request may be from the vertiport (500 m cruise needs over 6.2 km)
@@ -27,14 +27,15 @@ WIND_KTS = WIND_RANGE_KTS  # kt: the flight tables' range
 MAX_REQUESTS = 2000  # in one day's file
 DEFAULT_RATE_PER_H = 4.0  # requests per hour
 DEFAULT_WINDOW_S = 2 * 3600.0  # s: a request waits this long for an aircraft, then it is refused
-FIELDS = ("t_s", "name", "x_km", "y_km", "priority", "wind_kts", "window_s")
+MAX_VERTIPORTS = 10  # vertiports of one fleet (each with its own aircraft and chargers)
+FIELDS = ("t_s", "name", "x_km", "y_km", "priority", "wind_kts", "window_s", "vertiport")
 
 
 @dataclass(frozen=True)
 class Request:
-    """Fly to (``x_km``, ``y_km``) km from the vertiport and back, asked at ``t_s`` (s into the day),
-    worth ``priority`` (1-3 stars), in a forecast wind of ``wind_kts`` (kt, + = headwind on the way
-    out), served if an aircraft takes off before ``t_s + window_s``."""
+    """Fly to (``x_km``, ``y_km``) km from vertiport number ``vertiport`` (0-9; aircraft based there serve
+    it) and back, asked at ``t_s`` (s into the day), worth ``priority`` (1-3 stars), in a forecast wind of
+    ``wind_kts`` (kt, + = headwind on the way out), served if an aircraft takes off before ``t_s + window_s``."""
 
     t_s: float
     name: str
@@ -43,6 +44,7 @@ class Request:
     priority: int
     wind_kts: float = 0.0
     window_s: float = DEFAULT_WINDOW_S
+    vertiport: int = 0
 
     def __post_init__(self) -> None:
         check_range("t_s", self.t_s, 0.0, DAY_S, " s")
@@ -59,6 +61,9 @@ class Request:
             raise InputError("priority", f"{self.priority!r}: allowed 1, 2 or 3")
         check_range("wind_kts", self.wind_kts, *WIND_KTS, " kt")
         check_range("window_s", self.window_s, 60.0, DAY_S, " s")
+        if isinstance(self.vertiport, bool) or not isinstance(self.vertiport, (int, np.integer)) \
+                or not 0 <= int(self.vertiport) < MAX_VERTIPORTS:
+            raise InputError("vertiport", f"{self.vertiport!r}: allowed 0-{MAX_VERTIPORTS - 1}")
 
     @property
     def distance_km(self) -> float:
@@ -75,10 +80,12 @@ def day_seed(value: object) -> int:
 
 
 def poisson_demand(seed: int, rate_per_h: float = DEFAULT_RATE_PER_H, day_s: float = DAY_S,
-                   wind_sd_kts: float = 10.0, max_km: float = DEFAULT_MAX_KM) -> list[Request]:
+                   wind_sd_kts: float = 10.0, max_km: float = DEFAULT_MAX_KM, vertiports: int = 1) -> list[Request]:
     """A day of requests: a Poisson process of ``rate_per_h`` requests per hour over ``day_s`` s, each at
     a uniform bearing and a distance uniform in 8-``max_km`` km, 1-3 stars (half 1, a third 2, a
-    sixth 3), a forecast wind ~ N(0, ``wind_sd_kts``) clipped to the tables, a 2 h window."""
+    sixth 3), a forecast wind ~ N(0, ``wind_sd_kts``) clipped to the tables, a 2 h window, from one of
+    ``vertiports`` (1-10) vertiports drawn uniformly (a stream of its own: one vertiport draws the
+    same requests as before there were several)."""
     seed = day_seed(seed)
     rate = check_range("rate_per_h", rate_per_h, 0.0, 60.0, " per h")
     day = check_range("day_s", day_s, 0.0, DAY_S, " s")
@@ -90,8 +97,11 @@ def poisson_demand(seed: int, rate_per_h: float = DEFAULT_RATE_PER_H, day_s: flo
     dist = rng.uniform(RADIUS_KM[0] + 0.05, max(far - 0.05, RADIUS_KM[0] + 0.05), n)  # inside after rounding to 10 m
     prio = rng.choice([1, 2, 3], size=n, p=[0.5, 1 / 3, 1 / 6])
     wind = np.clip(rng.normal(0.0, wind_sd_kts, n), *WIND_KTS)
+    n_ports = int(check_range("vertiports", vertiports, 1, MAX_VERTIPORTS))
+    port = np.random.default_rng([seed, 3]).integers(0, n_ports, n) if n_ports > 1 else np.zeros(n, dtype=int)
     return [Request(float(t), f"R{k + 1}", round(float(d * math.cos(b)), 2), round(float(d * math.sin(b)), 2),
-                    int(p), round(float(w), 1)) for k, (t, b, d, p, w) in enumerate(zip(times, bearing, dist, prio, wind))]
+                    int(p), round(float(w), 1), vertiport=int(v))
+            for k, (t, b, d, p, w, v) in enumerate(zip(times, bearing, dist, prio, wind, port))]
 
 
 def _request(row: dict, where: str) -> Request:
@@ -101,8 +111,11 @@ def _request(row: dict, where: str) -> Request:
     try:
         prio = row["priority"]
         prio = int(prio) if isinstance(prio, str) and prio.strip().isdigit() and prio.isascii() else prio
+        port = row.get("vertiport") or 0
+        port = int(port) if isinstance(port, str) and port.strip().isdigit() and port.isascii() else port
         return Request(float(row["t_s"]), str(row.get("name") or where), float(row["x_km"]), float(row["y_km"]),
-                       prio, float(row.get("wind_kts") or 0.0), float(row.get("window_s") or DEFAULT_WINDOW_S))
+                       prio, float(row.get("wind_kts") or 0.0), float(row.get("window_s") or DEFAULT_WINDOW_S),
+                       vertiport=port)
     except InputError as err:
         raise InputError(err.field, f"{where}: {str(err)[len(err.field) + 2:]}") from None
     except (TypeError, ValueError) as err:
@@ -111,7 +124,7 @@ def _request(row: dict, where: str) -> Request:
 
 def load_demand(path: str | Path) -> list[Request]:
     """Requests from a CSV file (a header row naming :data:`FIELDS`; ``name``, ``wind_kts``,
-    ``window_s`` optional) or a JSON file (a list of objects with those keys), sorted by time.
+    ``window_s`` and ``vertiport`` optional) or a JSON file (a list of objects with those keys), sorted by time.
 
     :raises InputError: (field ``demand`` or the bad column's name) for anything else, in one line
         naming the row.

@@ -22,9 +22,9 @@ __all__ = ["fleet_study", "summarize"]
 
 
 def _life_row(size: int, seed: int, dispatcher: str, days: int, rate: float, chargers: int, spread: float,
-              max_km: float) -> dict:
+              max_km: float, vertiports: int = 1) -> dict:
     """One task: a fleet's life, reduced to what the summary needs (picklable, small)."""
-    life = simulate_life(size, days, seed, dispatcher, rate, chargers, spread, max_km=max_km)
+    life = simulate_life(size, days, seed, dispatcher, rate, chargers, spread, max_km=max_km, vertiports=vertiports)
     return {"aircraft": size, "seed": seed, "dispatcher": dispatcher,
             "priority": [d["priority"] for d in life["days"]], "refused": [d["refused"] for d in life["days"]],
             "breaches": [d["breaches"] for d in life["days"]], "served": [d["served"] for d in life["days"]],
@@ -34,7 +34,8 @@ def _life_row(size: int, seed: int, dispatcher: str, days: int, rate: float, cha
 def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[int] = (0, 1, 2, 3, 4),
                 dispatchers: Sequence[str] = DISPATCHERS, rate_per_h: float = 4.0, chargers: int = 2,
                 age_spread_efc: float = 300.0, workers: int | None = None, address: str | None = None,
-                progress: Callable[[int, int], None] | None = None, max_km: float = 45.0) -> list[dict]:
+                progress: Callable[[int, int], None] | None = None, max_km: float = 45.0,
+                vertiports: int = 1) -> list[dict]:
     """Every (fleet size, seed, dispatcher) life as a Dask task (:func:`uam_studio.engine.run_tasks`): on
     the scheduler at ``address`` (``tcp://host:8786``) if given, else on a local cluster of ``workers``
     processes (default: one per core), one thread each. ``workers=0`` runs the tasks here, one after
@@ -51,7 +52,7 @@ def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[
              for a, s, d in product(aircraft, seeds, dispatchers)]
     if not tasks:
         raise InputError("seeds", "no task: give at least one fleet size, seed and dispatcher")
-    args = (days, float(rate_per_h), int(chargers), float(age_spread_efc), float(max_km))
+    args = (days, float(rate_per_h), int(chargers), float(age_spread_efc), float(max_km), int(vertiports))
     return run_tasks(_life_row, [(*t, *args) for t in tasks], workers=workers, address=address,
                      progress=progress, name="fleet-life")
 
