@@ -1,5 +1,6 @@
 """A teacher's path through every tab of the served app at 1366x768 and 1920x1080, one screenshot per tab
-(Planner, Battery lab, Fly in flight and after the landing with a wind change injected, Retrain, Glossary):
+(Planner, Battery lab, Fly in flight and after the landing with a wind change injected, Retrain, Fleet
+after its first day, Glossary):
 
     python benchmarks/teacher_screenshots.py [OUT_FOLDER]      # default /tmp/uam_screenshots
 
@@ -46,6 +47,11 @@ def main() -> None:
             page.locator(".bk-tab", has_text="Retrain").click()
             page.wait_for_timeout(1500)
             page.screenshot(path=str(out / f"retrain_{w}.png"))
+            page.locator(".bk-tab", has_text="Fleet").click()
+            page.locator(".uam-fleet-run button").click()
+            page.locator(".uam-fleet-status").get_by_text("day 1:").wait_for(timeout=120_000)
+            page.wait_for_timeout(1500)
+            page.screenshot(path=str(out / f"fleet_{w}.png"))
             page.locator(".bk-tab", has_text="Glossary").click()
             page.wait_for_timeout(1000)
             page.screenshot(path=str(out / f"glossary_{w}.png"))

@@ -63,7 +63,8 @@ class FleetView(pn.viewable.Viewer):
 
     def __panel__(self) -> pn.viewable.Viewable:
         intro = pn.pane.Markdown(
-            "A small fleet at one vertiport through operating days of 12 h. Each request is a round trip; the "
+            "A small fleet at one or more vertiports through operating days of 12 h. Each request is a round "
+            "trip from its vertiport, flown by an aircraft based there; the "
             "packs age with every flight (a law fitted to real cells flown to their end of life), and each "
             "aircraft learns its own pack from its flights. **Health-aware** dispatching uses that belief, "
             "**health-blind** takes every pack as new with a fixed reserve, **hindsight** knows the truth. "
