@@ -116,15 +116,39 @@ def test_a_demand_file_round_trips_and_the_cli_flies_it(tmp_path, capsys):
     path = tmp_path / "day.json"
     path.write_text(json.dumps(demand_rows(reqs)))
     assert load_demand(path) == reqs
-    assert main(["fleet", "--demand", str(path), "--aircraft", "2", "--json", "--dispatcher", "aware"]) == 0
+    table = tmp_path / "days.csv"
+    assert main(["fleet", "--demand", str(path), "--aircraft", "2", "--json", "--dispatcher", "aware",
+                 "--csv", str(table)]) == 0
     out = json.loads(capsys.readouterr().out)
     day = out["aware"]["days"][0]
     assert day["served"] + day["refused"] + day["breaches"] == len(reqs)
+    import csv
+
+    rows = list(csv.DictReader(table.read_text().splitlines()))  # the same day as the JSON
+    assert rows == [{"dispatcher": "aware", "seed": "0", "day": "1",
+                     **{k: str(day[k]) for k in ("priority", "served", "refused", "breaches")}}]
+
+
+def test_a_life_as_csv_has_a_row_per_dispatcher_seed_and_day_as_the_json(tmp_path, capsys):
+    import csv
+
+    table = tmp_path / "life.csv"
+    assert main(["fleet", "--aircraft", "2", "--days", "2", "--seeds", "2", "--rate", "2", "--workers", "0",
+                 "--dispatcher", "aware", "--dispatcher", "blind", "--json", "--csv", str(table)]) == 0
+    lives = json.loads(capsys.readouterr().out)["lives"]
+    rows = list(csv.DictReader(table.read_text().splitlines()))
+    assert [(r["dispatcher"], r["seed"], r["day"]) for r in rows] == [
+        (d, str(s), str(k)) for s in (0, 1) for d in ("aware", "blind") for k in (1, 2)]
+    for r in rows:
+        life = next(x for x in lives if x["dispatcher"] == r["dispatcher"] and x["seed"] == int(r["seed"]))
+        assert int(r["priority"]) == life["priority"][int(r["day"]) - 1]
+        assert int(r["breaches"]) == life["breaches"][int(r["day"]) - 1]
 
 
 @pytest.mark.parametrize("args, flag", [(["--aircraft", "0"], "--aircraft"), (["--days", "0"], "--days"),
                                         (["--rate", "nan"], "--rate"), (["--chargers", "99"], "--chargers"),
-                                        (["--aircraft", "2", "--vertiports", "3"], "--vertiports")])
+                                        (["--aircraft", "2", "--vertiports", "3"], "--vertiports"),
+                                        (["--csv", "/nonexistent-folder/day.csv"], "--csv")])
 def test_cli_bad_settings_are_one_line(capsys, args, flag):
     assert main(["fleet", *args]) == 2
     err = capsys.readouterr().err.strip()

@@ -33,6 +33,35 @@ def _add_fleet_arguments(p: argparse.ArgumentParser) -> None:
                                                         "(1-1000; default 1)")
     add_engine_arguments(p, "lives")
     p.add_argument("--json", action="store_true", help="print every day's numbers as JSON")
+    p.add_argument("--csv", default=None, metavar="FILE",
+                   help="also write every day's numbers as CSV, one row per dispatcher, seed and day (atomic)")
+
+
+CSV_FIELDS = ("dispatcher", "seed", "day", "priority", "served", "refused", "breaches")
+
+
+def _check_csv_path(path: str | None) -> None:
+    """``--csv``: a file in an existing folder (checked before any work)."""
+    from pathlib import Path
+
+    from uam_studio.errors import InputError
+
+    if path is not None and (not Path(path).parent.is_dir() or Path(path).is_dir()):
+        raise InputError("--csv", f"{path}: not a file in an existing folder")
+
+
+def _write_csv(path: str, rows: list[dict]) -> None:
+    """The rows (keys :data:`CSV_FIELDS`) as CSV at ``path``, written atomically."""
+    import csv
+    import io
+
+    from uam_studio.atomic_io import atomic_save
+
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=CSV_FIELDS, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    atomic_save(path, lambda f: f.write(text.getvalue().encode()))
 
 
 def _run_fleet(args: argparse.Namespace) -> int:
@@ -47,6 +76,7 @@ def _run_fleet(args: argparse.Namespace) -> int:
                                 ("--age-spread", args.age_spread, 0.0, 2000.0), ("--max-km", args.max_km, 8.0, 100.0),
                                 ("--vertiports", args.vertiports, 1, min(10, args.aircraft))):
         check_range(flag, value, lo, hi)  # before any work: one line naming the flag
+    _check_csv_path(args.csv)
     dispatchers = args.dispatcher or ["aware", "blind", "hindsight"]
     out = {}
     if args.demand is not None:
@@ -67,6 +97,10 @@ def _run_fleet(args: argparse.Namespace) -> int:
                                args.age_spread, workers=args.workers, address=args.address,
                                progress=lambda done, _n: bar.update(done - bar.n), max_km=args.max_km,
                                vertiports=args.vertiports)
+        if args.csv is not None:
+            _write_csv(args.csv, [{"dispatcher": r["dispatcher"], "seed": r["seed"], "day": d + 1,
+                                   **{k: r[k][d] for k in ("priority", "served", "refused", "breaches")}}
+                                  for r in rows for d in range(len(r["priority"]))])
         if args.json:
             json.dump({"lives": rows, "summary": summarize(rows)}, sys.stdout, allow_nan=False)
             sys.stdout.write("\n")
@@ -81,6 +115,10 @@ def _run_fleet(args: argparse.Namespace) -> int:
             print(f"{r['dispatcher']:10} {r['priority_per_day']:12.1f} {r['p5']:4.0f}-{r['p95']:<4.0f} "
                   f"{r['served']:7d} {r['refused']:8d} {r['breaches']:9d} {r['packs_retired']:13d} {day:>8}")
         return EXIT_OK
+    if args.csv is not None:
+        _write_csv(args.csv, [{"dispatcher": d, "seed": args.seed, "day": k + 1,
+                               **{f: day[f] for f in ("priority", "served", "refused", "breaches")}}
+                              for d, life in out.items() for k, day in enumerate(life["days"])])
     if args.json:
         json.dump(out, sys.stdout, allow_nan=False)
         sys.stdout.write("\n")
