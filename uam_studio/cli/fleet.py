@@ -4,8 +4,11 @@ health-blind and hindsight dispatchers side by side on the same demand and the s
 from __future__ import annotations
 
 import argparse
+import csv
+import io
 import json
 import sys
+from pathlib import Path
 
 from uam_studio.cli.common import EXIT_OK, Command, add_engine_arguments, check_workers, seed_arg
 
@@ -42,8 +45,6 @@ CSV_FIELDS = ("dispatcher", "seed", "day", "priority", "served", "refused", "bre
 
 def _check_csv_path(path: str | None) -> None:
     """``--csv``: a file in an existing folder (checked before any work)."""
-    from pathlib import Path
-
     from uam_studio.errors import InputError
 
     if path is not None and (not Path(path).parent.is_dir() or Path(path).is_dir()):
@@ -52,9 +53,6 @@ def _check_csv_path(path: str | None) -> None:
 
 def _write_csv(path: str, rows: list[dict]) -> None:
     """The rows (keys :data:`CSV_FIELDS`) as CSV at ``path``, written atomically."""
-    import csv
-    import io
-
     from uam_studio.atomic_io import atomic_save
 
     text = io.StringIO()
