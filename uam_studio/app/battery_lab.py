@@ -22,18 +22,18 @@ import param
 from uam_studio.app.battery_lab_state import CELLS, VARY, BatteryLabState
 from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE
 from uam_studio.app.session import ensure_bokeh_backend, respond_at_once, session_dispatcher
-from uam_studio.app.style import heading, no_scroll_zoom
+from uam_studio.app.style import heading, intro, no_scroll_zoom, window_height
 from uam_studio.flight.tables import ALTITUDE_RANGE_M, WIND_RANGE_KTS
 
 FAMILY_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2")
 EOD_COLOR = "#d62728"
 SETTING = "this setting"
-BUSY_AFTER_MS = 150
+BUSY_AFTER_MS = 150  # served: a change taking longer than this shows the busy indicator
 # The plots share the window's height below the tab's heading (about 230 px down): 46% / 54%, at least
 # 250 / 290 px (a 1366x768 screen shows both whole; a 1920x1080 one fills its height instead of a third
 # of it staying empty).
 CURRENT_HEIGHT_CSS = "max(250px, calc((100vh - 230px) * 0.46))"
-VOLTAGE_HEIGHT_CSS = "max(290px, calc((100vh - 230px) * 0.54))"  # served: a change taking longer than this shows the busy indicator
+VOLTAGE_HEIGHT_CSS = "max(290px, calc((100vh - 230px) * 0.54))"
 
 
 def eod_text(curve: dict[str, Any]) -> str:
@@ -93,20 +93,20 @@ class BatteryLabView(pn.viewable.Viewer):
         self._on_result()
 
     def __panel__(self) -> pn.viewable.Viewable:
-        intro = pn.pane.Markdown(
+        text = intro(
             "One leg flown by one 18650 cell (the pack scaled to a cell), repeated without recharging: the "
             "paper's NASA cell, or a Sony VTC6 identified on the CMU eVTOL dataset's real cells (same current). "
             "Pick the factor to vary: the thin curves sweep it over its range, the black curve is the "
-            "setting of the sliders.", sizing_mode="stretch_width", styles={"font-size": "13px"})
+            "setting of the sliders.")
         controls = pn.Column(heading("Leg and cell"), *self.widgets.values(), width=270)
         plots = pn.Column(pn.Row(heading("Current and voltage"), self.busy),
-                          pn.Column(self.current_plot, sizing_mode="stretch_width", styles={"height": CURRENT_HEIGHT_CSS}),
-                          pn.Column(self.voltage_plot, sizing_mode="stretch_width", styles={"height": VOLTAGE_HEIGHT_CSS}),
+                          window_height(self.current_plot, CURRENT_HEIGHT_CSS),
+                          window_height(self.voltage_plot, VOLTAGE_HEIGHT_CSS),
                           min_width=560, sizing_mode="stretch_width",
                           styles={"flex": "1 1 560px"})
         table = pn.Column(heading("End of discharge"), self.eod_table, width=300)
         body = pn.FlexBox(controls, plots, table, flex_wrap="wrap", gap="10px", sizing_mode="stretch_width")
-        return pn.Column(intro, self.message, body, sizing_mode="stretch_width")
+        return pn.Column(text, self.message, body, sizing_mode="stretch_width")
 
     def _on_cell(self, *events: Any) -> None:
         """The state's new cell set its health and ranges: the sliders follow."""

@@ -19,7 +19,7 @@ import param
 
 from uam_studio.app.fleet_state import LABELS, FleetState
 from uam_studio.app.session import ensure_bokeh_backend
-from uam_studio.app.style import NOTE_STYLE, PHYSICS_COLOR, PREDICTED_COLOR, heading, no_scroll_zoom
+from uam_studio.app.style import NOTE_STYLE, PHYSICS_COLOR, PREDICTED_COLOR, heading, intro, no_scroll_zoom
 from uam_studio.fleet.dispatch import DISPATCHERS
 
 COLORS = {"aware": PHYSICS_COLOR, "blind": PREDICTED_COLOR, "hindsight": "#555555"}
@@ -62,20 +62,20 @@ class FleetView(pn.viewable.Viewer):
         self._on_text()
 
     def __panel__(self) -> pn.viewable.Viewable:
-        intro = pn.pane.Markdown(
+        text = intro(
             "A small fleet at one or more vertiports through operating days of 12 h. Each request is a round "
             "trip from its vertiport, flown by an aircraft based there; the "
             "packs age with every flight (a law fitted to real cells flown to their end of life), and each "
             "aircraft learns its own pack from its flights. **Health-aware** dispatching uses that belief, "
             "**health-blind** takes every pack as new with a fixed reserve, **hindsight** knows the truth. "
-            "The same requests and packs for all three.", sizing_mode="stretch_width", styles={"font-size": "13px"})
+            "The same requests and packs for all three.")
         controls = pn.Column(heading("Fleet"), *self.widgets.values(), self.run,
                              pn.pane.HTML("Changing a setting starts new fleets.", styles=NOTE_STYLE, width=250),
                              width=270)
         figures = pn.Column(self.error, self.status, self.days_pane, pn.Row(self.timeline_pane, self.packs_pane,
                                                                              sizing_mode="stretch_width"),
                             sizing_mode="stretch_width", min_width=560, styles={"flex": "1 1 560px"})
-        return pn.Column(intro, pn.FlexBox(controls, figures, flex_wrap="wrap", gap="10px",
+        return pn.Column(text, pn.FlexBox(controls, figures, flex_wrap="wrap", gap="10px",
                                            sizing_mode="stretch_width"), sizing_mode="stretch_width",
                          css_classes=["uam-fleet"])
 

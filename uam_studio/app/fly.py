@@ -30,6 +30,7 @@ from uam_studio.app.style import (
     no_scroll_zoom,
     pixel_offset,
     tight_legend_above,
+    window_height,
 )
 from uam_studio.planning import VERTIPORT, Mission
 from uam_studio.planning.operations import record_csv
@@ -134,7 +135,7 @@ class FlyView(pn.viewable.Viewer):
                       self.inject_kts, self.inject_button, self.clear_button, pn.Spacer(height=10),
                       self.seed, self.sigma, self.noise, pn.Spacer(height=10), self.download, width=230),
             pn.Column(self.error, pn.Row(self.progress, self.status, sizing_mode="stretch_width"), pn.Row(self.map_pane, self.volt_pane, sizing_mode="stretch_width"),
-                      pn.Column(self.log, sizing_mode="stretch_width", styles={"height": LOG_HEIGHT_CSS}),
+                      window_height(self.log, LOG_HEIGHT_CSS),
                       sizing_mode="stretch_width"),
             sizing_mode="stretch_width", css_classes=["uam-fly"])
         if s.record is not None:

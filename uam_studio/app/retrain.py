@@ -24,7 +24,7 @@ from uam_studio.app.planner_state import PlannerState
 from uam_studio.app.retrain_state import CURVE_COLUMNS, EPOCH_COLUMNS, MODELS, RetrainState
 from uam_studio.app.services import registry
 from uam_studio.app.session import ensure_bokeh_backend
-from uam_studio.app.style import NOTE_STYLE, heading, no_scroll_zoom
+from uam_studio.app.style import NOTE_STYLE, heading, intro, no_scroll_zoom
 from uam_studio.planning.agents.retrain import agents_dir
 from uam_studio.planning.missions.mission import SCENARIOS
 
@@ -144,7 +144,7 @@ class RetrainView(pn.viewable.Viewer):
 
     def __panel__(self) -> pn.viewable.Viewable:
         w = SETTINGS_WIDTH
-        intro = pn.pane.Markdown(
+        text = intro(
             "Retrain a planner and watch it learn.\n\n"
             "- **DQN (paper)** learns by trial and error, one episode after another, on the *current map* "
             "(a random cell each episode) or on *random missions*.\n"
@@ -155,8 +155,7 @@ class RetrainView(pn.viewable.Viewer):
             "8-destination map in 3 minutes where random weights did not, `benchmarks/RESULTS.md`).\n"
             f"- Saved in `{html.escape(str(agents_dir()))}` (`UAM_STUDIO_HOME` moves it), never over the bundled "
             "ones; they appear in every session's Planner policy list. The full recipe is "
-            "`uam-studio train attention`.",
-            sizing_mode="stretch_width", styles={"font-size": "13px"})
+            "`uam-studio train attention`.")
         self.rewards = pn.pane.HTML("alpha: reward per destination x priority; beta: penalty per charging stop; "
                                     "gamma: penalty for an end of discharge", width=w, styles=NOTE_STYLE,
                                     margin=(0, 10))
@@ -171,7 +170,7 @@ class RetrainView(pn.viewable.Viewer):
         curves = pn.Column(self.status, self.reference_text, self.dqn_curves, self.attention_curves, min_width=520,
                            sizing_mode="stretch_width", styles={"flex": "1 1 520px"})
         self._on_model()
-        return pn.Column(intro, self.error, pn.FlexBox(controls, curves, flex_wrap="wrap", gap="10px",
+        return pn.Column(text, self.error, pn.FlexBox(controls, curves, flex_wrap="wrap", gap="10px",
                                                        sizing_mode="stretch_width"),
                          sizing_mode="stretch_width")
 

@@ -23,6 +23,18 @@ def heading(text: str, **params: Any) -> pn.pane.HTML:
     return pn.pane.HTML(f"<div style='font-size:15px;font-weight:600'>{html.escape(text)}</div>", **params)
 
 
+def intro(text: str) -> pn.pane.Markdown:
+    """A tab's introduction: Markdown at one size across the tabs, the tab's whole width."""
+    return pn.pane.Markdown(text, sizing_mode="stretch_width", styles={"font-size": "13px"})
+
+
+def window_height(obj: Any, height_css: str) -> pn.Column:
+    """``obj`` (sized ``stretch_both``) in a full-width box whose height is the CSS ``height_css``, e.g.
+    a share of the window's height (``100vh``) with a floor: Bokeh sizes a figure or table only from a
+    box of definite height."""
+    return pn.Column(obj, sizing_mode="stretch_width", styles={"height": height_css})
+
+
 def label_background(plot: Any, element: Any) -> None:
     """Bokeh hook: labels on a white box, so that route lines do not run through their text."""
     glyph = plot.handles["glyph"]
