@@ -40,7 +40,8 @@ def _add_fleet_arguments(p: argparse.ArgumentParser) -> None:
                    help="also write every day's numbers as CSV, one row per dispatcher, seed and day (atomic)")
 
 
-CSV_FIELDS = ("dispatcher", "seed", "day", "priority", "served", "refused", "breaches")
+DAY_FIELDS = ("priority", "served", "refused", "breaches")  # each day's numbers in the CSV
+CSV_FIELDS = ("dispatcher", "seed", "day", *DAY_FIELDS)
 
 
 def _check_csv_path(path: str | None) -> None:
@@ -97,8 +98,7 @@ def _run_fleet(args: argparse.Namespace) -> int:
                                vertiports=args.vertiports)
         if args.csv is not None:
             _write_csv(args.csv, [{"dispatcher": r["dispatcher"], "seed": r["seed"], "day": d + 1,
-                                   **{k: r[k][d] for k in ("priority", "served", "refused", "breaches")}}
-                                  for r in rows for d in range(len(r["priority"]))])
+                                   **{k: r[k][d] for k in DAY_FIELDS}} for r in rows for d in range(len(r["priority"]))])
         if args.json:
             json.dump({"lives": rows, "summary": summarize(rows)}, sys.stdout, allow_nan=False)
             sys.stdout.write("\n")
@@ -114,8 +114,7 @@ def _run_fleet(args: argparse.Namespace) -> int:
                   f"{r['served']:7d} {r['refused']:8d} {r['breaches']:9d} {r['packs_retired']:13d} {day:>8}")
         return EXIT_OK
     if args.csv is not None:
-        _write_csv(args.csv, [{"dispatcher": d, "seed": args.seed, "day": k + 1,
-                               **{f: day[f] for f in ("priority", "served", "refused", "breaches")}}
+        _write_csv(args.csv, [{"dispatcher": d, "seed": args.seed, "day": k + 1, **{f: day[f] for f in DAY_FIELDS}}
                               for d, life in out.items() for k, day in enumerate(life["days"])])
     if args.json:
         json.dump(out, sys.stdout, allow_nan=False)

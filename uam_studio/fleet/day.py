@@ -185,7 +185,7 @@ def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int
             views = [AircraftView(str(i), fleet.belief[i], version[i]) for i in range(n)
                      if free[i] and fleet.base[i] == port]
             asks = [r for r in waiting if r.vertiport == port]
-            for req, view in assign(asks, views, margin, required) if views and asks else ():
+            for req, view in assign(asks, views, margin, required):
                 i = int(view.name)
                 waiting.remove(req)
                 free[i] = False

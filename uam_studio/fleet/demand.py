@@ -31,6 +31,18 @@ MAX_VERTIPORTS = 10  # vertiports of one fleet (each with its own aircraft and c
 FIELDS = ("t_s", "name", "x_km", "y_km", "priority", "wind_kts", "window_s", "vertiport")
 
 
+def _check_small_int(field: str, value: object, lo: int, hi: int, allowed: str) -> None:
+    """An integer (not a bool, not a float) from ``lo`` to ``hi``, else one line naming ``field`` and
+    the ``allowed`` values."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= int(value) <= hi:
+        raise InputError(field, f"{value!r}: allowed {allowed}")
+
+
+def _ascii_digits(value: object) -> object:
+    """A CSV cell of ASCII digits as an int; anything else unchanged (for the checks to refuse)."""
+    return int(value) if isinstance(value, str) and value.strip().isdigit() and value.isascii() else value
+
+
 @dataclass(frozen=True)
 class Request:
     """Fly to (``x_km``, ``y_km``) km from vertiport number ``vertiport`` (0-9; aircraft based there serve
@@ -56,14 +68,10 @@ class Request:
         if not RADIUS_KM[0] <= d <= RADIUS_KM[1]:
             raise InputError("x_km", f"({self.x_km:g}, {self.y_km:g}) is {d:.1f} km from the vertiport; "
                                      f"allowed {RADIUS_KM[0]:g}-{RADIUS_KM[1]:g} km")
-        if isinstance(self.priority, bool) or not isinstance(self.priority, (int, np.integer)) \
-                or not 1 <= int(self.priority) <= 3:
-            raise InputError("priority", f"{self.priority!r}: allowed 1, 2 or 3")
+        _check_small_int("priority", self.priority, 1, 3, "1, 2 or 3")
         check_range("wind_kts", self.wind_kts, *WIND_KTS, " kt")
         check_range("window_s", self.window_s, 60.0, DAY_S, " s")
-        if isinstance(self.vertiport, bool) or not isinstance(self.vertiport, (int, np.integer)) \
-                or not 0 <= int(self.vertiport) < MAX_VERTIPORTS:
-            raise InputError("vertiport", f"{self.vertiport!r}: allowed 0-{MAX_VERTIPORTS - 1}")
+        _check_small_int("vertiport", self.vertiport, 0, MAX_VERTIPORTS - 1, f"0-{MAX_VERTIPORTS - 1}")
 
     @property
     def distance_km(self) -> float:
@@ -109,13 +117,9 @@ def _request(row: dict, where: str) -> Request:
     if missing:
         raise InputError(missing[0], f"{where}: missing (columns: {', '.join(FIELDS)})")
     try:
-        prio = row["priority"]
-        prio = int(prio) if isinstance(prio, str) and prio.strip().isdigit() and prio.isascii() else prio
-        port = row.get("vertiport") or 0
-        port = int(port) if isinstance(port, str) and port.strip().isdigit() and port.isascii() else port
         return Request(float(row["t_s"]), str(row.get("name") or where), float(row["x_km"]), float(row["y_km"]),
-                       prio, float(row.get("wind_kts") or 0.0), float(row.get("window_s") or DEFAULT_WINDOW_S),
-                       vertiport=port)
+                       _ascii_digits(row["priority"]), float(row.get("wind_kts") or 0.0),
+                       float(row.get("window_s") or DEFAULT_WINDOW_S), vertiport=_ascii_digits(row.get("vertiport") or 0))
     except InputError as err:
         raise InputError(err.field, f"{where}: {str(err)[len(err.field) + 2:]}") from None
     except (TypeError, ValueError) as err:
