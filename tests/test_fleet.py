@@ -126,7 +126,7 @@ def test_a_demand_file_round_trips_and_the_cli_flies_it(tmp_path, capsys):
 
     rows = list(csv.DictReader(table.read_text().splitlines()))  # the same day as the JSON
     assert rows == [{"dispatcher": "aware", "seed": "0", "day": "1",
-                     **{k: str(day[k]) for k in ("priority", "served", "refused", "breaches")}}]
+                     **{k: str(day[k]) for k in ("priority", "served", "refused", "breaches")}, "bound": ""}]
 
 
 def test_a_life_as_csv_has_a_row_per_dispatcher_seed_and_day_as_the_json(tmp_path, capsys):

@@ -69,7 +69,12 @@ GLOSSARY: dict[str, str] = {
                       "data). A pack retires below 80% of its first capacity.",
     "Dispatcher": "The rule that gives a fleet's requests to its aircraft. Health-aware: by each aircraft's "
                   "own estimate of its pack, on its cautious side; health-blind: every pack taken as new, "
-                  "with a fixed voltage reserve; hindsight: knowing every pack's truth (an upper bound).",
+                  "with a fixed voltage reserve; hindsight: knowing every pack's truth and the actual winds, "
+                  "assigning by the same rule (a reference).",
+    "Day bound": "The most stars any dispatcher could serve on a day from a fleet, knowing the whole day's "
+                 "demand and every pack's truth: only the requests some pack flies safely, within what the "
+                 "aircraft and chargers can turn round in the day (a proven upper bound; "
+                 "uam_studio.fleet.hindsight).",
 }
 
 

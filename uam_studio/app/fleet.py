@@ -68,7 +68,8 @@ class FleetView(pn.viewable.Viewer):
             "packs age with every flight (a law fitted to real cells flown to their end of life), and each "
             "aircraft learns its own pack from its flights. **Health-aware** dispatching uses that belief, "
             "**health-blind** takes every pack as new with a fixed reserve, **hindsight** knows the truth. "
-            "The same requests and packs for all three.")
+            "The same requests and packs for all three. The dotted line is the most any dispatcher could "
+            "serve each day, knowing the whole day's demand and the truth (an upper bound).")
         controls = pn.Column(heading("Fleet"), *self.widgets.values(), self.run,
                              pn.pane.HTML("Changing a setting starts new fleets.", styles=NOTE_STYLE, width=250),
                              width=270)
@@ -113,6 +114,8 @@ class FleetView(pn.viewable.Viewer):
                   color=COLORS[d], line_width=2, line_dash="dashed" if d == "hindsight" else "solid") *
                   hv.Scatter(series[d], "day", "stars served").opts(color=COLORS[d], size=6)
                   for d in DISPATCHERS]
+        curves.append(hv.Curve(series["bound"], "day", "stars served", label="upper bound").opts(
+            color="black", line_width=1, line_dash="dotted"))
         n = max(1, len(self.state.days))
         return hv.Overlay(curves).opts(title="Served priority (stars) per day", height=240, responsive=True,
                                        legend_position="right", xlim=(0.5, n + 0.5), hooks=[no_scroll_zoom],

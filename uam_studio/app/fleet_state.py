@@ -104,7 +104,9 @@ class FleetState(param.Parameterized):
         self.param.update(days=[*self.days, row], last=results, error="",
                           status=f"day {day + 1}: " + " · ".join(
                               f"{LABELS[d]} {r.priority} stars, {r.refused} refused, {r.breaches} breach"
-                              f"{'' if r.breaches == 1 else 'es'}" for d, r in results.items()))
+                              f"{'' if r.breaches == 1 else 'es'}"
+                              + ("" if r.bound is None else f" (at most {r.bound} possible)")
+                              for d, r in results.items()))
 
     def wait_idle(self, timeout: float = 120.0) -> bool:
         """Block until the newest day asked for is shown (tests)."""
@@ -129,9 +131,12 @@ class FleetState(param.Parameterized):
                  "in_service": s} for i, (t, b, s) in enumerate(zip(f.truth, f.belief, f.in_service))]
 
     def per_day(self) -> dict[str, tuple[list[int], list[int]]]:
-        """Served priority per day for each dispatcher: (days, stars)."""
-        return {d: ([row["day"] for row in self.days], [row[d]["priority"] for row in self.days])
-                for d in DISPATCHERS}
+        """Served priority per day for each dispatcher: (days, stars); under ``"bound"`` the most stars any
+        dispatcher could have served from hindsight's fleet each day."""
+        days = [row["day"] for row in self.days]
+        out = {d: (days, [row[d]["priority"] for row in self.days]) for d in DISPATCHERS}
+        out["bound"] = (days, [row["hindsight"]["bound"] for row in self.days])
+        return out
 
 
 __all__ = ["LABELS", "FleetState"]

@@ -40,7 +40,7 @@ def _add_fleet_arguments(p: argparse.ArgumentParser) -> None:
                    help="also write every day's numbers as CSV, one row per dispatcher, seed and day (atomic)")
 
 
-DAY_FIELDS = ("priority", "served", "refused", "breaches")  # each day's numbers in the CSV
+DAY_FIELDS = ("priority", "served", "refused", "breaches", "bound")  # each day's numbers in the CSV (bound: hindsight)
 CSV_FIELDS = ("dispatcher", "seed", "day", *DAY_FIELDS)
 
 
@@ -107,11 +107,14 @@ def _run_fleet(args: argparse.Namespace) -> int:
               f"from {args.seed}, Poisson {args.rate:g} requests/h up to {args.max_km:g} km, {args.chargers} charger(s) "
               f"per vertiport, packs aged U(0, {args.age_spread:g}) cycles")
         print(f"{'dispatcher':10} {'priority/day':>12} {'5-95%':>9} {'served':>7} {'refused':>8} {'breaches':>9} "
-              f"{'packs retired':>13} {'mean day':>8}")
+              f"{'packs retired':>13} {'mean day':>8} {'bound/day':>9}")
         for r in summarize(rows):
             day = "-" if r["mean_retirement_day"] is None else f"{r['mean_retirement_day']:.0f}"
             print(f"{r['dispatcher']:10} {r['priority_per_day']:12.1f} {r['p5']:4.0f}-{r['p95']:<4.0f} "
-                  f"{r['served']:7d} {r['refused']:8d} {r['breaches']:9d} {r['packs_retired']:13d} {day:>8}")
+                  f"{r['served']:7d} {r['refused']:8d} {r['breaches']:9d} {r['packs_retired']:13d} {day:>8} "
+                  f"{_per_day(r['bound_per_day']):>9}")
+        print("bound/day: the most stars any dispatcher could serve from hindsight's fleet, knowing the day "
+              "(uam_studio.fleet.hindsight)")
         return EXIT_OK
     if args.csv is not None:
         _write_csv(args.csv, [{"dispatcher": d, "seed": args.seed, "day": k + 1, **{f: day[f] for f in DAY_FIELDS}}
@@ -124,7 +127,7 @@ def _run_fleet(args: argparse.Namespace) -> int:
           f"{'demand ' + args.demand if args.demand else f'Poisson {args.rate:g} requests/h'}, "
           f"{args.chargers} charger(s) per vertiport")
     print(f"{'dispatcher':10} {'priority/day':>12} {'served':>7} {'refused':>8} {'breaches':>9} {'flights':>8} "
-          f"{'charge Ah/day':>13} {'retired packs':>13}")
+          f"{'charge Ah/day':>13} {'retired packs':>13} {'bound/day':>9}")
     for d, life in out.items():
         days = life["days"]
         n = len(days)
@@ -132,8 +135,13 @@ def _run_fleet(args: argparse.Namespace) -> int:
         print(f"{d:10} {sum(x['priority'] for x in days) / n:12.1f} {sum(x['served'] for x in days):7d} "
               f"{sum(x['refused'] for x in days):8d} {sum(x['breaches'] for x in days):9d} "
               f"{sum(x['flights'] for x in days):8d} {sum(x['charge_ah'] for x in days) / n:13.1f} "
-              f"{len(retired):13d}")
+              f"{len(retired):13d} {_per_day(None if days[0]['bound'] is None else sum(x['bound'] for x in days) / n):>9}")
     return EXIT_OK
+
+
+def _per_day(value: float | None) -> str:
+    """A per-day mean for the tables: one decimal, or "-" where there is none."""
+    return "-" if value is None else f"{value:.1f}"
 
 
 COMMAND = Command(

@@ -44,13 +44,16 @@ from uam_studio.fleet.dispatch import (
     round_trip,
     round_trip_margin,
 )
+from uam_studio.fleet.hindsight import Job, day_bound
 
-__all__ = ["DayResult", "Fleet", "FIT_WINDOW_S", "day_of_life_seed", "simulate_day", "simulate_life"]
+__all__ = ["DayResult", "END_S", "Fleet", "FIT_WINDOW_S", "day_of_life_seed", "hindsight_bound", "simulate_day",
+           "simulate_life"]
 
 FIT_WINDOW_S = 600  # s of each flight's readings fitted for its pack's health
 FORECAST_SIGMA_KT = 8.0  # kt: the actual wind is the forecast plus N(0, this)
 NOISE_V, NOISE_A = 0.005, 0.020  # sensor noise std (V, A)
 CHARGE_C_RATE = 1.0  # charge current, in q_max per hour
+END_S = DAY_S + 6 * 3600.0  # s: the simulation's end (flights in the air at the day's end land)
 SEED_STRIDE = 100_003  # day d of the life seeded ``seed`` is seeded ``seed * SEED_STRIDE + d``
 
 
@@ -108,8 +111,9 @@ class Fleet:
 class DayResult:
     """One day: ``priority`` served (stars of the requests flown without a breach), ``served``,
     ``refused`` (never flown), ``breaches``, ``flights``, ``charge_ah`` (per cell, delivered),
-    ``charger_wait_s`` (summed), and each flight as (take-off s, aircraft, request, true margin V,
-    duration s)."""
+    ``charger_wait_s`` (summed), each flight as (take-off s, aircraft, request, true margin V,
+    duration s), and for the hindsight dispatcher ``bound``: the most stars any dispatcher could serve
+    this day from the same fleet (:mod:`uam_studio.fleet.hindsight`; None for the others)."""
 
     priority: int
     served: int
@@ -119,6 +123,7 @@ class DayResult:
     charge_ah: float
     charger_wait_s: float
     log: tuple[tuple[float, int, str, float, float], ...]
+    bound: int | None = None
 
     def to_dict(self) -> dict:
         return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in self.__dict__.items() if k != "log"}
@@ -130,14 +135,8 @@ def _world_winds(demand: list[Request], seed: int) -> dict[str, tuple[float, flo
                      -r.wind_kts + float(rng.normal(0.0, FORECAST_SIGMA_KT))) for r in demand}
 
 
-def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int,
-                 chargers: int | Sequence[int] = 2) -> DayResult:
-    """Fly one day of ``demand`` with ``fleet`` under ``dispatcher`` (:data:`DISPATCHERS`); the fleet's
-    truth and beliefs are updated in place (packs age, beliefs learn). ``chargers``: per vertiport (one
-    count for all, or one each, 1-50). Each request is served by an aircraft based at its vertiport.
-    Seeded: the same inputs give the same day."""
-    if dispatcher not in DISPATCHERS:
-        raise InputError("dispatcher", f"{dispatcher!r}: allowed {', '.join(DISPATCHERS)}")
+def _charger_counts(fleet: Fleet, demand: list[Request], chargers: int | Sequence[int]) -> list[int]:
+    """Chargers per vertiport (one count for all, or one each, 1-50), every request at a fleet's vertiport."""
     ports = fleet.vertiports
     counts = [chargers] * ports if isinstance(chargers, (int, np.integer)) else list(chargers)
     if len(counts) != ports:
@@ -147,7 +146,56 @@ def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int
         if req.vertiport >= ports:
             raise InputError("vertiport", f"request {req.name!r} at vertiport {req.vertiport}: the fleet is based "
                                           f"at vertiports 0-{ports - 1}")
+    return counts
+
+
+def _recharge_s(charge_c: float, q_max: float) -> float:
+    """Time (s) to put ``charge_c`` (C) back at :data:`CHARGE_C_RATE` on a cell of ``q_max`` (C)."""
+    return charge_c / (CHARGE_C_RATE * q_max) * 3600.0
+
+
+def _delivered(sim) -> tuple[np.ndarray, float, float]:
+    """A round trip's current (A) up to its end or its cut-off, the charge it drew (C) and its duration (s)."""
+    k = int(np.count_nonzero(sim.valid)) if sim.eod_s is not None else len(sim.current_a)
+    cur = np.asarray(sim.current_a[:k], dtype=float)
+    return cur, float(np.sum(np.clip(cur, 0.0, None)) * sim.dt_s), float(k * sim.dt_s)
+
+
+def hindsight_bound(fleet: Fleet, demand: list[Request], seed: int, chargers: int | Sequence[int] = 2) -> int:
+    """The most stars any dispatcher could serve on this day from this fleet, knowing the whole ``demand``
+    and, from the world seeded ``seed``, every pack's truth and the actual winds
+    (:func:`uam_studio.fleet.hindsight.day_bound` over every safe true round trip of every aircraft in
+    service). Reads the truth: a reference, never a dispatcher's view."""
+    counts = _charger_counts(fleet, demand, chargers)
+    winds = _world_winds(demand, day_seed(seed))
+    jobs = []
+    for i, truth in enumerate(fleet.truth):
+        if not fleet.in_service[i]:
+            continue
+        for r, req in enumerate(demand):
+            if req.vertiport != fleet.base[i]:
+                continue
+            sim = round_trip(req, truth.q_max, truth.r0, *winds[req.name])
+            if sim.safe:
+                _, charge, flight_s = _delivered(sim)
+                jobs.append(Job(r, i, req.vertiport, req.t_s, req.t_s + req.window_s, flight_s,
+                                _recharge_s(charge, truth.q_max), int(req.priority)))
+    per_port = [sum(1 for i, b in enumerate(fleet.base) if b == p and fleet.in_service[i]) for p in range(len(counts))]
+    return day_bound(jobs, counts, per_port, END_S)
+
+
+def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int,
+                 chargers: int | Sequence[int] = 2) -> DayResult:
+    """Fly one day of ``demand`` with ``fleet`` under ``dispatcher`` (:data:`DISPATCHERS`); the fleet's
+    truth and beliefs are updated in place (packs age, beliefs learn). ``chargers``: per vertiport (one
+    count for all, or one each, 1-50). Each request is served by an aircraft based at its vertiport.
+    Seeded: the same inputs give the same day."""
+    if dispatcher not in DISPATCHERS:
+        raise InputError("dispatcher", f"{dispatcher!r}: allowed {', '.join(DISPATCHERS)}")
+    counts = _charger_counts(fleet, demand, chargers)
+    ports = fleet.vertiports
     seed = day_seed(seed)
+    bound = hindsight_bound(fleet, demand, seed, counts) if dispatcher == "hindsight" else None
     env = simpy.Environment()
     plugs = [simpy.Resource(env, capacity=c) for c in counts]
     winds = _world_winds(demand, seed)
@@ -194,14 +242,13 @@ def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int
     def fly(i: int, req: Request):
         truth = fleet.truth[i]
         sim = round_trip(req, truth.q_max, truth.r0, *winds[req.name])
-        k = int(np.count_nonzero(sim.valid)) if sim.eod_s is not None else len(sim.current_a)
-        cur = np.asarray(sim.current_a[:k], dtype=float)
-        charge = float(np.sum(np.clip(cur, 0.0, None)) * sim.dt_s)
+        cur, charge, flight_s = _delivered(sim)
+        k = len(cur)
         breached = not bool(sim.safe)
         stats["flights"] += 1
         stats["charge_c"] += charge
-        log.append((float(env.now), i, req.name, float(sim.min_voltage_v) - sim.eod_v, float(k * sim.dt_s)))
-        yield env.timeout(float(k * sim.dt_s))
+        log.append((float(env.now), i, req.name, float(sim.min_voltage_v) - sim.eod_v, flight_s))
+        yield env.timeout(flight_s)
         fleet.truth[i] = truth.after(charge)
         belief = fleet.belief[i].aged(charge)
         m = min(FIT_WINDOW_S, k)
@@ -221,7 +268,7 @@ def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int
         with plugs[fleet.base[i]].request() as plug:
             yield plug
             stats["wait_s"] += env.now - t0
-            yield env.timeout(charge / (CHARGE_C_RATE * fleet.truth[i].q_max) * 3600.0)
+            yield env.timeout(_recharge_s(charge, fleet.truth[i].q_max))
         if fleet.truth[i].retired:
             fleet.in_service[i] = False
             return
@@ -238,10 +285,11 @@ def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int
             dispatch()
 
     env.process(arrivals())
-    env.run(until=DAY_S + 6 * 3600.0)  # flights in the air at the day's end land
+    env.run(until=END_S)  # flights in the air at the day's end land
     flown = {entry[2] for entry in log}
     return DayResult(stats["priority"], stats["served"], len(demand) - len(flown), stats["breaches"],
-                     stats["flights"], stats["charge_c"] / 3600.0, stats["wait_s"], tuple(log))
+                     stats["flights"], stats["charge_c"] / 3600.0, stats["wait_s"], tuple(log),
+                     bound)
 
 
 def _fit(current: np.ndarray, voltage: np.ndarray, dt_s: float) -> tuple[float, float, float, float] | None:

@@ -10,7 +10,7 @@
   (1.64 std to the weak side, winds 2.33 std to the head side) lands above the cut-off; ``blind``
   assumes every pack is new (q_max 7600 C, R0 0.117 ohm) with a fixed voltage reserve on the forecast
   winds; ``hindsight`` knows each pack's truth and the actual winds (a reference, not a proven optimum:
-  it assigns by the same rule). Each assigns the
+  it assigns by the same rule; :mod:`uam_studio.fleet.hindsight` bounds what any rule could serve). Each assigns the
   waiting requests, most stars first, to the free aircraft with the least margin that still passes.
 """
 

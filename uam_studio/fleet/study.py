@@ -28,7 +28,7 @@ def _life_row(size: int, seed: int, dispatcher: str, days: int, rate: float, cha
     return {"aircraft": size, "seed": seed, "dispatcher": dispatcher,
             "priority": [d["priority"] for d in life["days"]], "refused": [d["refused"] for d in life["days"]],
             "breaches": [d["breaches"] for d in life["days"]], "served": [d["served"] for d in life["days"]],
-            "retired_day": life["retired_day"]}
+            "bound": [d["bound"] for d in life["days"]], "retired_day": life["retired_day"]}
 
 
 def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[int] = (0, 1, 2, 3, 4),
@@ -42,7 +42,8 @@ def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[
     another (no Dask).
 
     :return: one row per task in task order (sizes, then seeds, then dispatchers): per day its
-        priority, refusals, breaches and served requests, and each pack's retirement day.
+        priority, refusals, breaches, served requests and bound (hindsight; None for the others), and
+        each pack's retirement day.
     """
     for d in dispatchers:
         if d not in DISPATCHERS:
@@ -59,17 +60,21 @@ def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[
 
 def summarize(rows: list[dict]) -> list[dict]:
     """Per (fleet size, dispatcher): served priority per day (mean, 5% and 95% over every day of every
-    seed), refusals, breaches and packs retired (with the mean retirement day) over all lives."""
+    seed), refusals, breaches and packs retired (with the mean retirement day) over all lives; for
+    hindsight ``bound_per_day``, the mean of each day's upper bound on any dispatcher's stars from its
+    fleet (None for the others)."""
     out = []
     keys = sorted({(r["aircraft"], r["dispatcher"]) for r in rows}, key=lambda k: (k[0], DISPATCHERS.index(k[1])))
     for size, d in keys:
         group = [r for r in rows if (r["aircraft"], r["dispatcher"]) == (size, d)]
         p = np.concatenate([np.asarray(r["priority"], dtype=float) for r in group])
         retired = [day for r in group for day in r["retired_day"] if day is not None]
+        bounds = [b for r in group for b in r.get("bound", []) if b is not None]
         out.append({"aircraft": size, "dispatcher": d, "lives": len(group), "days": int(p.size),
                     "priority_per_day": float(p.mean()), "p5": float(np.percentile(p, 5)),
                     "p95": float(np.percentile(p, 95)), "refused": int(sum(sum(r["refused"]) for r in group)),
                     "breaches": int(sum(sum(r["breaches"]) for r in group)),
                     "served": int(sum(sum(r["served"]) for r in group)), "packs_retired": len(retired),
-                    "mean_retirement_day": float(np.mean(retired)) if retired else None})
+                    "mean_retirement_day": float(np.mean(retired)) if retired else None,
+                    "bound_per_day": float(np.mean(bounds)) if bounds and len(bounds) == p.size else None})
     return out
