@@ -118,6 +118,7 @@ def test_fleet_tab_runs_a_day_for_the_three_dispatchers(browser, app_url):
     line.wait_for(timeout=TIMEOUT_MS)
     text = line.inner_text()
     assert all(word in text for word in ("health-aware", "health-blind", "hindsight")), text
+    assert re.search(r"hindsight \d+ stars, .*\(at most \d+ possible\)", text), text  # the day's bound
     titles = page.evaluate("() => [...window.Bokeh.index.all_views()].filter(v => v.model.type === 'Figure' && "
                            "v.model.title && v.model.title.text).map(v => v.model.title.text)")
     for start in ("Served priority", "Last day, health-aware", "Each pack after"):
