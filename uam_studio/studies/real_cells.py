@@ -218,7 +218,7 @@ def real_cell_report(data: str | Path | None = None, held_out: bool = True, refi
                 ("landing", SET_LANDING, "this mission's landing and rest", VTC6_LANDING_HELD_OUT),
                 ("cell", SET_CELL, "cell VAH01 (fit on VAH07 only)", VTC6_CELL_HELD_OUT)):
             cell = identify_vtc6(folder, hold_out=hold_out) if refit else bundled
-            report.physics.append(physics_row("VTC6 refit", what, cell, mission))
+            report.physics.append(physics_row("VTC6 refit" if refit else "VTC6 held-out set", what, cell, mission))
             sets.append((label, cell))
     sets.append((SET_BUNDLED, VTC6))
     report.physics.append(physics_row("NASA 18650 (default)", "all (not fitted)", NASA_18650, mission))
