@@ -115,7 +115,8 @@ class FleetView(pn.viewable.Viewer):
                   hv.Scatter(series[d], "day", "stars served").opts(color=COLORS[d], size=6)
                   for d in DISPATCHERS]
         curves.append(hv.Curve(series["bound"], "day", "stars served", label="upper bound").opts(
-            color="black", line_width=1, line_dash="dotted"))
+            color="black", line_width=1, line_dash="dotted") *
+            hv.Scatter(series["bound"], "day", "stars served").opts(color="black", marker="dash", size=14))
         n = max(1, len(self.state.days))
         return hv.Overlay(curves).opts(title="Served priority (stars) per day", height=240, responsive=True,
                                        legend_position="right", xlim=(0.5, n + 0.5), hooks=[no_scroll_zoom],
