@@ -14,6 +14,7 @@
 Kernels inherit these; ``tests/test_notebooks.py`` checks that a kernel sees them.
 """
 
+import json
 import os
 from pathlib import Path
 
@@ -32,3 +33,19 @@ if _CMU.is_dir():
     os.environ.setdefault("UAM_STUDIO_CMU_DATA", str(_CMU))
 if not os.environ.get("UAM_STUDIO_CMU_DATA"):  # notebook 10 reads the dataset: without it, not collected
     collect_ignore = ["notebooks/10_real_cells.ipynb"]
+
+
+# Longest files first: with ``-n auto --dist loadfile --no-loadscope-reorder`` each worker takes the next
+# whole file in this order, so the slow files (browser tests, notebooks, training) start at once instead
+# of last, and the run does not end waiting on one long file. The seconds per file come from an earlier
+# run (``tests/file_seconds.json``, written by ``python benchmarks/suite_file_seconds.py LOG``); a file
+# not listed goes after the listed ones. Within a file the order is kept.
+_FILE_SECONDS = Path(ROOT) / "tests" / "file_seconds.json"
+
+
+def pytest_collection_modifyitems(config, items):
+    try:
+        seconds = json.loads(_FILE_SECONDS.read_text())
+    except (OSError, ValueError):
+        return
+    items.sort(key=lambda item: -float(seconds.get(item.nodeid.split("::")[0], 0.0)))
