@@ -166,8 +166,11 @@ def hindsight_bound(fleet: Fleet, demand: list[Request], seed: int, chargers: in
     and, from the world seeded ``seed``, every pack's truth and the actual winds
     (:func:`uam_studio.fleet.hindsight.day_bound` over every safe true round trip of every aircraft in
     service). Reads the truth: a reference, never a dispatcher's view."""
-    counts = _charger_counts(fleet, demand, chargers)
-    winds = _world_winds(demand, day_seed(seed))
+    return _bound(fleet, demand, _world_winds(demand, day_seed(seed)), _charger_counts(fleet, demand, chargers))
+
+
+def _bound(fleet: Fleet, demand: list[Request], winds: dict[str, tuple[float, float]], counts: list[int]) -> int:
+    """:func:`hindsight_bound` in the day's world (``winds``, kt) with checked charger ``counts``."""
     jobs = []
     for i, truth in enumerate(fleet.truth):
         if not fleet.in_service[i]:
@@ -195,10 +198,10 @@ def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int
     counts = _charger_counts(fleet, demand, chargers)
     ports = fleet.vertiports
     seed = day_seed(seed)
-    bound = hindsight_bound(fleet, demand, seed, counts) if dispatcher == "hindsight" else None
+    winds = _world_winds(demand, seed)
+    bound = _bound(fleet, demand, winds, counts) if dispatcher == "hindsight" else None
     env = simpy.Environment()
     plugs = [simpy.Resource(env, capacity=c) for c in counts]
-    winds = _world_winds(demand, seed)
     noise = np.random.default_rng([seed, 11])
     n = len(fleet.truth)
     free = list(fleet.in_service)  # an aircraft is free when in service and not flying or charging
