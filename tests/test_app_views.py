@@ -337,13 +337,18 @@ def test_battery_lab_loads_the_vtc6_cell():
     """The identified real cell: its nominal health and ranges reach the sliders, its own health family
     the legend, and it flies the same per-cell current further than the paper's cell."""
     from uam_studio.app.battery_lab import BatteryLabView
-    from uam_studio.app.battery_lab_state import VTC6_NAME, BatteryLabState
+    from uam_studio.app.battery_lab_state import NASA_NAME, VTC6_NAME, BatteryLabState
     from uam_studio.battery.parameters import VTC6
 
     view = BatteryLabView(BatteryLabState())
     view.__panel__().get_root(Document())
     nasa = view.state.result["setting"][0]
+    sent = []  # every slider state the browser is sent: each must hold its value (or the browser clamps it)
+    for key in ("q_max", "r0"):
+        w = view.widgets[key]
+        w.param.watch(lambda e, w=w: sent.append((w.start, w.value, w.end)), ["start", "end", "value"])
     view.widgets["cell"].value = VTC6_NAME
+    assert sent and all(lo <= v <= hi for lo, v, hi in sent), sent
     q, r = view.widgets["q_max"], view.widgets["r0"]
     assert (q.start, q.end, q.value) == (7000.0, 11500.0, VTC6.q_max) and (r.start, r.end) == (0.01, 0.1)
     assert view.state.r0 == VTC6.r0
@@ -356,6 +361,10 @@ def test_battery_lab_loads_the_vtc6_cell():
     view.state.vary = "q_max"
     assert view._factor == ("q_max", "q_max 8000 C", "q_max 9000 C", "q_max 10000 C", "q_max 11000 C")
     assert "q_max 8000 C" in view.eod_table.object
+    sent.clear()
+    view.widgets["cell"].value = NASA_NAME  # back: 10943 C to 7600 C, inside every range sent
+    assert (q.start, q.end, q.value) == (5000.0, 8000.0, 7600.0) and view.state.q_max == 7600.0
+    assert sent and all(lo <= v <= hi for lo, v, hi in sent), sent
 
 
 def test_retrain_view_shows_progress_numbers_and_the_oracle_line():

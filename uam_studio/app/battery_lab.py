@@ -109,12 +109,20 @@ class BatteryLabView(pn.viewable.Viewer):
         return pn.Column(text, self.message, body, sizing_mode="stretch_width")
 
     def _on_cell(self, *events: Any) -> None:
-        """The state's new cell set its health and ranges: the sliders follow."""
+        """The state's new cell set its health and ranges: the sliders follow.
+
+        In three messages, each a valid slider: the union of the old and new ranges, the new value,
+        the new range. The browser applies a message's changes one at a time, and a value outside the
+        range it holds at that moment is clamped there and sent back (the NASA range ends at 8000 C,
+        below the VTC6's nominal q_max), so one combined message could leave the state at the clamp.
+        """
         s = self.state
-        with pn.io.hold():
-            for key in ("q_max", "r0"):
-                lo, hi = s.param[key].bounds
-                self.widgets[key].param.update(start=lo, end=hi, value=getattr(s, key))
+        for key in ("q_max", "r0"):
+            wd = self.widgets[key]
+            lo, hi = s.param[key].bounds
+            wd.param.update(start=min(lo, wd.start), end=max(hi, wd.end))
+            wd.value = getattr(s, key)
+            wd.param.update(start=lo, end=hi)
 
     def _on_busy(self, event: param.parameterized.Event) -> None:
         """Served, the busy indicator appears only once a change has taken :data:`BUSY_AFTER_MS`
