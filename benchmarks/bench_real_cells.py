@@ -66,17 +66,25 @@ def main() -> None:
     for r in report.health_likelihood:
         if r["context_s"] == 120 and r["set"] == SET_LANDING:  # the reference: the likelihood alone, same run
             print(f"  reference: health fit 120 s without the prior: {r['error_mv']:+.1f} mV, inside: {r['inside']}")
-    for what, rows in (("as bundled (NASA cell)", report.dynaformer), ("fine-tuned on the VTC6", report.dynaformer_vtc6)):
-        d120 = next(r for r in rows if r["context_s"] == 120)
-        if "error_mv" not in d120:
-            print(f"  Dynaformer {what} 120 s: refused: {d120['error']}")
+    dynaformers = [("as bundled (NASA cell)", report.dynaformer, SET_BUNDLED)]
+    dynaformers += [(f"fine-tuned on the {label} set (held out)",
+                     [r for r in report.dynaformer_held_out if r["set"] == label], label) for label in held_sets]
+    dynaformers.append(("fine-tuned on the bundled VTC6 set (in-sample)", report.dynaformer_vtc6, SET_BUNDLED))
+    for what, rows, health_set in dynaformers:
+        if not rows:
+            print(f"  Dynaformer {what}: no rows")
             continue
-        ref = next(r for r in report.health if r["context_s"] == 120 and r["set"] == SET_BUNDLED)  # its cell set
-        ratio = abs(d120["error_mv"]) / max(abs(ref["error_mv"]), 1e-9)
-        same = abs(d120["error_mv"]) / max(abs(d120["physics_error_mv"]), 1e-9)
-        print(f"  Dynaformer {what} 120 s: {d120['error_mv']:+.1f} mV, inside its 90% band: {d120['inside']}; "
-              f"{ratio:.1f}x the physics fit's on the bundled set it reads (goal 1.5x): {'met' if ratio <= 1.5 else 'NOT met'}; reference: "
-              f"its own fit flown along the same current {d120['physics_error_mv']:+.1f} mV ({same:.1f}x)")
+        for d in rows:
+            if "error_mv" not in d:
+                print(f"  Dynaformer {what} {d['context_s']} s: refused: {d['error']}")
+                continue
+            ref = next(r for r in report.health if r["context_s"] == d["context_s"] and r["set"] == health_set)
+            ratio = abs(d["error_mv"]) / max(abs(ref["error_mv"]), 1e-9)
+            same = abs(d["error_mv"]) / max(abs(d["physics_error_mv"]), 1e-9)
+            print(f"  Dynaformer {what} {d['context_s']} s: {d['error_mv']:+.1f} mV, inside its 90% band: "
+                  f"{d['inside']}; {ratio:.1f}x the physics fit's on the set it reads ({health_set}, "
+                  f"{ref['error_mv']:+.1f} mV; goal 1.5x): {'met' if ratio <= 1.5 else 'NOT met'}; reference: "
+                  f"its own fit flown along the same current {d['physics_error_mv']:+.1f} mV ({same:.1f}x)")
     for key, what in (("_whole", "whole discharge"), ("", "part above 3.4 V")):
         errs = np.array([r[f"error_pct{key}"] for r in report.capacity])
         print(f"  capacity from the {what}: worst {np.nanmax(np.abs(errs)):.2f}% over {len(errs)} reference "

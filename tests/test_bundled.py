@@ -17,7 +17,8 @@ ROOT = Path(__file__).resolve().parents[1]
 ROOT_PRETRAINED = ROOT / "pretrained"
 NAMES = ["dynaformer.pt", "dqn_single_flight.zip", "dqn_single_charge.zip", "dqn_multi_charge.zip",
          "DQN_CARD.md", "DYNAFORMER_CARD.md", "attention_planner.pt", "ATTENTION_CARD.md", "dynaformer_vtc6.pt",
-         "DYNAFORMER_VTC6_CARD.md", "SHA256SUMS"]
+         "DYNAFORMER_VTC6_CARD.md", "dynaformer_vtc6_landing_held_out.pt", "dynaformer_vtc6_cell_held_out.pt",
+         "DYNAFORMER_VTC6_HELD_OUT_CARD.md", "SHA256SUMS"]
 
 
 @pytest.fixture(autouse=True)

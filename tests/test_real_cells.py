@@ -305,3 +305,23 @@ def test_a_cell_the_set_never_read_is_flagged_and_no_breach_is_cleared():
     last = rows[-1]
     assert "outside fleet range" in last["flags"] and last["inside"]
     assert all(r["discrepancy_factor"] > 1.0 for r in rows if "misfit" in r["flags"])
+
+
+@real
+@pytest.mark.parametrize("key", ["vtc6_landing_held_out", "vtc6_cell_held_out"])
+def test_each_held_out_set_has_its_own_dynaformer_row(key):
+    """The Dynaformer rows that never read the scored landing: weights fine-tuned on the held-out set's
+    own synthetic data (not the bundled VTC6 set's), a finite prediction and interval at every context,
+    and beside it the same fit flown on that set's physics."""
+    from uam_studio.dynaformer import load_pretrained
+    from uam_studio.studies.real_cells import CONTEXTS_S, dynaformer_rows
+
+    pred = load_pretrained(key)
+    assert pred.cell is pred.cell_type.cell.params and pred.cell_type.key == key
+    assert pred.cell is not VTC6.params and Path(pred.source).name == f"dynaformer_{key}.pt"
+    rows = dynaformer_rows(mission_cycle(load_cell_log(Path(DATA) / "VAH01_20.csv")), key)
+    assert [r["context_s"] for r in rows] == list(CONTEXTS_S)
+    for r in rows:
+        assert "error" not in r, r
+        assert np.isfinite([r["predicted_v"], r["low_v"], r["high_v"], r["physics_error_mv"]]).all()
+        assert r["low_v"] <= r["predicted_v"] <= r["high_v"]

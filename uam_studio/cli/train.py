@@ -9,6 +9,9 @@ from pathlib import Path
 
 from uam_studio.cli.common import EXIT_INPUT, EXIT_OK, CliExit, Command, seed_arg
 
+# uam_studio.dynaformer.cells.DYNAFORMER_CELLS' keys (that module imports torch; the parser must not)
+DYNAFORMER_CELL_KEYS = ["nasa18650", "vtc6", "vtc6_landing_held_out", "vtc6_cell_held_out"]
+
 # which models each train option belongs to (the others refuse it)
 _OPTION_MODELS = {
     "steps": ("dynaformer", "dqn"),
@@ -38,9 +41,11 @@ def _add_train_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--n-train", type=int, default=None, help="synthetic training discharges (default 24000)")
     g.add_argument("--no-resume", action="store_true", default=None,
                    help="start from scratch even if a checkpoint exists")
-    g.add_argument("--cell", default=None, choices=["nasa18650", "vtc6"],
-                   help="the cell type to train for: nasa18650 (the paper's, default) or vtc6 (the VTC6 identified "
-                        "on the CMU eVTOL dataset, loads flown by power); see uam_studio/dynaformer/cells.py")
+    g.add_argument("--cell", default=None, choices=DYNAFORMER_CELL_KEYS,
+                   help="the cell type to train for: nasa18650 (the paper's, default), vtc6 (the VTC6 identified "
+                        "on the CMU eVTOL dataset, loads flown by power), or vtc6_landing_held_out / "
+                        "vtc6_cell_held_out (the VTC6 sets identified without VAH01's landing / without cell "
+                        "VAH01); see uam_studio/dynaformer/cells.py")
     g = p.add_argument_group("dqn only")
     g.add_argument("--scenario", default=None,
                    help="single_flight, single_charge or multi_charge; default: the mission's, else single_charge")

@@ -11,19 +11,27 @@ loads and the network's input scales.
   40-65 W for 45-120 s, cruise 8-30 W for 100-1500 s, 1-4 legs with rests between) and constant or
   piecewise-constant currents of 0.5-18 A.
 
+- ``"vtc6_landing_held_out"`` and ``"vtc6_cell_held_out"``: the same as ``"vtc6"`` on the two VTC6 sets
+  identified without VAH01's landing (:data:`~uam_studio.battery.parameters.VTC6_LANDING_HELD_OUT`) and
+  without cell VAH01 (:data:`~uam_studio.battery.parameters.VTC6_CELL_HELD_OUT`), the bundled
+  ``dynaformer_vtc6_landing_held_out.pt`` and ``dynaformer_vtc6_cell_held_out.pt``: the Dynaformer rows
+  of ``uam-studio evaluate real`` that never read the scored landing.
+
 A weights file names its type in ``DynaformerConfig.cell``; the predictor fits health, re-observes
 the take-off and fills rests with that type's parameter set.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ..battery.parameters import (
     NASA_18650,
     PAPER_Q_RANGE,
     PAPER_R0_RANGE,
     VTC6,
+    VTC6_CELL_HELD_OUT,
+    VTC6_LANDING_HELD_OUT,
     Cell,
 )
 from ..errors import InputError
@@ -79,7 +87,13 @@ NASA_TRAINING = DynaformerCell("nasa18650", NASA_18650, PAPER_Q_RANGE, PAPER_R0_
 VTC6_TRAINING = DynaformerCell("vtc6", VTC6, (8000.0, 12500.0), (0.012, 0.06),
                                ((6500.0, 8000.0), (12500.0, 14000.0)), (0.06, 0.08), "power", (0.5, 18.0), 15.0, 5120,
                                "dynaformer_vtc6.pt")
-DYNAFORMER_CELLS: dict[str, DynaformerCell] = {c.key: c for c in (NASA_TRAINING, VTC6_TRAINING)}
+# The VTC6 recipe on the parameter sets that never read VAH01's landing (real_cells' held-out rows)
+VTC6_LANDING_TRAINING = replace(VTC6_TRAINING, key="vtc6_landing_held_out", cell=VTC6_LANDING_HELD_OUT,
+                                weights_file="dynaformer_vtc6_landing_held_out.pt")
+VTC6_CELL_TRAINING = replace(VTC6_TRAINING, key="vtc6_cell_held_out", cell=VTC6_CELL_HELD_OUT,
+                             weights_file="dynaformer_vtc6_cell_held_out.pt")
+DYNAFORMER_CELLS: dict[str, DynaformerCell] = {
+    c.key: c for c in (NASA_TRAINING, VTC6_TRAINING, VTC6_LANDING_TRAINING, VTC6_CELL_TRAINING)}
 
 
 def dynaformer_cell(key: str) -> DynaformerCell:

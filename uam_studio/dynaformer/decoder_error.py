@@ -26,13 +26,17 @@ DECODER_ERROR_SHAPE = (0.01, 0.002)  # (V, -) per unit of lam
 CAL_PROBS = (0.5, 0.6, 0.7, 0.75, 0.8, 0.85, 0.9, 0.925, 0.95, 0.975, 0.99, 0.999)
 # Split-conformal quantiles of lam at CAL_PROBS for the bundled weights, keyed by the file's SHA-256
 # (``decoder_error_scores(load_pretrained(cell))``: 400 flights of the weights' cell type, seed 424242; 333
-# of the VTC6's end after their 20 s context). Other weights are
-# calibrated on first use (200 flights, a few seconds).
+# of the VTC6's end after their 20 s context; for the held-out sets' weights, the count after the name).
+# Other weights are calibrated on first use (200 flights, a few seconds).
 BUNDLED_DECODER_LAMBDA: dict[str, tuple[float, ...]] = {
     "cfcb738ced4eb4fcae574d9e2a5d41f345dd4c83402510e9024a8197286c382b":  # pretrained/dynaformer.pt (715,909 bytes)
         (0.2195, 0.3189, 0.4386, 0.5187, 0.6423, 0.7908, 0.9728, 1.0764, 1.3455, 1.6256, 2.4252, 4.9844),
     "7a2522b588ac307d8a464ea3e8d506d97086885c60ebbc8d5326d4f7f346a8e8":  # pretrained/dynaformer_vtc6.pt (716,101 bytes)
         (0.1967, 0.3296, 0.4975, 0.6373, 0.7185, 0.8153, 1.0370, 1.1747, 1.5903, 2.3308, 3.4117, 5.0126),
+    "f6387df88f86096d0fa80d123ecc1e7797ab1eff26bd942d457bcfc6633ec604":  # dynaformer_vtc6_landing_held_out.pt (317)
+        (0.2444, 0.3600, 0.4903, 0.6427, 0.7960, 0.9551, 1.2151, 1.4663, 1.8587, 2.4561, 4.7815, 6.5148),
+    "0918e1c24baa9e0e8e0de2879ceb0b3930e7efe17b6eeb6acf51c1131306481b":  # dynaformer_vtc6_cell_held_out.pt (317)
+        (0.1958, 0.3169, 0.4212, 0.5042, 0.6002, 0.6926, 0.8935, 1.0941, 1.6163, 2.6821, 4.0625, 4.9153),
 }
 
 

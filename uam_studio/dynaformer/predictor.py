@@ -429,10 +429,11 @@ def load_predictor(path=None) -> DynaformerPredictor:
     return DynaformerPredictor(model, pca, meta, str(p))
 
 
-@lru_cache(maxsize=2)
+@lru_cache(maxsize=4)
 def load_pretrained(cell: str = "nasa18650") -> DynaformerPredictor:
-    """The bundled, pretrained Dynaformer for the cell type ``cell`` (``"nasa18650"``, the paper's cell,
-    or ``"vtc6"``, fine-tuned on the identified VTC6), loaded once per process."""
+    """The bundled, pretrained Dynaformer for the cell type ``cell`` (``"nasa18650"``, the paper's cell;
+    ``"vtc6"``, fine-tuned on the identified VTC6; ``"vtc6_landing_held_out"`` and ``"vtc6_cell_held_out"``,
+    on the VTC6 sets that never read VAH01's landing), loaded once per process."""
     return load_predictor(bundled_weights_path(cell))
 
 

@@ -16,9 +16,12 @@ models on a real VTC6? Every row is scored on measurements; the held-out status 
   bundled literals ``VTC6_LANDING_HELD_OUT`` and ``VTC6_CELL_HELD_OUT``, or identified again from the
   data with ``refit=True``), and the bundled set as the in-sample reference (:data:`SET_BUNDLED`; only
   it with ``held_out=False``);
-- Dynaformer: the bundled model (trained on the NASA cell, 0.05-3 A; held out), and the one fine-tuned
-  on the bundled VTC6 set's synthetic data (``dynaformer_vtc6.pt``; in-sample: that set read this
-  landing), on the same contexts along the measured current; beside each, the reference in the same run: the same physics fit flown along the same current;
+- Dynaformer: the bundled model (trained on the NASA cell, 0.05-3 A; held out), the ones fine-tuned
+  on each held-out set's synthetic data (``dynaformer_vtc6_landing_held_out.pt``,
+  ``dynaformer_vtc6_cell_held_out.pt``; held out: neither their set nor their weights read this landing),
+  and the one fine-tuned on the bundled VTC6 set's (``dynaformer_vtc6.pt``; in-sample: that set read this
+  landing), on the same contexts along the measured current; beside each, the reference in the same
+  run: the same physics fit flown along the same current;
 - capacity: q_max fitted to each C/5 reference discharge of the four resampled lives (the whole discharge,
   and only its part above 3.4 V), the capacity to 2.5 V it gives against the dataset's integrated capacity;
 - safety: for cut-offs from 3.0 to 3.3 V, would the health fit's 90% lower bound have called the
@@ -53,6 +56,8 @@ CONTEXTS_S = (20, 60, 120)
 SET_LANDING = "landing held out"  # the VTC6 refit that never read VAH01's landing and the rest after it
 SET_CELL = "cell VAH01 held out"  # the VTC6 refit on VAH07 alone
 SET_BUNDLED = "bundled (in-sample)"  # the bundled VTC6 set: its fit read this landing
+# the bundled Dynaformer fine-tuned on each held-out set (uam_studio.dynaformer.cells)
+HELD_OUT_DYNAFORMERS = ((SET_LANDING, "vtc6_landing_held_out"), (SET_CELL, "vtc6_cell_held_out"))
 SAFETY_CUTOFFS_V = (3.0, 3.05, 3.1, 3.15, 3.2, 3.25, 3.3)
 CAPACITY_FIT_ABOVE_V = 3.4  # V: the part of each C/5 discharge the capacity fit reads
 CAPACITY_DT_S = 1.0  # s: simulation step of the C/5 discharges (below the VTC6's fastest time constant)
@@ -69,6 +74,7 @@ class RealCellReport:
     health_likelihood: list[dict] = field(default_factory=list)
     dynaformer: list[dict] = field(default_factory=list)
     dynaformer_vtc6: list[dict] = field(default_factory=list)
+    dynaformer_held_out: list[dict] = field(default_factory=list)  # rows with their "set"
     capacity: list[dict] = field(default_factory=list)
     safety: list[dict] = field(default_factory=list)
     measured_landing_min_v: float = math.nan
@@ -76,7 +82,8 @@ class RealCellReport:
     def as_dict(self) -> dict:
         return {"measured_landing_min_v": self.measured_landing_min_v, "physics": self.physics,
                 "health": self.health, "health_likelihood": self.health_likelihood, "dynaformer": self.dynaformer,
-                "dynaformer_vtc6": self.dynaformer_vtc6, "capacity": self.capacity,
+                "dynaformer_vtc6": self.dynaformer_vtc6, "dynaformer_held_out": self.dynaformer_held_out,
+                "capacity": self.capacity,
                 "safety": self.safety, "summary": held_out_summary(self)}
 
 
@@ -132,7 +139,8 @@ def health_rows(cell: Cell, mission: MissionLog, rng: np.random.Generator, prior
 
 
 def dynaformer_rows(mission: MissionLog, cell: str = "nasa18650") -> list[dict]:
-    """A bundled Dynaformer (``cell``: ``"nasa18650"`` or ``"vtc6"``) on the mission's contexts along its
+    """A bundled Dynaformer (``cell``: a key of :data:`uam_studio.dynaformer.cells.DYNAFORMER_CELLS`) on
+    the mission's contexts along its
     measured current (A), with its default health (the physics fit of the context on the weights' cell);
     ``physics_error_mv``: that fit flown on the physics model along the same current (the reference).
     A refusal or a missing weights file is a row with its one-line ``error``."""
@@ -228,6 +236,9 @@ def real_cell_report(data: str | Path | None = None, held_out: bool = True, refi
         report.health_likelihood += health_rows(cell, mission, np.random.default_rng(seed), prior=False, label=label)
     report.dynaformer = dynaformer_rows(mission)
     report.dynaformer_vtc6 = dynaformer_rows(mission, "vtc6")
+    if held_out:
+        for label, key in HELD_OUT_DYNAFORMERS:
+            report.dynaformer_held_out += [{"set": label, **r} for r in dynaformer_rows(mission, key)]
     if capacity:
         report.capacity = capacity_rows(folder, VTC6)
     report.safety = safety_rows(report.health, report.measured_landing_min_v)
@@ -279,10 +290,15 @@ def format_report(report: RealCellReport) -> str:
                        f"{r['predicted_v']:11.3f} {r['low_v']:8.3f}-{r['high_v']:.3f} {r['error_mv']:+9.1f} "
                        f"{'yes' if r['inside'] else 'NO ':3s}  {r['discrepancy_factor']:5.1f}  "
                        f"{', '.join(r['flags']) or '-'}")
-    for title, rows in (("Dynaformer as bundled (trained on the NASA cell, 0.05-3 A)", report.dynaformer),
-                        ("Dynaformer fine-tuned on the bundled VTC6 set's synthetic data (dynaformer_vtc6.pt; "
-                         "in-sample: that set read this landing)",
-                         report.dynaformer_vtc6)):
+    sections = [("Dynaformer as bundled (trained on the NASA cell, 0.05-3 A)", report.dynaformer)]
+    for label, key in HELD_OUT_DYNAFORMERS:
+        rows = [r for r in report.dynaformer_held_out if r["set"] == label]
+        if rows:
+            sections.append((f"Dynaformer fine-tuned on the {label} set's synthetic data (dynaformer_{key}.pt; "
+                             "held out: neither the set nor the weights read this landing)", rows))
+    sections.append(("Dynaformer fine-tuned on the bundled VTC6 set's synthetic data (dynaformer_vtc6.pt; "
+                     "in-sample: that set read this landing)", report.dynaformer_vtc6))
+    for title, rows in sections:
         out += ["", f"{title}, same contexts, along the measured current; physics: its own fit (the weights' "
                 "cell) flown along the same current"]
         for r in rows:
