@@ -20,12 +20,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from uam_studio.atomic_io import (
     STALE_AGE_S,
     atomic_save,
     atomic_write_bytes,
     atomic_write_text,
+    read_sha256sums,
     remove_stale_temps,
     temp_path,
 )
@@ -432,3 +435,15 @@ def test_every_trainer_writes_the_weights_sha256_and_a_changed_byte_is_refused(k
         load(path)
     assert str(err.value).startswith(("agent: ", "weights: ")) and str(path) in str(err.value)
     assert "SHA-256" in str(err.value) and "\n" not in str(err.value)
+
+
+@settings(max_examples=50, deadline=None)
+@given(files=st.dictionaries(st.from_regex(r"[A-Za-z0-9_.\-]{1,30}", fullmatch=True),
+                             st.binary(min_size=32, max_size=32).map(bytes.hex), max_size=6),
+       binary=st.booleans())
+def test_sha256sums_read_back_what_sha256sum_writes(files, binary):
+    """The manifest and sidecar format: ``<digest>  <name>`` (``*<name>`` in binary mode), upper or
+    lower case hex, blank lines between; a sidecar with a digest alone names no file."""
+    text = "\n\n".join(f"{d.upper() if binary else d}  {'*' if binary else ''}{n}" for n, d in files.items())
+    assert read_sha256sums(text) == files
+    assert read_sha256sums("  ABCD \n") == {"": "abcd"}

@@ -46,6 +46,7 @@ __all__ = [
     "atomic_write_text",
     "check_digest",
     "digest_path",
+    "read_sha256sums",
     "remove_stale_temps",
     "sha256_file",
     "temp_path",
@@ -132,6 +133,17 @@ def digest_path(path: StrPath) -> Path:
     return p.with_name(p.name + DIGEST_SUFFIX)
 
 
+def read_sha256sums(text: str) -> dict[str, str]:
+    """``{file name: digest (hex, lower case)}`` of ``sha256sum`` output (``<digest>  <name>`` per line;
+    ``*<name>`` for binary mode); a line with a digest alone is the name ``""``; blank lines skipped."""
+    out: dict[str, str] = {}
+    for line in text.splitlines():
+        digest, _, name = line.strip().partition(" ")
+        if digest:
+            out.setdefault(name.strip().removeprefix("*"), digest.lower())
+    return out
+
+
 def sha256_file(path: StrPath) -> str:
     """The SHA-256 digest (hex) of the file at ``path``."""
     h = hashlib.sha256()
@@ -146,8 +158,11 @@ def _check_written_digest(path: str, mtime_ns: int, size: int, digest_mtime_ns: 
     p = Path(path)
     side = digest_path(p)
     try:
-        want = side.read_text().split()[0].lower()
-    except (OSError, IndexError, UnicodeDecodeError):
+        listed = read_sha256sums(side.read_text())
+    except (OSError, UnicodeDecodeError):
+        return
+    want = listed.get(p.name) or next(iter(listed.values()), None)  # a sidecar names its file
+    if want is None:
         return
     if sha256_file(p) != want:
         raise InputError(field, f"{p} is damaged: its SHA-256 is not the one written with it in {side.name} "

@@ -29,7 +29,7 @@ import os
 from importlib import resources
 from pathlib import Path
 
-from uam_studio.atomic_io import sha256_file
+from uam_studio.atomic_io import read_sha256sums, sha256_file
 from uam_studio.errors import InputError
 
 PACKAGE = "uam_studio.pretrained"
@@ -104,12 +104,7 @@ def _check_digest(path: str, mtime_ns: int, size: int) -> None:
     :data:`MANIFEST` with another digest (cached by modification time and size)."""
     p = Path(path)
     manifest = p.parent / MANIFEST
-    expected = {}
-    if manifest.is_file():
-        for line in manifest.read_text().splitlines():
-            digest, _, fname = line.strip().partition("  ")
-            expected[fname] = digest
-    want = expected.get(p.name)
+    want = read_sha256sums(manifest.read_text()).get(p.name) if manifest.is_file() else None
     if want is not None and sha256_file(p) != want:
         raise InputError(p.name, f"{p} is damaged: its SHA-256 is not the bundled file's ({want[:16]}...); "
                                  "reinstall uam_studio")
