@@ -17,6 +17,7 @@ import time
 
 from uam_studio.dynaformer import load_predictor
 from uam_studio.dynaformer.artifact import bundled_weights_path
+from uam_studio.dynaformer.cells import DYNAFORMER_CELLS
 from uam_studio.dynaformer.data import make_dataset
 from uam_studio.dynaformer.evaluate import decoder_errors
 
@@ -26,7 +27,7 @@ SETS = (("missions", 1.0, 777_001), ("generic", 0.0, 777_002))
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--n", type=int, default=200, help="discharges per set")
-    ap.add_argument("--cell", default="vtc6", choices=("vtc6", "vtc6_landing_held_out", "vtc6_cell_held_out"),
+    ap.add_argument("--cell", default="vtc6", choices=[k for k in DYNAFORMER_CELLS if k.startswith("vtc6")],
                     help="the fine-tuned weights (and the parameter set of the discharges)")
     args = ap.parse_args()
     key = args.cell

@@ -290,11 +290,14 @@ def format_report(report: RealCellReport) -> str:
                        f"{r['predicted_v']:11.3f} {r['low_v']:8.3f}-{r['high_v']:.3f} {r['error_mv']:+9.1f} "
                        f"{'yes' if r['inside'] else 'NO ':3s}  {r['discrepancy_factor']:5.1f}  "
                        f"{', '.join(r['flags']) or '-'}")
+    from uam_studio.dynaformer.cells import dynaformer_cell
+
     sections = [("Dynaformer as bundled (trained on the NASA cell, 0.05-3 A)", report.dynaformer)]
     for label, key in HELD_OUT_DYNAFORMERS:
         rows = [r for r in report.dynaformer_held_out if r["set"] == label]
         if rows:
-            sections.append((f"Dynaformer fine-tuned on the {label} set's synthetic data (dynaformer_{key}.pt; "
+            sections.append((f"Dynaformer fine-tuned on the {label} set's synthetic data "
+                             f"({dynaformer_cell(key).weights_file}; "
                              "held out: neither the set nor the weights read this landing)", rows))
     sections.append(("Dynaformer fine-tuned on the bundled VTC6 set's synthetic data (dynaformer_vtc6.pt; "
                      "in-sample: that set read this landing)", report.dynaformer_vtc6))
