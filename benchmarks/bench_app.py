@@ -6,6 +6,7 @@ training session beside a planning one.
     python benchmarks/bench_app.py replan       # browser: slider key -> the summary of that exact input
     python benchmarks/bench_app.py lab          # browser: Battery lab slider key -> its table redrawn
     python benchmarks/bench_app.py concurrency  # browser: two sessions, one retraining, the other replanning
+    python benchmarks/bench_app.py flytick      # the Fly tab's playback tick, in process (server side)
     python benchmarks/bench_app.py all --append benchmarks/RESULTS.md
 
 latency: the 8-destination single-charge mission below, the Planner's state and views built on a
@@ -29,6 +30,11 @@ lab's R0 slider moved one step, timed to the end-of-discharge table of the new v
 session B moves the q_max slider as in replan; first with nothing else running, then while session A
 retrains a DQN agent, once with the training in a child process (the app's default) and once in a
 thread of the server (for comparison).
+
+flytick: the example mission flown in the Fly tab's state and view (built on a Bokeh document as in a
+session), then ``--n`` playback ticks of 0.25 s at x10 (the tick the tab's timer runs every 250 ms);
+each sample is one tick with the view's update. Reference, in the same run: the same ticks of the
+state alone (its clock and status), the view's figures, sources and log not attached.
 """
 
 from __future__ import annotations
@@ -357,9 +363,44 @@ def bench_concurrency(k: int, steps: int, runner: str) -> list[str]:
     return lines
 
 
+# ----------------------------------------------------------------------------- Fly playback tick
+
+
+def bench_flytick(n: int) -> list[str]:
+    from bokeh.document import Document
+
+    from uam_studio.app.fly import TICK_MS, FlyView
+    from uam_studio.app.fly_state import FlyState
+    from uam_studio.app.session import configure_server_threads
+    from uam_studio.planning import load_mission
+
+    configure_server_threads()
+    mission = load_mission(Path(__file__).resolve().parents[1] / "assets" / "example_mission.json")
+
+    def ticks(with_view: bool) -> list[float]:
+        state = FlyState(lambda: mission, speed=10)
+        if with_view:
+            FlyView(state).__panel__().get_root(Document())
+        state.fly()
+        state.speed = 10
+        out = []
+        for _ in range(n):
+            t0 = time.perf_counter()
+            state.tick(TICK_MS / 1000.0)
+            out.append(time.perf_counter() - t0)
+        return out
+
+    view, bare = ticks(True), ticks(False)
+    ratio = statistics.median(view) / max(statistics.median(bare), 1e-9)
+    return ["Fly tab playback tick (example mission, x10, 0.25 s ticks)",
+            f"  view + state: {_stats(view)}", f"  state alone (reference): {_stats(bare)}",
+            f"  RATIO view+state/state: median {ratio:.1f}x; a tick's share of its {TICK_MS} ms period: "
+            f"median {100 * statistics.median(view) / (TICK_MS / 1000.0):.1f}%"]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=["latency", "pageload", "replan", "lab", "concurrency", "all"], nargs="?",
+    ap.add_argument("what", choices=["latency", "pageload", "replan", "lab", "concurrency", "flytick", "all"], nargs="?",
                     default="all")
     ap.add_argument("--n", type=int, default=40, help="slider changes per policy (latency)")
     ap.add_argument("--n-oracle", type=int, default=8, help="slider changes for the oracle (seconds each)")
@@ -386,6 +427,8 @@ def main() -> None:
     if args.what in ("concurrency", "all"):
         for runner in args.runners.split(","):
             lines += bench_concurrency(args.k, args.steps, runner)
+    if args.what in ("flytick", "all"):
+        lines += bench_flytick(args.n)
     print("\n".join(lines))
     if args.append:
         cmd = "python benchmarks/bench_app.py " + " ".join(sys.argv[1:])

@@ -99,9 +99,7 @@ def test_flown_legs_are_numbered_with_their_altitude_on_the_map(state):
     n = len(state.record.route)
     assert labels["text"] == [f"#{k + 1} {a:g} m" for k, a in enumerate(state.record.altitudes_m)][:len(labels["text"])]
     assert n - 1 <= len(labels["text"]) <= n  # every leg flown (a leg ending where it began has no label)
-    import holoviews as hv
-
-    assert hv.render(view._map()).toolbar.active_scroll is None  # the mouse wheel scrolls the page
+    assert view.map_fig.toolbar.active_scroll is None  # the mouse wheel scrolls the page
     one = _leg_labels([(0.0, 0.0), (10.0, 0.0), (10.0, 0.0)], [500.0, 1000.0], state.mission_flown)
     assert one["text"] == ["#1 500 m"] and 0.0 <= one["x"][0] <= 10.0 and one["y"][0] != 0.0  # beside the leg
     # placed as the Planner's labels: clear of the places, their names and each other

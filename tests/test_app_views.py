@@ -306,7 +306,7 @@ def test_map_names_stay_on_their_places_at_any_zoom():
     for element, offset in ((names, -NAME_OFFSET_PX), (vp_label, NAME_OFFSET_PX)):
         glyph = hv.renderer("bokeh").get_plot(element).handles["glyph"]
         assert glyph.y_offset == offset and glyph.x_offset == 0
-    fig = hv.render(FlyView(FlyState(lambda: state.mission))._map())
+    fig = FlyView(FlyState(lambda: state.mission)).map_fig
     texts = [r for r in fig.renderers if type(r.glyph).__name__ == "Text" and "name" in r.data_source.data]
     assert len(texts) == 1 and texts[0].glyph.y_offset == -NAME_OFFSET_PX
     assert list(texts[0].data_source.data["y_km"]) == [d.y_km for d in state.mission.destinations]

@@ -12,24 +12,20 @@ from __future__ import annotations
 import io
 from typing import Any
 
-import holoviews as hv
 import numpy as np
 import pandas as pd
 import panel as pn
 import param
+from bokeh.models import ColumnDataSource, HoverTool, Range1d, Span
+from bokeh.plotting import figure
 
 from uam_studio.app.fly_state import SPEEDS, FlyState
 from uam_studio.app.map_geometry import altitude_labels
-from uam_studio.app.session import ensure_bokeh_backend
 from uam_studio.app.style import (
     MEASURED_COLOR,
     NAME_OFFSET_PX,
     PHYSICS_COLOR,
     PREDICTED_COLOR,
-    label_background,
-    no_scroll_zoom,
-    pixel_offset,
-    tight_legend_above,
     window_height,
 )
 from uam_studio.planning import VERTIPORT, Mission
@@ -47,9 +43,6 @@ VOLTAGE_SERIES = (
     ("true", "true (hidden)", {"color": PHYSICS_COLOR, "line_width": 2}),
     ("measured", "measured", {"color": MEASURED_COLOR, "line_width": 1, "alpha": 0.8}),
 )
-DECISION_STYLE = {"marker": "triangle", "size": 11, "color": "black", "line_color": "white", "tools": ["hover"]}
-TIME_DIM, VOLT_DIM = hv.Dimension("time_min", label="time (min)"), hv.Dimension("voltage_v", label="voltage (V)")
-ROUTE_COLORS = ("#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b")
 
 
 def _leg_labels(path: list[tuple[float, float]], altitudes_m: list[float], mission: Mission) -> dict[str, list]:
@@ -74,7 +67,6 @@ class FlyView(pn.viewable.Viewer):
     state = param.ClassSelector(class_=FlyState)
 
     def __init__(self, state: FlyState, **params: Any) -> None:
-        ensure_bokeh_backend()
         super().__init__(state=state, **params)
         s = self.state
         w = 200
@@ -107,13 +99,10 @@ class FlyView(pn.viewable.Viewer):
                                         widths={"t (s)": 55, "at": 85, "q_max (C)": 95, "R0 (ohm)": 85,
                                                 "fit flags": 80, "leg wind vs forecast (kt)": 190,
                                                 "common shift (kt)": 135, "next": 85})
-        self.pos = hv.streams.Pipe(data=[])
-        self.leg_labels = hv.streams.Pipe(data={"x": [], "y": [], "text": []})
-        self.seen = hv.streams.Pipe(data=[])
-        self.series = hv.streams.Pipe(data=s.series_until())
-        self.now = hv.streams.Pipe(data=0.0)
-        self.map_pane = pn.pane.HoloViews(self._map(), width=MAP_PX + 10, height=MAP_PX + 10)
-        self.volt_pane = pn.pane.HoloViews(self._voltage(), sizing_mode="stretch_width", height=MAP_PX)
+        self._shown = (-1, -1, -1)
+        self._figures()
+        self.map_pane = pn.pane.Bokeh(self.map_fig, width=MAP_PX + 10, height=MAP_PX + 10)
+        self.volt_pane = pn.pane.Bokeh(self.volt_fig, sizing_mode="stretch_width", height=MAP_PX)
         self.fly_button.on_click(lambda _e: s.fly())
         self.inject_button.on_click(lambda _e: s.inject())
         self.clear_button.on_click(lambda _e: s.clear_events())
@@ -142,82 +131,100 @@ class FlyView(pn.viewable.Viewer):
             self._on_record()
 
     # ------------------------------------------------------------------ figures
-    def _map(self) -> hv.Overlay:
+    def _figures(self) -> None:
+        """The map and voltage figures, built once as plain Bokeh models: each playback tick only
+        replaces their sources' data and moves the time line, a few milliseconds of the session's
+        thread (the same figures drawn through HoloViews streams took 0.2-0.5 s a tick)."""
+        tools = "pan,wheel_zoom,box_zoom,reset,save"
+        self.dests = ColumnDataSource({"x_km": [], "y_km": [], "name": []})
+        self.vertiport = ColumnDataSource({"x_km": [], "y_km": []})
+        self.seen = ColumnDataSource({"x_km": [], "y_km": []})
+        self.leg_labels = ColumnDataSource({"x": [], "y": [], "text": []})
+        self.pos = ColumnDataSource({"x_km": [], "y_km": []})
+        fig = figure(title="flight", width=MAP_PX, height=MAP_PX, tools=tools, x_axis_label="x (km)",
+                     y_axis_label="y (km)", x_range=Range1d(0.0, 1.0), y_range=Range1d(0.0, 1.0))
+        fig.scatter("x_km", "y_km", source=self.vertiport, marker="square", size=14, color="black")
+        dots = fig.scatter("x_km", "y_km", source=self.dests, size=10, color="#ff7f0e", line_color="black")
+        fig.text("x_km", "y_km", text="name", source=self.dests, text_font_size="9pt", text_baseline="bottom",
+                 text_align="center", y_offset=-NAME_OFFSET_PX)
+        fig.line("x_km", "y_km", source=self.seen, color="#1f77b4", line_width=3)
+        fig.text("x", "y", text="text", source=self.leg_labels, text_font_size="8pt", text_color="#333333",
+                 text_align="center", text_baseline="middle", background_fill_color="white",
+                 background_fill_alpha=0.85)
+        fig.scatter("x_km", "y_km", source=self.pos, marker="triangle", size=16, color=EOD_COLOR)
+        fig.add_tools(HoverTool(renderers=[dots], tooltips=[("", "@name"), ("x (km)", "@x_km"), ("y (km)", "@y_km")]))
+        fig.toolbar.active_scroll = None  # the mouse wheel scrolls the page (the zoom stays in the toolbar)
+        self.map_fig = fig
+
+        self.curves = {key: ColumnDataSource({"time_min": [], "voltage_v": []}) for key, _, _ in VOLTAGE_SERIES}
+        self.cutoff = ColumnDataSource({"x": [], "y": []})
+        self.marks = ColumnDataSource({"time_min": [], "voltage_v": [], "decision": []})
+        self.changes = ColumnDataSource({"x": [], "y": [], "text": [], "y0": []})
+        fig = figure(title="voltage: fly the mission to see it", height=MAP_PX, sizing_mode="stretch_width",
+                     x_range=Range1d(0.0, 1.0), y_range=Range1d(2.9, 4.25), tools=tools, x_axis_label="time (min)", y_axis_label="voltage (V)", min_border_top=0)
+        for key, label, style in VOLTAGE_SERIES:
+            fig.line("time_min", "voltage_v", source=self.curves[key], legend_label=label, **style)
+        fig.line("x", "y", source=self.cutoff, legend_label="EOD cut-off", color=EOD_COLOR, line_dash="dashed",
+                 line_width=2)
+        marks = fig.scatter("time_min", "voltage_v", source=self.marks, legend_label="decisions", marker="triangle",
+                            size=11, color="black", line_color="white")
+        fig.segment("x", "y0", "x", "y", source=self.changes, color=EVENT_COLOR, line_width=2, line_dash="dashdot")
+        fig.text("x", "y", text="text", source=self.changes, text_color=EVENT_COLOR, text_font_size="9pt",
+                 text_align="left", text_baseline="top", x_offset=4)
+        fig.add_tools(HoverTool(renderers=[marks], tooltips=[("time (min)", "@time_min{0.0}"),
+                                                              ("voltage (V)", "@voltage_v{0.000}"),
+                                                              ("decision", "@decision")]))
+        self.now_line = Span(location=0.0, dimension="height", line_color="black", line_width=1)
+        fig.add_layout(self.now_line)
+        fig.add_layout(fig.legend[0], "above")
+        fig.legend.orientation = "horizontal"
+        fig.legend.margin, fig.legend.padding = 0, 4
+        fig.toolbar.active_scroll = None
+        self.volt_fig = fig
+        self._draw_flight()
+
+    def _draw_flight(self) -> None:
+        """Set the figures to the current record (or the Planner's mission before a flight): the places,
+        the axes' ranges, the cut-off line and the title; the playback's own data is :meth:`_on_time`'s."""
         s = self.state
         m = s.mission_flown if s.mission_flown is not None else s._mission()
         xs = [d.x_km for d in m.destinations]
         ys = [d.y_km for d in m.destinations]
-        names = [f"{d.name} {'*' * d.priority}" for d in m.destinations]
-        dests = hv.Points((xs, ys, names), ["x_km", "y_km"], ["name"], label="destinations").opts(
-            size=10, color="#ff7f0e", line_color="black", tools=["hover"])
-        labels = hv.Labels((xs, ys, names), ["x_km", "y_km"], "name").opts(
-            text_font_size="9pt", text_baseline="bottom", hooks=[pixel_offset(-NAME_OFFSET_PX)])
-        vp = hv.Points([(m.vertiport.x_km, m.vertiport.y_km)], ["x_km", "y_km"], label="vertiport").opts(
-            marker="square", size=14, color="black")
-        flown = hv.DynamicMap(lambda data: hv.Path(data, ["x_km", "y_km"], label="flown").opts(
-            color="#1f77b4", line_width=3), streams=[self.seen])
-        legs = hv.DynamicMap(lambda data: hv.Labels(data, ["x", "y"], "text").opts(
-            text_font_size="8pt", text_color="#333333", hooks=[label_background]), streams=[self.leg_labels])
-        craft = hv.DynamicMap(lambda data: hv.Points(data, ["x_km", "y_km"], label="aircraft").opts(
-            marker="triangle", size=16, color=EOD_COLOR), streams=[self.pos])
+        self.dests.data = {"x_km": xs, "y_km": ys, "name": [f"{d.name} {'*' * d.priority}" for d in m.destinations]}
+        self.vertiport.data = {"x_km": [m.vertiport.x_km], "y_km": [m.vertiport.y_km]}
         pad = 8.0
         allx, ally = np.array(xs + [m.vertiport.x_km]), np.array(ys + [m.vertiport.y_km])
         x0, x1, y0, y1 = allx.min() - pad, allx.max() + pad, ally.min() - pad, ally.max() + 2 * pad  # room for names
         span = max(x1 - x0, y1 - y0)  # equal scales on both axes in a square frame
         cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
-        return (vp * dests * labels * flown * legs * craft).opts(
-            title="flight", width=MAP_PX, height=MAP_PX, legend_position="bottom_right", show_legend=False,
-            xlabel="x (km)", ylabel="y (km)", hooks=[no_scroll_zoom],
-            xlim=(cx - span / 2, cx + span / 2), ylim=(cy - span / 2, cy + span / 2))
-
-    def _voltage(self) -> hv.Overlay:
-        """The voltage figure of the current record (time in min): the cut-off, and up to the playback
-        time the operator's prediction, the world's true voltage, the sensor's readings on top, the
-        decisions made and the wind changes that have started (:meth:`_on_time` streams them in)."""
-        s = self.state
+        self.map_fig.x_range.update(start=cx - span / 2, end=cx + span / 2)
+        self.map_fig.y_range.update(start=cy - span / 2, end=cy + span / 2)
         r = s.record
-        eod = (s.mission_flown or s._mission()).eod_v
-        cutoff = hv.HLine(eod, label="EOD cut-off").opts(color=EOD_COLOR, line_dash="dashed", line_width=2)
-        legend = dict(legend_position="top", legend_opts={"orientation": "horizontal"}, hooks=[no_scroll_zoom, tight_legend_above], responsive=True, height=MAP_PX)
-        if r is None or r.time_s.size == 0:  # the same legend as a flight's, so that nothing moves after it
-            empty = [hv.Curve([], TIME_DIM, VOLT_DIM, label=label).opts(**style) for _, label, style in VOLTAGE_SERIES]
-            marks = hv.Points([], [TIME_DIM, VOLT_DIM], label="decisions").opts(**DECISION_STYLE)
-            return hv.Overlay([*empty, cutoff, marks]).opts(title="voltage: fly the mission to see it",
-                                                           ylim=(eod - 0.1, 4.25), **legend)
-        lo = min(eod, float(r.true_voltage_v.min())) - 0.08
-
-        def curve(key: str, label: str, style: dict[str, Any]) -> hv.DynamicMap:
-            return hv.DynamicMap(lambda data: hv.Curve(data[key], TIME_DIM, VOLT_DIM, label=label).opts(**style),
-                                 streams=[self.series])
-
-        predicted, true, measured = (curve(*spec) for spec in VOLTAGE_SERIES)
-        marks = hv.DynamicMap(lambda data: hv.Points(
-            [(t, v, reason) for t, v, reason in data["decisions"]], [TIME_DIM, VOLT_DIM], ["decision"],
-            label="decisions").opts(**DECISION_STYLE),
-            streams=[self.series])
-        changes = hv.DynamicMap(lambda data: hv.VLines([t for t, _ in data["changes"]], TIME_DIM).opts(
-            color=EVENT_COLOR, line_width=2, line_dash="dashdot") * hv.Labels(
-            {"x": [t for t, _ in data["changes"]], "y": [4.22] * len(data["changes"]),
-             "text": [text for _, text in data["changes"]]}, ["x", "y"], "text").opts(
-            text_color=EVENT_COLOR, text_font_size="9pt", text_align="left", text_baseline="top", xoffset=0.5),
-            streams=[self.series])
-        now = hv.DynamicMap(lambda data: hv.VLine(float(data) / 60.0 if np.ndim(data) == 0 else 0.0).opts(
-            color="black", line_width=1), streams=[self.now])
-        return (predicted * true * measured * cutoff * marks * changes * now).opts(
-            title="voltage: measured vs predicted, and the cut-off", ylim=(lo, 4.25),
-            xlim=(0, float(r.time_s[-1]) / 60.0 * 1.02), **legend)
+        eod = m.eod_v
+        if r is None or r.time_s.size == 0:
+            end_min, lo, title = 1.0, eod - 0.1, "voltage: fly the mission to see it"
+        else:
+            end_min = float(r.time_s[-1]) / 60.0 * 1.02
+            lo, title = min(eod, float(r.true_voltage_v.min())) - 0.08, "voltage: measured vs predicted, and the cut-off"
+        self.volt_fig.title.text = title
+        self.volt_fig.x_range.update(start=0.0, end=end_min)
+        self.volt_fig.y_range.update(start=lo, end=4.25)
+        self.cutoff.data = {"x": [0.0, end_min], "y": [eod, eod]}
+        self._lo = lo
 
     # ------------------------------------------------------------------ updates
     def _on_record(self, *_: Any) -> None:
         s = self.state
         self.download.disabled = s.record is None
         self.clock.end = max(1.0, s.end_s)
-        self.map_pane.object = self._map()
-        self.volt_pane.object = self._voltage()
+        self._draw_flight()
+        self._shown = (-1, -1, -1)
         self._on_time()
         self._ensure_timer()
 
     def _on_time(self, *_: Any) -> None:
+        """Show the flight up to the playback time: the path flown, the aircraft, the leg labels, the
+        series and decisions so far, the wind changes started, the time line and the log."""
         s = self.state
         if s.record is None:
             return
@@ -226,11 +233,24 @@ class FlyView(pn.viewable.Viewer):
         m = s.mission_flown
         nodes = [VERTIPORT] + list(s.record.route)
         path = [(m.node(n).x_km, m.node(n).y_km) for n in nodes[: max(leg, 0) + 1]] + [(x, y)]
-        self.seen.send([path])
-        self.leg_labels.send(_leg_labels(path, s.record.altitudes_m, m))
-        self.pos.send([(x, y)])
-        self.series.send(s.series_until())
-        self.now.send(float(s.t_s))
+        self.seen.data = {"x_km": [p[0] for p in path], "y_km": [p[1] for p in path]}
+        self.pos.data = {"x_km": [x], "y_km": [y]}
+        series = s.series_until()
+        for key, _, _ in VOLTAGE_SERIES:
+            t, v = series[key]
+            self.curves[key].data = {"time_min": np.asarray(t, dtype=float), "voltage_v": np.asarray(v, dtype=float)}
+        self.now_line.location = float(s.t_s) / 60.0
+        shown = (leg, len(series["decisions"]), len(series["changes"]))
+        if shown == self._shown:  # the labels, marks and log change only at a new leg, decision or change
+            return
+        self._shown = shown
+        self.leg_labels.data = _leg_labels(path, s.record.altitudes_m, m)
+        decisions = series["decisions"]
+        self.marks.data = {"time_min": [d[0] for d in decisions], "voltage_v": [d[1] for d in decisions],
+                           "decision": [d[2] for d in decisions]}
+        changes = series["changes"]
+        self.changes.data = {"x": [c[0] for c in changes], "y": [4.22] * len(changes),
+                             "text": [c[1] for c in changes], "y0": [self._lo] * len(changes)}
         rows = s.decisions_until()
         self.log.value = pd.DataFrame(rows) if rows else self.log.value.iloc[0:0]
 
