@@ -278,6 +278,19 @@ def test_num_procs_out_of_range_is_one_line(value, capsys):
     assert err.startswith("error: --num-procs:") and "[0, 64]" in err and len(err.splitlines()) == 1, err
 
 
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().split(")")[-1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
 def test_every_process_of_a_two_process_server_refuses_a_foreign_host(tmp_path):
     """``--num-procs 2``: the host guard is installed in each forked process (the kernel hands each of
     the 16 connections to either process: every foreign one is refused, every own one served)."""
@@ -292,4 +305,9 @@ def test_every_process_of_a_two_process_server_refuses_a_foreign_host(tmp_path):
             conn.request("GET", "/", headers={"Host": host})
             codes.append(conn.getresponse().status)
             conn.close()
+        workers = _children(app.proc.pid)
     assert codes == [403] * 12 + [200] * 4, codes
+    assert len(workers) >= 2, workers
+    alive = [pid for pid in workers if Path(f"/proc/{pid}").exists()
+             and Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"]
+    assert not alive, alive  # the forked workers ended with the server

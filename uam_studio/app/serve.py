@@ -10,8 +10,10 @@ cannot drive the app, not even through DNS rebinding (a name of its own that res
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -206,6 +208,15 @@ def warm_up(compare: str | None = None) -> None:
         runner.submit("warm-up", [(r, lambda _row: None) for r in todo])
 
 
+def _group_alive(pgid: int) -> bool:
+    """Whether any process of the process group ``pgid`` is still alive (or not yet reaped)."""
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
 class ServedApp:
     """``uam-studio serve --no-show`` in a subprocess on a free local port: how the browser tests and
     ``benchmarks/bench_app.py`` start the app the way users do.
@@ -236,7 +247,8 @@ class ServedApp:
         t0 = time.perf_counter()
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "uam_studio.cli", "serve", "--no-show", "--port", str(self.port), *self.args],
-            cwd=root, env=env, stdout=self._log, stderr=subprocess.STDOUT)
+            cwd=root, env=env, stdout=self._log, stderr=subprocess.STDOUT,
+            start_new_session=True)  # its own process group: ``--num-procs`` workers end with it
         deadline = time.monotonic() + self.timeout_s
         liveness = f"http://127.0.0.1:{self.port}/liveness?endpoint=/"
         while True:  # answers once the server is up and has built the app once
@@ -255,9 +267,16 @@ class ServedApp:
         return self
 
     def __exit__(self, *exc) -> None:
-        self.proc.terminate()
-        try:
-            self.proc.wait(20)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
+        """Stop the server and every process it forked (its process group): SIGTERM, up to 20 s for
+        all of them to end, then SIGKILL."""
+        deadline = time.monotonic() + 20.0
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(self.proc.pid, signal.SIGTERM)
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            self.proc.wait(20.0)
+        while _group_alive(self.proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        self.proc.wait()
         self._log.close()
