@@ -145,14 +145,19 @@ def _legend_labels(element) -> list[str]:
     return [item.label.value for lg in plot.state.legend for item in lg.items if hasattr(item.label, "value")]
 
 
+def _figure_legend_labels(fig) -> list[str]:
+    """The labels of a Bokeh figure's visible legend entries."""
+    return [item.label.value for lg in fig.legend for item in lg.items if item.visible]
+
+
 def test_voltage_plot_always_shows_eod_with_a_legend_entry_and_the_band():
     state = PlannerState(policy="greedy")
     view = PlannerView(state)
     data = view._voltage_data()
     lo, hi = data["ylim"]
     assert lo < 3.0 < hi and min(data["physics"][1]) > 3.3  # the default plan stays far above EOD
-    labels = _legend_labels(view._voltage_element(data))
-    assert labels == ["Dynaformer 90%", "physics", "Dynaformer", "EOD 3 V"]
+    view._draw_voltage(data)
+    assert _figure_legend_labels(view.voltage_fig) == ["Dynaformer 90%", "physics", "Dynaformer", "EOD 3 V"]
     assert len(data["band"][1]) == len(data["physics"][1]) > 0
     state.apply(eod_v=2.5)
     lo, hi = view._voltage_data()["ylim"]
@@ -168,8 +173,8 @@ def test_failed_takeoff_draws_the_takeoff_not_an_empty_plot():
     t, v = data["physics"]
     assert len(t) > 5 and v[-1] < 3.0 and data["xlim"] == (0.0, t[-1]) and data["ylim"][0] < v.min()
     assert "cannot take off" in summary_html(state) and "data-level='unsafe'" in summary_html(state)
-    fig = hv.render(view._voltage_element(data))  # no legend entry for a series that has no data
-    labels = [item.label.value for legend in fig.legend for item in legend.items]
+    view._draw_voltage(data)  # no legend entry for a series that has no data
+    labels = _figure_legend_labels(view.voltage_fig)
     assert labels and all("Dynaformer" not in lbl for lbl in labels) and "physics" in labels, labels
     assert data["legs"] == ([], [])  # no leg took off
     # no route: the altitude chart says so, and the map shows no empty legend box

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import html
 import io
+from collections.abc import Callable
 from typing import Any
 
 import holoviews as hv
@@ -156,12 +157,10 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
         self.table.on_edit(self._on_table_edit)
 
         self._route_tpl = self._route_templates()
-        self._voltage_tpl = self._voltage_templates()
         self._points_pipe = hv.streams.Pipe(data=self._frame())
         self._route_pipe = hv.streams.Pipe(data=self._route_data())
-        self._voltage_pipe = hv.streams.Pipe(data=self._voltage_data())
         self._health_pipe = hv.streams.Pipe(data=self._health_data())
-        self._sent: dict[str, Any] = {}  # last data sent on each pipe (unchanged data is not re-sent)
+        self._sent: dict[str, Any] = {}  # last data drawn on each plot (unchanged data is not redrawn)
         points = hv.DynamicMap(self._points_element, streams=[self._points_pipe])
         self._draw = hv.streams.PointDraw(source=points, drag=True, add=True, empty_value=0,
                                           tooltip="Click to add a destination, drag to move, select + Backspace "
@@ -177,9 +176,10 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
             css_classes=["uam-map"], linked_axes=False, margin=(0, 5))
         self.altitude_plot = pn.pane.HoloViews(
             hv.DynamicMap(self._altitude_element, streams=[self._route_pipe]), linked_axes=False)
-        self.voltage_plot = pn.pane.HoloViews(
-            hv.DynamicMap(self._voltage_element, streams=[self._voltage_pipe]),
-            linked_axes=False, sizing_mode="stretch_width", css_classes=["uam-voltage"])
+        self.voltage_fig = self._voltage_figure()
+        self._send("voltage", self._draw_voltage, self._voltage_data())
+        self.voltage_fig.css_classes = ["uam-voltage"]  # on the figure: the Bokeh pane's model is the figure
+        self.voltage_plot = pn.pane.Bokeh(self.voltage_fig, sizing_mode="stretch_width")
         self.health_plot = pn.pane.HoloViews(self._population_element() * hv.DynamicMap(
             self._health_element, streams=[self._health_pipe]), linked_axes=False)
         # The class sits on the content (inside the pane's shadow root), so that a locator for
@@ -265,26 +265,26 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
     def _on_destinations(self, *events: param.parameterized.Event) -> None:
         with pn.io.hold():
             self._sync_destinations()
-            self._send("route", self._route_pipe, self._route_data())
+            self._send("route", self._route_pipe.send, self._route_data())
 
     def _on_plan(self, *events: param.parameterized.Event) -> None:
         with pn.io.hold():  # one batch of model changes per plan: each costs the browser a page layout
             self.summary.object = summary_html(self.state)
             self.compare.object = comparison_html(self.state)  # the bold row follows the policy
-            self._send("route", self._route_pipe, self._route_data())
-            self._send("voltage", self._voltage_pipe, self._voltage_data())
-            self._send("health", self._health_pipe, self._health_data())
+            self._send("route", self._route_pipe.send, self._route_data())
+            self._send("voltage", self._draw_voltage, self._voltage_data())
+            self._send("health", self._health_pipe.send, self._health_data())
 
     def _on_comparison(self, event: param.parameterized.Event) -> None:
         self.compare.object = comparison_html(self.state)
 
-    def _send(self, key: str, pipe: hv.streams.Pipe, data: Any) -> None:
-        """Send ``data`` on ``pipe`` unless it equals the last data sent there (re-rendering a plot
-        costs tens of ms)."""
+    def _send(self, key: str, draw: Callable[[Any], None], data: Any) -> None:
+        """Draw ``data`` (a pipe's ``send`` or a figure's draw method) unless it equals the last data
+        drawn there (re-rendering a plot costs tens of ms)."""
         if key in self._sent and _equal(self._sent[key], data):
             return
         self._sent[key] = data
-        pipe.send(data)
+        draw(data)
 
     def _on_busy(self, event: param.parameterized.Event) -> None:
         """Served, the busy state is shown only once a plan has taken :data:`BUSY_AFTER_MS`: every

@@ -10,6 +10,9 @@ from typing import Any
 import holoviews as hv
 import numpy as np
 import pandas as pd
+from bokeh.core.properties import value
+from bokeh.models import ColumnDataSource, Legend, LegendItem, Range1d
+from bokeh.plotting import figure
 
 from uam_studio.app.map_geometry import FAILED_COLOR, altitude_labels, leg_arrows, route_legs
 from uam_studio.app.services import population
@@ -20,7 +23,6 @@ from uam_studio.app.style import (
     label_background,
     no_scroll_zoom,
     pixel_offset,
-    tight_legend_above,
 )
 from uam_studio.planning.missions.mission import VERTIPORT
 
@@ -71,7 +73,8 @@ def _route_legend(plot: Any, element: Any) -> None:
 class PlannerPlots:
     """The plots of :class:`~uam_studio.app.planner.PlannerView`: each plot's data from the view's
     ``state`` (a :class:`~uam_studio.app.planner_state.PlannerState`) and its element from that data,
-    cloned from the styled templates the view keeps (``_route_tpl``, ``_voltage_tpl``)."""
+    cloned from the styled templates the view keeps (``_route_tpl``); the voltage plot is a Bokeh
+    figure (``voltage_fig``) whose sources each frame replaces."""
 
     def _route_data(self) -> dict[str, list]:
         """:func:`route_legs` of the plan, plus ``nodes``: every place on the map (x, y km)."""
@@ -185,44 +188,63 @@ class PlannerPlots:
                 "level": float(band["level"]), "eod": float(eod), "xlim": (0.0, t_end), "legs": legs,
                 "ylim": (y0, y1 + 0.08 * (y1 - y0))}  # headroom for the legs' names
 
-    @staticmethod
-    def _voltage_templates() -> dict[str, Any]:
-        """Styled empty elements of the voltage plot (cloned with each frame's data, as the route's);
-        each frame's axes follow its data, which include the EOD line (framewise)."""
-        kd, vd = "time (min)", "voltage (V)"
-        empty = ([0.0], [0.0])
-        band = hv.Area(([0.0], [0.0], [0.0]), kd, [vd, "high"], label="Dynaformer 90%").opts(
-            color="#ff7f0e", alpha=0.35, line_color="#ff7f0e", line_alpha=0.8, line_width=1, framewise=True)
-        leg_lines = hv.VLines([], kd).opts(color="#777777", line_dash="dotted", line_width=1)
-        leg_names = hv.Labels({"x": [], "y": [], "text": []}, ["x", "y"], "text").opts(
-            text_font_size="8pt", text_color="#444444", text_align="left", text_baseline="top", xoffset=0.0)
-        phys = hv.Curve(empty, kd, vd, label="physics").opts(color=PHYSICS_COLOR, line_width=2, framewise=True)
-        pred = hv.Curve(empty, kd, vd, label="Dynaformer").opts(color=PREDICTED_COLOR, line_width=2, line_dash="dashed",
-                                                               framewise=True)
-        eod = hv.Curve(empty, kd, vd, label="EOD").opts(color=FAILED_COLOR, line_width=1.5, line_dash="dotted",
-                                                        framewise=True)
-        overlay = (band * phys * pred * eod * leg_lines * leg_names).opts(
-            responsive=True, height=VOLTAGE_HEIGHT_PX, legend_position="top", legend_opts={"orientation": "horizontal"}, show_grid=True,
-            fontsize={"legend": "8pt", "title": "10pt"},
-            title="Voltage: physics (what happens) vs Dynaformer (predicted)", hooks=[no_scroll_zoom, tight_legend_above])
-        return {"overlay": overlay, "band": band, "physics": phys, "predicted": pred, "eod": eod,
-                "leg_lines": leg_lines, "leg_names": leg_names}
+    def _voltage_figure(self) -> Any:
+        """The voltage figure as plain Bokeh models, built once: a band, the physics and Dynaformer
+        series, the EOD line, each leg's take-off (a dotted line and its name), and a legend above.
+        :meth:`_draw_voltage` puts a frame's data in it (a new plan costs replacing some sources' data,
+        not a new figure)."""
+        src = {key: ColumnDataSource(cols) for key, cols in (
+            ("band", {"t": [], "low": [], "high": []}), ("physics", {"t": [], "v": []}),
+            ("predicted", {"t": [], "v": []}), ("eod", {"t": [], "v": []}),
+            ("legs", {"x": [], "y0": [], "y1": []}), ("leg_names", {"x": [], "y": [], "text": []}))}
+        fig = figure(height=VOLTAGE_HEIGHT_PX, width=None, sizing_mode="stretch_width", align="start",
+                     min_border_left=10, min_border_right=10, min_border_bottom=10, x_range=Range1d(0.0, 1.0),
+                     y_range=Range1d(2.9, 4.3), tools="pan,wheel_zoom,box_zoom,save,reset",
+                     x_axis_label="time (min)", y_axis_label="voltage (V)", min_border_top=0,
+                     title="Voltage: physics (what happens) vs Dynaformer (predicted)")
+        fig.title.text_font_size = "10pt"
+        band = fig.varea("t", "low", "high", source=src["band"], fill_color="#ff7f0e", fill_alpha=0.35)
+        for edge in ("low", "high"):
+            fig.line("t", edge, source=src["band"], color="#ff7f0e", line_alpha=0.8, line_width=1)
+        phys = fig.line("t", "v", source=src["physics"], color=PHYSICS_COLOR, line_width=2)
+        pred = fig.line("t", "v", source=src["predicted"], color=PREDICTED_COLOR, line_width=2, line_dash="dashed")
+        eod = fig.line("t", "v", source=src["eod"], color=FAILED_COLOR, line_width=1.5, line_dash="dotted")
+        fig.segment("x", "y0", "x", "y1", source=src["legs"], color="#777777", line_dash="dotted", line_width=1)
+        fig.text("x", "y", text="text", source=src["leg_names"], text_font_size="8pt", text_color="#444444",
+                 text_align="left", text_baseline="top")
+        items = {key: LegendItem(label=value(key), renderers=[r]) for key, r in
+                 (("band", band), ("physics", phys), ("predicted", pred), ("eod", eod))}
+        fig.add_layout(Legend(items=list(items.values()), orientation="horizontal", label_text_font_size="8pt",
+                              margin=0, padding=4), "above")
+        fig.toolbar.active_scroll = None  # the mouse wheel scrolls the page (the zoom stays in the toolbar)
+        self._voltage_src, self._voltage_items = src, items
+        return fig
 
-    def _voltage_element(self, data: dict[str, Any]) -> hv.Overlay:
-        tpl = self._voltage_tpl
+    def _draw_voltage(self, data: dict[str, Any]) -> None:
+        """Put :meth:`_voltage_data`'s frame in the voltage figure: its series, the axes' ranges (which
+        include EOD), the legs' take-offs, and a legend entry for each series that has data."""
+        src, items, fig = self._voltage_src, self._voltage_items, self.voltage_fig
         x0, x1 = data["xlim"]
+        y0, y1 = data["ylim"]
         starts, names = data["legs"]
         tb, lo, hi = data["band"]
+        src["band"].data = {"t": np.asarray(tb, float), "low": np.asarray(lo, float), "high": np.asarray(hi, float)}
+        for key in ("physics", "predicted"):
+            t, v = data[key]
+            src[key].data = {"t": np.asarray(t, float), "v": np.asarray(v, float)}
+        src["eod"].data = {"t": [x0, x1], "v": [data["eod"]] * 2}
+        src["legs"].data = {"x": list(starts), "y0": [y0] * len(starts), "y1": [y1] * len(starts)}
+        src["leg_names"].data = {"x": [x + 0.004 * (x1 - x0) for x in starts], "y": [y1] * len(starts),
+                                 "text": list(names)}
+        fig.x_range.update(start=x0, end=x1)
+        fig.y_range.update(start=y0, end=y1)
         # a series with no data gets no legend entry (a failed take-off has no prediction)
-        return tpl["overlay"].clone([
-            tpl["band"].clone((tb, lo, hi), label=f"Dynaformer {100 * data['level']:.0f}%" if len(tb) else ""),
-            tpl["physics"].clone(data["physics"], label="physics" if len(data["physics"][0]) else ""),
-            tpl["predicted"].clone(data["predicted"], label="Dynaformer" if len(data["predicted"][0]) else ""),
-            tpl["eod"].clone(([x0, x1], [data["eod"]] * 2), label=f"EOD {data['eod']:g} V"),
-            tpl["leg_lines"].clone(list(starts)),
-            tpl["leg_names"].clone({"x": [x + 0.004 * (x1 - x0) for x in starts], "y": [data["ylim"][1]] * len(starts),
-                                    "text": list(names)}),
-        ])
+        labels = {"band": f"Dynaformer {100 * data['level']:.0f}%", "physics": "physics", "predicted": "Dynaformer",
+                  "eod": f"EOD {data['eod']:g} V"}
+        shown = {"band": len(tb), "physics": len(data["physics"][0]), "predicted": len(data["predicted"][0]),
+                 "eod": 1}
+        for key, item in items.items():
+            item.update(label=value(labels[key]), visible=bool(shown[key]))
 
     def _health_data(self) -> tuple[float, float] | None:
         return self.state.health

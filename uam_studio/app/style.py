@@ -53,14 +53,6 @@ def pixel_offset(y_px: float) -> Any:
     return hook
 
 
-def tight_legend_above(plot: Any, element: Any) -> None:
-    """Bokeh hook: a legend above the plot in one row, without the empty band Bokeh leaves above it."""
-    for legend in plot.state.legend:
-        legend.margin = 0
-        legend.padding = 4
-    plot.state.min_border_top = 0
-
-
 def no_scroll_zoom(plot: Any, element: Any) -> None:
     """Bokeh hook: the mouse wheel scrolls the page, not the plot (the zoom stays in the toolbar)."""
     plot.state.toolbar.active_scroll = None
