@@ -139,7 +139,6 @@ def test_retrain_view_planner_choice_shows_its_settings_and_curves():
 
 
 def _legend_labels(element) -> list[str]:
-    import holoviews as hv
 
     plot = hv.renderer("bokeh").get_plot(element)
     return [item.label.value for lg in plot.state.legend for item in lg.items if hasattr(item.label, "value")]
@@ -178,8 +177,8 @@ def test_failed_takeoff_draws_the_takeoff_not_an_empty_plot():
     assert labels and all("Dynaformer" not in lbl for lbl in labels) and "physics" in labels, labels
     assert data["legs"] == ([], [])  # no leg took off
     # no route: the altitude chart says so, and the map shows no empty legend box
-    alt = hv.render(view._altitude_element(view._route_data()))
-    texts = [t for r in alt.renderers for t in r.data_source.data.get("text", [])]
+    view._draw_altitude(view._route_data())
+    texts = [t for r in view.altitude_fig.renderers for t in r.data_source.data.get("text", [])]
     assert texts == ["no route: nothing is flown"], texts
     state.apply(r0=0.117)
     root = view.__panel__().get_root(Document())
@@ -295,7 +294,6 @@ def test_leg_labels_overlap_no_label_name_or_marker_on_small_maps():
 def test_map_names_stay_on_their_places_at_any_zoom():
     """Names are drawn at their place's own coordinates, moved by a fixed number of screen pixels
     (not km): zooming in cannot drift them away from their points (an offset in km grows with the zoom)."""
-    import holoviews as hv
 
     from uam_studio.app.fly import FlyView
     from uam_studio.app.fly_state import FlyState

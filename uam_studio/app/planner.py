@@ -174,8 +174,9 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
                             title="Map (km): click to add, drag to move, select + Backspace to delete",
                             xlim=(-h, h), ylim=(-h, h), xlabel="x (km)", ylabel="y (km)", fontsize={"title": "9.5pt"})),
             css_classes=["uam-map"], linked_axes=False, margin=(0, 5))
-        self.altitude_plot = pn.pane.HoloViews(
-            hv.DynamicMap(self._altitude_element, streams=[self._route_pipe]), linked_axes=False)
+        self.altitude_fig = self._altitude_figure()
+        self._draw_altitude(self._route_data())
+        self.altitude_plot = pn.pane.Bokeh(self.altitude_fig)
         self.voltage_fig = self._voltage_figure()
         self._send("voltage", self._draw_voltage, self._voltage_data())
         self.voltage_fig.css_classes = ["uam-voltage"]  # on the figure: the Bokeh pane's model is the figure
@@ -265,15 +266,20 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
     def _on_destinations(self, *events: param.parameterized.Event) -> None:
         with pn.io.hold():
             self._sync_destinations()
-            self._send("route", self._route_pipe.send, self._route_data())
+            self._send("route", self._draw_route, self._route_data())
 
     def _on_plan(self, *events: param.parameterized.Event) -> None:
         with pn.io.hold():  # one batch of model changes per plan: each costs the browser a page layout
             self.summary.object = summary_html(self.state)
             self.compare.object = comparison_html(self.state)  # the bold row follows the policy
-            self._send("route", self._route_pipe.send, self._route_data())
+            self._send("route", self._draw_route, self._route_data())
             self._send("voltage", self._draw_voltage, self._voltage_data())
             self._send("health", self._health_pipe.send, self._health_data())
+
+    def _draw_route(self, data: dict[str, list]) -> None:
+        """A route on the map (its pipe) and in the altitude figure."""
+        self._route_pipe.send(data)
+        self._draw_altitude(data)
 
     def _on_comparison(self, event: param.parameterized.Event) -> None:
         self.compare.object = comparison_html(self.state)

@@ -11,7 +11,7 @@ import holoviews as hv
 import numpy as np
 import pandas as pd
 from bokeh.core.properties import value
-from bokeh.models import ColumnDataSource, Legend, LegendItem, Range1d
+from bokeh.models import ColumnDataSource, FixedTicker, HoverTool, Legend, LegendItem, Range1d
 from bokeh.plotting import figure
 
 from uam_studio.app.map_geometry import FAILED_COLOR, altitude_labels, leg_arrows, route_legs
@@ -139,26 +139,40 @@ class PlannerPlots:
         return (tpl["legs"].clone(pick(done)) * tpl["lost"].clone(failed) * tpl["arrows"].clone(leg_arrows(data))
                 * tpl["labels"].clone(altitude_labels(data, data.get("nodes", []), data.get("names", []))))
 
-    @staticmethod
-    def _altitude_element(data: dict[str, list]) -> hv.Overlay:
+    def _altitude_figure(self) -> Any:
+        """The cruise altitude per leg as a plain Bokeh figure, built once: a bar per leg (colour =
+        charging cycle) with its altitude above it, the legs' names as the x axis' tick labels.
+        :meth:`_draw_altitude` puts a route in it."""
+        self._altitude_bars = ColumnDataSource({c: [] for c in ("left", "right", "top", "bottom", "color", "leg",
+                                                                "altitude_m")})
+        self._altitude_text = ColumnDataSource({"x": [], "y": [], "text": []})
+        fig = figure(width=WIDE_MIN_PX, height=240, x_range=Range1d(0.4, 1.6), y_range=Range1d(0.0, 3300.0),
+                     tools="pan,wheel_zoom,box_zoom,save,reset", y_axis_label="altitude (m)",
+                     title="Cruise altitude per leg (colour = charging cycle)")
+        bars = fig.quad(left="left", right="right", top="top", bottom="bottom", source=self._altitude_bars,
+                        fill_color="color", line_color="white")
+        fig.text("x", "y", text="text", source=self._altitude_text, text_font_size="8pt", text_color="#222222",
+                 text_align="center", text_baseline="middle")
+        fig.add_tools(HoverTool(renderers=[bars], tooltips=[("leg", "@leg"), ("altitude (m)", "@altitude_m")]))
+        fig.xaxis.ticker = FixedTicker(ticks=[1.0])
+        fig.xaxis.major_label_orientation = np.radians(30)
+        fig.toolbar.active_scroll = None  # the mouse wheel scrolls the page (the zoom stays in the toolbar)
+        return fig
+
+    def _draw_altitude(self, data: dict[str, list]) -> None:
+        """Put :meth:`_route_data`'s legs in the altitude figure (or say that nothing is flown)."""
         # Numeric x (leg number) with tick labels: categorical axes do not survive empty -> full updates.
         n = len(data["leg"])
         idx = np.arange(1, n + 1, dtype=float)
         alt = np.asarray(data["altitude_m"], dtype=float)
-        bars = hv.Rectangles({"x0": idx - 0.38, "y0": np.zeros(n), "x1": idx + 0.38, "y1": alt,
-                              "color": list(data["color"]), "leg": list(data["leg"]), "altitude_m": alt},
-                             kdims=["x0", "y0", "x1", "y1"], vdims=["color", "leg", "altitude_m"]).opts(
-            color="color", line_color="white", tools=["hover"])
-        text = {"x": idx, "y": alt + 120, "text": [f"{a:g}" for a in alt]} if n else \
+        self._altitude_bars.data = {"left": idx - 0.38, "right": idx + 0.38, "top": alt, "bottom": np.zeros(n),
+                                    "color": list(data["color"]), "leg": list(data["leg"]), "altitude_m": alt}
+        self._altitude_text.data = {"x": idx, "y": alt + 120, "text": [f"{a:g}" for a in alt]} if n else \
             {"x": [1.0], "y": [1650.0], "text": ["no route: nothing is flown"]}
-        labels = hv.Labels(text, kdims=["x", "y"], vdims="text").opts(text_font_size="8pt", text_color="#222222")
-        ticks = [(float(i), str(lbl)) for i, lbl in zip(idx, data["leg"])] if n else [(1.0, "")]
-        return (bars * labels).opts(
-            hv.opts.Rectangles(xticks=ticks, xrotation=30, xlim=(0.4, max(n, 1) + 0.6), ylim=(0, 3300),
-                               xlabel="", ylabel="altitude (m)", framewise=True),
-            hv.opts.Labels(framewise=True),
-        ).opts(width=WIDE_MIN_PX, height=240, title="Cruise altitude per leg (colour = charging cycle)",
-                hooks=[no_scroll_zoom])
+        fig = self.altitude_fig
+        fig.xaxis.ticker.ticks = [float(i) for i in idx] if n else [1.0]
+        fig.xaxis.major_label_overrides = {float(i): str(lbl) for i, lbl in zip(idx, data["leg"])} if n else {1.0: ""}
+        fig.x_range.update(start=0.4, end=max(n, 1) + 0.6)
 
     def _voltage_data(self) -> dict[str, Any]:
         """The voltage plot's series (minutes, V): physics (the plan's, or the failed take-off's),
