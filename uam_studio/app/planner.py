@@ -159,7 +159,6 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
         self._route_tpl = self._route_templates()
         self._points_pipe = hv.streams.Pipe(data=self._frame())
         self._route_pipe = hv.streams.Pipe(data=self._route_data())
-        self._health_pipe = hv.streams.Pipe(data=self._health_data())
         self._sent: dict[str, Any] = {}  # last data drawn on each plot (unchanged data is not redrawn)
         points = hv.DynamicMap(self._points_element, streams=[self._points_pipe])
         self._draw = hv.streams.PointDraw(source=points, drag=True, add=True, empty_value=0,
@@ -181,8 +180,9 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
         self._send("voltage", self._draw_voltage, self._voltage_data())
         self.voltage_fig.css_classes = ["uam-voltage"]  # on the figure: the Bokeh pane's model is the figure
         self.voltage_plot = pn.pane.Bokeh(self.voltage_fig, sizing_mode="stretch_width")
-        self.health_plot = pn.pane.HoloViews(self._population_element() * hv.DynamicMap(
-            self._health_element, streams=[self._health_pipe]), linked_axes=False)
+        self.health_fig = self._health_figure()
+        self._send("health", self._draw_health, self._health_data())
+        self.health_plot = pn.pane.Bokeh(self.health_fig)
         # The class sits on the content (inside the pane's shadow root), so that a locator for
         # ".uam-plan-summary" finds exactly one element whose text is the summary.
         self.summary = pn.pane.HTML(summary_html(s), sizing_mode="stretch_width", margin=(0, 10))
@@ -274,7 +274,7 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
             self.compare.object = comparison_html(self.state)  # the bold row follows the policy
             self._send("route", self._draw_route, self._route_data())
             self._send("voltage", self._draw_voltage, self._voltage_data())
-            self._send("health", self._health_pipe.send, self._health_data())
+            self._send("health", self._draw_health, self._health_data())
 
     def _draw_route(self, data: dict[str, list]) -> None:
         """A route on the map (its pipe) and in the altitude figure."""

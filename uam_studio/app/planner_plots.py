@@ -11,8 +11,10 @@ import holoviews as hv
 import numpy as np
 import pandas as pd
 from bokeh.core.properties import value
-from bokeh.models import ColumnDataSource, FixedTicker, HoverTool, Legend, LegendItem, Range1d
+from bokeh.models import ColorBar, ColumnDataSource, FixedTicker, HoverTool, Legend, LegendItem, Range1d
+from bokeh.palettes import Viridis256
 from bokeh.plotting import figure
+from bokeh.transform import linear_cmap
 
 from uam_studio.app.map_geometry import FAILED_COLOR, altitude_labels, leg_arrows, route_legs
 from uam_studio.app.services import population
@@ -263,24 +265,38 @@ class PlannerPlots:
     def _health_data(self) -> tuple[float, float] | None:
         return self.state.health
 
-    @staticmethod
-    def _population_element() -> hv.Points:
+    def _health_figure(self) -> Any:
+        """The health estimate against the training population as a plain Bokeh figure, built once:
+        the population's cells (Dynaformer PCs, coloured by R0) and this cell's star, which
+        :meth:`_draw_health` moves."""
         pop = population()
-        if pop is None:
-            df = pd.DataFrame({"PC1": [], "PC2": [], "R0 (ohm)": [], "q_max (C)": []})
-        else:
-            df = pd.DataFrame({"PC1": pop.pc1, "PC2": pop.pc2, "R0 (ohm)": pop.r0, "q_max (C)": pop.q_max})
-        # headroom above the population for the legend, so that it never covers a cell's star
-        lo, hi = (float(df["PC2"].min()), float(df["PC2"].max())) if len(df) else (-1.0, 1.0)
-        return hv.Points(df, ["PC1", "PC2"], ["R0 (ohm)", "q_max (C)"], label="training population").opts(
-            ylim=(lo - 0.05 * (hi - lo), hi + 0.4 * (hi - lo)),
-            color="R0 (ohm)", cmap="viridis", colorbar=True, size=5, alpha=0.6, tools=["hover"],
-            width=WIDE_MIN_PX, height=280, title="Health estimate (Dynaformer PCs) vs population", show_grid=True,
-            legend_position="top", legend_cols=2, xlabel="PC1 (tracks R0)", ylabel="PC2 (tracks q_max)",
-            hooks=[no_scroll_zoom])
+        cols = {"PC1": [], "PC2": [], "r0": [], "q_max": []} if pop is None else \
+            {"PC1": pop.pc1, "PC2": pop.pc2, "r0": pop.r0, "q_max": pop.q_max}
+        pc2 = np.asarray(cols["PC2"], float)
+        lo, hi = (float(pc2.min()), float(pc2.max())) if pc2.size else (-1.0, 1.0)
+        pc1 = np.asarray(cols["PC1"], float)
+        x0, x1 = (float(pc1.min()), float(pc1.max())) if pc1.size else (-1.0, 1.0)
+        fig = figure(width=WIDE_MIN_PX, height=280, tools="pan,wheel_zoom,box_zoom,save,reset",
+                     x_range=Range1d(x0 - 0.05 * (x1 - x0), x1 + 0.05 * (x1 - x0)),
+                     y_range=Range1d(lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo)),
+                     x_axis_label="PC1 (tracks R0)", y_axis_label="PC2 (tracks q_max)",
+                     title="Health estimate (Dynaformer PCs) vs population")
+        r0 = np.asarray(cols["r0"], float)
+        mapper = linear_cmap("r0", Viridis256, float(r0.min()) if r0.size else 0.0, float(r0.max()) if r0.size else 1.0)
+        dots = fig.scatter("PC1", "PC2", source=ColumnDataSource(cols), size=5, alpha=0.6, color=mapper,
+                           legend_label="training population")
+        self._health_src = ColumnDataSource({"PC1": [], "PC2": []})
+        fig.scatter("PC1", "PC2", source=self._health_src, marker="star", size=22, color="#d62728",
+                    line_color="black", legend_label="this cell")
+        fig.add_layout(ColorBar(color_mapper=mapper.transform, title="R0 (ohm)", width=12), "right")
+        fig.add_tools(HoverTool(renderers=[dots], tooltips=[("PC1", "@PC1{0.00}"), ("PC2", "@PC2{0.00}"),
+                                                             ("R0 (ohm)", "@r0{0.000}"), ("q_max (C)", "@q_max{0}")]))
+        fig.add_layout(fig.legend[0], "above")
+        fig.legend.orientation, fig.legend.margin, fig.legend.padding = "horizontal", 0, 4
+        fig.toolbar.active_scroll = None  # the mouse wheel scrolls the page (the zoom stays in the toolbar)
+        return fig
 
-    @staticmethod
-    def _health_element(data: tuple[float, float] | None) -> hv.Points:
-        pts = [] if data is None else [tuple(data)]
-        return hv.Points(pts, ["PC1", "PC2"], label="this cell").opts(
-            color="#d62728", marker="star", size=22, line_color="black")
+    def _draw_health(self, data: tuple[float, float] | None) -> None:
+        """Put this cell's estimate (PC1, PC2) on the health figure (none: no star)."""
+        self._health_src.data = {"PC1": [] if data is None else [float(data[0])],
+                                 "PC2": [] if data is None else [float(data[1])]}
