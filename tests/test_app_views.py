@@ -302,13 +302,14 @@ def test_map_names_stay_on_their_places_at_any_zoom():
     state = PlannerState(policy="greedy")
     view = PlannerView(state)
     rows = state.destination_rows()
-    names, _, vp_label = view._names_element(None).values()
-    assert names.data["x"].tolist() == [r["x_km"] for r in rows]
-    assert names.data["y"].tolist() == [r["y_km"] for r in rows]
-    assert vp_label.data[["x", "y"]].values.tolist() == [[state.vertiport_x_km, state.vertiport_y_km]]
-    for element, offset in ((names, -NAME_OFFSET_PX), (vp_label, NAME_OFFSET_PX)):
-        glyph = hv.renderer("bokeh").get_plot(element).handles["glyph"]
-        assert glyph.y_offset == offset and glyph.x_offset == 0
+    texts = [r for r in view.map_fig.renderers if type(r.glyph).__name__ == "Text"]
+    names = next(r for r in texts if r.data_source is view._names_src)
+    vp_label = next(r for r in texts if r.data_source is view._vp_src)
+    assert list(names.data_source.data["x"]) == [r["x_km"] for r in rows]
+    assert list(names.data_source.data["y"]) == [r["y_km"] for r in rows]
+    assert [list(vp_label.data_source.data[c]) for c in ("x", "y")] == [[state.vertiport_x_km], [state.vertiport_y_km]]
+    for renderer, offset in ((names, -NAME_OFFSET_PX), (vp_label, NAME_OFFSET_PX)):
+        assert renderer.glyph.y_offset == offset and renderer.glyph.x_offset == 0
     fig = FlyView(FlyState(lambda: state.mission)).map_fig
     texts = [r for r in fig.renderers if type(r.glyph).__name__ == "Text" and "name" in r.data_source.data]
     assert len(texts) == 1 and texts[0].glyph.y_offset == -NAME_OFFSET_PX

@@ -15,7 +15,6 @@ import io
 from collections.abc import Callable
 from typing import Any
 
-import holoviews as hv
 import numpy as np
 import pandas as pd
 import panel as pn
@@ -28,7 +27,6 @@ from uam_studio.app.planner_state import PlannerState
 from uam_studio.app.planner_summary import comparison_html, summary_html
 from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE
 from uam_studio.app.session import (
-    ensure_bokeh_backend,
     in_server_session,
     respond_at_once,
     session_dispatcher,
@@ -91,7 +89,6 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
     state = param.ClassSelector(class_=PlannerState)
 
     def __init__(self, state: PlannerState, **params: Any) -> None:
-        ensure_bokeh_backend()
         super().__init__(state=state, **params)
         s = state
         self._syncing = False
@@ -156,25 +153,14 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
         )
         self.table.on_edit(self._on_table_edit)
 
-        self._route_tpl = self._route_templates()
-        self._points_pipe = hv.streams.Pipe(data=self._frame())
-        self._route_pipe = hv.streams.Pipe(data=self._route_data())
         self._sent: dict[str, Any] = {}  # last data drawn on each plot (unchanged data is not redrawn)
-        points = hv.DynamicMap(self._points_element, streams=[self._points_pipe])
-        self._draw = hv.streams.PointDraw(source=points, drag=True, add=True, empty_value=0,
-                                          tooltip="Click to add a destination, drag to move, select + Backspace "
-                                                  "to delete")
-        self._draw.add_subscriber(self._on_draw)
-        route = hv.DynamicMap(self._route_element, streams=[self._route_pipe])
-        names = hv.DynamicMap(self._names_element, streams=[self._points_pipe])
-        h = MAP_HALF_KM
-        self.map = pn.pane.HoloViews((route * names * points).opts(
-            hv.opts.Overlay(frame_width=MAP_FRAME_PX, frame_height=MAP_FRAME_PX, show_grid=True,
-                            title="Map (km): click to add, drag to move, select + Backspace to delete",
-                            xlim=(-h, h), ylim=(-h, h), xlabel="x (km)", ylabel="y (km)", fontsize={"title": "9.5pt"})),
-            css_classes=["uam-map"], linked_axes=False, margin=(0, 5))
+        self.map_fig = self._map_figure(MAP_HALF_KM, MAP_FRAME_PX)
+        self.map_fig.css_classes = ["uam-map"]  # on the figure: the Bokeh pane's model is the figure
+        self.map_fig.margin = (0, 5, 0, 5)
         self.altitude_fig = self._altitude_figure()
-        self._draw_altitude(self._route_data())
+        self._sync_destinations()
+        self._send("route", self._draw_route, self._route_data())
+        self.map = pn.pane.Bokeh(self.map_fig)
         self.altitude_plot = pn.pane.Bokeh(self.altitude_fig)
         self.voltage_fig = self._voltage_figure()
         self._send("voltage", self._draw_voltage, self._voltage_data())
@@ -259,7 +245,7 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
         try:
             if not _same_frame(self.table.value, df):
                 self.table.value = df
-            self._points_pipe.send(df)
+            self._draw_points(df)
         finally:
             self._syncing = False
 
@@ -277,8 +263,8 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
             self._send("health", self._draw_health, self._health_data())
 
     def _draw_route(self, data: dict[str, list]) -> None:
-        """A route on the map (its pipe) and in the altitude figure."""
-        self._route_pipe.send(data)
+        """A route on the map and in the altitude figure."""
+        self._draw_map_route(data)
         self._draw_altitude(data)
 
     def _on_comparison(self, event: param.parameterized.Event) -> None:
@@ -354,6 +340,10 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
             self._editing_table = False
         if not applied:
             self._sync_destinations()
+
+    def _on_points_edit(self, _attr: str, _old: Any, new: dict[str, Any]) -> None:
+        """The map's point-drawing tool changed the destinations' points (added, dragged, deleted)."""
+        self._on_draw(dict(new))
 
     def _on_draw(self, data: dict[str, list] | None = None, **_: Any) -> None:
         if self._syncing or not data:

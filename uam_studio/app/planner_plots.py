@@ -7,11 +7,19 @@ from __future__ import annotations
 
 from typing import Any
 
-import holoviews as hv
 import numpy as np
 import pandas as pd
-from bokeh.core.properties import value
-from bokeh.models import ColorBar, ColumnDataSource, FixedTicker, HoverTool, Legend, LegendItem, Range1d
+from bokeh.core.properties import field, value
+from bokeh.models import (
+    ColorBar,
+    ColumnDataSource,
+    FixedTicker,
+    HoverTool,
+    Legend,
+    LegendItem,
+    PointDrawTool,
+    Range1d,
+)
 from bokeh.palettes import Viridis256
 from bokeh.plotting import figure
 from bokeh.transform import linear_cmap
@@ -22,9 +30,6 @@ from uam_studio.app.style import (
     NAME_OFFSET_PX,
     PHYSICS_COLOR,
     PREDICTED_COLOR,
-    label_background,
-    no_scroll_zoom,
-    pixel_offset,
 )
 from uam_studio.planning.missions.mission import VERTIPORT
 
@@ -44,34 +49,6 @@ def _display_index(values: np.ndarray, limit: int) -> np.ndarray:
     return np.unique(np.append(idx, int(np.argmin(values))))
 
 
-def _route_legend(plot: Any, element: Any) -> None:
-    """Bokeh hook of the map's route segments: one legend entry per value of the legs' ``legend``
-    column (``cycle 1``, ``cycle 2``...; ``failed`` for the legs that would not make it), grouped by
-    BokehJS from the data (the hover tool puts the columns in the data source), so the legend
-    follows every new plan without a new figure."""
-    from bokeh.models import Legend, LegendItem
-
-    fig = plot.state
-    renderer = plot.handles.get("glyph_renderer")
-    if renderer is None:
-        return
-    legend = next((lg for lg in fig.legend if getattr(lg, "name", None) == "uam-route-legend"), None)
-    if legend is None:
-        legend = Legend(items=[], name="uam-route-legend", location="top_left", label_text_font_size="8pt",
-                        padding=4, spacing=0, background_fill_alpha=0.8)
-        fig.add_layout(legend)
-    # no route, no legend box: the legs' data decide; the lost legs' data only ever add one
-    field_name = "failed" if "failed" in [d.name for d in element.vdims] else "legend"
-    if field_name == "legend":
-        legend.visible = len(element) > 0
-    elif len(element):
-        legend.visible = True
-    if not any(renderer in item.renderers for item in legend.items):
-        # one column name per renderer: BokehJS reads a field label from its item's first renderer only
-        field = "failed" if "failed" in [d.name for d in element.vdims] else "legend"
-        legend.items.append(LegendItem(label={"field": field}, renderers=[renderer]))
-
-
 class PlannerPlots:
     """The plots of :class:`~uam_studio.app.planner.PlannerView`: each plot's data from the view's
     ``state`` (a :class:`~uam_studio.app.planner_state.PlannerState`) and its element from that data,
@@ -88,47 +65,71 @@ class PlannerPlots:
         data["names"] = [VERTIPORT] + [f"{r['name']} {'*' * int(r['priority'])}" for r in rows]  # as drawn
         return data
 
-    @staticmethod
-    def _points_element(data: pd.DataFrame) -> hv.Points:
-        return hv.Points(data, kdims=["x_km", "y_km"], vdims=["name", "priority", "wind_kts", "dwell_s"]).opts(
-            size=14, color="#444444", line_color="white", line_width=2, tools=["hover"],
-            active_tools=["point_draw"], hooks=[no_scroll_zoom],
-        )
+    def _map_figure(self, half_km: float, frame_px: int) -> Any:
+        """The map as a plain Bokeh figure, built once: the route (a segment per leg, coloured by
+        charging cycle, dashed red where the physics check fails, an arrowhead and an altitude label
+        per leg, a legend of the cycles), the places' names, the vertiport and the destinations, which
+        a ``PointDrawTool`` adds, drags and deletes (its edits reach :meth:`_on_points_edit`).
+        :meth:`_draw_points` and :meth:`_draw_map_route` put the state in it."""
+        fig = figure(frame_width=frame_px, frame_height=frame_px, x_range=Range1d(-half_km, half_km),
+                     y_range=Range1d(-half_km, half_km), x_axis_label="x (km)", y_axis_label="y (km)",
+                     tools="pan,wheel_zoom,box_zoom,save,reset", min_border_left=10, min_border_right=10,
+                     title="Map (km): click to add, drag to move, select + Backspace to delete")
+        fig.title.text_font_size = "9.5pt"
+        leg_cols = ("x0", "y0", "x1", "y1", "color", "leg", "altitude_m")
+        self._legs_src = ColumnDataSource({c: [] for c in (*leg_cols, "legend")})
+        self._lost_src = ColumnDataSource({c: [] for c in (*leg_cols, "failed")})
+        self._arrows_src = ColumnDataSource({"x": [], "y": [], "angle": [], "color": []})
+        self._alt_src = ColumnDataSource({"x": [], "y": [], "text": []})
+        legs = fig.segment("x0", "y0", "x1", "y1", source=self._legs_src, color="color", line_width=4, alpha=0.85)
+        lost = fig.segment("x0", "y0", "x1", "y1", source=self._lost_src, color=FAILED_COLOR, line_width=3,
+                           line_dash="dashed")
+        fig.scatter("x", "y", source=self._arrows_src, marker="triangle", angle="angle", color="color", size=13,
+                    line_color="white", line_width=1)
+        fig.text("x", "y", text="text", source=self._alt_src, text_font_size="8pt", text_color="#333333",
+                 text_align="center", text_baseline="middle", background_fill_color="white",
+                 background_fill_alpha=0.85)
+        # one legend entry per value of the legs' legend column (cycle 1, cycle 2...; failed), grouped by
+        # BokehJS from the data, so the legend follows every plan without a new figure
+        self._route_legend = Legend(items=[LegendItem(label=field("legend"), renderers=[legs]),
+                                           LegendItem(label=field("failed"), renderers=[lost])],
+                                    name="uam-route-legend", location="top_left", label_text_font_size="8pt",
+                                    padding=4, spacing=0, background_fill_alpha=0.8, visible=False)
+        fig.add_layout(self._route_legend)
+        fig.add_tools(HoverTool(renderers=[legs, lost], tooltips=[("leg", "@leg"), ("altitude (m)", "@altitude_m")]))
+        self._names_src = ColumnDataSource({"x": [], "y": [], "text": []})
+        self._vp_src = ColumnDataSource({"x": [], "y": []})
+        fig.text("x", "y", text="text", source=self._names_src, text_font_size="9pt", text_font_style="bold",
+                 text_color="#222222", text_align="center", text_baseline="bottom", y_offset=-NAME_OFFSET_PX)
+        fig.scatter("x", "y", source=self._vp_src, marker="square", size=16, color="#d62728")
+        fig.text("x", "y", text=value("vertiport"), source=self._vp_src, text_font_size="9pt", text_color="#d62728",
+                 text_align="center", text_baseline="top", y_offset=NAME_OFFSET_PX)
+        self._points_src = ColumnDataSource({c: [] for c in ("x_km", "y_km", "name", "priority", "wind_kts",
+                                                               "dwell_s")})
+        points = fig.scatter("x_km", "y_km", source=self._points_src, size=14, color="#444444", line_color="white",
+                             line_width=2)
+        draw = PointDrawTool(renderers=[points], add=True, drag=True, empty_value=0,
+                             description="Click to add a destination, drag to move, select + Backspace to delete")
+        fig.add_tools(draw, HoverTool(renderers=[points], tooltips=[
+            ("name", "@name"), ("priority", "@priority"), ("wind (kt)", "@wind_kts"), ("dwell (s)", "@dwell_s")]))
+        fig.toolbar.active_tap = draw
+        fig.toolbar.active_drag = draw
+        fig.toolbar.active_scroll = None  # the mouse wheel scrolls the page (the zoom stays in the toolbar)
+        self._points_src.on_change("data", self._on_points_edit)
+        return fig
 
-    def _names_element(self, data: pd.DataFrame) -> hv.Overlay:
+    def _draw_points(self, frame: pd.DataFrame) -> None:
+        """The destinations (``frame``: the table's rows), their names and the vertiport on the map."""
         s = self.state
         rows = s.destination_rows()
-        names = hv.Labels({"x": [r["x_km"] for r in rows], "y": [r["y_km"] for r in rows],
-                           "text": [f"{r['name']} {'*' * int(r['priority'])}" for r in rows]},
-                          kdims=["x", "y"], vdims="text").opts(text_font_size="9pt", text_font_style="bold",
-                                                               text_color="#222222", text_baseline="bottom",
-                                                               hooks=[pixel_offset(-NAME_OFFSET_PX)])
-        vp = hv.Points([(s.vertiport_x_km, s.vertiport_y_km)], kdims=["x_km", "y_km"]).opts(
-            marker="square", size=16, color="#d62728")
-        vp_label = hv.Labels([(s.vertiport_x_km, s.vertiport_y_km, "vertiport")], kdims=["x", "y"],
-                             vdims="text").opts(text_font_size="9pt", text_color="#d62728", text_baseline="top",
-                                                hooks=[pixel_offset(NAME_OFFSET_PX)])
-        return names * vp * vp_label
+        self._points_src.data = {c: list(frame[c]) for c in self._points_src.data}
+        self._names_src.data = {"x": [r["x_km"] for r in rows], "y": [r["y_km"] for r in rows],
+                                "text": [f"{r['name']} {'*' * int(r['priority'])}" for r in rows]}
+        self._vp_src.data = {"x": [float(s.vertiport_x_km)], "y": [float(s.vertiport_y_km)]}
 
-    @staticmethod
-    def _route_templates() -> dict[str, Any]:
-        """Styled empty elements of the route; each frame clones them with new data, keeping their
-        styles without an ``.opts`` call (which costs milliseconds) per frame."""
-        kd = ["x0", "y0", "x1", "y1"]
-        empty = {c: [] for c in ("x0", "y0", "x1", "y1", "color", "leg", "altitude_m")}
-        return {
-            "legs": hv.Segments({**empty, "legend": []}, kd, ["color", "leg", "altitude_m", "legend"]).opts(
-                color="color", line_width=4, alpha=0.85, tools=["hover"], hooks=[_route_legend]),
-            "lost": hv.Segments({**empty, "failed": []}, kd, ["color", "leg", "altitude_m", "failed"]).opts(
-                color=FAILED_COLOR, line_width=3, line_dash="dashed", tools=["hover"], hooks=[_route_legend]),
-            "labels": hv.Labels({"x": [], "y": [], "text": []}, ["x", "y"], "text").opts(
-                text_font_size="8pt", text_color="#333333", text_align="center", text_baseline="middle",
-                hooks=[label_background]),
-            "arrows": hv.Points({"x": [], "y": [], "angle": [], "color": []}, ["x", "y"], ["angle", "color"]).opts(
-                marker="triangle", angle="angle", color="color", size=13, line_color="white", line_width=1),
-        }
-
-    def _route_element(self, data: dict[str, list]) -> hv.Overlay:
+    def _draw_map_route(self, data: dict[str, list]) -> None:
+        """:meth:`_route_data`'s legs on the map: flown legs by cycle, the failed ones dashed, an
+        arrowhead and an altitude label per leg; the legend shown only where there are legs."""
         done = np.asarray(data["completed"], dtype=bool)
         cols = ("x0", "y0", "x1", "y1", "color", "leg", "altitude_m", "legend")
 
@@ -137,9 +138,11 @@ class PlannerPlots:
 
         failed = pick(~done)
         failed["failed"] = failed.pop("legend")
-        tpl = self._route_tpl
-        return (tpl["legs"].clone(pick(done)) * tpl["lost"].clone(failed) * tpl["arrows"].clone(leg_arrows(data))
-                * tpl["labels"].clone(altitude_labels(data, data.get("nodes", []), data.get("names", []))))
+        self._legs_src.data = pick(done)
+        self._lost_src.data = failed
+        self._arrows_src.data = leg_arrows(data)
+        self._alt_src.data = altitude_labels(data, data.get("nodes", []), data.get("names", []))
+        self._route_legend.visible = bool(len(done))
 
     def _altitude_figure(self) -> Any:
         """The cruise altitude per leg as a plain Bokeh figure, built once: a bar per leg (colour =
