@@ -1,8 +1,8 @@
 """The Planner tab: edit a mission on a map and in a table, and see the plan update live.
 
-View only: everything it shows comes from a :class:`~uam_studio.app.planner_state.PlannerState`. The map's
-destinations are a :class:`holoviews.streams.PointDraw` on a DynamicMap fed by a
-:class:`~holoviews.streams.Pipe`; map and table are linked both ways through the state (an edit in
+View only: everything it shows comes from a :class:`~uam_studio.app.planner_state.PlannerState`. The plots are
+plain Bokeh figures built once per view, whose sources each new state replaces; the map's destinations
+are a Bokeh ``PointDrawTool`` on their own source. Map and table are linked both ways through the state (an edit in
 either goes to :meth:`PlannerState.set_destinations`; an accepted or rejected edit re-sends the
 state's destinations to both). Its plots come from :class:`~uam_studio.app.planner_plots.PlannerPlots`,
 its summary and comparison panes from :mod:`~uam_studio.app.planner_summary`.
