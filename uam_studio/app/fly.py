@@ -134,7 +134,7 @@ class FlyView(pn.viewable.Viewer):
     def _figures(self) -> None:
         """The map and voltage figures, built once as plain Bokeh models: each playback tick only
         replaces their sources' data and moves the time line, a few milliseconds of the session's
-        thread (the same figures drawn through HoloViews streams took 0.2-0.5 s a tick)."""
+        thread (``benchmarks/bench_app.py flytick``)."""
         tools = "pan,wheel_zoom,box_zoom,reset,save"
         self.dests = ColumnDataSource({"x_km": [], "y_km": [], "name": []})
         self.vertiport = ColumnDataSource({"x_km": [], "y_km": []})
