@@ -17,15 +17,15 @@ import pandas as pd
 import panel as pn
 import param
 from bokeh.models import ColumnDataSource, HoverTool, Range1d, Span
-from bokeh.plotting import figure
 
 from uam_studio.app.fly_state import SPEEDS, FlyState
-from uam_studio.app.map_geometry import altitude_labels
+from uam_studio.app.map_geometry import altitude_labels, place_label
 from uam_studio.app.style import (
     MEASURED_COLOR,
     NAME_OFFSET_PX,
     PHYSICS_COLOR,
     PREDICTED_COLOR,
+    page_figure,
     window_height,
 )
 from uam_studio.planning import VERTIPORT, Mission
@@ -56,7 +56,7 @@ def _leg_labels(path: list[tuple[float, float]], altitudes_m: list[float], missi
             for c, v in zip(legs, (f"{x0:.3f},{y0:.3f}", f"leg {k}", altitudes_m[k], x0, y0, x1, y1)):
                 legs[c].append(v)
     nodes = [(d.x_km, d.y_km) for d in mission.destinations]
-    names = [f"{d.name} {'*' * d.priority}" for d in mission.destinations]
+    names = [place_label(d.name, d.priority) for d in mission.destinations]
     # altitude_labels numbers the legs it is given from #1: here every leg flown so far, in order
     return altitude_labels(legs, [(mission.vertiport.x_km, mission.vertiport.y_km), *nodes], ["", *names])
 
@@ -135,14 +135,13 @@ class FlyView(pn.viewable.Viewer):
         """The map and voltage figures, built once as plain Bokeh models: each playback tick only
         replaces their sources' data and moves the time line, a few milliseconds of the session's
         thread (``benchmarks/bench_app.py flytick``)."""
-        tools = "pan,wheel_zoom,box_zoom,reset,save"
         self.dests = ColumnDataSource({"x_km": [], "y_km": [], "name": []})
         self.vertiport = ColumnDataSource({"x_km": [], "y_km": []})
         self.seen = ColumnDataSource({"x_km": [], "y_km": []})
         self.leg_labels = ColumnDataSource({"x": [], "y": [], "text": []})
         self.pos = ColumnDataSource({"x_km": [], "y_km": []})
-        fig = figure(title="flight", width=MAP_PX, height=MAP_PX, tools=tools, x_axis_label="x (km)",
-                     y_axis_label="y (km)", x_range=Range1d(0.0, 1.0), y_range=Range1d(0.0, 1.0))
+        fig = page_figure(title="flight", width=MAP_PX, height=MAP_PX, x_axis_label="x (km)",
+                          y_axis_label="y (km)", x_range=Range1d(0.0, 1.0), y_range=Range1d(0.0, 1.0))
         fig.scatter("x_km", "y_km", source=self.vertiport, marker="square", size=14, color="black")
         dots = fig.scatter("x_km", "y_km", source=self.dests, size=10, color="#ff7f0e", line_color="black")
         fig.text("x_km", "y_km", text="name", source=self.dests, text_font_size="9pt", text_baseline="bottom",
@@ -153,15 +152,15 @@ class FlyView(pn.viewable.Viewer):
                  background_fill_alpha=0.85)
         fig.scatter("x_km", "y_km", source=self.pos, marker="triangle", size=16, color=EOD_COLOR)
         fig.add_tools(HoverTool(renderers=[dots], tooltips=[("", "@name"), ("x (km)", "@x_km"), ("y (km)", "@y_km")]))
-        fig.toolbar.active_scroll = None  # the mouse wheel scrolls the page (the zoom stays in the toolbar)
         self.map_fig = fig
 
         self.curves = {key: ColumnDataSource({"time_min": [], "voltage_v": []}) for key, _, _ in VOLTAGE_SERIES}
         self.cutoff = ColumnDataSource({"x": [], "y": []})
         self.marks = ColumnDataSource({"time_min": [], "voltage_v": [], "decision": []})
         self.changes = ColumnDataSource({"x": [], "y": [], "text": [], "y0": []})
-        fig = figure(title="voltage: fly the mission to see it", height=MAP_PX, sizing_mode="stretch_width",
-                     x_range=Range1d(0.0, 1.0), y_range=Range1d(2.9, 4.25), tools=tools, x_axis_label="time (min)", y_axis_label="voltage (V)", min_border_top=0)
+        fig = page_figure(title="voltage: fly the mission to see it", height=MAP_PX, sizing_mode="stretch_width",
+                          x_range=Range1d(0.0, 1.0), y_range=Range1d(2.9, 4.25), x_axis_label="time (min)",
+                          y_axis_label="voltage (V)", min_border_top=0)
         for key, label, style in VOLTAGE_SERIES:
             fig.line("time_min", "voltage_v", source=self.curves[key], legend_label=label, **style)
         fig.line("x", "y", source=self.cutoff, legend_label="EOD cut-off", color=EOD_COLOR, line_dash="dashed",
@@ -179,7 +178,6 @@ class FlyView(pn.viewable.Viewer):
         fig.add_layout(fig.legend[0], "above")
         fig.legend.orientation = "horizontal"
         fig.legend.margin, fig.legend.padding = 0, 4
-        fig.toolbar.active_scroll = None
         self.volt_fig = fig
         self._draw_flight()
 
@@ -190,7 +188,7 @@ class FlyView(pn.viewable.Viewer):
         m = s.mission_flown if s.mission_flown is not None else s._mission()
         xs = [d.x_km for d in m.destinations]
         ys = [d.y_km for d in m.destinations]
-        self.dests.data = {"x_km": xs, "y_km": ys, "name": [f"{d.name} {'*' * d.priority}" for d in m.destinations]}
+        self.dests.data = {"x_km": xs, "y_km": ys, "name": [place_label(d.name, d.priority) for d in m.destinations]}
         self.vertiport.data = {"x_km": [m.vertiport.x_km], "y_km": [m.vertiport.y_km]}
         pad = 8.0
         allx, ally = np.array(xs + [m.vertiport.x_km]), np.array(ys + [m.vertiport.y_km])
@@ -210,7 +208,6 @@ class FlyView(pn.viewable.Viewer):
         self.volt_fig.x_range.update(start=0.0, end=end_min)
         self.volt_fig.y_range.update(start=lo, end=4.25)
         self.cutoff.data = {"x": [0.0, end_min], "y": [eod, eod]}
-        self._lo = lo
 
     # ------------------------------------------------------------------ updates
     def _on_record(self, *_: Any) -> None:
@@ -250,7 +247,7 @@ class FlyView(pn.viewable.Viewer):
                            "decision": [d[2] for d in decisions]}
         changes = series["changes"]
         self.changes.data = {"x": [c[0] for c in changes], "y": [4.22] * len(changes),
-                             "text": [c[1] for c in changes], "y0": [self._lo] * len(changes)}
+                             "text": [c[1] for c in changes], "y0": [self.volt_fig.y_range.start] * len(changes)}
         rows = s.decisions_until()
         self.log.value = pd.DataFrame(rows) if rows else self.log.value.iloc[0:0]
 

@@ -31,6 +31,11 @@ LEG_COLUMNS = ("leg", "from", "to", "x0", "y0", "x1", "y1", "altitude_m", "cycle
 FAILED_LABEL = "would not make it (physics)"
 
 
+def place_label(name: str, priority: int) -> str:
+    """A destination's name as the maps draw it: the name and its priority in stars (``"Napa **"``)."""
+    return f"{name} {'*' * int(priority)}"
+
+
 def route_legs(plan: dict[str, Any] | None, state_rows: list[dict[str, Any]], vertiport: tuple[float, float]) \
         -> dict[str, list]:
     """The legs of ``plan`` as columns (one entry per leg): from/to names and coordinates, altitude,

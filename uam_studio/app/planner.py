@@ -271,8 +271,8 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
         self.compare.object = comparison_html(self.state)
 
     def _send(self, key: str, draw: Callable[[Any], None], data: Any) -> None:
-        """Draw ``data`` (a pipe's ``send`` or a figure's draw method) unless it equals the last data
-        drawn there (re-rendering a plot costs tens of ms)."""
+        """Draw ``data`` with ``draw`` (a figure's ``_draw_*`` method) unless it equals the last data
+        drawn under ``key`` (comparing is cheaper than redrawing)."""
         if key in self._sent and _equal(self._sent[key], data):
             return
         self._sent[key] = data

@@ -21,15 +21,15 @@ from bokeh.models import (
     Range1d,
 )
 from bokeh.palettes import Viridis256
-from bokeh.plotting import figure
 from bokeh.transform import linear_cmap
 
-from uam_studio.app.map_geometry import FAILED_COLOR, altitude_labels, leg_arrows, route_legs
+from uam_studio.app.map_geometry import FAILED_COLOR, altitude_labels, leg_arrows, place_label, route_legs
 from uam_studio.app.services import population
 from uam_studio.app.style import (
     NAME_OFFSET_PX,
     PHYSICS_COLOR,
     PREDICTED_COLOR,
+    page_figure,
 )
 from uam_studio.planning.missions.mission import VERTIPORT
 
@@ -51,9 +51,8 @@ def _display_index(values: np.ndarray, limit: int) -> np.ndarray:
 
 class PlannerPlots:
     """The plots of :class:`~uam_studio.app.planner.PlannerView`: each plot's data from the view's
-    ``state`` (a :class:`~uam_studio.app.planner_state.PlannerState`) and its element from that data,
-    cloned from the styled templates the view keeps (``_route_tpl``); the voltage plot is a Bokeh
-    figure (``voltage_fig``) whose sources each frame replaces."""
+    ``state`` (a :class:`~uam_studio.app.planner_state.PlannerState`), and each plot a Bokeh figure
+    built once (``_*_figure``) whose sources its ``_draw_*`` method replaces with that data."""
 
     def _route_data(self) -> dict[str, list]:
         """:func:`route_legs` of the plan, plus ``nodes``: every place on the map (x, y km)."""
@@ -62,7 +61,7 @@ class PlannerPlots:
         data = route_legs(s.plan, rows, (s.vertiport_x_km, s.vertiport_y_km))
         data["nodes"] = [(float(s.vertiport_x_km), float(s.vertiport_y_km))] + \
             [(float(r["x_km"]), float(r["y_km"])) for r in rows]
-        data["names"] = [VERTIPORT] + [f"{r['name']} {'*' * int(r['priority'])}" for r in rows]  # as drawn
+        data["names"] = [VERTIPORT] + [place_label(r["name"], r["priority"]) for r in rows]  # as drawn
         return data
 
     def _map_figure(self, half_km: float, frame_px: int) -> Any:
@@ -71,9 +70,9 @@ class PlannerPlots:
         per leg, a legend of the cycles), the places' names, the vertiport and the destinations, which
         a ``PointDrawTool`` adds, drags and deletes (its edits reach :meth:`_on_points_edit`).
         :meth:`_draw_points` and :meth:`_draw_map_route` put the state in it."""
-        fig = figure(frame_width=frame_px, frame_height=frame_px, x_range=Range1d(-half_km, half_km),
-                     y_range=Range1d(-half_km, half_km), x_axis_label="x (km)", y_axis_label="y (km)",
-                     tools="pan,wheel_zoom,box_zoom,save,reset", min_border_left=10, min_border_right=10,
+        fig = page_figure(frame_width=frame_px, frame_height=frame_px, x_range=Range1d(-half_km, half_km),
+                          y_range=Range1d(-half_km, half_km), x_axis_label="x (km)", y_axis_label="y (km)",
+                          min_border_left=10, min_border_right=10,
                      title="Map (km): click to add, drag to move, select + Backspace to delete")
         fig.title.text_font_size = "9.5pt"
         leg_cols = ("x0", "y0", "x1", "y1", "color", "leg", "altitude_m")
@@ -114,17 +113,15 @@ class PlannerPlots:
             ("name", "@name"), ("priority", "@priority"), ("wind (kt)", "@wind_kts"), ("dwell (s)", "@dwell_s")]))
         fig.toolbar.active_tap = draw
         fig.toolbar.active_drag = draw
-        fig.toolbar.active_scroll = None  # the mouse wheel scrolls the page (the zoom stays in the toolbar)
         self._points_src.on_change("data", self._on_points_edit)
         return fig
 
     def _draw_points(self, frame: pd.DataFrame) -> None:
         """The destinations (``frame``: the table's rows), their names and the vertiport on the map."""
         s = self.state
-        rows = s.destination_rows()
         self._points_src.data = {c: list(frame[c]) for c in self._points_src.data}
-        self._names_src.data = {"x": [r["x_km"] for r in rows], "y": [r["y_km"] for r in rows],
-                                "text": [f"{r['name']} {'*' * int(r['priority'])}" for r in rows]}
+        self._names_src.data = {"x": list(frame["x_km"]), "y": list(frame["y_km"]),
+                                "text": [place_label(n, p) for n, p in zip(frame["name"], frame["priority"])]}
         self._vp_src.data = {"x": [float(s.vertiport_x_km)], "y": [float(s.vertiport_y_km)]}
 
     def _draw_map_route(self, data: dict[str, list]) -> None:
@@ -151,8 +148,8 @@ class PlannerPlots:
         self._altitude_bars = ColumnDataSource({c: [] for c in ("left", "right", "top", "bottom", "color", "leg",
                                                                 "altitude_m")})
         self._altitude_text = ColumnDataSource({"x": [], "y": [], "text": []})
-        fig = figure(width=WIDE_MIN_PX, height=240, x_range=Range1d(0.4, 1.6), y_range=Range1d(0.0, 3300.0),
-                     tools="pan,wheel_zoom,box_zoom,save,reset", y_axis_label="altitude (m)",
+        fig = page_figure(width=WIDE_MIN_PX, height=240, x_range=Range1d(0.4, 1.6), y_range=Range1d(0.0, 3300.0),
+                          y_axis_label="altitude (m)",
                      title="Cruise altitude per leg (colour = charging cycle)")
         bars = fig.quad(left="left", right="right", top="top", bottom="bottom", source=self._altitude_bars,
                         fill_color="color", line_color="white")
@@ -161,7 +158,6 @@ class PlannerPlots:
         fig.add_tools(HoverTool(renderers=[bars], tooltips=[("leg", "@leg"), ("altitude (m)", "@altitude_m")]))
         fig.xaxis.ticker = FixedTicker(ticks=[1.0])
         fig.xaxis.major_label_orientation = np.radians(30)
-        fig.toolbar.active_scroll = None  # the mouse wheel scrolls the page (the zoom stays in the toolbar)
         return fig
 
     def _draw_altitude(self, data: dict[str, list]) -> None:
@@ -216,9 +212,9 @@ class PlannerPlots:
             ("band", {"t": [], "low": [], "high": []}), ("physics", {"t": [], "v": []}),
             ("predicted", {"t": [], "v": []}), ("eod", {"t": [], "v": []}),
             ("legs", {"x": [], "y0": [], "y1": []}), ("leg_names", {"x": [], "y": [], "text": []}))}
-        fig = figure(height=VOLTAGE_HEIGHT_PX, width=None, sizing_mode="stretch_width", align="start",
-                     min_border_left=10, min_border_right=10, min_border_bottom=10, x_range=Range1d(0.0, 1.0),
-                     y_range=Range1d(2.9, 4.3), tools="pan,wheel_zoom,box_zoom,save,reset",
+        fig = page_figure(height=VOLTAGE_HEIGHT_PX, width=None, sizing_mode="stretch_width", align="start",
+                          min_border_left=10, min_border_right=10, min_border_bottom=10, x_range=Range1d(0.0, 1.0),
+                     y_range=Range1d(2.9, 4.3),
                      x_axis_label="time (min)", y_axis_label="voltage (V)", min_border_top=0,
                      title="Voltage: physics (what happens) vs Dynaformer (predicted)")
         fig.title.text_font_size = "10pt"
@@ -235,7 +231,6 @@ class PlannerPlots:
                  (("band", band), ("physics", phys), ("predicted", pred), ("eod", eod))}
         fig.add_layout(Legend(items=list(items.values()), orientation="horizontal", label_text_font_size="8pt",
                               margin=0, padding=4), "above")
-        fig.toolbar.active_scroll = None  # the mouse wheel scrolls the page (the zoom stays in the toolbar)
         self._voltage_src, self._voltage_items = src, items
         return fig
 
@@ -279,11 +274,11 @@ class PlannerPlots:
         lo, hi = (float(pc2.min()), float(pc2.max())) if pc2.size else (-1.0, 1.0)
         pc1 = np.asarray(cols["PC1"], float)
         x0, x1 = (float(pc1.min()), float(pc1.max())) if pc1.size else (-1.0, 1.0)
-        fig = figure(width=WIDE_MIN_PX, height=280, tools="pan,wheel_zoom,box_zoom,save,reset",
-                     x_range=Range1d(x0 - 0.05 * (x1 - x0), x1 + 0.05 * (x1 - x0)),
-                     y_range=Range1d(lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo)),
-                     x_axis_label="PC1 (tracks R0)", y_axis_label="PC2 (tracks q_max)",
-                     title="Health estimate (Dynaformer PCs) vs population")
+        fig = page_figure(width=WIDE_MIN_PX, height=280,
+                          x_range=Range1d(x0 - 0.05 * (x1 - x0), x1 + 0.05 * (x1 - x0)),
+                          y_range=Range1d(lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo)),
+                          x_axis_label="PC1 (tracks R0)", y_axis_label="PC2 (tracks q_max)",
+                          title="Health estimate (Dynaformer PCs) vs population")
         r0 = np.asarray(cols["r0"], float)
         mapper = linear_cmap("r0", Viridis256, float(r0.min()) if r0.size else 0.0, float(r0.max()) if r0.size else 1.0)
         dots = fig.scatter("PC1", "PC2", source=ColumnDataSource(cols), size=5, alpha=0.6, color=mapper,
@@ -296,7 +291,6 @@ class PlannerPlots:
                                                              ("R0 (ohm)", "@r0{0.000}"), ("q_max (C)", "@q_max{0}")]))
         fig.add_layout(fig.legend[0], "above")
         fig.legend.orientation, fig.legend.margin, fig.legend.padding = "horizontal", 0, 4
-        fig.toolbar.active_scroll = None  # the mouse wheel scrolls the page (the zoom stays in the toolbar)
         return fig
 
     def _draw_health(self, data: tuple[float, float] | None) -> None:

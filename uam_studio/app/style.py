@@ -35,24 +35,20 @@ def window_height(obj: Any, height_css: str) -> pn.Column:
     return pn.Column(obj, sizing_mode="stretch_width", styles={"height": height_css})
 
 
-def label_background(plot: Any, element: Any) -> None:
-    """Bokeh hook: labels on a white box, so that route lines do not run through their text."""
-    glyph = plot.handles["glyph"]
-    glyph.background_fill_color, glyph.background_fill_alpha = "white", 0.85
-
-
-def pixel_offset(y_px: float) -> Any:
-    """A Bokeh hook that draws labels ``y_px`` screen pixels below their data point (negative: above).
-
-    The offset is in pixels, not km, so a label stays beside its point at every zoom (an offset in
-    data units grows with the zoom and drifts the label away)."""
-
-    def hook(plot: Any, element: Any) -> None:
-        plot.handles["glyph"].y_offset = y_px
-
-    return hook
-
-
 def no_scroll_zoom(plot: Any, element: Any) -> None:
     """Bokeh hook: the mouse wheel scrolls the page, not the plot (the zoom stays in the toolbar)."""
     plot.state.toolbar.active_scroll = None
+
+
+PAGE_TOOLS = "pan,wheel_zoom,box_zoom,save,reset"
+
+
+def page_figure(**kwargs: Any) -> Any:
+    """A Bokeh figure with the app's tools whose mouse wheel scrolls the page, not the plot (the zoom
+    stays in the toolbar): the Bokeh-figure twin of :func:`no_scroll_zoom`. ``kwargs`` go to
+    :func:`bokeh.plotting.figure`."""
+    from bokeh.plotting import figure
+
+    fig = figure(tools=PAGE_TOOLS, **kwargs)
+    fig.toolbar.active_scroll = None
+    return fig
