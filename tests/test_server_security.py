@@ -178,20 +178,6 @@ def test_websocket_own_origin_is_accepted(server, name):
     assert _ws(port, f"{name}:{port}", f"http://{name}:{port}") == 101
 
 
-def test_allow_origin_adds_a_name(tmp_path):
-    srv = _Server(tmp_path, "--allow-origin", "classroom.example", "--allow-origin", "10.0.0.5:8080")
-    try:
-        port = srv.port
-        assert _get(port, "/liveness", f"classroom.example:{port}") == 200
-        assert _get(port, "/liveness", "10.0.0.5:8080") == 200
-        assert _get(port, "/liveness", f"10.0.0.5:{port}") == 403
-        assert _get(port, "/liveness", f"{EVIL}:{port}") == 403
-        assert _ws(port, f"classroom.example:{port}", f"http://classroom.example:{port}") == 101
-        assert _ws(port, f"classroom.example:{port}", f"http://{EVIL}:{port}") == 403
-    finally:
-        srv.stop()
-
-
 def test_port_in_use_is_one_line_and_exit_2(tmp_path):
     env = {**os.environ, "UAM_STUDIO_HOME": str(tmp_path), "PYTHONPATH": str(ROOT)}
     with socket.socket() as taken:
@@ -291,22 +277,30 @@ def _children(pid: int) -> list[int]:
     return out
 
 
-def test_every_process_of_a_two_process_server_refuses_a_foreign_host(tmp_path):
+def test_every_process_of_a_two_process_server_refuses_a_foreign_host_and_allows_added_names(tmp_path):
     """``--num-procs 2``: the host guard is installed in each forked process (the kernel hands each of
-    the 16 connections to either process: every foreign one is refused, every own one served)."""
+    the 16 connections to either process: every foreign one is refused, every own one served), and each
+    ``--allow-origin`` adds exactly its name (a port given with it is that port only)."""
     import http.client
 
     from uam_studio.app.serve import ServedApp
 
-    with ServedApp(tmp_path, args=["--num-procs", "2"]) as app:
+    added = ["--allow-origin", "classroom.example", "--allow-origin", "10.0.0.5:8080"]
+    with ServedApp(tmp_path, args=["--num-procs", "2", *added]) as app:
+        port = app.port
         codes = []
-        for host in [f"evil.example:{app.port}"] * 12 + [f"127.0.0.1:{app.port}"] * 4:
-            conn = http.client.HTTPConnection("127.0.0.1", app.port, timeout=120)
+        for host in [f"evil.example:{port}"] * 12 + [f"127.0.0.1:{port}"] * 4:
+            conn = http.client.HTTPConnection("127.0.0.1", port, timeout=120)
             conn.request("GET", "/", headers={"Host": host})
             codes.append(conn.getresponse().status)
             conn.close()
+        added_codes = [_get(port, "/liveness", host) for host in
+                       (f"classroom.example:{port}", "10.0.0.5:8080", f"10.0.0.5:{port}", f"{EVIL}:{port}")]
+        added_ws = [_ws(port, f"classroom.example:{port}", f"http://{origin}:{port}")
+                    for origin in ("classroom.example", EVIL)]
         workers = _children(app.proc.pid)
     assert codes == [403] * 12 + [200] * 4, codes
+    assert added_codes == [200, 200, 403, 403] and added_ws == [101, 403], (added_codes, added_ws)
     assert len(workers) >= 2, workers
     alive = [pid for pid in workers if Path(f"/proc/{pid}").exists()
              and Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"]
