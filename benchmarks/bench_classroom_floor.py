@@ -1,0 +1,115 @@
+"""What a first load costs the server before any of the app's own work: two reference pages beside the app.
+
+    OMP_NUM_THREADS=1 python benchmarks/bench_classroom_floor.py [--sessions 1 30]
+
+Three servers, one after another, each loaded by :func:`bench_classroom.first_load` (the page GET, the
+websocket, the whole document), N clients at once:
+
+- ``bare``: ``panel serve`` of a page with one Markdown pane and one slider (Panel's own floor);
+- ``figures``: ``panel serve`` of four Bokeh figures of five 100-point lines each with the usual six
+  tools, and one slider (about the model count of the Planner's four plots);
+- ``app``: ``uam-studio serve`` (:class:`uam_studio.app.serve.ServedApp`), the app as a class opens it.
+
+Printed per server and N: p50 / p95 of the load times (s) and the server's CPU seconds per session
+(``/proc/PID/stat``, user + system, over the N loads; the app's comparison process not counted). With every page built on one event loop, p95 at N
+concurrent loads is about N x the CPU per session: a p95 of 5 s for 30 sessions needs <= ~0.17 s each.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_classroom import first_load  # noqa: E402
+
+from uam_studio.app.serve import ServedApp  # noqa: E402
+
+BARE = """import panel as pn
+pn.Column(pn.pane.Markdown("# A page"),
+          pn.widgets.FloatSlider(name="q_max (C)", start=5000, end=8000, value=7600)).servable()
+"""
+FIGURES = """import numpy as np, panel as pn
+from bokeh.plotting import figure
+def fig(i):
+    f = figure(height=250, width=400, title=f"figure {i}", tools="pan,wheel_zoom,box_zoom,reset,save,hover")
+    for k in range(5):
+        f.line(np.arange(100), np.random.default_rng(k).random(100), legend_label=f"line {k}")
+    return f
+pn.Column(*[pn.pane.Bokeh(fig(i)) for i in range(4)], pn.widgets.FloatSlider(name="q", start=0, end=1)).servable()
+"""
+
+
+def cpu_s(pid: int) -> float:
+    """User + system CPU seconds of one process so far."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (float(fields[11]) + float(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+async def _loads(url: str, n: int) -> list[float]:
+    with ThreadPoolExecutor(max_workers=n) as pool:
+        results = await asyncio.gather(*(first_load(url, pool) for _ in range(n)))
+    for _, conn in results:
+        conn.close()
+    return [t for t, _ in results]
+
+
+def measure(name: str, url: str, pid: int, sessions: list[int]) -> None:
+    """Print one line per N for the server ``pid`` answering at ``url``."""
+    for n in sessions:
+        before = cpu_s(pid)
+        times = np.array(asyncio.run(_loads(url, n)))
+        per = (cpu_s(pid) - before) / n
+        print(f"{name:8s} {n:3d} sessions: p50 {np.percentile(times, 50):6.2f} s, p95 {np.percentile(times, 95):6.2f} s, "
+              f"server CPU {per:5.3f} s/session", flush=True)
+        time.sleep(2.0)
+
+
+def _panel_serve(script: Path, port: int) -> subprocess.Popen:
+    proc = subprocess.Popen([sys.executable, "-m", "panel", "serve", str(script), "--port", str(port)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    url = f"http://localhost:{port}/{script.stem}"
+    deadline = time.monotonic() + 120
+    while True:
+        try:
+            urllib.request.urlopen(url, timeout=30).read()
+            return proc
+        except OSError:
+            if time.monotonic() > deadline or proc.poll() is not None:
+                proc.kill()
+                raise RuntimeError(f"panel serve {script.name} did not start") from None
+            time.sleep(0.5)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--sessions", type=int, nargs="+", default=[1, 30])
+    ap.add_argument("--port", type=int, default=5391, help="first of the two ports the reference pages use")
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        for i, (name, source) in enumerate((("bare", BARE), ("figures", FIGURES))):
+            script = Path(tmp) / f"{name}.py"
+            script.write_text(source)
+            proc = _panel_serve(script, args.port + i)
+            try:
+                measure(name, f"http://localhost:{args.port + i}/{name}", proc.pid, args.sessions)
+            finally:
+                proc.terminate()
+                proc.wait(30)
+        with ServedApp(Path(tmp) / "home") as app:
+            time.sleep(5.0)  # the warm-up's plans and comparisons
+            measure("app", app.url, app.proc.pid, args.sessions)
+
+
+if __name__ == "__main__":
+    main()
