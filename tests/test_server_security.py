@@ -192,6 +192,21 @@ def test_port_in_use_is_one_line_and_exit_2(tmp_path):
     assert len(lines) == 1 and lines[0].startswith("error: --port:") and str(port) in lines[0], res.stderr
 
 
+def test_port_in_use_is_found_before_the_app_is_imported(tmp_path):
+    """A port in use is refused before panel and the app are imported (seconds of a user's wait)."""
+    env = {**os.environ, "UAM_STUDIO_HOME": str(tmp_path), "PYTHONPATH": str(ROOT)}
+    code = ("import sys\nfrom uam_studio.cli import main\nrc = main(sys.argv[1:])\n"
+            "print(sorted(m for m in ('panel', 'torch', 'uam_studio.app.main') if m in sys.modules))\nsys.exit(rc)")
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        res = subprocess.run([sys.executable, "-c", code, "serve", "--no-show", "--port", str(port)], cwd=ROOT,
+                             env=env, capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2 and res.stderr.startswith("error: --port:"), res.stderr[-2000:]
+    assert res.stdout == "[]\n", res.stdout
+
+
 def test_port_in_use_starts_no_warm_up(monkeypatch):
     """The port is bound before the warm-up thread starts: a thread still inside torch when the
     process exits on the bind error aborted it (exit 134, "terminate called without an active exception")."""

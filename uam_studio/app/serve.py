@@ -11,6 +11,7 @@ cannot drive the app, not even through DNS rebinding (a name of its own that res
 from __future__ import annotations
 
 import contextlib
+import errno
 import logging
 import os
 import signal
@@ -156,17 +157,20 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
     naming a host of :func:`allowed_hosts` (``allow_origin`` adds names); others get 403. ``/liveness``
     answers once the server is up; ``/liveness?endpoint=/`` builds the app once first.
 
-    The port is bound first (:class:`OSError` if it cannot be; :class:`ValueError` for a bad
-    ``allow_origin`` before that), then the Dynaformer and the health population are loaded in a
-    background thread, so the first session does not wait for them.
+    The port is bound first (:class:`OSError` if it cannot be, within a second: :func:`check_can_listen`
+    runs before the app's imports; :class:`ValueError` for a bad ``allow_origin`` before that), then the
+    Dynaformer and the health population are loaded in a background thread, so the first session does
+    not wait for them.
     """
+    address = address or DEFAULT_ADDRESS
+    allowed_hosts(port, address, allow_origin)  # ValueError for a bad allow_origin, before binding
+    check_can_listen(address, port)
+
     import panel as pn
 
     from uam_studio.app.main import EXTENSIONS, TITLE, create_app
     from uam_studio.app.session import configure_server_threads
 
-    address = address or DEFAULT_ADDRESS
-    allowed_hosts(port, address, allow_origin)  # ValueError for a bad allow_origin, before binding
     configure_server_threads()
     pn.extension(*EXTENSIONS)
     server = pn.serve({"/": create_app}, port=port, address=address, show=show, title=TITLE, start=False,
@@ -180,6 +184,25 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
         server.io_loop.start()  # until Ctrl-C (panel's SIGINT handler stops the loop)
     finally:
         warm.join()  # a daemon thread still inside torch at interpreter exit aborts the process
+
+
+def check_can_listen(address: str, port: int) -> None:
+    """Bind, then release, each socket the server will listen on (``address``, ``port``; the options
+    Tornado binds with): :class:`OSError` now, as the server's own bind would give it, instead of after
+    the app's imports (seconds). Port 0 (any free port) is not checked."""
+    if port == 0:
+        return
+    for family, kind, proto, _, sockaddr in socket.getaddrinfo(address, port, type=socket.SOCK_STREAM,
+                                                               flags=socket.AI_PASSIVE):
+        with socket.socket(family, kind, proto) as sock:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            if family == socket.AF_INET6 and hasattr(socket, "IPPROTO_IPV6"):
+                sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, 1)
+            try:
+                sock.bind(sockaddr)
+            except OSError as err:  # as Tornado: a host without IPv6 still serves "localhost" on IPv4
+                if not (err.errno == errno.EADDRNOTAVAIL and address == "localhost" and sockaddr[0] == "::1"):
+                    raise
 
 
 def warm_up(compare: str | None = None) -> None:
