@@ -294,7 +294,7 @@ def _children(pid: int) -> list[int]:
 
 def test_every_process_of_a_two_process_server_refuses_a_foreign_host_and_allows_added_names(tmp_path):
     """``--num-procs 2``: the host guard is installed in each forked process (the kernel hands each of
-    the 16 connections to either process: every foreign one is refused, every own one served), and each
+    the 16 connections to either process: every foreign one is refused, every own one answered), and each
     ``--allow-origin`` adds exactly its name (a port given with it is that port only)."""
     import http.client
 
@@ -306,7 +306,7 @@ def test_every_process_of_a_two_process_server_refuses_a_foreign_host_and_allows
         codes = []
         for host in [f"evil.example:{port}"] * 12 + [f"127.0.0.1:{port}"] * 4:
             conn = http.client.HTTPConnection("127.0.0.1", port, timeout=120)
-            conn.request("GET", "/", headers={"Host": host})
+            conn.request("GET", "/liveness", headers={"Host": host})  # the guard is before every route
             codes.append(conn.getresponse().status)
             conn.close()
         added_codes = [_get(port, "/liveness", host) for host in
