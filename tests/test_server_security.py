@@ -26,7 +26,7 @@ pytest.importorskip("panel")
 from tornado.httpclient import HTTPClientError, HTTPRequest  # noqa: E402
 from tornado.websocket import websocket_connect  # noqa: E402
 
-from uam_studio.app.serve import allowed_hosts, split_host  # noqa: E402
+from uam_studio.app.serve import ServedApp, allowed_hosts, split_host  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 EVIL = "evil.example"
@@ -58,41 +58,11 @@ def _get(port: int, path: str, host: str, origin: str | None = None) -> int:
         conn.close()
 
 
-class _Server:
-    """``uam-studio serve --no-show --port P *args`` in a subprocess, up once ``/liveness`` answers."""
-
-    def __init__(self, tmp: Path, *args: str) -> None:
-        self.port = _free_port()
-        self.log = tmp / f"serve-{self.port}.log"
-        env = {**os.environ, "UAM_STUDIO_HOME": str(tmp / "home"), "PYTHONPATH": str(ROOT)}
-        with open(self.log, "w") as log:
-            self.proc = subprocess.Popen(_cli("serve", "--no-show", "--port", str(self.port), *args),
-                                         cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
-        deadline = time.monotonic() + 120
-        while True:
-            try:
-                if _get(self.port, "/liveness", f"127.0.0.1:{self.port}") == 200:
-                    return
-            except OSError:
-                pass
-            if self.proc.poll() is not None or time.monotonic() > deadline:
-                self.stop()
-                pytest.fail(f"uam-studio serve did not start: {self.log.read_text()[-2000:]}")
-            time.sleep(0.2)
-
-    def stop(self) -> None:
-        self.proc.terminate()
-        try:
-            self.proc.wait(20)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-
-
 @pytest.fixture(scope="module")
-def server(tmp_path_factory) -> Iterator[_Server]:
-    srv = _Server(tmp_path_factory.mktemp("serve"))
-    yield srv
-    srv.stop()
+def server(tmp_path_factory) -> Iterator[ServedApp]:
+    """``uam-studio serve --no-show`` on a free port (its process group ended after the module)."""
+    with ServedApp(tmp_path_factory.mktemp("serve"), timeout_s=120) as srv:
+        yield srv
 
 
 def _listeners(port: int) -> list[str]:
