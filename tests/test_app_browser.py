@@ -283,13 +283,13 @@ def test_retraining_curve_grows_another_session_replans_and_the_agent_is_selecta
         steps.locator("input").fill("1000000")
         steps.locator("input").press("Enter")
         steps.locator("input").press("Tab")  # commit the value before Start (else the 5000-step default may run)
+        _open(planner, app_url)  # loaded before the run starts: the run lasts only as long as the checks need
+        handle = planner.locator(".bk-input-group", has=planner.get_by_text("q_max (C)")).locator(".noUi-handle")
         trainer.locator(".uam-train-start button").click()
         trainer.locator(".uam-train-status").get_by_text("training 1000000 steps").wait_for()
         trainer.wait_for_function(f"() => ({JS_CURVE_LENGTH})('Destinations reached') > 0")
         lengths = [trainer.evaluate(JS_CURVE_LENGTH, "Destinations reached")]
 
-        _open(planner, app_url)
-        handle = planner.locator(".bk-input-group", has=planner.get_by_text("q_max (C)")).locator(".noUi-handle")
         handle.focus()
         for _ in range(4):  # 4 steps of 50 C
             handle.press("ArrowLeft")
