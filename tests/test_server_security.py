@@ -60,9 +60,12 @@ def _get(port: int, path: str, host: str, origin: str | None = None) -> int:
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory) -> Iterator[ServedApp]:
-    """``uam-studio serve --no-show`` on a free port (its process group ended after the module)."""
+    """``uam-studio serve --no-show`` on a free port (its process group ended after the module). ServedApp
+    ends it with SIGTERM: it must stop as on Ctrl-C, exit 0, no semaphore of its worker pools left behind."""
     with ServedApp(tmp_path_factory.mktemp("serve"), timeout_s=120) as srv:
         yield srv
+    log = srv.log_path.read_text()
+    assert srv.proc.returncode == 0 and "leaked" not in log, (srv.proc.returncode, log[-2000:])
 
 
 def _listeners(port: int) -> list[str]:

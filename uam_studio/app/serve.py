@@ -151,7 +151,7 @@ def quiet_closed_connections(loop: Any, context: dict[str, Any]) -> None:
 
 def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = None,
           allow_origin: Sequence[str] = (), num_procs: int = 1) -> None:
-    """Start a Panel server with the app at ``/`` and block until it is stopped (Ctrl-C).
+    """Start a Panel server with the app at ``/`` and block until it is stopped (Ctrl-C or SIGTERM).
 
     It listens on ``address`` (default ``127.0.0.1``: this machine only) and answers only requests
     naming a host of :func:`allowed_hosts` (``allow_origin`` adds names); others get 403. ``/liveness``
@@ -179,6 +179,9 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
     warm = threading.Thread(target=warm_up, daemon=True, name="uam-warm-up")
     warm.start()
     server.io_loop.asyncio_loop.set_exception_handler(quiet_closed_connections)
+    # SIGTERM (a service manager, ``kill``) stops the server as Ctrl-C does: panel's SIGINT handler ends the
+    # loop, the sessions and the comparison process close (a plain SIGTERM left semaphores behind)
+    signal.signal(signal.SIGTERM, signal.getsignal(signal.SIGINT))
     try:
         server.start()
         server.io_loop.start()  # until Ctrl-C (panel's SIGINT handler stops the loop)
