@@ -288,6 +288,8 @@ def test_every_process_of_a_two_process_server_refuses_a_foreign_host_and_allows
                     for origin in ("classroom.example", EVIL)]
         workers = _children(app.proc.pid)
     assert codes == [403] * 12 + [200] * 4, codes
+    # SIGTERM to the group: the forking process passes it on and exits 0 once its workers stopped cleanly
+    assert app.proc.returncode == 0 and "leaked" not in app.log_path.read_text(), app.log_path.read_text()[-2000:]
     assert added_codes == [200, 200, 403, 403] and added_ws == [101, 403], (added_codes, added_ws)
     assert len(workers) >= 2, workers
     alive = [pid for pid in workers if Path(f"/proc/{pid}").exists()

@@ -173,6 +173,8 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
 
     configure_server_threads()
     pn.extension(*EXTENSIONS)
+    if num_procs != 1:  # this process forks the workers (in pn.serve) and then only waits for them
+        signal.signal(signal.SIGTERM, _forward_to_workers)
     server = pn.serve({"/": create_app}, port=port, address=address, show=show, title=TITLE, start=False,
                       threaded=False, liveness=True, num_procs=num_procs)
     install_host_guard(server, allowed_hosts(server.port, address, allow_origin))
@@ -187,6 +189,23 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
         server.io_loop.start()  # until Ctrl-C (panel's SIGINT handler stops the loop)
     finally:
         warm.join()  # a daemon thread still inside torch at interpreter exit aborts the process
+
+
+def _child_pids(pid: int) -> list[int]:
+    """The processes ``pid`` started (Linux ``/proc``; empty elsewhere)."""
+    out: list[int] = []
+    with contextlib.suppress(OSError):
+        for task in Path(f"/proc/{pid}/task").iterdir():
+            out += [int(c) for c in (task / "children").read_text().split()]
+    return out
+
+
+def _forward_to_workers(signum: int, frame: Any) -> None:
+    """SIGTERM in the process that forked ``--num-procs`` workers: pass it on to each. They stop as on
+    Ctrl-C and exit 0, and Tornado's forking process then exits 0 (a worker that fails is restarted)."""
+    for pid in _child_pids(os.getpid()):
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGTERM)
 
 
 def check_can_listen(address: str, port: int) -> None:
