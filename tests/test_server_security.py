@@ -66,6 +66,9 @@ def server(tmp_path_factory) -> Iterator[ServedApp]:
         yield srv
     log = srv.log_path.read_text()
     assert srv.proc.returncode == 0 and "leaked" not in log, (srv.proc.returncode, log[-2000:])
+    # the websocket probes without Bokeh's subprotocol (test_websocket_own_origin_is_accepted): one line each
+    assert "Traceback" not in log, log[-3000:]
+    assert "websocket refused: Subprotocol header is not 'bokeh'" in log, log[-3000:]
 
 
 def _listeners(port: int) -> list[str]:

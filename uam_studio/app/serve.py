@@ -149,6 +149,22 @@ def quiet_closed_connections(loop: Any, context: dict[str, Any]) -> None:
     loop.default_exception_handler(context)
 
 
+class OneLineRefusedWebsockets(logging.Filter):
+    """For tornado's ``tornado.application`` log: a websocket that Bokeh refuses (no ``bokeh`` subprotocol,
+    no token, a bad signature, an expired session: a page left open overnight) is one warning line naming
+    the reason, not an "Uncaught exception" traceback."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        from bokeh.protocol.exceptions import ProtocolError
+
+        exc = record.exc_info[1] if record.exc_info else None
+        if isinstance(exc, ProtocolError):
+            record.msg, record.args = "websocket refused: %s", (exc,)
+            record.exc_info, record.exc_text = None, None
+            record.levelno, record.levelname = logging.WARNING, "WARNING"
+        return True
+
+
 def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = None,
           allow_origin: Sequence[str] = (), num_procs: int = 1) -> None:
     """Start a Panel server with the app at ``/`` and block until it is stopped (Ctrl-C or SIGTERM).
@@ -181,6 +197,7 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
     warm = threading.Thread(target=warm_up, daemon=True, name="uam-warm-up")
     warm.start()
     server.io_loop.asyncio_loop.set_exception_handler(quiet_closed_connections)
+    logging.getLogger("tornado.application").addFilter(OneLineRefusedWebsockets())
     # SIGTERM (a service manager, ``kill``) stops the server as Ctrl-C does: panel's SIGINT handler ends the
     # loop, the sessions and the comparison process close (a plain SIGTERM left semaphores behind)
     signal.signal(signal.SIGTERM, signal.getsignal(signal.SIGINT))
