@@ -298,3 +298,40 @@ def test_every_process_of_a_two_process_server_refuses_a_foreign_host_and_allows
     alive = [pid for pid in workers if Path(f"/proc/{pid}").exists()
              and Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"]
     assert not alive, alive  # the forked workers ended with the server
+
+
+def test_a_refused_websocket_is_one_warning_line():
+    """The filter on tornado's application log: Bokeh's ProtocolError (the reason a websocket is refused)
+    becomes one warning naming it, without the traceback; other records pass unchanged."""
+    import logging
+
+    from bokeh.protocol.exceptions import ProtocolError
+
+    from uam_studio.app.serve import OneLineRefusedWebsockets
+
+    def record(exc: BaseException) -> logging.LogRecord:
+        try:
+            raise exc
+        except type(exc):
+            return logging.LogRecord("tornado.application", logging.ERROR, __file__, 1, "Uncaught exception %s",
+                                     ("GET /ws",), sys.exc_info())
+
+    refused = record(ProtocolError("Token is expired."))
+    assert OneLineRefusedWebsockets().filter(refused)
+    assert (refused.getMessage(), refused.levelname, refused.exc_info) == (
+        "websocket refused: Token is expired.", "WARNING", None)
+    other = record(ValueError("a bug"))
+    assert OneLineRefusedWebsockets().filter(other)
+    assert other.levelname == "ERROR" and other.exc_info is not None and other.getMessage() == "Uncaught exception GET /ws"
+
+
+def test_child_pids_lists_the_processes_this_one_started():
+    from uam_studio.app.serve import _child_pids
+
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        assert child.pid in _child_pids(os.getpid())
+    finally:
+        child.kill()
+        child.wait()
+    assert child.pid not in _child_pids(os.getpid())
