@@ -25,6 +25,7 @@ from uam_studio.app.style import (
     NAME_OFFSET_PX,
     PHYSICS_COLOR,
     PREDICTED_COLOR,
+    legend_above,
     page_figure,
     window_height,
 )
@@ -175,9 +176,7 @@ class FlyView(pn.viewable.Viewer):
                                                               ("decision", "@decision")]))
         self.now_line = Span(location=0.0, dimension="height", line_color="black", line_width=1)
         fig.add_layout(self.now_line)
-        fig.add_layout(fig.legend[0], "above")
-        fig.legend.orientation = "horizontal"
-        fig.legend.margin, fig.legend.padding = 0, 4
+        legend_above(fig)
         self.volt_fig = fig
         self._draw_flight()
 

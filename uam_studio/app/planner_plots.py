@@ -29,6 +29,7 @@ from uam_studio.app.style import (
     NAME_OFFSET_PX,
     PHYSICS_COLOR,
     PREDICTED_COLOR,
+    legend_above,
     page_figure,
 )
 from uam_studio.planning.missions.mission import VERTIPORT
@@ -73,7 +74,7 @@ class PlannerPlots:
         fig = page_figure(frame_width=frame_px, frame_height=frame_px, x_range=Range1d(-half_km, half_km),
                           y_range=Range1d(-half_km, half_km), x_axis_label="x (km)", y_axis_label="y (km)",
                           min_border_left=10, min_border_right=10,
-                     title="Map (km): click to add, drag to move, select + Backspace to delete")
+                          title="Map (km): click to add, drag to move, select + Backspace to delete")
         fig.title.text_font_size = "9.5pt"
         leg_cols = ("x0", "y0", "x1", "y1", "color", "leg", "altitude_m")
         self._legs_src = ColumnDataSource({c: [] for c in (*leg_cols, "legend")})
@@ -149,8 +150,7 @@ class PlannerPlots:
                                                                 "altitude_m")})
         self._altitude_text = ColumnDataSource({"x": [], "y": [], "text": []})
         fig = page_figure(width=WIDE_MIN_PX, height=240, x_range=Range1d(0.4, 1.6), y_range=Range1d(0.0, 3300.0),
-                          y_axis_label="altitude (m)",
-                     title="Cruise altitude per leg (colour = charging cycle)")
+                          y_axis_label="altitude (m)", title="Cruise altitude per leg (colour = charging cycle)")
         bars = fig.quad(left="left", right="right", top="top", bottom="bottom", source=self._altitude_bars,
                         fill_color="color", line_color="white")
         fig.text("x", "y", text="text", source=self._altitude_text, text_font_size="8pt", text_color="#222222",
@@ -213,10 +213,9 @@ class PlannerPlots:
             ("predicted", {"t": [], "v": []}), ("eod", {"t": [], "v": []}),
             ("legs", {"x": [], "y0": [], "y1": []}), ("leg_names", {"x": [], "y": [], "text": []}))}
         fig = page_figure(height=VOLTAGE_HEIGHT_PX, width=None, sizing_mode="stretch_width", align="start",
-                          min_border_left=10, min_border_right=10, min_border_bottom=10, x_range=Range1d(0.0, 1.0),
-                     y_range=Range1d(2.9, 4.3),
-                     x_axis_label="time (min)", y_axis_label="voltage (V)", min_border_top=0,
-                     title="Voltage: physics (what happens) vs Dynaformer (predicted)")
+                          min_border_left=10, min_border_right=10, min_border_bottom=10, min_border_top=0,
+                          x_range=Range1d(0.0, 1.0), y_range=Range1d(2.9, 4.3), x_axis_label="time (min)",
+                          y_axis_label="voltage (V)", title="Voltage: physics (what happens) vs Dynaformer (predicted)")
         fig.title.text_font_size = "10pt"
         band = fig.varea("t", "low", "high", source=src["band"], fill_color="#ff7f0e", fill_alpha=0.35)
         for edge in ("low", "high"):
@@ -289,8 +288,7 @@ class PlannerPlots:
         fig.add_layout(ColorBar(color_mapper=mapper.transform, title="R0 (ohm)", width=12), "right")
         fig.add_tools(HoverTool(renderers=[dots], tooltips=[("PC1", "@PC1{0.00}"), ("PC2", "@PC2{0.00}"),
                                                              ("R0 (ohm)", "@r0{0.000}"), ("q_max (C)", "@q_max{0}")]))
-        fig.add_layout(fig.legend[0], "above")
-        fig.legend.orientation, fig.legend.margin, fig.legend.padding = "horizontal", 0, 4
+        legend_above(fig)
         return fig
 
     def _draw_health(self, data: tuple[float, float] | None) -> None:

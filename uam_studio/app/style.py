@@ -52,3 +52,10 @@ def page_figure(**kwargs: Any) -> Any:
     fig = figure(tools=PAGE_TOOLS, **kwargs)
     fig.toolbar.active_scroll = None
     return fig
+
+
+def legend_above(fig: Any) -> None:
+    """Move the legend that ``fig``'s ``legend_label`` glyphs made above the plot, in one row, without
+    the empty band Bokeh leaves around it."""
+    fig.add_layout(fig.legend[0], "above")
+    fig.legend.orientation, fig.legend.margin, fig.legend.padding = "horizontal", 0, 4
