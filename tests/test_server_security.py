@@ -26,7 +26,7 @@ pytest.importorskip("panel")
 from tornado.httpclient import HTTPClientError, HTTPRequest  # noqa: E402
 from tornado.websocket import websocket_connect  # noqa: E402
 
-from uam_studio.app.serve import ServedApp, allowed_hosts, split_host  # noqa: E402
+from uam_studio.app.serve import ServedApp, _child_pids, allowed_hosts, split_host  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 EVIL = "evil.example"
@@ -255,19 +255,6 @@ def test_num_procs_out_of_range_is_one_line(value, capsys):
     assert err.startswith("error: --num-procs:") and "[0, 64]" in err and len(err.splitlines()) == 1, err
 
 
-def _children(pid: int) -> list[int]:
-    """The processes whose parent is ``pid`` (from /proc)."""
-    out = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().split(")")[-1].split()
-        except OSError:
-            continue
-        if int(fields[1]) == pid:
-            out.append(int(stat.parent.name))
-    return out
-
-
 def test_every_process_of_a_two_process_server_refuses_a_foreign_host_and_allows_added_names(tmp_path):
     """``--num-procs 2``: the host guard is installed in each forked process (the kernel hands each of
     the 16 connections to either process: every foreign one is refused, every own one answered), and each
@@ -289,7 +276,7 @@ def test_every_process_of_a_two_process_server_refuses_a_foreign_host_and_allows
                        (f"classroom.example:{port}", "10.0.0.5:8080", f"10.0.0.5:{port}", f"{EVIL}:{port}")]
         added_ws = [_ws(port, f"classroom.example:{port}", f"http://{origin}:{port}")
                     for origin in ("classroom.example", EVIL)]
-        workers = _children(app.proc.pid)
+        workers = _child_pids(app.proc.pid)
     assert codes == [403] * 12 + [200] * 4, codes
     # SIGTERM to the group: the forking process passes it on and exits 0 once its workers stopped cleanly
     assert app.proc.returncode == 0 and "leaked" not in app.log_path.read_text(), app.log_path.read_text()[-2000:]
@@ -326,8 +313,6 @@ def test_a_refused_websocket_is_one_warning_line():
 
 
 def test_child_pids_lists_the_processes_this_one_started():
-    from uam_studio.app.serve import _child_pids
-
     child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
     try:
         assert child.pid in _child_pids(os.getpid())
