@@ -76,10 +76,10 @@ def not_white(rho: np.ndarray, n: np.ndarray, sse_v2: np.ndarray | None = None, 
     rho = np.asarray(rho, float)
     out = rho * np.sqrt(np.maximum(np.asarray(n, float), 1.0)) > WHITE_Z
     if noise_v is not None and sse_v2 is not None and dof is not None:
-        from scipy.stats import chi2
+        from scipy.special import chdtri  # chi-square quantile, 1 - p: scipy.stats's chi2.ppf(1 - p, d)
 
         d = np.maximum(np.asarray(dof, float), 1.0)
-        out = out | (np.asarray(sse_v2, float) / noise_v ** 2 > chi2.ppf(1.0 - NOISE_P, d))
+        out = out | (np.asarray(sse_v2, float) / noise_v ** 2 > chdtri(d, NOISE_P))
     return out
 
 

@@ -140,6 +140,8 @@ NASA_18650 = Cell("NASA 18650 (Daigle & Kulkarni 2013)", DEFAULT_CELL, DEFAULT_Q
 
 # The Sony-Murata US18650VTC6 (3.0 Ah NMC/graphite) of the CMU eVTOL dataset, identified by
 # ``uam-studio identify vtc6 --data PATH`` (its output, pasted): the card is pretrained/vtc6_cell.md.
+# The fit is flat along its weakly identified terms (the activations, the fastest time constant), whose
+# printed digits move with the solver's round-off; tests/test_real_cells.py holds a rerun to this set.
 # Identified from cell VAH07's first C/5 discharge and first four missions (30 s samples) and cell
 # VAH01's 1 Hz mission; the open-circuit-voltage curve is the positive electrode's (u0p, ap).
 # The VTC6 fleet: q_max in proportion to the C/5 capacities measured over the lives of the dataset's
