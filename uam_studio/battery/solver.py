@@ -39,15 +39,15 @@ def _recurrence(drive: np.ndarray, x0: np.ndarray, a: float) -> np.ndarray:
     """x[1..T] of x[k+1] = a x[k] + drive[k] for every row of ``drive`` [B, T], from x[0] = ``x0`` [B].
 
     One unit lower-bidiagonal solve (LAPACK ``dtbtrs``, every row a right-hand side): row k of the system
-    is x[k+1] - a x[k] = drive[k], with a x[0] moved to the first right-hand side."""
+    is x[k+1] - a x[k] = drive[k], with a x[0] moved to the first right-hand side. ``drive`` must be a
+    fresh C-ordered float array: the solve overwrites it (a copy of a [300, 600] array doubles the time)."""
     batch, n_steps = drive.shape
     if n_steps == 0:
         return np.empty((batch, 0))
-    rhs = np.array(drive, dtype=float)  # a copy: the solve overwrites it
-    rhs[:, 0] += a * np.asarray(x0, dtype=float)
+    drive[:, 0] += a * np.asarray(x0, dtype=float)
     band = np.empty((n_steps, 2)).T  # Fortran order; row 0 (the unit diagonal) is not read
     band[1] = -a
-    out, info = dtbtrs(band, rhs.T, uplo="L", diag="U", overwrite_b=1)
+    out, info = dtbtrs(band, drive.T, uplo="L", diag="U", overwrite_b=1)
     if info != 0:  # a unit-diagonal system is never singular: only a malformed call gets here
         raise RuntimeError(f"dtbtrs failed with info={info}")
     return out.T
@@ -56,7 +56,7 @@ def _recurrence(drive: np.ndarray, x0: np.ndarray, a: float) -> np.ndarray:
 def _lag(inputs: np.ndarray, x0: np.ndarray, tau_s: float, dt_s: float) -> np.ndarray:
     """Euler first-order lag x[k+1] = x[k] + dt (u[k] - x[k]) / tau; returns x[1..T], shape [B, T]."""
     gain = dt_s / tau_s
-    return _recurrence(gain * inputs, x0, 1.0 - gain)
+    return _recurrence(np.multiply(gain, inputs, dtype=float), x0, 1.0 - gain)
 
 
 def _shift(seq_1_to_t: np.ndarray, x0: np.ndarray) -> np.ndarray:
