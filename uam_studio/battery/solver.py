@@ -35,28 +35,29 @@ _PICARD_TOL_K = 1e-5
 _PICARD_MAX_ITER = 30
 
 
-def _recurrence(drive: np.ndarray, x0: np.ndarray, a: float) -> np.ndarray:
-    """x[1..T] of x[k+1] = a x[k] + drive[k] for every row of ``drive`` [B, T], from x[0] = ``x0`` [B].
+def _solve_recurrence(rhs: np.ndarray, a: float) -> np.ndarray:
+    """Solve x[0] = rhs[0], x[k] = a x[k-1] + rhs[k] along each row of ``rhs`` [B, T+1] (C-ordered; the
+    solve overwrites it): x[0..T], shape [B, T+1].
 
-    One unit lower-bidiagonal solve (LAPACK ``dtbtrs``, every row a right-hand side): row k of the system
-    is x[k+1] - a x[k] = drive[k], with a x[0] moved to the first right-hand side. ``drive`` must be a
-    fresh C-ordered float array: the solve overwrites it (a copy of a [300, 600] array doubles the time)."""
-    batch, n_steps = drive.shape
-    if n_steps == 0:
-        return np.empty((batch, 0))
-    drive[:, 0] += a * np.asarray(x0, dtype=float)
-    band = np.empty((n_steps, 2)).T  # Fortran order; row 0 (the unit diagonal) is not read
+    One unit lower-bidiagonal system, every row a right-hand side (LAPACK ``dtbtrs``): forward
+    substitution, the same arithmetic as the Euler steps."""
+    n = rhs.shape[1]
+    band = np.empty((n, 2)).T  # Fortran order; row 0 (the unit diagonal) is not read
     band[1] = -a
-    out, info = dtbtrs(band, drive.T, uplo="L", diag="U", overwrite_b=1)
+    out, info = dtbtrs(band, rhs.T, uplo="L", diag="U", overwrite_b=1)
     if info != 0:  # a unit-diagonal system is never singular: only a malformed call gets here
         raise RuntimeError(f"dtbtrs failed with info={info}")
     return out.T
 
 
 def _lag(inputs: np.ndarray, x0: np.ndarray, tau_s: float, dt_s: float) -> np.ndarray:
-    """Euler first-order lag x[k+1] = x[k] + dt (u[k] - x[k]) / tau; returns x[1..T], shape [B, T]."""
+    """Euler first-order lag x[k+1] = x[k] + dt (u[k] - x[k]) / tau from x[0] = ``x0`` [B], inputs u
+    [B, T]: x[0..T], shape [B, T+1] (x[1..T] is ``[:, 1:]``, x[0..T-1] is ``[:, :-1]``)."""
     gain = dt_s / tau_s
-    return _recurrence(np.multiply(gain, inputs, dtype=float), x0, 1.0 - gain)
+    rhs = np.empty((inputs.shape[0], inputs.shape[1] + 1))
+    rhs[:, 0] = x0
+    np.multiply(gain, inputs, out=rhs[:, 1:])
+    return _solve_recurrence(rhs, 1.0 - gain)
 
 
 def _shift(seq_1_to_t: np.ndarray, x0: np.ndarray) -> np.ndarray:
@@ -86,10 +87,13 @@ def integrate_current(current: np.ndarray, x0: BatteryState, q_total: np.ndarray
     # Both gaps share one recurrence: -gap_p obeys gap_n's, so one solve on the stacked rows
     # [current; current] from [gap_n0; -gap_p0] gives both.
     batch = current.shape[0]
-    drive = dt * inv_vs * current
-    gaps = _recurrence(np.concatenate([drive, drive]), np.concatenate([gap_n0, -gap_p0]), a_diff)
-    gap_n = _shift(gaps[:batch], gap_n0)  # d[0..T-1]
-    gap_p = _shift(-gaps[batch:], gap_p0)
+    rhs = np.empty((2 * batch, current.shape[1] + 1))
+    rhs[:batch, 0], rhs[batch:, 0] = gap_n0, -gap_p0
+    np.multiply(dt * inv_vs, current, out=rhs[:batch, 1:])
+    rhs[batch:, 1:] = rhs[:batch, 1:]
+    gaps = _solve_recurrence(rhs, a_diff)
+    gap_n = gaps[:batch, :-1]  # d[0..T-1]
+    gap_p = -gaps[batch:, :-1]
     flux_n = dt * gap_n / tdiff
     flux_p = dt * gap_p / tdiff
     qnb = x0.qnb[:, None] - np.cumsum(flux_n, axis=1)
@@ -97,26 +101,24 @@ def integrate_current(current: np.ndarray, x0: BatteryState, q_total: np.ndarray
     qpb = x0.qpb[:, None] - np.cumsum(flux_p, axis=1)
     qps = x0.qps[:, None] + np.cumsum(flux_p + dt * current, axis=1)
 
-    vo = _lag(current * r0[:, None], x0.vo, cell.t_ohmic_s, dt)
+    vo = _lag(current * r0[:, None], x0.vo, cell.t_ohmic_s, dt)  # [B, T+1], as every lag below
 
     # Overpotential gains at the start of each step (they need x[k], k = 0..T-1).
     q_surface_max = (q_total * cell.vol_s_fraction)[:, None]
     xns_k, xps_k = surface_fractions(_shift(qns, x0.qns), _shift(qps, x0.qps), q_surface_max)
     gn, gp = overpotential_gains(current, xns_k, xps_k, cell)
-    vo_k = _shift(vo, x0.vo)
 
     tb_k = np.broadcast_to(x0.tb[:, None], current.shape).copy()
     heat_scale = cell.thermal_tau_s / cell.thermal_mass
     for _ in range(_PICARD_MAX_ITER):
         if cell.temperature_dependent:  # R0 and the rate constants follow the temperature iterate
             vo = _lag(current * r0[:, None] * cell.r0_factor(tb_k), x0.vo, cell.t_ohmic_s, dt)
-            vo_k = _shift(vo, x0.vo)
             gn, gp = overpotential_gains(current, xns_k, xps_k, cell, cell.rate_factor(tb_k))
         vsn = _lag(gn * tb_k, x0.vsn, cell.t_sn_s, dt)
         vsp = _lag(gp * tb_k, x0.vsp, cell.t_sp_s, dt)
-        eta_k = vo_k + _shift(vsn, x0.vsn) + _shift(vsp, x0.vsp)
+        eta_k = vo[:, :-1] + vsn[:, :-1] + vsp[:, :-1]
         tb = _lag(heat_scale * eta_k * current + cell.t_ambient_k, x0.tb, cell.thermal_tau_s, dt)
-        tb_next = _shift(tb, x0.tb)
+        tb_next = tb[:, :-1]
         converged = not np.any(np.abs(tb_next - tb_k) > _PICARD_TOL_K)  # NaN-safe
         tb_k = tb_next
         if converged:
@@ -124,7 +126,7 @@ def integrate_current(current: np.ndarray, x0: BatteryState, q_total: np.ndarray
             # the voltage error is < tol * R/(F alpha) * asinh(...) ~ 1e-11 V.
             break
 
-    states = {"tb": tb, "vo": vo, "vsn": vsn, "vsp": vsp, "qnb": qnb, "qns": qns, "qpb": qpb, "qps": qps}
+    states = {"tb": tb[:, 1:], "vo": vo[:, 1:], "vsn": vsn[:, 1:], "vsp": vsp[:, 1:], "qnb": qnb, "qns": qns, "qpb": qpb, "qps": qps}
     voltage = output_voltage(states, q_total[:, None], cell)
     return voltage, states
 
