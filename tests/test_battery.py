@@ -16,15 +16,15 @@ from uam_studio.errors import InputError
 from uam_studio.flight import leg_current
 
 
-def _stepwise_voltage(current, q_max, r0, dt=1.0):
+def _stepwise_voltage(current, q_max, r0, dt=1.0, cell=DEFAULT_CELL):
     """Plain step-by-step Euler loop: the naive reference for the vectorised solver."""
     q = np.atleast_1d(float(q_max))
-    x = full_charge(q)
-    q_total = DEFAULT_CELL.q_total(q)
+    x = full_charge(q, cell)
+    q_total = cell.q_total(q)
     out = []
     for i in current:
-        x = step(x, np.atleast_1d(i), q_total, np.atleast_1d(r0), dt, DEFAULT_CELL)
-        out.append(output_voltage(x.__dict__, q_total, DEFAULT_CELL)[0])
+        x = step(x, np.atleast_1d(i), q_total, np.atleast_1d(r0), dt, cell)
+        out.append(output_voltage(x.__dict__, q_total, cell)[0])
     return np.array(out)
 
 
@@ -32,11 +32,14 @@ def flight_profile():
     return np.concatenate([leg_current(40.0, 1000, 13), leg_current(30.0, 500, -26), np.zeros(30)])
 
 
-@pytest.mark.parametrize("q_max,r0", [(5000, 0.017), (8000, 0.3), (6500, 0.25)])
-def test_vectorised_solver_equals_stepwise_euler(q_max, r0):
+@pytest.mark.parametrize("q_max,r0,cell", [(5000, 0.017, DEFAULT_CELL), (8000, 0.3, DEFAULT_CELL),
+                                          (6500, 0.25, DEFAULT_CELL), (10900, 0.021, VTC6_PARAMS)])
+def test_vectorised_solver_equals_stepwise_euler(q_max, r0, cell):
+    """The time-vectorised solver against the plain Euler loop; the VTC6 set's R0 and rate constants
+    follow the cell's temperature (the Picard iteration's temperature-dependent branch)."""
     cur = flight_profile()[:2500]
-    res = simulate(cur, q_max=q_max, r0=r0)
-    ref = _stepwise_voltage(cur, q_max, r0)
+    res = simulate(cur, q_max=q_max, r0=r0, cell=cell)
+    ref = _stepwise_voltage(cur, q_max, r0, cell=cell)
     n = int(res.valid.sum())
     assert n > 100
     assert np.max(np.abs(res.voltage_v[:n] - ref[:n])) < 1e-9
