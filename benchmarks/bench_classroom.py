@@ -29,7 +29,7 @@ import numpy as np
 from tornado.httpclient import HTTPRequest
 from tornado.websocket import websocket_connect
 
-from uam_studio.app.serve import ServedApp
+from uam_studio.app.serve import ServedApp, child_pids
 
 TOKEN = re.compile(r'"token":\s*"([^"]+)"')
 
@@ -75,12 +75,11 @@ def rss_mb(pid: int) -> float:
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
         if line.startswith("VmRSS:"):
             total += int(line.split()[1]) / 1024.0
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        for child in (task / "children").read_text().split():
-            try:
-                total += rss_mb(int(child))
-            except (OSError, ValueError):
-                pass
+    for child in child_pids(pid):
+        try:
+            total += rss_mb(child)
+        except (OSError, ValueError):  # the child ended meanwhile
+            pass
     return total
 
 

@@ -26,7 +26,7 @@ pytest.importorskip("panel")
 from tornado.httpclient import HTTPClientError, HTTPRequest  # noqa: E402
 from tornado.websocket import websocket_connect  # noqa: E402
 
-from uam_studio.app.serve import ServedApp, _child_pids, allowed_hosts, split_host  # noqa: E402
+from uam_studio.app.serve import ServedApp, allowed_hosts, child_pids, split_host  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 EVIL = "evil.example"
@@ -276,7 +276,7 @@ def test_every_process_of_a_two_process_server_refuses_a_foreign_host_and_allows
                        (f"classroom.example:{port}", "10.0.0.5:8080", f"10.0.0.5:{port}", f"{EVIL}:{port}")]
         added_ws = [_ws(port, f"classroom.example:{port}", f"http://{origin}:{port}")
                     for origin in ("classroom.example", EVIL)]
-        workers = _child_pids(app.proc.pid)
+        workers = child_pids(app.proc.pid)
     assert codes == [403] * 12 + [200] * 4, codes
     # SIGTERM to the group: the forking process passes it on and exits 0 once its workers stopped cleanly
     assert app.proc.returncode == 0 and "leaked" not in app.log_path.read_text(), app.log_path.read_text()[-2000:]
@@ -315,8 +315,8 @@ def test_a_refused_websocket_is_one_warning_line():
 def test_child_pids_lists_the_processes_this_one_started():
     child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
     try:
-        assert child.pid in _child_pids(os.getpid())
+        assert child.pid in child_pids(os.getpid())
     finally:
         child.kill()
         child.wait()
-    assert child.pid not in _child_pids(os.getpid())
+    assert child.pid not in child_pids(os.getpid())

@@ -208,7 +208,7 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
         warm.join()  # a daemon thread still inside torch at interpreter exit aborts the process
 
 
-def _child_pids(pid: int) -> list[int]:
+def child_pids(pid: int) -> list[int]:
     """The processes ``pid`` started (Linux ``/proc``; empty elsewhere)."""
     out: list[int] = []
     with contextlib.suppress(OSError):
@@ -220,7 +220,7 @@ def _child_pids(pid: int) -> list[int]:
 def _forward_to_workers(signum: int, frame: Any) -> None:
     """SIGTERM in the process that forked ``--num-procs`` workers: pass it on to each. They stop as on
     Ctrl-C and exit 0, and Tornado's forking process then exits 0 (a worker that fails is restarted)."""
-    for pid in _child_pids(os.getpid()):
+    for pid in child_pids(os.getpid()):
         with contextlib.suppress(ProcessLookupError):
             os.kill(pid, signal.SIGTERM)
 
