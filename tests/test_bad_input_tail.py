@@ -218,7 +218,7 @@ def test_leg_profile_caps_its_samples():
     assert len(leg_profile(50.0, 1000.0, 0.0, dt_s=0.01).time_s) > 100_000  # fine steps still work
 
 
-def test_weights_of_nan_are_refused(tmp_path):
+def test_weights_of_nan_are_refused(tmp_path, capsys):
     from uam_studio.dynaformer.artifact import WeightsError, load_artifact
 
     blob = torch.load(ROOT / "pretrained" / "dynaformer.pt", map_location="cpu", weights_only=True)
@@ -228,19 +228,18 @@ def test_weights_of_nan_are_refused(tmp_path):
     torch.save(blob, bad)
     with pytest.raises(WeightsError, match="NaN or inf"):
         load_artifact(bad)
-    code = subprocess.run([sys.executable, "-m", "uam_studio.cli", "evaluate", "dynaformer", "--weights",
-                           str(bad), "--n", "10", "--json"], capture_output=True, text=True, timeout=300)
-    assert code.returncode == 2 and code.stderr.startswith("error: weights") and "NaN" in code.stderr
-    assert "NaN" not in code.stdout
+    code = main(["evaluate", "dynaformer", "--weights", str(bad), "--n", "10", "--json"])
+    out = capsys.readouterr()
+    assert code == 2 and out.err.startswith("error: weights") and "NaN" in out.err
+    assert "NaN" not in out.out
 
 
-def test_mismatched_scenario_note_is_not_doubled(tmp_path):
+def test_mismatched_scenario_note_is_not_doubled(tmp_path, capsys):
     d = _example()
     d["scenario"] = "multi_charge"
     p = tmp_path / "m.json"
     p.write_text(json.dumps(d))
     agent = ROOT / "pretrained" / "dqn_single_charge.zip"
-    out = subprocess.run([sys.executable, "-m", "uam_studio.cli", "plan", str(p), "--policy", "dqn",
-                          "--agent", str(agent)], capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stderr
-    assert "note: note:" not in out.stdout and "note: the agent was trained for scenario" in out.stdout
+    assert main(["plan", str(p), "--policy", "dqn", "--agent", str(agent)]) == 0
+    out = capsys.readouterr().out
+    assert "note: note:" not in out and "note: the agent was trained for scenario" in out

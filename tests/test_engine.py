@@ -42,7 +42,7 @@ def test_the_paper_findings_on_a_running_scheduler_equal_the_same_run_here():
 
     small = {"steps": 300, "n_eval": 2, "n_missions": 2}
     here = paper_findings(workers=0, **small)
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
                       silence_logs=40) as cluster:
         there = paper_findings(address=cluster.scheduler_address, **small)
     assert there == here

@@ -220,15 +220,19 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
                           timeout=300, cwd=ROOT)
 
 
-def test_cli_fly_json_and_log():
-    out = _cli(str(EXAMPLE), "--seed", "2", "--json")
-    assert out.returncode == 0, out.stderr
-    d = json.loads(out.stdout)
+def test_cli_fly_json_and_log(capsys):
+    """Through ``uam_studio.cli.main`` in this process (the console script's own process is the bad-input
+    case below and tests/test_cli.py's)."""
+    from uam_studio.cli import main
+
+    assert main(["fly", str(EXAMPLE), "--seed", "2", "--json"]) == 0
+    out = capsys.readouterr()
+    d = json.loads(out.out)
     assert d["route"][-1] == "vertiport" and d["reached_priority"] >= 1 and "time_s" not in d
-    log = _cli(str(EXAMPLE), "--seed", "2", "--event", "wind+20@1500")
-    assert log.returncode == 0, log.stderr
-    assert "t=    20 s at vertiport: plan" in log.stdout and "hindsight oracle" in log.stdout
-    assert "wind+20@1500" in log.stdout
+    assert main(["fly", str(EXAMPLE), "--seed", "2", "--event", "wind+20@1500"]) == 0
+    log = capsys.readouterr().out
+    assert "t=    20 s at vertiport: plan" in log and "hindsight oracle" in log
+    assert "wind+20@1500" in log
 
 
 @pytest.mark.parametrize("args, field, own_process", [
