@@ -3,6 +3,7 @@ context is the model plus white noise, wider and flagged where it is not (issue 
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -80,6 +81,71 @@ def test_bandwidth_is_a_valid_lag_and_grows_with_rho(rho, n):
     lag = andrews_bandwidth(rho, n)
     assert 1 <= lag <= max(n - 1, 1)
     assert andrews_bandwidth(min(max(rho, 0.0) + 0.1, 0.99), n) >= lag
+
+
+@pytest.mark.parametrize("rho, n, lag", [(0.5, 1000, 14), (0.3, 50, 4), (0.7, 2000, 29), (0.9, 300, 35),
+                                         (0.0, 500, 1), (-0.4, 500, 1), (0.99, 10, 9), (0.999, 10, 9),
+                                         (0.99, 2, 1)])
+def test_bandwidth_is_andrews_ar1_plug_in(rho, n, lag):
+    """Andrews (1991), Bartlett kernel: ceil(1.1447 (alpha n)^(1/3)), alpha = 4 rho^2 / ((1 - rho)^2
+    (1 + rho)^2), at least 1 and at most n - 1 (the lags worked out by hand: rho 0.5, n 1000: alpha
+    1.778, (1778)^(1/3) 12.11, x 1.1447 = 13.87 -> 14)."""
+    assert andrews_bandwidth(rho, n) == lag
+
+
+def _newey_west(jac: np.ndarray, r: np.ndarray, lags: int) -> np.ndarray:
+    """Newey-West's covariance by its definition, one product at a time (the reference)."""
+    n, p = jac.shape
+    s = np.zeros((p, p))
+    for t in range(n):
+        s += r[t] ** 2 * np.outer(jac[t], jac[t])
+        for k in range(1, min(lags, t) + 1):
+            w = 1.0 - k / (lags + 1.0)
+            s += w * r[t] * r[t - k] * (np.outer(jac[t], jac[t - k]) + np.outer(jac[t - k], jac[t]))
+    a_inv = np.linalg.inv(jac.T @ jac)
+    return a_inv @ s @ a_inv
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(4, 40), rho=st.floats(0.0, 0.99))
+def test_hac_covariance_is_newey_west_over_the_counted_samples(seed, n, rho):
+    rng = np.random.default_rng(seed)
+    jac = np.column_stack([np.ones(n), rng.normal(size=n)])
+    r = rng.normal(size=n)
+    mask = rng.random(n) < 0.8
+    mask[:3] = True  # at least three counted samples for two parameters
+    got = hac_covariance(jac, r, mask, rho)
+    want = _newey_west(jac[mask], r[mask], andrews_bandwidth(rho, int(mask.sum())))
+    assert got is not None and np.allclose(got, want, rtol=1e-9, atol=0.0)
+    assert np.array_equal(got, got.T)
+
+
+def test_hac_covariance_is_none_where_the_samples_do_not_determine_the_fit():
+    jac = np.column_stack([np.ones(3), np.arange(3.0)])
+    assert hac_covariance(jac[:2], np.ones(2), np.ones(2, bool), 0.5) is None  # 2 samples, 2 parameters
+    assert hac_covariance(jac, np.ones(3), np.array([True, True, False]), 0.5) is None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # refused before any arithmetic: no overflow warning either
+        assert hac_covariance(jac, np.array([1.0, np.inf, 1.0]), np.ones(3, bool), 0.5) is None
+        assert hac_covariance(np.where(jac == 2.0, np.nan, jac), np.ones(3), np.ones(3, bool), 0.5) is None
+    assert hac_covariance(jac, np.array([1.0, -1.0, 0.5]), np.ones(3, bool), 0.5) is not None
+
+
+def test_excess_factor_is_scale_free_and_one_where_it_cannot_be_judged():
+    """The largest ratio in any direction, the same at the scale of R0's variance (1e-8 ohm^2) as of
+    q_max's (1e4 C^2); 1 where the other covariance is missing, smaller, or not a number."""
+    for scale in (1e-20, 1e-8, 1.0, 1e4):
+        ref = scale * np.diag([1.0, 4.0])
+        assert excess_factor(ref, scale * np.diag([3.0, 4.0])) == pytest.approx(3.0, rel=1e-9)
+    rot = np.array([[np.cos(0.3), -np.sin(0.3)], [np.sin(0.3), np.cos(0.3)]])
+    assert excess_factor(np.eye(2), rot @ np.diag([5.0, 0.1]) @ rot.T) == pytest.approx(5.0, rel=1e-9)
+    assert excess_factor(np.eye(2), np.array([[np.nan, 0.0], [0.0, 1.0]])) == 1.0
+
+
+def test_flags_are_described_one_sentence_each():
+    both = describe_flags((FLAG_MISFIT, FLAG_OUTSIDE_FLEET))
+    assert both == describe_flags((FLAG_MISFIT,)) + " " + describe_flags((FLAG_OUTSIDE_FLEET,))
+    assert both.count(". ") == 1 and both.endswith(".") and describe_flags(()) == ""
 
 
 def test_hac_covariance_holds_the_spread_of_a_fit_with_correlated_errors():

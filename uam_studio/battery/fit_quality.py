@@ -96,12 +96,12 @@ def hac_covariance(jac: np.ndarray, residual_v: np.ndarray, mask: np.ndarray, rh
     """The HAC (Newey-West) covariance A^-1 S A^-1 of a least-squares fit's parameters: ``jac`` [T, P]
     (V per parameter unit), ``residual_v`` [T] (V), ``mask`` [T] (the counted samples), ``rho`` the
     residuals' lag-1 autocorrelation (for the bandwidth, :func:`andrews_bandwidth`). None when the
-    counted samples do not determine the parameters."""
+    counted samples do not determine the parameters or hold a value that is not a number."""
     m = np.asarray(mask, bool)
     j = np.asarray(jac, float)[m]
     r = np.asarray(residual_v, float)[m]
     n = r.size
-    if n <= j.shape[1]:
+    if n <= j.shape[1] or not (np.all(np.isfinite(j)) and np.all(np.isfinite(r))):
         return None
     u = j * r[:, None]
     s = u.T @ u
