@@ -733,6 +733,27 @@ def test_comparison_in_a_child_process():
     runner._proc.terminate()
 
 
+def test_a_closed_comparison_runner_starts_no_process():
+    """The server's last step closes the runners (``serve``): a task that comes after gets an error row,
+    not kept for other sessions, and no comparison process is started while the server exits."""
+    import multiprocessing
+
+    from uam_studio.app.comparison import ComparisonRunner, cached_row
+    from uam_studio.app.plans import PlanRequest
+
+    before = {p.pid for p in multiprocessing.active_children()}  # an earlier test's child may be ending
+    runner = ComparisonRunner("process")
+    runner.close()
+    runner.start()
+    mission = mission_from_dict({**EXAMPLE_MISSION, "name": "Closed"})
+    got = []
+    runner.submit("t", [(PlanRequest(mission, "greedy"), got.append)])
+    assert runner.wait_idle(30)
+    assert [r["status"] for r in got] == ["error"] and "server is stopping" in got[0]["error"], got
+    assert [p for p in multiprocessing.active_children() if p.pid not in before] == []
+    assert cached_row(PlanRequest(mission, "greedy")) is None
+
+
 def test_retrain_progress_text_and_oracle_reference():
     planner = _state()
     rs = RetrainState(source="map", compare="inline", runner="thread", steps=200)

@@ -210,6 +210,7 @@ class ComparisonRunner:
         self._proc: Any = None
         self._requests: Any = None
         self._results: Any = None
+        self._closed = False
         self.busy = False
 
     def submit(self, owner: Any, tasks: list[tuple[PlanRequest, Callable[[dict[str, Any]], None]]]) -> None:
@@ -241,8 +242,19 @@ class ComparisonRunner:
             with self._cv:
                 self._ensure_process()
 
+    def close(self) -> None:
+        """Stop for good (the server is stopping): drop every waiting task and start no child process
+        again. A task already running ends with an error row once its child is gone; the child itself
+        (a daemon) ends with this process. Without this, a child killed with the server was started
+        again by the next waiting task while the process exited, and that child's queues' semaphores
+        outlived it (a "leaked semaphore" warning)."""
+        with self._cv:
+            self._closed = True
+            self._pending.clear()
+            self._cv.notify_all()
+
     def _ensure_process(self) -> None:
-        if self._proc is not None and self._proc.is_alive():
+        if self._closed or (self._proc is not None and self._proc.is_alive()):
             return
 
         ctx = multiprocessing.get_context("spawn")  # no fork of a threaded server
@@ -288,6 +300,8 @@ class ComparisonRunner:
         with self._cv:
             self._ensure_process()
             proc, requests, results = self._proc, self._requests, self._results
+        if proc is None or not proc.is_alive():
+            return {"status": "error", "error": "comparison failed: the server is stopping"}
         requests.put((req.mission, req.policy))
         while True:
             try:
@@ -319,6 +333,15 @@ def comparison_runner(mode: str) -> ComparisonRunner:
         if mode not in _RUNNERS:
             _RUNNERS[mode] = ComparisonRunner(mode)
         return _RUNNERS[mode]
+
+
+def close_comparisons() -> None:
+    """Close every :class:`ComparisonRunner` this process has (:meth:`ComparisonRunner.close`): the
+    server's last step, so that none starts a child process while the process exits."""
+    with _RUNNERS_LOCK:
+        runners = list(_RUNNERS.values())
+    for runner in runners:
+        runner.close()
 
 
 def cancel_comparisons(mode: str, owner: Any) -> None:

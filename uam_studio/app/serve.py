@@ -205,6 +205,9 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
         server.start()
         server.io_loop.start()  # until Ctrl-C (panel's SIGINT handler stops the loop)
     finally:
+        from uam_studio.app.comparison import close_comparisons
+
+        close_comparisons()  # no comparison process started again while this one exits
         warm.join()  # a daemon thread still inside torch at interpreter exit aborts the process
 
 
