@@ -58,15 +58,16 @@ def pytest_collection_modifyitems(config, items):
 # raised in finalizers (its unraisable-exception check): one full collection here, while that check
 # still listens (a finalizer's exception is still reported), then a freeze leaves those five passes
 # nothing to walk.
-def pytest_collection_finish(session):
+def _collect_and_freeze() -> None:
     import gc
 
     gc.collect()
     gc.freeze()
+
+
+def pytest_collection_finish(session):
+    _collect_and_freeze()
 
 
 def pytest_unconfigure(config):
-    import gc
-
-    gc.collect()
-    gc.freeze()
+    _collect_and_freeze()

@@ -244,10 +244,9 @@ class ComparisonRunner:
 
     def close(self) -> None:
         """Stop for good (the server is stopping): drop every waiting task and start no child process
-        again. A task already running ends with an error row once its child is gone; the child itself
-        (a daemon) ends with this process. Without this, a child killed with the server was started
-        again by the next waiting task while the process exited, and that child's queues' semaphores
-        outlived it (a "leaked semaphore" warning)."""
+        again, so that none (with its queues' semaphores) starts while the process exits. A task already
+        running ends with an error row once its child is gone; a task submitted later gets one at once;
+        the child itself (a daemon) ends with this process."""
         with self._cv:
             self._closed = True
             self._pending.clear()
@@ -298,10 +297,10 @@ class ComparisonRunner:
         if self.mode == "thread":
             return compare_row(req.mission, req.policy)
         with self._cv:
+            if self._closed:
+                return {"status": "error", "error": "comparison failed: the server is stopping"}
             self._ensure_process()
             proc, requests, results = self._proc, self._requests, self._results
-        if proc is None or not proc.is_alive():
-            return {"status": "error", "error": "comparison failed: the server is stopping"}
         requests.put((req.mission, req.policy))
         while True:
             try:
