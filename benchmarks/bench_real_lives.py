@@ -6,7 +6,8 @@ without that cell (``uam_studio.studies.real_lives``).
 
 Prints, per held-out cell: missions, landing samples, coverage of the 90% interval at the sampled
 times, median width, breaches and missed breaches (cut-offs 3.0-3.3 V x samples), for the calibrated
-interval (health draws widened by the conformal margin of the cell's own earlier predictions) and, the
+interval (the health draws' interval moved out, or in, by the conformal margin of the cell's own earlier
+predictions) and, the
 reference in the same run, the health-only interval. Goals: coverage 80-98% per cell, 0 missed breaches.
 """
 

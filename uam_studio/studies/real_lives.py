@@ -7,12 +7,16 @@ For each life (VAH07, VAH09, VAH27, VAH30) held out in turn:
    C/5 reference discharge and first four missions, the recipe of
    :func:`~uam_studio.battery.real_cells.vtc6_fit_segments`); nothing of the held-out cell is read.
 2. **The health** for mission k comes from mission k-1 of the same cell (:func:`fit_mission`): q_max
-   (C), R0 (ohm) and the charge out of full at its start, fitted to all its clean samples along its
-   interpolated current, with a Laplace covariance whose std is the residuals' own and, where they are
-   not white noise, the HAC factor of :mod:`uam_studio.battery.fit_quality` (the model's discrepancy).
+   (C) and R0 (ohm) fitted to all its clean samples along its interpolated current, from a rested start
+   whose charge matches the rest voltage measured before its take-off (the rule of step 3), with a
+   Laplace covariance whose std is the residuals' own and, where they are not white noise, the HAC
+   factor of :mod:`uam_studio.battery.fit_quality` (the model's discrepancy).
 3. **The prediction** (:func:`predict_landing`): mission k flown along its own interpolated current from
    a rested start whose charge matches the rest voltage measured just before its take-off, for 200
-   draws of that health; the 90% interval of the voltage at each of its landing's sampled times.
+   draws of that health; the 90% interval of the voltage at each of its landing's sampled times. A
+   drawn cell that passed the cut-off (2.5 V) reads the cut-off from then on; within the landing,
+   which holds one current, each draw's voltage is its lowest so far (a rise under that load is the
+   model past its fitted charge range, not the cell).
 
 Scored at the sampled times, never against a sampled minimum (sampling misses the true minimum):
 coverage of the 90% interval, and per cut-off from 3.0 to 3.3 V, missed breaches (the interval's lower
@@ -58,15 +62,16 @@ CUTOFFS_V = (3.0, 3.05, 3.1, 3.15, 3.2, 3.25, 3.3)
 LEVEL = 0.9
 SAFETY_LEVEL = 0.99  # the one-sided safety bound: a measurement below it 1 time in 100 at most
 N_DRAWS = 200
-REMOVED_START_C = 2160.0  # C: the fit's start for the charge out of full (a 4.0 V charge of a VTC6)
-_STEP = np.array([1e-4, 1e-4, 1e-3])  # finite-difference steps in (ln q_max, ln R0, removed kC)
+EOD_V = 2.5  # V: the simulations' cut-off; a drawn cell past it reads this voltage
+REMOVED_START_C = 2160.0  # C: the identification's start for a mission's charge out of full (a 4.0 V charge)
+_STEP = np.array([1e-4, 1e-4])  # finite-difference steps in (ln q_max, ln R0)
 _LN_R0 = (np.log(1e-4), np.log(1.0))  # ln ohm: the box of R0 (draws and fits); q_max: the health fit's box
 
 
 @dataclass
 class MissionFit:
-    """:func:`fit_mission`'s result: (ln q_max, ln R0, removed kC) with its covariance (already
-    multiplied by ``factor``), the RMS residual (V) and the model-discrepancy factor (>= 1)."""
+    """:func:`fit_mission`'s result: (ln q_max, ln R0) with its covariance (already multiplied by
+    ``factor``), the RMS residual (V) and the model-discrepancy factor (>= 1)."""
 
     theta: np.ndarray
     cov: np.ndarray
@@ -76,7 +81,8 @@ class MissionFit:
 
 @dataclass
 class LifeScore:
-    """One held-out cell: missions predicted, landing samples scored, breaches (over all cut-offs x
+    """One held-out cell: missions predicted (``unfit``: those left out, their previous mission giving
+    no health fit), landing samples scored, breaches (over all cut-offs x
     samples); covered samples and missed breaches of the calibrated interval (the model's error
     included, :func:`conformal_margin`) and of the health-only one (``raw_``); each sample's
     (measured, low, median, high) voltage (V) of the calibrated interval (an infinite end: no
@@ -86,6 +92,7 @@ class LifeScore:
 
     cell: str
     missions: int = 0
+    unfit: int = 0
     samples: int = 0
     breaches: int = 0
     inside: int = 0
@@ -106,13 +113,20 @@ class LifeScore:
 
 def conformal_margin(scores: list[float], level: float = LEVEL) -> float:
     """The split-conformal margin (V) from the nonconformity scores of earlier predictions (each
-    max(low - measured, measured - high), V): their ceil((n + 1) level)-th smallest; inf while there
-    are too few (fewer than level / (1 - level)) for a finite one."""
+    max(low - measured, measured - high), V): their ceil((n + 1) level)-th smallest, negative where
+    earlier intervals held their measurements with room to spare; inf while there are too few (fewer
+    than level / (1 - level)) for a finite one."""
     n = len(scores)
     k = int(np.ceil((n + 1) * level))
     if k > n:
         return float("inf")
-    return max(float(np.sort(scores)[k - 1]), 0.0)
+    return float(np.sort(scores)[k - 1])
+
+
+def calibrated(low: float, median: float, high: float, margin: float) -> tuple[float, float]:
+    """The health-only interval (V) moved out by ``margin`` (V) at both ends (in, where it is negative),
+    never past the median draw's voltage: the prediction stays inside its interval."""
+    return min(low - margin, median), max(high + margin, median)
 
 
 def segments_without(folder: str | Path, held: str, n_missions: int = 4) -> list[FitSegment]:
@@ -144,31 +158,33 @@ def _params(cell: Cell, log: CellLog, mission: ResampledMission) -> CellParamete
     return replace(cell.params, t_ambient_k=ZERO_C + float(log.temperature_c[mission.index[0]]))
 
 
-def _voltages(thetas: np.ndarray, current: np.ndarray, params: CellParameters) -> np.ndarray:
-    """Voltage [N, T] (V) of rested cells at (ln q_max, ln R0, removed kC) ``thetas`` [N, 3] along
-    ``current`` [T] (A, 1 s steps)."""
+def _voltages(thetas: np.ndarray, rest_v: float, current: np.ndarray, params: CellParameters) -> np.ndarray:
+    """Voltage [N, T] (V) of cells at (ln q_max, ln R0) ``thetas`` [N, 2], each from the rested charge
+    that shows ``rest_v`` (V), along ``current`` [T] (A, 1 s steps); :data:`EOD_V` after a cell's cut-off."""
     q, r = np.exp(thetas[:, 0]), np.exp(thetas[:, 1])
-    x0 = rested_state(q, thetas[:, 2] * 1000.0, params)
-    res = simulate(np.broadcast_to(current, (len(thetas), current.size)), 1.0, q, r, eod_v=2.5, initial_state=x0,
+    x0 = rested_state(q, _removed_for_rest(q, rest_v, params), params)
+    res = simulate(np.broadcast_to(current, (len(thetas), current.size)), 1.0, q, r, eod_v=EOD_V, initial_state=x0,
                    cell=params)
-    return res.voltage_v
+    return np.where(res.valid, res.voltage_v, EOD_V)
 
 
 def fit_mission(log: CellLog, mission: ResampledMission, cell: Cell, max_iter: int = 40) -> MissionFit | None:
-    """q_max, R0 and the start's charge out of full of one resampled mission (module docstring, step 2);
-    None where it has too few clean samples (fewer than 5)."""
+    """q_max and R0 of one resampled mission (module docstring, step 2); None where it has too few clean
+    samples (fewer than 5) or its covariance is not positive definite (the data do not fix both)."""
     cur, observed = mission_current(log, mission, 1.0)
     keep = observed >= 0
     if keep.sum() < 5:
         return None
     obs, meas = observed[keep], log.voltage_v[mission.index[keep]]
     params = _params(cell, log, mission)
-    theta = np.array([np.log(cell.q_max), np.log(cell.r0), REMOVED_START_C / 1000.0])
+    rest_v = float(log.voltage_v[mission.index[0]])
+    theta = np.array([np.log(cell.q_max), np.log(cell.r0)])
+    low, high = [np.log(FIT_Q_RANGE[0]), _LN_R0[0]], [np.log(FIT_Q_RANGE[1]), _LN_R0[1]]
     lam = 1e-2
 
     def evaluate(t):
         pts = np.vstack([t, t + np.diag(_STEP)])
-        v = _voltages(pts, cur, params)[:, obs]
+        v = _voltages(pts, rest_v, cur, params)[:, obs]
         return meas - v[0], (v[1:] - v[0]).T / _STEP
 
     r, j = evaluate(theta)
@@ -177,7 +193,7 @@ def fit_mission(log: CellLog, mission: ResampledMission, cell: Cell, max_iter: i
         a = j.T @ j
         step = np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-12), j.T @ r)
         trial = theta + step
-        trial = np.clip(trial, [np.log(FIT_Q_RANGE[0]), _LN_R0[0], 0.0], [np.log(FIT_Q_RANGE[1]), _LN_R0[1], 10.0])
+        trial = np.clip(trial, low, high)
         r_t, j_t = evaluate(trial)
         if np.all(np.isfinite(r_t)) and float(r_t @ r_t) <= cost:
             done = cost - float(r_t @ r_t) < 1e-10
@@ -189,13 +205,14 @@ def fit_mission(log: CellLog, mission: ResampledMission, cell: Cell, max_iter: i
             if lam > 1e8:
                 break
     n = r.size
-    s2 = max(cost / max(n - 3, 1), (0.5e-3) ** 2)
+    s2 = max(cost / max(n - 2, 1), (0.5e-3) ** 2)
     try:
         cov = s2 * np.linalg.inv(j.T @ j)
+        rho = float(residual_autocorrelation(r[None])[0])
+        factor = excess_factor(cov, hac_covariance(j, r, np.ones(n, bool), rho)) if not_white(rho, n) else 1.0
+        np.linalg.cholesky(cov * factor)
     except np.linalg.LinAlgError:
         return None
-    rho = float(residual_autocorrelation(r[None])[0])
-    factor = excess_factor(cov, hac_covariance(j, r, np.ones(n, bool), rho)) if not_white(rho, n) else 1.0
     return MissionFit(theta, cov * factor, float(np.sqrt(cost / n)), factor)
 
 
@@ -220,12 +237,13 @@ def predict_landing(log: CellLog, mission: ResampledMission, cell: Cell, health:
     if not at.any():
         return []
     params = _params(cell, log, mission)
-    chol = np.linalg.cholesky(health.cov[:2, :2] + np.eye(2) * 1e-14)
-    draws = np.vstack([health.theta[:2], health.theta[:2] + rng.standard_normal((N_DRAWS, 2)) @ chol.T])
+    chol = np.linalg.cholesky(health.cov + np.eye(2) * 1e-14)
+    draws = np.vstack([health.theta, health.theta + rng.standard_normal((N_DRAWS, 2)) @ chol.T])
     draws = np.column_stack([np.clip(draws[:, 0], *np.log(FIT_Q_RANGE)), np.clip(draws[:, 1], *_LN_R0)])
-    q = np.exp(draws[:, 0])
-    removed = _removed_for_rest(q, float(log.voltage_v[mission.index[0]]), params)
-    v = _voltages(np.column_stack([draws, removed / 1000.0]), cur, params)[:, observed[at]]
+    v = _voltages(draws, float(log.voltage_v[mission.index[0]]), cur, params)
+    land = int(mission.phase_starts_s()[LANDING])
+    v[:, land:] = np.minimum.accumulate(v[:, land:], axis=1)
+    v = v[:, observed[at]]
     lo, hi = np.quantile(v[1:], [(1 - LEVEL) / 2, (1 + LEVEL) / 2], axis=0)
     meas = log.voltage_v[mission.index[at]]
     return [(float(m), float(a), float(c), float(b)) for m, a, c, b in zip(meas, lo, v[0], hi)]
@@ -233,8 +251,9 @@ def predict_landing(log: CellLog, mission: ResampledMission, cell: Cell, health:
 
 def score_life(log: CellLog, cell: Cell, seed: int = 38200, every: int = 1) -> LifeScore:
     """Every ``every``-th mission of a life predicted from the one before it (module docstring). The
-    calibrated interval widens the health-only one by :func:`conformal_margin` of the scores of this
-    cell's earlier predictions (its own earlier flights only: online, never the mission scored)."""
+    calibrated interval moves the health-only one's ends by :func:`conformal_margin` of the scores of
+    this cell's earlier predictions (:func:`calibrated`; its own earlier flights only: online, never the
+    mission scored)."""
     missions = find_missions(log)
     score = LifeScore(log.name)
     rng = np.random.default_rng([seed, sum(map(ord, log.name))])
@@ -243,23 +262,25 @@ def score_life(log: CellLog, cell: Cell, seed: int = 38200, every: int = 1) -> L
     for k in range(1, len(missions), every):
         health = fit_mission(log, missions[k - 1], cell)
         if health is None:
+            score.unfit += 1
             continue
         rows = predict_landing(log, missions[k], cell, health, rng)
         if not rows:
             continue
         margin = conformal_margin(past)
-        strict = conformal_margin(past_low, SAFETY_LEVEL)
+        strict = max(conformal_margin(past_low, SAFETY_LEVEL), 0.0)  # never above the health-only low end
         score.missions += 1
         for meas, lo, med, hi in rows:
+            low, high = calibrated(lo, med, hi, margin)
             score.samples += 1
             score.raw_inside += lo <= meas <= hi
-            score.inside += lo - margin <= meas <= hi + margin
-            score.rows.append((meas, lo - margin, med, hi + margin))
+            score.inside += low <= meas <= high
+            score.rows.append((meas, low, med, high))
             for cut in CUTOFFS_V:
                 breached = meas < cut
                 score.breaches += breached
                 score.raw_missed += breached and lo >= cut
-                score.missed += breached and lo - margin >= cut
+                score.missed += breached and low >= cut
                 score.strict_missed += breached and lo - strict >= cut
         past += [max(lo - meas, meas - hi) for meas, lo, _, hi in rows]
         past_low += [lo - meas for meas, lo, _, _ in rows]
@@ -279,11 +300,12 @@ def leave_one_cell_out(data: str | Path | None = None, every: int = 1, seed: int
 def format_scores(scores: list[LifeScore]) -> str:
     """The table as plain text: calibrated (health-only in brackets)."""
     out = [f"{'cell':6s} {'missions':>8s} {'landing samples':>15s} {'90% coverage':>16s} "
-           f"{'median width mV':>15s} {'breaches':>8s} {'missed':>11s} {'missed, 99% bound':>17s}  (health-only "
-           "interval in brackets; width over the finite intervals)"]
+           f"{'median width mV':>15s} {'breaches':>8s} {'missed':>11s} {'missed, 99% bound':>17s} {'unfit':>5s}  "
+           "(health-only interval in brackets; width over the finite intervals; unfit: missions not predicted, "
+           "the one before gave no health fit)"]
     for s in scores:
         finite = [1000 * (hi - lo) for _, lo, _, hi in s.rows if np.isfinite(hi - lo)]
         width = np.median(finite) if finite else float("nan")
         out.append(f"{s.cell:6s} {s.missions:8d} {s.samples:15d} {s.coverage:7.3f} ({s.raw_coverage:.3f}) "
-                   f"{width:15.0f} {s.breaches:8d} {s.missed:4d} ({s.raw_missed:4d}) {s.strict_missed:17d}")
+                   f"{width:15.0f} {s.breaches:8d} {s.missed:4d} ({s.raw_missed:4d}) {s.strict_missed:17d} {s.unfit:5d}")
     return "\n".join(out)
