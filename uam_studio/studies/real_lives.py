@@ -81,9 +81,9 @@ class MissionFit:
 
 @dataclass
 class LifeScore:
-    """One held-out cell: missions predicted (``unfit``: those left out, their previous mission giving
-    no health fit), landing samples scored, breaches (over all cut-offs x
-    samples); covered samples and missed breaches of the calibrated interval (the model's error
+    """One held-out cell: missions predicted (``unfit``: those whose previous mission gave no health
+    fit, predicted from the last health that an earlier one gave), landing samples scored, breaches
+    (over all cut-offs x samples); covered samples and missed breaches of the calibrated interval (the model's error
     included, :func:`conformal_margin`) and of the health-only one (``raw_``); each sample's
     (measured, low, median, high) voltage (V) of the calibrated interval (an infinite end: no
     calibration yet). ``strict_missed``: missed breaches of the one-sided safety bound at
@@ -259,10 +259,12 @@ def score_life(log: CellLog, cell: Cell, seed: int = 38200, every: int = 1) -> L
     rng = np.random.default_rng([seed, sum(map(ord, log.name))])
     past: list[float] = []
     past_low: list[float] = []  # how far earlier measurements fell below the health-only low end (V)
+    health = None
     for k in range(1, len(missions), every):
-        health = fit_mission(log, missions[k - 1], cell)
+        fit = fit_mission(log, missions[k - 1], cell)
+        score.unfit += fit is None
+        health = fit or health  # no fit: the last health the cell's flights gave
         if health is None:
-            score.unfit += 1
             continue
         rows = predict_landing(log, missions[k], cell, health, rng)
         if not rows:
@@ -301,8 +303,8 @@ def format_scores(scores: list[LifeScore]) -> str:
     """The table as plain text: calibrated (health-only in brackets)."""
     out = [f"{'cell':6s} {'missions':>8s} {'landing samples':>15s} {'90% coverage':>16s} "
            f"{'median width mV':>15s} {'breaches':>8s} {'missed':>11s} {'missed, 99% bound':>17s} {'unfit':>5s}  "
-           "(health-only interval in brackets; width over the finite intervals; unfit: missions not predicted, "
-           "the one before gave no health fit)"]
+           "(health-only interval in brackets; width over the finite intervals; unfit: missions whose previous "
+           "one gave no health fit, predicted from the last health fitted)"]
     for s in scores:
         finite = [1000 * (hi - lo) for _, lo, _, hi in s.rows if np.isfinite(hi - lo)]
         width = np.median(finite) if finite else float("nan")
