@@ -83,9 +83,9 @@ class MissionFit:
 class LifeScore:
     """One held-out cell: missions predicted (``unfit``: those whose previous mission gave no health
     fit, predicted from the last health that an earlier one gave), landing samples scored, breaches
-    (over all cut-offs x samples); covered samples and missed breaches of the calibrated interval (the model's error
-    included, :func:`conformal_margin`) and of the health-only one (``raw_``); each sample's
-    (measured, low, median, high) voltage (V) of the calibrated interval (an infinite end: no
+    (over all cut-offs x samples); covered samples and missed breaches of the calibrated interval
+    (the model's error included, :func:`conformal_margin`) and of the health-only one (``raw_``); each
+    sample's (measured, low, median, high) voltage (V) of the calibrated interval (an infinite end: no
     calibration yet). ``strict_missed``: missed breaches of the one-sided safety bound at
     :data:`SAFETY_LEVEL` (the health-only low end less the conformal margin of earlier low-side
     scores at that level)."""
