@@ -24,6 +24,7 @@ from uam_studio.studies.real_lives import (
     conformal_margin,
     fit_mission,
     predict_landing,
+    rest_before,
     score_life,
     segments_without,
 )
@@ -147,3 +148,20 @@ def test_the_landing_prediction_only_falls_under_the_landing_current(monkeypatch
                 assert np.all(np.diff(rows[:, 1:], axis=0) <= 0)
                 assert np.all(rows[:, 1:] >= EOD_V)
         assert checked >= 4
+
+
+@real
+def test_a_mission_with_no_rest_before_it_is_neither_fitted_nor_predicted():
+    """A sample before the take-off below the voltage the mission then shows under load is not the rest
+    it started from: no health from that mission, no prediction of it."""
+    log = load_cell_log(Path(DATA) / "VAH27.csv.mat")
+    missions = resampled_missions(log)
+    mission = missions[50]
+    assert rest_before(log, mission) == log.voltage_v[mission.index[0]]
+    volts = log.voltage_v.copy()
+    volts[mission.index[0]] = 3.3  # below its cruise samples (3.6-3.9 V)
+    stale = replace(log, voltage_v=volts)
+    assert rest_before(stale, mission) is None and fit_mission(stale, mission, VTC6) is None
+    health = fit_mission(log, missions[49], VTC6)
+    assert predict_landing(stale, mission, VTC6, health, np.random.default_rng(0)) == []
+    assert len(predict_landing(log, mission, VTC6, health, np.random.default_rng(0))) >= 1

@@ -8,7 +8,9 @@ For each life (VAH07, VAH09, VAH27, VAH30) held out in turn:
    :func:`~uam_studio.battery.real_cells.vtc6_fit_segments`); nothing of the held-out cell is read.
 2. **The health** for mission k comes from mission k-1 of the same cell (:func:`fit_mission`): q_max
    (C) and R0 (ohm) fitted to all its clean samples along its interpolated current, from a rested start
-   whose charge matches the rest voltage measured before its take-off (the rule of step 3), with a
+   whose charge matches the rest voltage measured before its take-off (the rule of step 3; a sample
+   before the take-off that is below a later one of the mission is no rest before it,
+   :func:`rest_before`: that mission gives no health and is not predicted), with a
    Laplace covariance whose std is the residuals' own and, where they are not white noise, the HAC
    factor of :mod:`uam_studio.battery.fit_quality` (the model's discrepancy).
 3. **The prediction** (:func:`predict_landing`): mission k flown along its own interpolated current from
@@ -82,7 +84,9 @@ class MissionFit:
 @dataclass
 class LifeScore:
     """One held-out cell: missions predicted (``unfit``: those whose previous mission gave no health
-    fit, predicted from the last health that an earlier one gave), landing samples scored, breaches
+    fit, predicted from the last health that an earlier one gave; ``grounded``: those with no rest
+    before their take-off, :func:`rest_before`, not predicted and so never cleared: their breaches
+    are counted, none missed, their samples not scored), landing samples scored, breaches
     (over all cut-offs x samples); covered samples and missed breaches of the calibrated interval
     (the model's error included, :func:`conformal_margin`) and of the health-only one (``raw_``); each
     sample's (measured, low, median, high) voltage (V) of the calibrated interval (an infinite end: no
@@ -93,6 +97,7 @@ class LifeScore:
     cell: str
     missions: int = 0
     unfit: int = 0
+    grounded: int = 0
     samples: int = 0
     breaches: int = 0
     inside: int = 0
@@ -168,16 +173,27 @@ def _voltages(thetas: np.ndarray, rest_v: float, current: np.ndarray, params: Ce
     return np.where(res.valid, res.voltage_v, EOD_V)
 
 
+def rest_before(log: CellLog, mission: ResampledMission) -> float | None:
+    """The voltage (V) of the sample before the mission's take-off, where it can be the cell's rest
+    before it: at least every voltage the mission's clean samples show after it (a loaded or recovering
+    cell is never above its rest before a discharge); None otherwise (that sample is not the rest the
+    mission started from)."""
+    rest = float(log.voltage_v[mission.index[0]])
+    after = log.voltage_v[mission.index[1:]][mission.segment[1:] >= 0]
+    return rest if after.size == 0 or rest >= float(after.max()) else None
+
+
 def fit_mission(log: CellLog, mission: ResampledMission, cell: Cell, max_iter: int = 40) -> MissionFit | None:
     """q_max and R0 of one resampled mission (module docstring, step 2); None where it has too few clean
-    samples (fewer than 5) or its covariance is not positive definite (the data do not fix both)."""
+    samples (fewer than 5), no rest before its take-off (:func:`rest_before`) or a covariance that is
+    not positive definite (the data do not fix both)."""
     cur, observed = mission_current(log, mission, 1.0)
     keep = observed >= 0
-    if keep.sum() < 5:
+    rest_v = rest_before(log, mission)
+    if keep.sum() < 5 or rest_v is None:
         return None
     obs, meas = observed[keep], log.voltage_v[mission.index[keep]]
     params = _params(cell, log, mission)
-    rest_v = float(log.voltage_v[mission.index[0]])
     theta = np.array([np.log(cell.q_max), np.log(cell.r0)])
     low, high = [np.log(FIT_Q_RANGE[0]), _LN_R0[0]], [np.log(FIT_Q_RANGE[1]), _LN_R0[1]]
     lam = 1e-2
@@ -231,16 +247,18 @@ def _removed_for_rest(q: np.ndarray, rest_v: float, params: CellParameters) -> n
 def predict_landing(log: CellLog, mission: ResampledMission, cell: Cell, health: MissionFit,
                     rng: np.random.Generator) -> list[tuple[float, float, float, float]]:
     """(measured, low, median, high) voltage (V) at each sampled time of the mission's landing, the
-    interval at :data:`LEVEL` over :data:`N_DRAWS` draws of ``health`` (module docstring, step 3)."""
+    interval at :data:`LEVEL` over :data:`N_DRAWS` draws of ``health`` (module docstring, step 3); none
+    where the mission has no rest before its take-off (:func:`rest_before`)."""
     cur, observed = mission_current(log, mission, 1.0)
     at = (mission.segment == LANDING) & (observed >= 0)
-    if not at.any():
+    rest_v = rest_before(log, mission)
+    if not at.any() or rest_v is None:
         return []
     params = _params(cell, log, mission)
     chol = np.linalg.cholesky(health.cov + np.eye(2) * 1e-14)
     draws = np.vstack([health.theta, health.theta + rng.standard_normal((N_DRAWS, 2)) @ chol.T])
     draws = np.column_stack([np.clip(draws[:, 0], *np.log(FIT_Q_RANGE)), np.clip(draws[:, 1], *_LN_R0)])
-    v = _voltages(draws, float(log.voltage_v[mission.index[0]]), cur, params)
+    v = _voltages(draws, rest_v, cur, params)
     land = int(mission.phase_starts_s()[LANDING])
     v[:, land:] = np.minimum.accumulate(v[:, land:], axis=1)
     v = v[:, observed[at]]
@@ -264,6 +282,12 @@ def score_life(log: CellLog, cell: Cell, seed: int = 38200, every: int = 1) -> L
         fit = fit_mission(log, missions[k - 1], cell)
         score.unfit += fit is None
         health = fit or health  # no fit: the last health the cell's flights gave
+        if rest_before(log, missions[k]) is None:  # its start unknown: not predicted, so never cleared
+            _, observed = mission_current(log, missions[k], 1.0)
+            at = (missions[k].segment == LANDING) & (observed >= 0)
+            score.grounded += 1
+            score.breaches += sum(int(m < c) for m in log.voltage_v[missions[k].index[at]] for c in CUTOFFS_V)
+            continue
         if health is None:
             continue
         rows = predict_landing(log, missions[k], cell, health, rng)
@@ -302,12 +326,13 @@ def leave_one_cell_out(data: str | Path | None = None, every: int = 1, seed: int
 def format_scores(scores: list[LifeScore]) -> str:
     """The table as plain text: calibrated (health-only in brackets)."""
     out = [f"{'cell':6s} {'missions':>8s} {'landing samples':>15s} {'90% coverage':>16s} "
-           f"{'median width mV':>15s} {'breaches':>8s} {'missed':>11s} {'missed, 99% bound':>17s} {'unfit':>5s}  "
-           "(health-only interval in brackets; width over the finite intervals; unfit: missions whose previous "
-           "one gave no health fit, predicted from the last health fitted)"]
+           f"{'median width mV':>15s} {'breaches':>8s} {'missed':>11s} {'missed, 99% bound':>17s} {'unfit':>5s} "
+           f"{'grounded':>8s}  (health-only interval in brackets; width over the finite intervals; unfit: missions "
+           "whose previous one gave no health fit, predicted from the last health fitted; grounded: no rest before "
+           "the take-off, not predicted, their breaches counted, none missed)"]
     for s in scores:
         finite = [1000 * (hi - lo) for _, lo, _, hi in s.rows if np.isfinite(hi - lo)]
         width = np.median(finite) if finite else float("nan")
         out.append(f"{s.cell:6s} {s.missions:8d} {s.samples:15d} {s.coverage:7.3f} ({s.raw_coverage:.3f}) "
-                   f"{width:15.0f} {s.breaches:8d} {s.missed:4d} ({s.raw_missed:4d}) {s.strict_missed:17d} {s.unfit:5d}")
+                   f"{width:15.0f} {s.breaches:8d} {s.missed:4d} ({s.raw_missed:4d}) {s.strict_missed:17d} {s.unfit:5d} {s.grounded:8d}")
     return "\n".join(out)
