@@ -244,15 +244,22 @@ def _removed_for_rest(q: np.ndarray, rest_v: float, params: CellParameters) -> n
     return 0.5 * (lo + hi)
 
 
+def _landing_samples(log: CellLog, mission: ResampledMission) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The mission's interpolated current (A, 1 s steps), and the step and measured voltage (V) of each
+    of its landing's clean samples."""
+    cur, observed = mission_current(log, mission, 1.0)
+    at = (mission.segment == LANDING) & (observed >= 0)
+    return cur, observed[at], log.voltage_v[mission.index[at]]
+
+
 def predict_landing(log: CellLog, mission: ResampledMission, cell: Cell, health: MissionFit,
                     rng: np.random.Generator) -> list[tuple[float, float, float, float]]:
     """(measured, low, median, high) voltage (V) at each sampled time of the mission's landing, the
     interval at :data:`LEVEL` over :data:`N_DRAWS` draws of ``health`` (module docstring, step 3); none
     where the mission has no rest before its take-off (:func:`rest_before`)."""
-    cur, observed = mission_current(log, mission, 1.0)
-    at = (mission.segment == LANDING) & (observed >= 0)
+    cur, steps, meas = _landing_samples(log, mission)
     rest_v = rest_before(log, mission)
-    if not at.any() or rest_v is None:
+    if not steps.size or rest_v is None:
         return []
     params = _params(cell, log, mission)
     chol = np.linalg.cholesky(health.cov + np.eye(2) * 1e-14)
@@ -261,9 +268,8 @@ def predict_landing(log: CellLog, mission: ResampledMission, cell: Cell, health:
     v = _voltages(draws, rest_v, cur, params)
     land = int(mission.phase_starts_s()[LANDING])
     v[:, land:] = np.minimum.accumulate(v[:, land:], axis=1)
-    v = v[:, observed[at]]
+    v = v[:, steps]
     lo, hi = np.quantile(v[1:], [(1 - LEVEL) / 2, (1 + LEVEL) / 2], axis=0)
-    meas = log.voltage_v[mission.index[at]]
     return [(float(m), float(a), float(c), float(b)) for m, a, c, b in zip(meas, lo, v[0], hi)]
 
 
@@ -283,10 +289,8 @@ def score_life(log: CellLog, cell: Cell, seed: int = 38200, every: int = 1) -> L
         score.unfit += fit is None
         health = fit or health  # no fit: the last health the cell's flights gave
         if rest_before(log, missions[k]) is None:  # its start unknown: not predicted, so never cleared
-            _, observed = mission_current(log, missions[k], 1.0)
-            at = (missions[k].segment == LANDING) & (observed >= 0)
             score.grounded += 1
-            score.breaches += sum(int(m < c) for m in log.voltage_v[missions[k].index[at]] for c in CUTOFFS_V)
+            score.breaches += sum(int(m < c) for m in _landing_samples(log, missions[k])[2] for c in CUTOFFS_V)
             continue
         if health is None:
             continue
