@@ -71,6 +71,18 @@ R0_PLAN_RANGE = (0.005, 1.5)  # ohm
 IN_FLIGHT_PLANNERS = ("attention", "oracle")  # the operator's planners (the first is the default)
 
 
+@dataclasses.dataclass(frozen=True)
+class LegObservation:
+    """What the last leg flown told the operator about the wind, until its next decision reads it:
+    the wind the leg's duration implies (kt, + headwind), its residual against the forecast (kt),
+    whether that was a surprise (the wind estimate reset), and the same as one line of text."""
+
+    wind_kt: float
+    residual_kt: float
+    surprise: bool
+    note: str
+
+
 class Operator:
     """Decides the flight from the forecast and the readings (see the module docstring).
 
@@ -113,8 +125,7 @@ class Operator:
         self._last_route: tuple[str, ...] | None = None
         self._leg_start_s = 0.0
         self._leg: tuple[str, str, float] | None = None
-        self.last_observation = ""
-        self._leg_wind: tuple[float, float, bool] | None = None  # the last leg's wind, residual (kt), surprise
+        self._observed: LegObservation | None = None  # the last leg's wind, not yet read by a decision
 
     # ------------------------------------------------------------------ sensing
     def observe(self, time_s: np.ndarray, current_a: np.ndarray, voltage_v: np.ndarray) -> None:
@@ -143,9 +154,13 @@ class Operator:
         note = f"wind to {to} {wind:+.0f} kt ({resid:+.0f} kt against the forecast)"
         if surprise:
             note += "; a surprise: the wind estimate is reset"
-        self.last_observation = note
-        self._leg_wind = (wind, resid, surprise)
+        self._observed = LegObservation(wind, resid, surprise, note)
         return note
+
+    @property
+    def last_observation(self) -> str:
+        """What the last leg flown told about the wind ("" once a decision has read it)."""
+        return self._observed.note if self._observed is not None else ""
 
     def health(self) -> tuple[float, float, float, float]:
         """(w, its std, r0 ohm, its std) from all readings so far and the fleet prior; w = 6500 C / q_max
@@ -299,9 +314,10 @@ class Operator:
             reason = why + seen
         else:
             reason = "plan changed: " + "; ".join(learned + [why])
-        self.last_observation = ""
-        leg_wind, leg_resid, surprise = self._leg_wind if self._leg_wind is not None else (None, None, False)
-        self._leg_wind = None
+        seen_leg, self._observed = self._observed, None
+        leg_wind = seen_leg.wind_kt if seen_leg is not None else None
+        leg_resid = seen_leg.residual_kt if seen_leg is not None else None
+        surprise = seen_leg.surprise if seen_leg is not None else False
         nxt = route[0] if route else None
         d = Decision(self.time_s, self.node, kind, reason, q, q_sd, r, r_sd, q_plan, r_plan, shift, shift_sd,
                      tuple(route), tuple(alts), nxt, alts[0] if route else None, time.perf_counter() - t0,
