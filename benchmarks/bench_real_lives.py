@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from uam_studio.studies.real_lives import format_scores, leave_one_cell_out
+from uam_studio.studies.real_lives import format_scores, leave_one_cell_out, totals_line
 
 
 def main() -> None:
@@ -28,12 +28,8 @@ def main() -> None:
     t0 = time.perf_counter()
     scores = leave_one_cell_out(args.data, every=args.every, max_nfev=args.max_nfev)
     print(format_scores(scores))
-    ok = all(0.8 <= s.coverage <= 0.98 and s.missed == 0 for s in scores)
-    print(f"missed breaches: 90% interval {sum(s.missed for s in scores)}, one-sided 99% bound "
-          f"{sum(s.strict_missed for s in scores)}, health-only {sum(s.raw_missed for s in scores)} of "
-          f"{sum(s.breaches for s in scores)} breaching (cut-off x sample) pairs")
-    print(f"\n({time.perf_counter() - t0:.0f} s) goals (coverage 80-98% per cell, 0 missed breaches): "
-          + ("met" if ok else "NOT met"))
+    print(totals_line(scores))
+    print(f"\n({time.perf_counter() - t0:.0f} s)")
 
 
 if __name__ == "__main__":

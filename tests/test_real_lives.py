@@ -3,6 +3,7 @@ what the identification reads, and a scored life (the real-data tests run where 
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import replace
 from pathlib import Path
@@ -15,9 +16,11 @@ from hypothesis import strategies as st
 from uam_studio.battery.cmu_data import LANDING, LIFE_FILES, load_cell_log, resampled_missions
 from uam_studio.battery.parameters import VTC6
 from uam_studio.battery.real_cells import mission_current
+from uam_studio.cli import main
 from uam_studio.errors import InputError
 from uam_studio.studies.real_lives import (
     EOD_V,
+    LifeScore,
     _params,
     _voltages,
     calibrated,
@@ -165,3 +168,34 @@ def test_a_mission_with_no_rest_before_it_is_neither_fitted_nor_predicted():
     health = fit_mission(log, missions[49], VTC6)
     assert predict_landing(stale, mission, VTC6, health, np.random.default_rng(0)) == []
     assert len(predict_landing(log, mission, VTC6, health, np.random.default_rng(0))) >= 1
+
+
+@real
+def test_cli_evaluate_lives_scores_the_cell_it_is_asked_for(capsys):
+    """``uam-studio evaluate lives --json`` prints one finite, JSON-ready row per cell asked for, scored on
+    a set identified without it (two identification evaluations here, to stay quick)."""
+    assert main(["evaluate", "lives", "--data", DATA, "--cell", "VAH27", "--every", "20", "--max-nfev", "2",
+                 "--json"]) == 0
+    (row,) = json.loads(capsys.readouterr().out)
+    assert row["cell"] == "VAH27" and row["missions"] >= 12 and row["samples"] >= row["missions"]
+    assert 0.0 <= row["coverage"] <= 1.0 and row["median_width_mv"] > 0
+    assert row["grounded"] == 0 and row["goals_met"] == (0.8 <= row["coverage"] <= 0.98 and row["missed"] == 0)
+
+
+@pytest.mark.parametrize("argv, field", [
+    (["evaluate", "lives", "--cell", "VAH99"], "cell"),
+    (["evaluate", "lives", "--every", "0"], "every"),
+    (["evaluate", "lives", "--max-nfev", "-3"], "max_nfev"),
+    (["evaluate", "dynaformer", "--cell", "VAH27"], "--cell"),
+])
+def test_cli_evaluate_lives_bad_input_is_one_line(argv, field, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and field in err and "Traceback" not in err
+
+
+def test_an_empty_life_score_is_json_ready():
+    """No sample scored: coverage and width are None (never NaN in JSON), and the goals are not met."""
+    row = LifeScore("VAH27").as_dict()
+    assert row["coverage"] is None and row["median_width_mv"] is None and row["goals_met"] is False
+    json.dumps(row, allow_nan=False)

@@ -28,7 +28,8 @@ bound at :data:`SAFETY_LEVEL`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -114,6 +115,24 @@ class LifeScore:
     @property
     def raw_coverage(self) -> float:
         return self.raw_inside / self.samples if self.samples else float("nan")
+
+    @property
+    def median_width_mv(self) -> float | None:
+        """Median width (mV) of the calibrated intervals that are finite; None where none is."""
+        finite = [1000 * (hi - lo) for _, lo, _, hi in self.rows if np.isfinite(hi - lo)]
+        return float(np.median(finite)) if finite else None
+
+    @property
+    def goals_met(self) -> bool:
+        """The issue's goals for one cell: coverage 80-98% and no missed breach of the 90% interval."""
+        return bool(0.8 <= self.coverage <= 0.98 and self.missed == 0)
+
+    def as_dict(self) -> dict:
+        """The counts, coverages and median width, without the per-sample rows (JSON-ready)."""
+        out = {k: v for k, v in asdict(self).items() if k != "rows"}
+        return out | {"coverage": self.coverage if self.samples else None,
+                      "raw_coverage": self.raw_coverage if self.samples else None,
+                      "median_width_mv": self.median_width_mv, "goals_met": self.goals_met}
 
 
 def conformal_margin(scores: list[float], level: float = LEVEL) -> float:
@@ -317,14 +336,36 @@ def score_life(log: CellLog, cell: Cell, seed: int = 38200, every: int = 1) -> L
     return score
 
 
+def life_file(cell: str) -> str:
+    """The file of :data:`~uam_studio.battery.cmu_data.LIFE_FILES` for a cell's name ("VAH27") or file name."""
+    for name in LIFE_FILES:
+        if cell in (name, name.split(".")[0]):
+            return name
+    raise InputError("cell", f"{cell!r}; allowed {', '.join(n.split('.')[0] for n in LIFE_FILES)}")
+
+
 def leave_one_cell_out(data: str | Path | None = None, every: int = 1, seed: int = 38200,
-                       max_nfev: int = 100) -> list[LifeScore]:
-    """The table of the module docstring: one :class:`LifeScore` per life, each on the parameter set
-    identified without it (``max_nfev``: the identification's evaluations, each with a 25-column
-    finite-difference Jacobian; 100 take about 1.5 min per set)."""
+                       max_nfev: int = 100, cells: Sequence[str] | None = None) -> list[LifeScore]:
+    """The table of the module docstring: one :class:`LifeScore` per life (``cells``: only these, by
+    name, e.g. ``["VAH27"]``; default all four), each on the parameter set identified without it
+    (``max_nfev``: the identification's evaluations, each with a 25-column finite-difference Jacobian;
+    100 take about 1.5 min per set); every ``every``-th mission scored."""
+    if not 1 <= every <= 1000:
+        raise InputError("every", f"{every}; allowed 1-1000")
+    if not 1 <= max_nfev <= 10_000:
+        raise InputError("max_nfev", f"{max_nfev}; allowed 1-10000")
+    names = [life_file(c) for c in cells] if cells else list(LIFE_FILES)
     folder = data_folder(data)
     return [score_life(load_cell_log(folder / name), identify_without(folder, name, max_nfev=max_nfev), seed, every)
-            for name in LIFE_FILES]
+            for name in dict.fromkeys(names)]
+
+
+def totals_line(scores: Sequence[LifeScore]) -> str:
+    """The missed breaches of all cells, and whether every cell met the goals (:attr:`LifeScore.goals_met`)."""
+    return (f"missed breaches: 90% interval {sum(s.missed for s in scores)}, one-sided 99% bound "
+            f"{sum(s.strict_missed for s in scores)}, health-only {sum(s.raw_missed for s in scores)} of "
+            f"{sum(s.breaches for s in scores)} breaching (cut-off x sample) pairs; goals (coverage 80-98% per "
+            "cell, 0 missed breaches): " + ("met" if scores and all(s.goals_met for s in scores) else "NOT met"))
 
 
 def format_scores(scores: list[LifeScore]) -> str:
@@ -335,8 +376,7 @@ def format_scores(scores: list[LifeScore]) -> str:
            "whose previous one gave no health fit, predicted from the last health fitted; grounded: no rest before "
            "the take-off, not predicted, their breaches counted, none missed)"]
     for s in scores:
-        finite = [1000 * (hi - lo) for _, lo, _, hi in s.rows if np.isfinite(hi - lo)]
-        width = np.median(finite) if finite else float("nan")
+        width = s.median_width_mv if s.median_width_mv is not None else float("nan")
         out.append(f"{s.cell:6s} {s.missions:8d} {s.samples:15d} {s.coverage:7.3f} ({s.raw_coverage:.3f}) "
                    f"{width:15.0f} {s.breaches:8d} {s.missed:4d} ({s.raw_missed:4d}) {s.strict_missed:17d} {s.unfit:5d} {s.grounded:8d}")
     return "\n".join(out)
