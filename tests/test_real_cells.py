@@ -178,6 +178,14 @@ def test_unknown_suffix_and_missing_folder(tmp_path, monkeypatch):
     assert "\n" not in text and "nowhere" in text and "os.environ['UAM_STUDIO_CMU_DATA']" in text
 
 
+@pytest.mark.parametrize("name", ["VAH27.csv.mat", "VAH01_20.csv"])
+def test_a_missing_file_says_so(tmp_path, name):
+    with pytest.raises(CellDataError) as err:
+        load_cell_log(tmp_path / name)
+    text = str(err.value)
+    assert "\n" not in text and text.startswith(f"{name}: path: ") and "no such file" in text.lower()
+
+
 def test_cli_evaluate_real_bad_folder_is_one_line(tmp_path, capsys):
     assert main(["evaluate", "real", "--data", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()

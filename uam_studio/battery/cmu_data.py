@@ -192,6 +192,8 @@ def load_mat(path: str | os.PathLike) -> CellLog:
     from scipy.io.matlab import MatReadError
 
     p = Path(path)
+    if not p.is_file():  # scipy's own message for a missing file does not say so
+        raise _fail(p, "path", "no such file")
     try:
         mat = loadmat(p, squeeze_me=True, struct_as_record=False)
     except OSError as exc:
