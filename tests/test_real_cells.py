@@ -184,6 +184,9 @@ def test_a_missing_file_says_so(tmp_path, name):
         load_cell_log(tmp_path / name)
     text = str(err.value)
     assert "\n" not in text and text.startswith(f"{name}: path: ") and "no such file" in text.lower()
+    (tmp_path / "VAH30.csv.mat").mkdir()
+    with pytest.raises(CellDataError, match="VAH30.csv.mat: path: not a file"):
+        load_cell_log(tmp_path / "VAH30.csv.mat")
 
 
 def test_cli_evaluate_real_bad_folder_is_one_line(tmp_path, capsys):

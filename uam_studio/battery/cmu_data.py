@@ -193,7 +193,7 @@ def load_mat(path: str | os.PathLike) -> CellLog:
 
     p = Path(path)
     if not p.is_file():  # scipy's own message for a missing file does not say so
-        raise _fail(p, "path", "no such file")
+        raise _fail(p, "path", "not a file" if p.exists() else "no such file")
     try:
         mat = loadmat(p, squeeze_me=True, struct_as_record=False)
     except OSError as exc:

@@ -8,6 +8,7 @@ import argparse
 import json
 
 from uam_studio.cli.common import EXIT_INPUT, EXIT_OK, CliExit, Command, seed_arg
+from uam_studio.errors import check_range
 
 
 def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
@@ -22,8 +23,8 @@ def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
                         "10.1184/R1/14226830)")
     p.add_argument("--cell", action="append", default=None,
                    help="lives: only this life, VAH07, VAH09, VAH27 or VAH30 (repeat for more; default all four)")
-    p.add_argument("--every", type=int, default=1, help="lives: score every n-th mission (1-1000, default 1)")
-    p.add_argument("--max-nfev", type=int, default=100,
+    p.add_argument("--every", type=int, default=None, help="lives: score every n-th mission (1-1000, default 1)")
+    p.add_argument("--max-nfev", type=int, default=None,
                    help="lives: evaluations of each parameter set's identification (1-10000, default 100)")
     p.add_argument("--quick", action="store_true",
                    help="real: skip the two held-out VTC6 sets: the health and safety rows are then only the "
@@ -32,7 +33,7 @@ def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
                    help="real: identify the two held-out VTC6 sets again from --data (about 10 s each) instead of "
                         "reading their bundled literals")
     p.add_argument("--weights", default=None, help="weights file (default: the bundled model)")
-    p.add_argument("--table", choices=["default", "noise"], default="default",
+    p.add_argument("--table", choices=["default", "noise"], default=None,
                    help="default: the held-out sets, beside the physics fit; noise: EOD timing over sensor noise "
                         "(0, 1, 5, 10 mV) x context (20, 60, 120, 600 s) x log start (aligned, at rest), beside the "
                         "physics fit and the take-off estimator, with 90%% interval coverage and latency")
@@ -42,28 +43,45 @@ def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
                    help="--table noise: one more column, another weights file with its own health estimator "
                         "(e.g. a transformer-encoder model)")
     p.add_argument("--seed", type=seed_arg, default=None,
-                   help="the draws' seed (default 12345; lives: 38200; real: fixed at 20260)")
+                   help="dynaformer, lives: the draws' seed (default 12345; lives: 38200)")
     p.add_argument("--json", action="store_true", help="print the metrics as JSON")
+
+
+# Each option but --json, and the models that read it: any other model refuses it in one line.
+OPTION_MODELS = {"data": ("real", "lives"), "quick": ("real",), "refit": ("real",), "cell": ("lives",),
+                 "every": ("lives",), "max_nfev": ("lives",), "weights": ("dynaformer",), "table": ("dynaformer",),
+                 "n": ("dynaformer",), "compare": ("dynaformer",), "seed": ("dynaformer", "lives")}
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """Refuse, in one line, every option given that ``args.model`` does not read."""
+    given = [k for k, models in OPTION_MODELS.items()
+             if getattr(args, k) not in (None, False) and args.model not in models]
+    if given:
+        flags = ", ".join("--" + k.replace("_", "-") for k in given)
+        only = "; ".join(f"--{k.replace('_', '-')} only with " + " or ".join(f"'evaluate {m}'" for m in OPTION_MODELS[k])
+                         for k in given)
+        raise CliExit(f"{flags}: not read by 'evaluate {args.model}' ({only})", EXIT_INPUT)
 
 
 def _run_evaluate(args: argparse.Namespace) -> int:
     from ..dynaformer.evaluate import evaluate, format_noise_table, format_report, noise_table
     from ..dynaformer.predictor import load_predictor
 
-    lives_only = args.cell is not None or args.every != 1 or args.max_nfev != 100
+    _check_options(args)
     if args.model == "lives":
         from ..studies.real_lives import format_scores, leave_one_cell_out, totals_line
 
+        every = int(check_range("--every", 1 if args.every is None else args.every, 1, 1000))
+        max_nfev = int(check_range("--max-nfev", 100 if args.max_nfev is None else args.max_nfev, 1, 10_000))
         seed = args.seed if args.seed is not None else 38200
-        scores = leave_one_cell_out(args.data, every=args.every, seed=seed, max_nfev=args.max_nfev, cells=args.cell)
+        scores = leave_one_cell_out(args.data, every=every, seed=seed, max_nfev=max_nfev, cells=args.cell)
         if args.json:
             print(json.dumps([s.as_dict() for s in scores], indent=2, allow_nan=False))
         else:
             print(format_scores(scores))
             print(totals_line(scores))
         return EXIT_OK
-    if lives_only:
-        raise CliExit("--cell, --every, --max-nfev: only with 'evaluate lives'", EXIT_INPUT)
     if args.model == "real":
         from ..studies.real_cells import format_report as format_real
         from ..studies.real_cells import real_cell_report
@@ -71,16 +89,15 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         report = real_cell_report(args.data, held_out=not args.quick, refit=args.refit)
         print(json.dumps(report.as_dict(), indent=2) if args.json else format_real(report))
         return EXIT_OK
-    if args.data is not None or args.quick or args.refit:
-        raise CliExit("--data, --quick, --refit: only with 'evaluate real' (--data also 'evaluate lives')", EXIT_INPUT)
-    n = args.n if args.n is not None else (200 if args.table == "noise" else 400)
+    table = args.table or "default"
+    n = args.n if args.n is not None else (200 if table == "noise" else 400)
     if n < 10:
         raise CliExit("--n: must be >= 10", EXIT_INPUT)
-    if args.compare is not None and args.table != "noise":
+    if args.compare is not None and table != "noise":
         raise CliExit("--compare: only with --table noise", EXIT_INPUT)
     seed = args.seed if args.seed is not None else 12345
     pred = load_predictor(args.weights)
-    if args.table == "noise":
+    if table == "noise":
         other = load_predictor(args.compare) if args.compare is not None else None
         compare = {other.model.cfg.health if other.model.cfg.health != "takeoff" else "other": other} if other else None
         metrics = noise_table(pred, n=n, seed=seed, compare=compare)

@@ -128,7 +128,8 @@ class LifeScore:
         return bool(0.8 <= self.coverage <= 0.98 and self.missed == 0)
 
     def as_dict(self) -> dict:
-        """The counts, coverages and median width, without the per-sample rows (JSON-ready)."""
+        """The counts, coverages, median width and :attr:`goals_met`, without the per-sample rows (JSON-ready:
+        None for a coverage or width with no sample behind it)."""
         out = {k: v for k, v in asdict(self).items() if k != "rows"}
         return out | {"coverage": self.coverage if self.samples else None,
                       "raw_coverage": self.raw_coverage if self.samples else None,
@@ -354,7 +355,12 @@ def leave_one_cell_out(data: str | Path | None = None, every: int = 1, seed: int
         raise InputError("every", f"{every}; allowed 1-1000")
     if not 1 <= max_nfev <= 10_000:
         raise InputError("max_nfev", f"{max_nfev}; allowed 1-10000")
-    names = [life_file(c) for c in cells] if cells else list(LIFE_FILES)
+    if isinstance(cells, str):
+        raise InputError("cells", f"{cells!r}: a list of cell names, e.g. [{cells!r}]")
+    names = [life_file(c) for c in cells] if cells is not None else list(LIFE_FILES)
+    if not names:
+        raise InputError("cells", "an empty list; allowed None (all four) or names from "
+                         f"{', '.join(n.split('.')[0] for n in LIFE_FILES)}")
     folder = data_folder(data)
     return [score_life(load_cell_log(folder / name), identify_without(folder, name, max_nfev=max_nfev), seed, every)
             for name in dict.fromkeys(names)]
