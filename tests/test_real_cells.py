@@ -29,6 +29,7 @@ from uam_studio.battery.identify import FitSegment, identify_cell
 from uam_studio.battery.parameters import NASA_18650, VTC6, VTC6_CELL_HELD_OUT
 from uam_studio.battery.real_cells import START_Q_MAX, START_R0, replay_mission, vtc6_start
 from uam_studio.cli import main
+from uam_studio.errors import InputError
 
 DATA = os.environ.get("UAM_STUDIO_CMU_DATA", "")
 real = pytest.mark.skipif(not (DATA and (Path(DATA) / "VAH01_20.csv").is_file()),
@@ -187,6 +188,16 @@ def test_a_missing_file_says_so(tmp_path, name):
     (tmp_path / "VAH30.csv.mat").mkdir()
     with pytest.raises(CellDataError, match="VAH30.csv.mat: path: not a file"):
         load_cell_log(tmp_path / "VAH30.csv.mat")
+
+
+def test_a_folder_needs_only_the_files_its_study_reads(tmp_path):
+    """The lives' studies need a resampled life, not the 1 Hz mission, and the other way round."""
+    (tmp_path / "VAH27.csv.mat").touch()
+    assert data_folder(tmp_path, needs="VAH27.csv.mat") == tmp_path
+    with pytest.raises(InputError, match="has no VAH01_20.csv .the CMU eVTOL dataset's 1 Hz mission"):
+        data_folder(tmp_path)
+    with pytest.raises(InputError, match="has no VAH09.csv.mat .the CMU eVTOL dataset's resampled life"):
+        data_folder(tmp_path, needs="VAH09.csv.mat")
 
 
 def test_cli_evaluate_real_bad_folder_is_one_line(tmp_path, capsys):

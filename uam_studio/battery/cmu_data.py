@@ -236,15 +236,17 @@ def load_cell_log(path: str | os.PathLike) -> CellLog:
     raise _fail(p, "path", "expected a .csv or .mat file of the CMU eVTOL dataset")
 
 
-def data_folder(path: str | os.PathLike | None = None) -> Path:
+def data_folder(path: str | os.PathLike | None = None, needs: str = MISSION_FILE) -> Path:
     """The dataset's folder: ``path`` if given, else ``$UAM_STUDIO_CMU_DATA``, else
     :data:`BESIDE_CHECKOUT` (``shared/data/cmu_evtol`` beside a source checkout) if it is there.
 
-    :raises InputError: none found, or the folder lacks the mission file. The message says where it
+    :param needs: the file the folder must hold (default the 1 Hz mission, :data:`MISSION_FILE`; a
+        study of the resampled lives passes one of :data:`LIFE_FILES`).
+    :raises InputError: none found, or the folder lacks ``needs``. The message says where it
         looked and how to point at the data from a notebook, a shell or the CLI.
     """
     text = str(path) if path is not None else os.environ.get(DATA_ENV, "")
-    if not text and (BESIDE_CHECKOUT / MISSION_FILE).is_file():
+    if not text and (BESIDE_CHECKOUT / needs).is_file():
         text = str(BESIDE_CHECKOUT)
     if not text:
         raise InputError("data", f"no dataset folder: the CMU eVTOL dataset (DOI {DATASET_DOI}) is not at "
@@ -252,9 +254,9 @@ def data_folder(path: str | os.PathLike | None = None) -> Path:
                          f"os.environ['{DATA_ENV}'] = '/path/to/cmu_evtol' in a notebook's first cell, "
                          f"export {DATA_ENV}=/path/to/cmu_evtol in a shell, or --data PATH on the command line")
     folder = Path(text).expanduser()
-    if not (folder / MISSION_FILE).is_file():
-        raise InputError("data", f"{folder} has no {MISSION_FILE} (the CMU eVTOL dataset's 1 Hz mission, "
-                         f"DOI {DATASET_DOI})")
+    if not (folder / needs).is_file():
+        what = "1 Hz mission" if needs == MISSION_FILE else "resampled life"
+        raise InputError("data", f"{folder} has no {needs} (the CMU eVTOL dataset's {what}, DOI {DATASET_DOI})")
     return folder
 
 

@@ -106,7 +106,7 @@ class LifePoints:
 def life_points(data: str | Path | None = None) -> list[LifePoints]:
     """The four lives' reference discharges (:class:`LifePoints`), from the dataset's folder (``data``,
     else :func:`~uam_studio.battery.cmu_data.data_folder`'s search)."""
-    folder = data_folder(data)
+    folder = data_folder(data, needs=LIFE_FILES[0])
     out = []
     for name in LIFE_FILES:
         log = load_cell_log(folder / name)

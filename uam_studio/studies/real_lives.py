@@ -361,7 +361,7 @@ def leave_one_cell_out(data: str | Path | None = None, every: int = 1, seed: int
     if not names:
         raise InputError("cells", "an empty list; allowed None (all four) or names from "
                          f"{', '.join(n.split('.')[0] for n in LIFE_FILES)}")
-    folder = data_folder(data)
+    folder = data_folder(data, needs=names[0])
     return [score_life(load_cell_log(folder / name), identify_without(folder, name, max_nfev=max_nfev), seed, every)
             for name in dict.fromkeys(names)]
 
