@@ -59,7 +59,7 @@ from uam_studio.battery.real_cells import (
 from uam_studio.battery.simulate import simulate
 from uam_studio.battery.solver import output_voltage
 from uam_studio.battery.state import rested_state
-from uam_studio.errors import InputError
+from uam_studio.errors import InputError, check_range
 
 CUTOFFS_V = (3.0, 3.05, 3.1, 3.15, 3.2, 3.25, 3.3)
 LEVEL = 0.9
@@ -68,6 +68,7 @@ N_DRAWS = 200
 EOD_V = 2.5  # V: the simulations' cut-off; a drawn cell past it reads this voltage
 REMOVED_START_C = 2160.0  # C: the identification's start for a mission's charge out of full (a 4.0 V charge)
 _STEP = np.array([1e-4, 1e-4])  # finite-difference steps in (ln q_max, ln R0)
+LIFE_NAMES = tuple(name.split(".")[0] for name in LIFE_FILES)  # the cells' names, "VAH07" ...
 _LN_R0 = (np.log(1e-4), np.log(1.0))  # ln ohm: the box of R0 (draws and fits); q_max: the health fit's box
 
 
@@ -339,10 +340,10 @@ def score_life(log: CellLog, cell: Cell, seed: int = 38200, every: int = 1) -> L
 
 def life_file(cell: str) -> str:
     """The file of :data:`~uam_studio.battery.cmu_data.LIFE_FILES` for a cell's name ("VAH27") or file name."""
-    for name in LIFE_FILES:
-        if cell in (name, name.split(".")[0]):
+    for name, short in zip(LIFE_FILES, LIFE_NAMES):
+        if cell in (name, short):
             return name
-    raise InputError("cell", f"{cell!r}; allowed {', '.join(n.split('.')[0] for n in LIFE_FILES)}")
+    raise InputError("cell", f"{cell!r}; allowed {', '.join(LIFE_NAMES)}")
 
 
 def leave_one_cell_out(data: str | Path | None = None, every: int = 1, seed: int = 38200,
@@ -351,16 +352,13 @@ def leave_one_cell_out(data: str | Path | None = None, every: int = 1, seed: int
     name, e.g. ``["VAH27"]``; default all four), each on the parameter set identified without it
     (``max_nfev``: the identification's evaluations, each with a 25-column finite-difference Jacobian;
     100 take about 1.5 min per set); every ``every``-th mission scored."""
-    if not 1 <= every <= 1000:
-        raise InputError("every", f"{every}; allowed 1-1000")
-    if not 1 <= max_nfev <= 10_000:
-        raise InputError("max_nfev", f"{max_nfev}; allowed 1-10000")
+    check_range("every", every, 1, 1000)
+    check_range("max_nfev", max_nfev, 1, 10_000)
     if isinstance(cells, str):
         raise InputError("cells", f"{cells!r}: a list of cell names, e.g. [{cells!r}]")
     names = [life_file(c) for c in cells] if cells is not None else list(LIFE_FILES)
     if not names:
-        raise InputError("cells", "an empty list; allowed None (all four) or names from "
-                         f"{', '.join(n.split('.')[0] for n in LIFE_FILES)}")
+        raise InputError("cells", f"an empty list; allowed None (all four) or names from {', '.join(LIFE_NAMES)}")
     folder = data_folder(data, needs=names[0])
     return [score_life(load_cell_log(folder / name), identify_without(folder, name, max_nfev=max_nfev), seed, every)
             for name in dict.fromkeys(names)]
@@ -382,7 +380,8 @@ def format_scores(scores: list[LifeScore]) -> str:
            "whose previous one gave no health fit, predicted from the last health fitted; grounded: no rest before "
            "the take-off, not predicted, their breaches counted, none missed)"]
     for s in scores:
-        width = s.median_width_mv if s.median_width_mv is not None else float("nan")
+        width = s.median_width_mv
+        width = width if width is not None else float("nan")
         out.append(f"{s.cell:6s} {s.missions:8d} {s.samples:15d} {s.coverage:7.3f} ({s.raw_coverage:.3f}) "
                    f"{width:15.0f} {s.breaches:8d} {s.missed:4d} ({s.raw_missed:4d}) {s.strict_missed:17d} {s.unfit:5d} {s.grounded:8d}")
     return "\n".join(out)

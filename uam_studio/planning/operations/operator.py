@@ -315,9 +315,8 @@ class Operator:
         else:
             reason = "plan changed: " + "; ".join(learned + [why])
         seen_leg, self._observed = self._observed, None
-        leg_wind = seen_leg.wind_kt if seen_leg is not None else None
-        leg_resid = seen_leg.residual_kt if seen_leg is not None else None
-        surprise = seen_leg.surprise if seen_leg is not None else False
+        leg_wind, leg_resid, surprise = ((seen_leg.wind_kt, seen_leg.residual_kt, seen_leg.surprise)
+                                         if seen_leg is not None else (None, None, False))
         nxt = route[0] if route else None
         d = Decision(self.time_s, self.node, kind, reason, q, q_sd, r, r_sd, q_plan, r_plan, shift, shift_sd,
                      tuple(route), tuple(alts), nxt, alts[0] if route else None, time.perf_counter() - t0,
