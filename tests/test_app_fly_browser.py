@@ -12,6 +12,7 @@ import shutil
 from pathlib import Path
 
 import pytest
+from drawn import assert_drawn
 
 pytest.importorskip("playwright")
 
@@ -86,6 +87,12 @@ def test_fly_tab_flies_plays_and_takes_a_wind_change(browser, app_url):
     _speed(page, "1000")  # on to the landing: then the result and the references show
     status.get_by_text("hindsight oracle (best known plan)").wait_for(timeout=TIMEOUT_MS)
     status.get_by_text("flown:").wait_for(timeout=TIMEOUT_MS)
+    from uam_studio.app.fly import EOD_COLOR, EVENT_COLOR
+    from uam_studio.app.style import MEASURED_COLOR, PHYSICS_COLOR, PREDICTED_COLOR
+
+    assert_drawn(page, "voltage: measured", {"predicted (operator)": (PREDICTED_COLOR, 1.0), "true (hidden)":
+                                             (PHYSICS_COLOR, 1.0), "measured": (MEASURED_COLOR, 0.8),
+                                             "EOD cut-off": (EOD_COLOR, 1.0), "wind change": (EVENT_COLOR, 1.0)})
     # the playback went on from the injection: the next arrival's re-plan is in the log
     log.get_by_text(re.compile(r"plan (changed|unchanged)")).first.wait_for(timeout=TIMEOUT_MS)
     # The operator noticed the change: the log shows what each leg measured against the forecast, the
@@ -114,7 +121,8 @@ def test_fly_tab_flies_plays_and_takes_a_wind_change(browser, app_url):
 
 def test_fleet_tab_runs_a_day_for_the_three_dispatchers(browser, app_url):
     """The Fleet tab at 1366x768: one click flies a day for the three dispatchers; the status names each,
-    the three figures are drawn, nothing overflows sideways (screenshot with UAM_SCREENSHOTS=1)."""
+    the three figures are there and draw their glyphs (pixels of each colour) after one day and after
+    three, nothing overflows sideways (screenshot with UAM_SCREENSHOTS=1)."""
     page = browser.new_page(viewport={"width": 1366, "height": 768})
     page.goto(app_url, timeout=TIMEOUT_MS)
     page.locator(".bk-tab", has_text="Fleet").click(timeout=TIMEOUT_MS)
@@ -129,6 +137,18 @@ def test_fleet_tab_runs_a_day_for_the_three_dispatchers(browser, app_url):
                            "v.model.title && v.model.title.text).map(v => v.model.title.text)")
     for start in ("Served priority", "Last day, health-aware", "Each pack after"):
         assert any(t.startswith(start) for t in titles), titles
+    from uam_studio.app.fleet import COLORS
+
+    days = {"health-aware": (COLORS["aware"], 1.0), "health-blind": (COLORS["blind"], 1.0),
+            "hindsight": (COLORS["hindsight"], 1.0), "upper bound": ("#000000", 1.0)}
+    packs = {"belief": (COLORS["aware"], 1.0), "truth (hidden)": ("#000000", 1.0)}
+    assert_drawn(page, "Served priority", days)  # one day: its markers
+    assert_drawn(page, "Each pack after", packs)
+    for day in (2, 3):
+        page.locator(".uam-fleet-run button").click(timeout=TIMEOUT_MS)
+        status.get_by_text(f"day {day}:").wait_for(timeout=TIMEOUT_MS)
+    assert_drawn(page, "Served priority", days)
+    assert_drawn(page, "Each pack after", packs)
     if os.environ.get("UAM_SCREENSHOTS") == "1":
         page.screenshot(path=str(ROOT / "assets" / "screenshots" / "fleet_tab.png"))
     assert page.evaluate("() => document.documentElement.scrollWidth") <= 1366 + 1

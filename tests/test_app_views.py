@@ -26,9 +26,20 @@ def home(tmp_path, monkeypatch):
     registry().refresh()
 
 
-def test_create_app_in_notebook_is_plain_tabs_and_renders():
+def _figures(model) -> list:
+    from bokeh.models import Plot
+
+    return [m for m in model.references() if isinstance(m, Plot)]
+
+
+def test_create_app_in_notebook_is_plain_tabs_and_renders(monkeypatch):
+    """... and every figure of its tabs draws on the canvas, even where HoloViews' default is WebGL (which
+    draws no line in a browser without a GPU)."""
+    import holoviews as hv
+
     from uam_studio.app.main import TABS
 
+    monkeypatch.setattr(type(hv.renderer("bokeh")), "webgl", True)
     app = create_app()
     assert isinstance(app, pn.Tabs)  # no template outside a server
     names = [name for name, _ in zip(app._names, app)]
@@ -36,9 +47,15 @@ def test_create_app_in_notebook_is_plain_tabs_and_renders():
     assert names[0] == "Planner" and {"Battery lab", "Retrain"} <= set(names)
     root = app.get_root(Document())
     assert root is not None
+    figures = _figures(root)
     for name in ("Battery lab", "Retrain"):  # the later tabs are built when shown
         app.active = names.index(name)
-    assert app.get_root(Document()) is not None
+        figures += _figures(app.get_root(Document()))
+    titles = {f.title.text.split(",")[0] for f in figures if f.title is not None and f.title.text}
+    assert {"Voltage: physics (what happens) vs Dynaformer (predicted)", "Voltage (physics model)",
+            "Per-cell current", "Priority of its plan of this map after each epoch "
+            "(0 = unsafe)"} <= titles, titles
+    assert {f.output_backend for f in figures} == {"canvas"}
 
 
 def test_the_page_document_validates_without_warnings(caplog):

@@ -43,3 +43,18 @@ def test_mission_map_and_sorties():
     assert sum(isinstance(el, hv.Curve) for el in fig) == 2  # one line per charging cycle
     ov = curves({"a": ([0, 1], [3.5, 3.2]), "b": ([0, 1], [3.6, 3.1])}, "t", "V", hline=3.0)
     assert len(ov) == 3
+
+
+def test_notebook_figures_draw_on_canvas_by_default(monkeypatch):
+    """Importing the classroom helpers makes HoloViews draw on the canvas: with its default (WebGL), a
+    student's browser without a GPU draws no line."""
+    import importlib
+
+    hv = pytest.importorskip("holoviews")
+    import uam_studio.classroom.plots as plots
+
+    monkeypatch.setattr(type(hv.renderer("bokeh")), "webgl", True)  # HoloViews' own default
+    webgl = hv.renderer("bokeh").get_plot(hv.Curve([(0, 1), (1, 2)])).state.output_backend
+    plots = importlib.reload(plots)  # what a notebook's import does
+    ov = plots.curves({"a": ([0, 1], [3.5, 3.2])}, "t", "V", hline=3.0)
+    assert (webgl, hv.renderer("bokeh").get_plot(ov).state.output_backend) == ("webgl", "canvas")

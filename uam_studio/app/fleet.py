@@ -23,6 +23,9 @@ from uam_studio.app.style import NOTE_STYLE, PHYSICS_COLOR, PREDICTED_COLOR, hea
 from uam_studio.fleet.dispatch import DISPATCHERS
 
 COLORS = {"aware": PHYSICS_COLOR, "blind": PREDICTED_COLOR, "hindsight": "#555555"}
+# Line width (px) and marker size (px) per dispatcher, widest first: the dispatchers often serve the same
+# stars, and a narrower line drawn later over a wider one leaves both in sight.
+WIDTHS = {"aware": (5.0, 12), "blind": (3.0, 8), "hindsight": (1.5, 5)}
 BREACH_COLOR = "#d62728"
 
 
@@ -111,9 +114,9 @@ class FleetView(pn.viewable.Viewer):
     def _days(self) -> hv.Overlay:
         series = self.state.per_day()
         curves = [hv.Curve(series[d], "day", "stars served", label=LABELS[d]).opts(
-                  color=COLORS[d], line_width=2, line_dash="dashed" if d == "hindsight" else "solid") *
-                  hv.Scatter(series[d], "day", "stars served").opts(color=COLORS[d], size=6)
-                  for d in DISPATCHERS]
+                  color=COLORS[d], line_width=WIDTHS[d][0], line_dash="dashed" if d == "hindsight" else "solid") *
+                  hv.Scatter(series[d], "day", "stars served").opts(color=COLORS[d], size=WIDTHS[d][1])
+                  for d in sorted(DISPATCHERS, key=lambda d: -WIDTHS[d][0])]
         curves.append(hv.Curve(series["bound"], "day", "stars served", label="upper bound").opts(
             color="black", line_width=1, line_dash="dotted") *
             hv.Scatter(series["bound"], "day", "stars served").opts(color="black", marker="dash", size=14))

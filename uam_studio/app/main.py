@@ -22,6 +22,7 @@ from uam_studio.app.comparison import compare_mode
 from uam_studio.app.panel_compat import keep_stylesheets_local
 from uam_studio.app.planner_state import PlannerState
 from uam_studio.app.session import configure_server_threads, in_server_session, session_dispatcher
+from uam_studio.app.style import draw_on_canvas
 
 TITLE = "uam_studio: health-aware eVTOL mission planning"
 EXTENSIONS = ("tabulator",)
@@ -152,6 +153,7 @@ def create_app(template: bool | None = None) -> pn.viewable.Viewable:
     :return: the template, or a ``pn.Tabs`` with one tab per entry of :data:`TABS`.
     """
     pn.extension(*EXTENSIONS, notifications=False)
+    draw_on_canvas()
     keep_stylesheets_local()
     session = new_session()
     tabs = []

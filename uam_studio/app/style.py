@@ -16,6 +16,20 @@ MEASURED_COLOR = "#333333"
 NAME_OFFSET_PX = 10  # map names sit this many screen pixels above their place (the vertiport's below it)
 
 
+def draw_on_canvas() -> None:
+    """Make every HoloViews figure of this process draw on a 2D canvas, not with WebGL.
+
+    HoloViews' Bokeh renderer asks for WebGL by default, and a browser without a GPU (software GL: CI, school
+    VMs, remote desktops, acceleration turned off) then draws the axes and legend but none of the lines
+    and markers. The app's curves are a few thousand points, which the canvas draws at once. The plain
+    Bokeh figures (Planner, Fly) use Bokeh's own default, the canvas. Called by
+    :func:`~uam_studio.app.main.create_app` before it builds a session.
+    """
+    import holoviews as hv
+
+    type(hv.renderer("bokeh")).webgl = False  # the class default: every renderer instance, then and later
+
+
 def heading(text: str, **params: Any) -> pn.pane.HTML:
     """A section heading of one fixed size (a Markdown ``####`` renders at different sizes in the
     first tab and in tabs built later)."""

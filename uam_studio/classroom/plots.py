@@ -3,6 +3,9 @@
 Call ``hv.extension("bokeh")`` (or ``pn.extension()``) in the notebook first. Every function returns a
 HoloViews object that a notebook displays or combines with ``+`` and ``*``.
 
+Importing this module makes HoloViews draw on a 2D canvas (:func:`draw_on_canvas`): with its default,
+WebGL, a student's browser without a GPU draws the axes and legends but no line.
+
 - :func:`mission_map`: vertiport, destinations with their priority stars, and optionally a route,
   coloured by charging cycle (the paper's mission maps).
 - :func:`curves`: several labelled (x, y) series in one overlay, with an optional horizontal line
@@ -24,7 +27,17 @@ from uam_studio.battery import DEFAULT_EOD_V
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
 from uam_studio.planning.operations import FlightRecord
 
-__all__ = ["curves", "flight_voltage", "mission_map", "sorties"]
+__all__ = ["curves", "draw_on_canvas", "flight_voltage", "mission_map", "sorties"]
+
+def draw_on_canvas() -> None:
+    """Make every HoloViews figure of this kernel draw on a 2D canvas, not with WebGL (HoloViews' default,
+    which draws no line or marker in a browser without a GPU). Called when this module is imported."""
+    from holoviews.plotting.bokeh import BokehRenderer
+
+    BokehRenderer.webgl = False
+
+
+draw_on_canvas()
 
 PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
 
