@@ -111,6 +111,16 @@ def test_fly_tab_flies_plays_and_takes_a_wind_change(browser, app_url):
     after = [d.leg_wind_vs_forecast_kts for d in flown.events[1:]]
     before = [d.leg_wind_vs_forecast_kts for d in calm.events[1:]]
     assert max(a - b for a, b in zip(after, before)) > 20.0, (after, before)
+    # The README's demo: the flight lands safe (the weather reserve covers +25 kt), and the log says what
+    # the operator believes about the change: its probability at each decision, higher by the landing
+    # than without the change, and its words where it has some ("perhaps a change of about ...").
+    assert not flown.breached and "BREACHED" not in status.get_by_text("flown:").inner_text(), flown.breach_cause
+    p_cells = page.locator('.uam-fly-log .tabulator-row .tabulator-cell[tabulator-field="wind changed (p)"]')
+    assert [t.strip() for t in p_cells.all_inner_texts()] == [f"{d.wind_change_p:.2f}" for d in reversed(flown.events)]
+    assert flown.events[-1].wind_change_p > calm.events[-1].wind_change_p, (flown.events[-1], calm.events[-1])
+    said = [d.wind_change for d in flown.events if d.wind_change]
+    assert said, [d.reason for d in flown.events]
+    log.get_by_text(said[-1]).first.wait_for(timeout=TIMEOUT_MS)
     if os.environ.get("UAM_SCREENSHOTS") == "1":
         page.screenshot(path=str(ROOT / "assets" / "screenshots" / "fly_tab.png"))
     width = page.evaluate("() => document.documentElement.scrollWidth")

@@ -150,11 +150,14 @@ def test_twelve_flights_no_breach_and_near_hindsight(flights):
     single = summarize(f for f in flights if f.scenario == "single_charge")
     multi = summarize(f for f in flights if f.scenario == "multi_charge")
     assert single.breaches == multi.breaches == 0
-    # measured on these 12: 0.906 and 0.959; on all 40 of bench_fly quality --n 20: 0.845 and 0.976
-    assert single.ratio >= 0.8 and multi.ratio >= 0.93, (single, multi)
-    assert single.priority >= single.blind_priority and multi.priority >= multi.blind_priority
-    both = summarize(flights)  # measured 0.943 (40 flights: 0.931)
-    assert both.breaches == 0 and both.ratio >= 0.90 and both.priority >= both.blind_priority, both
+    # With the default 25 kt weather reserve, measured on these 12: 0.781 and 0.877; on all 40 of bench_fly
+    # quality --n 20: 0.705 and 0.916 (without the reserve 0.845 and 0.968: its price, RESULTS.md). The
+    # blind pre-flight plan keeps no reserve after its first leg: in calm air it may serve more (here 26
+    # against 25 in single charge) where a change would breach it.
+    assert single.ratio >= 0.75 and multi.ratio >= 0.85, (single, multi)
+    assert multi.priority >= multi.blind_priority
+    both = summarize(flights)  # measured 0.848 (40 flights: 0.844)
+    assert both.breaches == 0 and both.ratio >= 0.82 and both.priority >= both.blind_priority, both
 
 
 @pytest.mark.slow
@@ -272,11 +275,12 @@ def test_a_cell_too_weak_for_the_take_off_is_reported_not_silent():
 
 def test_notebook_9_4_a_weak_cell_and_a_headwind_each_fly_less_than_a_healthy_cell_in_calm_air():
     """What notebook 9, section 9.4, tells a class: both flights take off, both reach less, for the
-    cause the operator's estimates name (the weak cell is read at the take-off check)."""
+    cause the operator's estimates name (the weak cell is read at the take-off check). The notebook flies
+    them without the weather reserve, so that each cause shows alone."""
     mission = load_mission(EXAMPLE)
-    calm = fly_mission(mission, seed=1, forecast_sigma_kt=0.0)
-    weak = fly_mission(mission.with_battery(5200.0, 0.25), seed=1, forecast_sigma_kt=0.0)
-    windy = fly_mission(mission, seed=1, forecast_sigma_kt=0.0, events=[parse_event("wind+25@600")])
+    calm = fly_mission(mission, seed=1, forecast_sigma_kt=0.0, reserve_kt=0.0)
+    weak = fly_mission(mission.with_battery(5200.0, 0.25), seed=1, forecast_sigma_kt=0.0, reserve_kt=0.0)
+    windy = fly_mission(mission, seed=1, forecast_sigma_kt=0.0, events=[parse_event("wind+25@600")], reserve_kt=0.0)
     for rec in (weak, windy):
         assert rec.route and not rec.breached
         assert 0 < rec.reached_priority < calm.reached_priority

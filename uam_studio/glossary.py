@@ -53,6 +53,19 @@ GLOSSARY: dict[str, str] = {
                       "infers its battery's health from them.",
     "Blind pre-flight plan": "The plan made after the take-off check and then flown to the end without "
                              "looking again, whatever the weather does.",
+    "Wind change (belief)": "What the operator believes about a change of the weather in flight: after each "
+                            "leg, the probability that the legs since some earlier leg fly in a new common "
+                            "wind shift, from the legs' measured winds against the forecast (Bayesian "
+                            "online change-point detection). It assumes that each place's forecast error is "
+                            "its own, that the weather changes now and then (a 10% chance before each leg), "
+                            "and that a change moves every later leg's wind by the same amount. The Fly log "
+                            "says 'the wind changed by about +22 kt since the Hayward leg (p 0.90)' from p "
+                            "0.5 on, 'perhaps a change' from p 0.2.",
+    "Weather reserve (kt)": "The headwind beyond its belief that the operator keeps every take-off safe "
+                            "under, as aviation keeps a fuel reserve: the next leg and the way home must stay "
+                            "above the cut-off with that much more headwind on each (default 25 kt). A change "
+                            "of the weather within the reserve does not breach; a breach after a larger one "
+                            "is recorded as 'the change exceeded the reserve', not as a decision error.",
     "Hindsight oracle": "The best plan knowing the true battery and the winds as they actually were at each "
                         "leg's time. With no wind change it is the exact oracle's plan; after an injected "
                         "change it is the best known plan (the oracle's plan for each wind period, and the "

@@ -79,6 +79,8 @@ class FlyView(pn.viewable.Viewer):
                                             value=s.forecast_sigma_kt, width=w)
         self.noise = pn.widgets.FloatSlider(name="Voltage sensor noise (mV)", start=0, end=20, step=0.5,
                                             value=s.sensor_noise_mv, width=w)
+        self.reserve = pn.widgets.FloatSlider(name="Weather reserve (kt of headwind)", start=0, end=40, step=5,
+                                              value=s.reserve_kt, width=w)
         self.inject_kts = pn.widgets.FloatSlider(name="Wind change (kt, + = headwind)", start=-40, end=40, step=5,
                                                  value=s.inject_kts, width=w)
         self.inject_button = pn.widgets.Button(name="Inject wind change now", button_type="warning", width=w)
@@ -92,14 +94,14 @@ class FlyView(pn.viewable.Viewer):
         self.progress = pn.indicators.LoadingSpinner(value=False, size=24, name="flying...", visible=False)
         self.log = pn.widgets.Tabulator(pd.DataFrame(columns=["t (s)", "at", "q_max (C)", "R0 (ohm)", "fit flags",
                                                               "leg wind vs forecast (kt)", "common shift (kt)",
-                                                              "next", "reason"]),
+                                                              "wind changed (p)", "next", "reason"]),
                                         disabled=True, show_index=False, sizing_mode="stretch_both",
                                         css_classes=["uam-fly-log"], layout="fit_columns",
                                         configuration={"columnDefaults": {"headerWordWrap": True}},
                                         formatters={"reason": {"type": "textarea"}},
                                         widths={"t (s)": 55, "at": 85, "q_max (C)": 95, "R0 (ohm)": 85,
                                                 "fit flags": 80, "leg wind vs forecast (kt)": 190,
-                                                "common shift (kt)": 135, "next": 85})
+                                                "common shift (kt)": 135, "wind changed (p)": 75, "next": 85})
         self._shown = (-1, -1, -1)
         self._figures()
         self.map_pane = pn.pane.Bokeh(self.map_fig, width=MAP_PX + 10, height=MAP_PX + 10)
@@ -112,6 +114,7 @@ class FlyView(pn.viewable.Viewer):
         self.seed.param.watch(lambda e: setattr(s, "seed", e.new), "value")
         self.sigma.param.watch(lambda e: setattr(s, "forecast_sigma_kt", e.new), "value")
         self.noise.param.watch(lambda e: setattr(s, "sensor_noise_mv", e.new), "value")
+        self.reserve.param.watch(lambda e: setattr(s, "reserve_kt", e.new), "value")
         self.inject_kts.param.watch(lambda e: setattr(s, "inject_kts", e.new), "value")
         self.clock.param.watch(self._on_clock, "value_throttled")
         s.param.watch(self._on_record, "record")
@@ -123,7 +126,7 @@ class FlyView(pn.viewable.Viewer):
         self._layout = pn.Row(
             pn.Column(self.fly_button, self.play, self.speed, self.clock, pn.Spacer(height=10),
                       self.inject_kts, self.inject_button, self.clear_button, pn.Spacer(height=10),
-                      self.seed, self.sigma, self.noise, pn.Spacer(height=10), self.download, width=230),
+                      self.seed, self.sigma, self.noise, self.reserve, pn.Spacer(height=10), self.download, width=230),
             pn.Column(self.error, pn.Row(self.progress, self.status, sizing_mode="stretch_width"), pn.Row(self.map_pane, self.volt_pane, sizing_mode="stretch_width"),
                       window_height(self.log, LOG_HEIGHT_CSS),
                       sizing_mode="stretch_width"),

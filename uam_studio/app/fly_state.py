@@ -22,12 +22,14 @@ from uam_studio.app.services import FLIGHT_POOL, LatestWorker, one_line
 from uam_studio.errors import InputError
 from uam_studio.planning import VERTIPORT, Mission
 from uam_studio.planning.operations import (
+    WEATHER_RESERVE_KT,
     FlightRecord,
     WindEvent,
     fly_mission,
     parse_event,
     position_at,
 )
+from uam_studio.planning.operations.operator import RESERVE_RANGE_KT
 from uam_studio.planning.operations.world import (
     DEFAULT_FORECAST_SIGMA_KT,
     DEFAULT_SENSOR_NOISE_MV,
@@ -66,8 +68,9 @@ def _flight_failed(flight: _Flight, exc: BaseException) -> tuple[_Flight, Flight
 class FlyState(param.Parameterized):
     """One flight and its playback (see the module docstring).
 
-    Inputs: ``seed``, ``forecast_sigma_kt`` (kt), ``sensor_noise_mv`` (mV), ``speed`` (playback
-    speed-up), ``inject_kts`` (kt, the wind change :meth:`inject` adds). Outputs: ``record``, ``t_s``
+    Inputs: ``seed``, ``forecast_sigma_kt`` (kt), ``sensor_noise_mv`` (mV), ``reserve_kt`` (kt, the
+    operator's weather reserve), ``speed`` (playback speed-up), ``inject_kts`` (kt, the wind change
+    :meth:`inject` adds). Outputs: ``record``, ``t_s``
     (the playback clock, s), ``mission_flown``, ``running`` (a flight is being computed), ``playing``, ``status``,
     ``error`` (one line).
     """
@@ -75,6 +78,7 @@ class FlyState(param.Parameterized):
     seed = param.Integer(default=0, bounds=(0, 10**9))
     forecast_sigma_kt = param.Number(default=DEFAULT_FORECAST_SIGMA_KT, bounds=(0.0, MAX_SIGMA_KT))
     sensor_noise_mv = param.Number(default=DEFAULT_SENSOR_NOISE_MV, bounds=(0.0, MAX_NOISE_MV))
+    reserve_kt = param.Number(default=WEATHER_RESERVE_KT, bounds=RESERVE_RANGE_KT)
     speed = param.Selector(default=100, objects=list(SPEEDS))
     inject_kts = param.Number(default=25.0, bounds=(-60.0, 60.0))
     events = param.List(default=[], item_type=WindEvent)
@@ -107,7 +111,8 @@ class FlyState(param.Parameterized):
             self.error = one_line(err, ERROR_CHARS)
             return
         flight = _Flight(mission, dict(seed=self.seed, forecast_sigma_kt=self.forecast_sigma_kt,
-                                       sensor_noise_mv=self.sensor_noise_mv, events=list(self.events)), keep_time)
+                                       sensor_noise_mv=self.sensor_noise_mv, events=list(self.events),
+                                       reserve_kt=self.reserve_kt), keep_time)
         self.running = True
         self.status = "flying..."
         if not keep_time:
@@ -215,7 +220,7 @@ class FlyState(param.Parameterized):
             reached = [to for to, end in zip(r.route, r.leg_end_s) if end <= self.t_s and to != VERTIPORT]
             return (f"flying: {self.t_s / 60:.1f} of {self.end_s / 60:.1f} min · reached so far: "
                     f"{', '.join(reached) or 'none'} · the results show at the landing")
-        own = "BREACHED the cut-off (priority 0)" if r.breached else f"priority {r.reached_priority}"
+        own = f"BREACHED the cut-off (priority 0; {r.breach_cause})" if r.breached else f"priority {r.reached_priority}"
         blind = "breached" if r.static_breached else f"priority {r.static_priority}"
         return (f"flown: {own}, {charging_cycles_text(r.charging_cycles)}, min {r.min_voltage_v:.3f} V · blind pre-flight "
                 f"plan: {blind} · hindsight oracle{'' if r.hindsight_exact else ' (best known plan)'}: "

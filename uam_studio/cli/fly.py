@@ -27,6 +27,9 @@ def _add_fly_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--event", action="append", default=[], metavar="wind+KT@S",
                    help="scripted wind change, e.g. wind+30@1200: 30 kt more headwind on legs taking off "
                         "from t = 1200 s (repeatable)")
+    p.add_argument("--reserve", type=float, default=None, metavar="KT",
+                   help="weather reserve (kt, 0-60; default 25): every take-off keeps the next leg and the way home "
+                        "safe under the operator's belief plus this much more headwind")
     p.add_argument("--q-max", type=float, default=None, help="override the true cell's q_max (C)")
     p.add_argument("--r0", type=float, default=None, help="override the true cell's r0 (ohm)")
     p.add_argument("--json", action="store_true", help="print the flight record as JSON")
@@ -35,31 +38,33 @@ def _add_fly_arguments(p: argparse.ArgumentParser) -> None:
 
 def _run_fly(args: argparse.Namespace) -> int:
     from uam_studio.planning import load_mission
-    from uam_studio.planning.operations import fly_mission, parse_event
+    from uam_studio.planning.operations import WEATHER_RESERVE_KT, fly_mission, parse_event
 
     events = [parse_event(e) for e in args.event]
     mission = load_mission(args.mission).with_battery(args.q_max, args.r0)
     rec = fly_mission(mission, args.policy, seed=args.seed, forecast_sigma_kt=args.forecast_sigma,
-                      sensor_noise_mv=args.sensor_noise_mv, sensor_noise_ma=args.sensor_noise_ma, events=events)
+                      sensor_noise_mv=args.sensor_noise_mv, sensor_noise_ma=args.sensor_noise_ma, events=events,
+                      reserve_kt=WEATHER_RESERVE_KT if args.reserve is None else args.reserve)
     if args.json:
         json.dump(rec.to_dict(series=args.series), sys.stdout, allow_nan=False)
         sys.stdout.write("\n")
         return EXIT_OK
     print(f"{mission.name} ({rec.scenario}): seed {rec.seed}, forecast sigma {rec.forecast_sigma_kt:g} kt, "
           f"sensor noise {rec.sensor_noise_mv:g} mV / {rec.sensor_noise_ma:g} mA, events: "
-          f"{', '.join(rec.wind_events) or 'none'}")
+          f"{', '.join(rec.wind_events) or 'none'}, weather reserve {rec.reserve_kt:g} kt")
     legs = iter(zip(rec.route, rec.altitudes_m, rec.actual_winds_kts, rec.forecast_winds_kts, rec.leg_end_s))
     for d in rec.events:
         print(f"t={d.time_s:>6.0f} s at {d.node}: {d.kind}: {d.reason}")
         print(f"           knows q_max {d.q_max_c:.0f} +- {d.q_max_sd_c:.0f} C, R0 {d.r0_ohm:.3f} +- "
               f"{d.r0_sd_ohm:.3f} ohm" + (f" (fit flagged: {', '.join(d.health_flags)})" if d.health_flags else "")
-              + f", wind shift {d.wind_shift_kts:+.1f} kt; plans {' -> '.join(d.route) or 'nothing more'}")
+              + f", wind shift {d.wind_shift_kts:+.1f} kt ({d.wind_change or f'no change believed, p {d.wind_change_p:.2f}'})"
+              + f"; plans {' -> '.join(d.route) or 'nothing more'}")
         if d.next_to is not None:
             to, alt, wind, forecast, end = next(legs)
             print(f"           flies to {to} at {alt:g} m: wind {wind:+.0f} kt (forecast {forecast:+.0f}), "
                   f"lands at {end:.0f} s")
     reached = ", ".join(rec.reached) or "none"
-    verdict = "BREACHED the cut-off: priority 0" if rec.breached else f"priority {rec.reached_priority}"
+    verdict = f"BREACHED the cut-off ({rec.breach_cause}): priority 0" if rec.breached else f"priority {rec.reached_priority}"
     print(f"flown: reached {reached}; {verdict}; {charging_cycles_text(rec.charging_cycles)}; min {rec.min_voltage_v:.3f} V")
     print(f"blind pre-flight plan: {' -> '.join(rec.static_route) or 'nothing'}: "
           f"{'BREACHED, priority 0' if rec.static_breached else f'priority {rec.static_priority}'}")

@@ -6,8 +6,14 @@ Public API: :func:`fly_mission` -> :class:`FlightRecord`, :class:`World`, :class
 """
 
 from uam_studio.planning.operations.decision import Decision
-from uam_studio.planning.operations.fly import FlightRecord, fly_mission, position_at, record_csv
-from uam_studio.planning.operations.operator import Operator
+from uam_studio.planning.operations.fly import (
+    FlightRecord,
+    breach_cause,
+    fly_mission,
+    position_at,
+    record_csv,
+)
+from uam_studio.planning.operations.operator import WEATHER_RESERVE_KT, Operator
 from uam_studio.planning.operations.world import (
     DEFAULT_FORECAST_SIGMA_KT,
     DEFAULT_SENSOR_NOISE_MA,
@@ -20,6 +26,6 @@ from uam_studio.planning.operations.world import (
 
 __all__ = [
     "DEFAULT_FORECAST_SIGMA_KT", "DEFAULT_SENSOR_NOISE_MA", "DEFAULT_SENSOR_NOISE_MV", "Decision",
-    "FlightRecord", "Operator", "Readings", "WindEvent", "World", "fly_mission", "parse_event",
-    "position_at", "record_csv",
+    "FlightRecord", "Operator", "Readings", "WEATHER_RESERVE_KT", "WindEvent", "World", "fly_mission", "parse_event",
+    "breach_cause", "position_at", "record_csv",
 ]

@@ -21,8 +21,11 @@ class Decision:
     ``health_flags``, the flags of the health fits behind the estimate
     (:mod:`uam_studio.battery.fit_quality`: ``"misfit"``, ``"outside fleet range"``), and what the
     leg just flown told about the wind: ``leg_wind_kts`` (kt, read off its measured duration),
-    ``leg_wind_vs_forecast_kts`` (kt, that wind minus the forecast) and ``wind_surprise`` (it was
-    further from the prediction than the forecast's error explains); None before the first leg.
+    ``leg_wind_vs_forecast_kts`` (kt, that wind minus the forecast) and ``wind_surprise`` (with this
+    leg the belief came to hold that the weather changed); None before the first leg. What it believes
+    about a change of the weather: ``wind_change_p`` (its probability) and ``wind_change`` (one line,
+    e.g. "the wind changed by about +22 kt since the Hayward leg (p 0.90)" or "perhaps a change of ...
+    (p 0.26)"; "" below p 0.2); ``reserve_kt`` (kt), the weather reserve its safety check kept.
     """
 
     time_s: float
@@ -46,16 +49,20 @@ class Decision:
     leg_wind_kts: float | None = None
     leg_wind_vs_forecast_kts: float | None = None
     wind_surprise: bool = False
+    wind_change_p: float = 0.0
+    wind_change: str = ""
+    reserve_kt: float = 0.0
 
     @property
     def leg_wind_text(self) -> str:
         """What the leg just flown told about the wind, e.g. ``"+14 (flew in +9)"`` (kt, against the
-        forecast, then the wind read off the leg), ``", a surprise"`` added where it was one; ``"-"``
+        forecast, then the wind read off the leg), ``", a change"`` added where the belief of a change
+        began with it; ``"-"``
         before the first leg."""
         if self.leg_wind_kts is None or self.leg_wind_vs_forecast_kts is None:
             return "-"
         text = f"{self.leg_wind_vs_forecast_kts:+.0f} (flew in {self.leg_wind_kts:+.0f})"
-        return text + ", a surprise" if self.wind_surprise else text
+        return text + ", a change" if self.wind_surprise else text
 
     def row(self) -> dict[str, Any]:
         """The decision as one row of a log table (the Fly tab, notebook 09): time (s), place, the
@@ -66,6 +73,7 @@ class Decision:
                 "fit flags": ", ".join(self.health_flags) or "-",
                 "leg wind vs forecast (kt)": self.leg_wind_text,
                 "common shift (kt)": f"{self.wind_shift_kts:+.1f} ± {self.wind_shift_sd_kts:.1f}",
+                "wind changed (p)": f"{self.wind_change_p:.2f}",
                 "next": self.next_to or "-", "reason": self.reason}
 
     def to_dict(self) -> dict[str, Any]:

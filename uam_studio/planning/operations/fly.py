@@ -38,6 +38,7 @@ from uam_studio.planning.operations.operator import (
     HEALTH_Z,
     IN_FLIGHT_PLANNERS,
     PLAN_WIND_Z,
+    WEATHER_RESERVE_KT,
     WIND_Z,
     Operator,
 )
@@ -58,8 +59,10 @@ class FlightRecord:
 
     Executed: ``route`` (nodes in order; ``"vertiport"`` is a recharge), ``altitudes_m`` (m) and
     ``actual_winds_kts`` (kt) of each leg, ``events`` (each re-plan as a :class:`Decision`),
-    ``breached`` (the cell fell below the cut-off), ``reached`` and ``reached_priority`` (0 when
-    breached), ``charging_cycles`` (returns to the vertiport).
+    ``breached`` (the cell fell below the cut-off), ``breach_cause`` (for a breach: whether the weather
+    changed by more than the operator's weather reserve ``reserve_kt`` (kt), or the breach is a decision
+    error; "" without a breach), ``reached`` and ``reached_priority`` (0 when breached),
+    ``charging_cycles`` (returns to the vertiport).
     Time series at 1 Hz from the first take-off: ``time_s`` (s), ``measured_voltage_v`` and
     ``measured_current_a`` (the sensors), ``true_voltage_v`` and ``true_current_a`` (the world), and
     ``predicted_voltage_v`` (the operator's prediction for each leg at the decision that chose it,
@@ -76,6 +79,7 @@ class FlightRecord:
     sensor_noise_mv: float
     sensor_noise_ma: float
     wind_events: list[str]
+    reserve_kt: float = 0.0
     route: list[str] = field(default_factory=list)
     altitudes_m: list[float] = field(default_factory=list)
     actual_winds_kts: list[float] = field(default_factory=list)
@@ -83,6 +87,7 @@ class FlightRecord:
     leg_end_s: list[float] = field(default_factory=list)
     events: list[Decision] = field(default_factory=list)
     breached: bool = False
+    breach_cause: str = ""
     reached: list[str] = field(default_factory=list)
     reached_priority: int = 0
     charging_cycles: int = 0
@@ -194,13 +199,24 @@ def _hindsight(mission: Mission, scenario: str, new_world: Callable[[], World], 
     return best
 
 
+def breach_cause(world: World, reserve_kt: float) -> str:
+    """Why a flight in ``world`` breached, in one line: the change of the weather the legs flew in
+    exceeded the weather reserve (kt), or it did not and the breach is a decision error."""
+    changes = [sum(e.delta_kts for e in world.events if e.start_s <= leg.start_s) for leg in world.legs]
+    worst = max(changes, default=0.0)
+    if worst > reserve_kt:
+        return f"the change exceeded the reserve ({worst:+g} kt against a {reserve_kt:g} kt reserve)"
+    return (f"a decision error: the weather changed by {worst:+g} kt, within the {reserve_kt:g} kt reserve"
+            if worst else f"a decision error: no change of the weather (reserve {reserve_kt:g} kt)")
+
+
 def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
                 forecast_sigma_kt: float = DEFAULT_FORECAST_SIGMA_KT,
                 sensor_noise_mv: float = DEFAULT_SENSOR_NOISE_MV,
                 sensor_noise_ma: float = DEFAULT_SENSOR_NOISE_MA,
                 events: Sequence[WindEvent] = (), scenario: str | None = None,
                 health_z: float = HEALTH_Z, wind_z: float = WIND_Z, plan_wind_z: float = PLAN_WIND_Z,
-                references: bool = True) -> FlightRecord:
+                references: bool = True, reserve_kt: float = WEATHER_RESERVE_KT) -> FlightRecord:
     """Fly ``mission`` once: the operator plans from the take-off check, re-plans at every arrival.
 
     :param mission: the mission; its ``battery`` is the world's true cell, its winds the forecast.
@@ -215,6 +231,8 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
     :param wind_z: the operator's margin on each unflown leg's wind (std) for its safety check.
     :param plan_wind_z: the wind margin (std) of the belief it searches plans on.
     :param references: also fly the blind pre-flight plan and the hindsight oracle.
+    :param reserve_kt: the operator's weather reserve (kt, 0-60, default 25): every take-off keeps the
+        next leg and the way home safe under its cautious belief plus this much more headwind.
     :raises InputError: for bad input, naming the field; an event that starts after the flight
         (and its references) ended is an error of field ``event``.
     """
@@ -226,9 +244,9 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
     world = World(mission, forecast_sigma_kt, sensor_noise_mv, sensor_noise_ma, events, seed)
     known = dataclasses.replace(mission, battery=Battery(DEFAULT_Q_MAX, DEFAULT_R0))  # the operator's view
     op = Operator(known, scenario, world.forecast_sigma_kt, world.sensor_noise_mv, health_z, wind_z, plan_wind_z,
-                  policy)
+                  policy, reserve_kt)
     rec = FlightRecord(mission.name, scenario, int(seed), world.forecast_sigma_kt, world.sensor_noise_mv,
-                       world.sensor_noise_ma, [e.text for e in world.events],
+                       world.sensor_noise_ma, [e.text for e in world.events], op.reserve_kt,
                        true_q_max=mission.battery.q_max, true_r0=mission.battery.r0)
     takeoff = np.asarray(takeoff_current(), dtype=float)  # every leg's vertical take-off and first climb
     series_t, series_i, series_v, series_true, series_true_i, series_pred = [], [], [], [], [], []
@@ -269,6 +287,7 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
         op.arrived(d.next_to)
         first = False
     rec.breached = world.breached
+    rec.breach_cause = breach_cause(world, op.reserve_kt) if rec.breached else ""
     rec.reached = [n for n in rec.route if n != VERTIPORT]
     if rec.breached:
         rec.reached = rec.reached[:-1] if rec.route and rec.route[-1] != VERTIPORT else rec.reached

@@ -11,18 +11,20 @@ take-off check and at every arrival) it
    sharpens);
 2. estimates the wind (:class:`~uam_studio.planning.operations.wind_belief.WindBelief`): the actual
    wind of each flown leg follows from its measured duration (cruise time = distance / ground speed);
-   the shift common to all legs is estimated from those residuals with a Gaussian prior, and every
-   unflown leg is predicted as forecast + shift;
+   the shift common to all legs, which may change in flight, is estimated from those residuals by
+   Bayesian online change-point detection, and every unflown leg is predicted as forecast + shift;
 3. plans the rest from its present node and estimated battery state on its *expected* belief
    (median health, predicted winds), with the attention planner (``planner="attention"``, the
    default: :func:`~uam_studio.planning.agents.attention.decode.continue_route`) or exactly
    (``planner="oracle"``: :func:`~uam_studio.planning.solvers.oracle.feasible_sorties`), allowing
    only first legs after which the aircraft can still get home on its *cautious* belief: the cell
    ``health_z`` std to the weak side, and the two legs' winds at a joint one-sided ``wind_z`` bound
+   plus the weather reserve (``reserve_kt`` more headwind on the next leg and on the way home: a change
+   of the weather since the last leg, or before the next, of up to that much never breaches)
    (:meth:`Operator._safe_moves`);
 4. flies that first leg only, and re-plans on arrival.
 
-The margins come only from its own uncertainty.
+The margins come from its own uncertainty and from the declared weather reserve.
 """
 
 from __future__ import annotations
@@ -49,7 +51,7 @@ from uam_studio.planning.missions.mission import (
 )
 from uam_studio.planning.missions.scenario import check_scenario
 from uam_studio.planning.operations.decision import Decision
-from uam_studio.planning.operations.defaults import DEFAULT_FORECAST_SIGMA_KT
+from uam_studio.planning.operations.defaults import DEFAULT_FORECAST_SIGMA_KT, WEATHER_RESERVE_KT
 from uam_studio.planning.operations.health_belief import HealthBelief
 from uam_studio.planning.operations.wind_belief import WindBelief, wind_from_duration
 from uam_studio.planning.solvers.oracle import (
@@ -64,6 +66,7 @@ from uam_studio.planning.solvers.setup import safest_level
 HEALTH_Z = 1.64  # std of the health estimate the belief cell is taken at (one-sided 95%)
 WIND_Z = 1.64  # one-sided joint bound (std) on the next leg's and the way home's winds
 PLAN_WIND_Z = 0.5  # std of a leg's predicted wind the expected belief takes
+RESERVE_RANGE_KT = (0.0, 60.0)  # kt, allowed weather reserves
 Q_PLAN_RANGE = (2000.0, 12000.0)  # C, belief cell bounds
 R0_PLAN_RANGE = (0.005, 1.5)  # ohm
 
@@ -75,7 +78,7 @@ IN_FLIGHT_PLANNERS = ("attention", "oracle")  # the operator's planners (the fir
 class LegObservation:
     """What the last leg flown told the operator about the wind, until its next decision reads it:
     the wind the leg's duration implies (kt, + headwind), its residual against the forecast (kt),
-    whether that was a surprise (the wind estimate reset), and the same as one line of text."""
+    whether the belief came to hold a change of the weather with it, and the same as one line of text."""
 
     wind_kt: float
     residual_kt: float
@@ -95,11 +98,14 @@ class Operator:
     :param health_z: margin on the health estimate (std).
     :param wind_z: margin on each unflown leg's wind (std).
     :param planner: ``"attention"`` (the learned planner, default) or ``"oracle"`` (exact search).
+    :param reserve_kt: the weather reserve (kt, 0-60): every take-off keeps the next leg and the way home
+        safe under the cautious belief plus this much more headwind on each.
     """
 
     def __init__(self, mission: Mission, scenario: str | None = None, forecast_sigma_kt: float = DEFAULT_FORECAST_SIGMA_KT,
                  sensor_noise_mv: float | None = None, health_z: float = HEALTH_Z, wind_z: float = WIND_Z,
-                 plan_wind_z: float = PLAN_WIND_Z, planner: str = "attention") -> None:
+                 plan_wind_z: float = PLAN_WIND_Z, planner: str = "attention",
+                 reserve_kt: float = WEATHER_RESERVE_KT) -> None:
         if planner not in IN_FLIGHT_PLANNERS:
             raise InputError("policy", f"{planner!r} is not an in-flight policy; allowed: "
                                        f"{', '.join(IN_FLIGHT_PLANNERS)}")
@@ -113,6 +119,7 @@ class Operator:
         self.health_z = check_range("health_z", health_z, 0.0, 5.0)
         self.wind_z = check_range("wind_z", wind_z, 0.0, 5.0)
         self.plan_wind_z = check_range("plan_wind_z", plan_wind_z, 0.0, 5.0)
+        self.reserve_kt = check_range("reserve_kt", reserve_kt, *RESERVE_RANGE_KT)
         self.noise_v = None if sensor_noise_mv is None else max(float(sensor_noise_mv), 0.5) * 1e-3
         self.health_belief = HealthBelief(self.noise_v, self.eod_v)  # the paper's box: the default cell's fleet
         self.winds = WindBelief({n: mission.node(n).wind_kts for n in mission.node_names}, forecast_sigma_kt)
@@ -152,8 +159,9 @@ class Operator:
         else:
             self.visited.append(to)
         note = f"wind to {to} {wind:+.0f} kt ({resid:+.0f} kt against the forecast)"
-        if surprise:
-            note += "; a surprise: the wind estimate is reset"
+        change = self.winds.change()
+        if change.worth_saying:
+            note += "; " + change.text()
         self._observed = LegObservation(wind, resid, surprise, note)
         return note
 
@@ -214,7 +222,8 @@ class Operator:
         Gaussians (std from :meth:`WindBelief.predict`), each leg's charge grows with its wind in
         proportion to its length, and the bound puts each leg's wind at
         ``mean + wind_z * sd^2 * d / sqrt(sum(sd^2 d^2))``. A wind already measured has a small std,
-        so all the margin then goes to the unknown one.
+        so all the margin then goes to the unknown one. Both legs then get ``reserve_kt`` more headwind
+        (the weather reserve).
         """
         legs = episode.legs
         n_alt = len(ALTITUDES_M)
@@ -231,14 +240,14 @@ class Operator:
             mean, sd = self.winds.predict(to)
             d1, d2 = legs.dist[here, j], legs.dist[j, VERTIPORT_SLOT]
             norm = math.sqrt((sd * d1) ** 2 + (home_sd * d2) ** 2) or 1.0
-            w1 = mean + self.wind_z * sd ** 2 * d1 / norm
-            w2 = home_mean + self.wind_z * home_sd ** 2 * d2 / norm
+            w1 = mean + self.wind_z * sd ** 2 * d1 / norm + self.reserve_kt
+            w2 = home_mean + self.wind_z * home_sd ** 2 * d2 / norm + self.reserve_kt
             for a in np.flatnonzero(open_moves[j]):
                 firsts.append((int(j), int(a), self._leg_current(frm, to, ALTITUDES_M[a], w1)))
                 returns.append([(b, self._leg_current(to, VERTIPORT, ALTITUDES_M[b], w2))
                                 for b in range(n_alt) if legs.feasible[j, VERTIPORT_SLOT, b]])
         if open_moves[VERTIPORT_SLOT].any():
-            w = home_mean + self.wind_z * home_sd
+            w = home_mean + self.wind_z * home_sd + self.reserve_kt
             for a in np.flatnonzero(open_moves[VERTIPORT_SLOT]):
                 firsts.append((VERTIPORT_SLOT, int(a), self._leg_current(frm, VERTIPORT, ALTITUDES_M[a], w)))
                 returns.append([])
@@ -265,7 +274,7 @@ class Operator:
         q, q_sd = Q_REF_C / w, Q_REF_C * w_sd / w ** 2
         shift, shift_sd = self.winds.shift()
         d = Decision(self.time_s, self.node, "abort", reason, q, q_sd, r, r_sd, q, r, shift, shift_sd, (), (),
-                     None, None, health_flags=self.health_belief.flags())
+                     None, None, health_flags=self.health_belief.flags(), reserve_kt=self.reserve_kt)
         self.decisions.append(d)
         return d
 
@@ -318,9 +327,11 @@ class Operator:
         leg_wind, leg_resid, surprise = ((seen_leg.wind_kt, seen_leg.residual_kt, seen_leg.surprise)
                                          if seen_leg is not None else (None, None, False))
         nxt = route[0] if route else None
+        change = self.winds.change()
         d = Decision(self.time_s, self.node, kind, reason, q, q_sd, r, r_sd, q_plan, r_plan, shift, shift_sd,
                      tuple(route), tuple(alts), nxt, alts[0] if route else None, time.perf_counter() - t0,
-                     self.health_belief.flags(), leg_wind, leg_resid, surprise)
+                     self.health_belief.flags(), leg_wind, leg_resid, surprise, change.p,
+                     change.text() if change.worth_saying else "", self.reserve_kt)
         self._last_route = tuple(route[1:])
         self.decisions.append(d)
         if nxt is not None:
@@ -439,4 +450,5 @@ class Operator:
             f"({ALTITUDES_M[best]:g} m)")
 
 
-__all__ = ["HEALTH_Z", "IN_FLIGHT_PLANNERS", "PLAN_WIND_Z", "WIND_Z", "Operator"]
+__all__ = ["HEALTH_Z", "IN_FLIGHT_PLANNERS", "PLAN_WIND_Z", "RESERVE_RANGE_KT", "WEATHER_RESERVE_KT", "WIND_Z",
+           "Operator"]

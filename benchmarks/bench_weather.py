@@ -1,0 +1,132 @@
+"""Weather that changes in flight: breaches and served priority with the weather reserve (issue "Weather
+that changes"), against the hindsight reference and against the same flights without a reserve.
+
+    OMP_NUM_THREADS=1 python benchmarks/bench_weather.py demo            # the README's Fly demo: 15 flights
+    OMP_NUM_THREADS=1 python benchmarks/bench_weather.py fresh [--n 45]  # fresh missions, 4 weathers
+
+``demo``: the example mission (``assets/example_mission.json``), +25 kt injected at 60, 300 and 900 s,
+world seeds 0-4. Goal: 0 breaches with the default reserve (25 kt).
+
+``fresh``: ``--n`` fresh single-charge missions of 5-8 destinations (generator seed 56000, world seeds
+56100+; neither was used to pick the belief's or the reserve's numbers), each flown with no change and
+with a change of +25, -20 and +35 kt at a time drawn uniformly over the first 90% of its no-change
+flight (seed 56200). A change drawn after the changed flight ended is not counted (the number is
+printed). Goals: no change and +25 / -20 kt: 0 breaches; +25 / -20 kt: priority >= 80% of the hindsight
+reference; no change: >= 85%. +35 kt exceeds the reserve: breaches and priority are reported.
+Each condition is also flown without a reserve (``reserve_kt=0``, the belief unchanged): the price of
+the reserve on the same flights.
+
+Runs on two processes (one per core of the project's machine).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+
+from uam_studio.errors import InputError
+from uam_studio.planning import load_mission
+from uam_studio.planning.operations import WEATHER_RESERVE_KT, fly_mission, parse_event
+from uam_studio.studies.flying import study_missions
+
+ROOT = __file__.rsplit("/benchmarks/", 1)[0]
+WEATHERS = ("none", "wind+25", "wind-20", "wind+35")
+
+
+def _fly(job: tuple) -> tuple:
+    """(label, reserve, priority, hindsight priority, breached, breach cause) of one flight, or None when
+    the change came after the flight ended."""
+    label, mission, seed, event, reserve = job
+    try:
+        rec = fly_mission(mission, seed=seed, events=[parse_event(event)] if event else [], reserve_kt=reserve)
+    except InputError as err:
+        if err.field != "event":
+            raise
+        return None
+    return label, reserve, rec.reached_priority, rec.hindsight_priority, rec.breached, rec.breach_cause
+
+
+def _table(rows: list[tuple], labels: list[str], skipped: dict[str, int], goals: dict[str, float]) -> None:
+    print("| weather | reserve (kt) | flights | breaches | priority | hindsight | ratio | goal |")
+    print("|---|---|---|---|---|---|---|---|")
+    for label in labels:
+        for reserve in (WEATHER_RESERVE_KT, 0.0):
+            sub = [r for r in rows if r[0] == label and r[1] == reserve]
+            if not sub:
+                continue
+            prio, hind = sum(r[2] for r in sub), sum(r[3] for r in sub)
+            breaches = sum(r[4] for r in sub)
+            ratio = prio / hind if hind else float("nan")
+            goal = ""
+            if reserve == WEATHER_RESERVE_KT and label in goals:
+                met = breaches == 0 and ratio >= goals[label]
+                goal = f"0 breaches, >= {goals[label]:.2f}: {'met' if met else 'NOT met'}"
+            print(f"| {label} | {reserve:g} | {len(sub)} | {breaches} | {prio} | {hind} | {ratio:.3f} | {goal} |")
+            for cause in sorted({r[5] for r in sub if r[4]}):
+                print(f"|  |  |  | {sum(1 for r in sub if r[5] == cause)}: {cause} |  |  |  |  |")
+    if any(skipped.values()):
+        print("changes after the flight's end, not counted: " + ", ".join(f"{k} {v}" for k, v in skipped.items() if v))
+
+
+def demo(workers: int) -> None:
+    mission = load_mission(f"{ROOT}/assets/example_mission.json")
+    jobs = [(f"+25 kt at {t} s", mission, seed, f"wind+25@{t}", reserve)
+            for reserve in (WEATHER_RESERVE_KT, 0.0) for t in (60, 300, 900) for seed in range(5)]
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(workers) as pool:
+        rows = [r for r in pool.map(_fly, jobs) if r is not None]
+    labels = [f"+25 kt at {t} s" for t in (60, 300, 900)]
+    _table(rows, labels, {}, {})
+    ours = [r for r in rows if r[1] == WEATHER_RESERVE_KT]
+    print(f"README demo, reserve {WEATHER_RESERVE_KT:g} kt: {len(ours)} flights, {sum(r[4] for r in ours)} breaches "
+          f"(goal 0: {'met' if not any(r[4] for r in ours) else 'NOT met'}); priority {sum(r[2] for r in ours)} of "
+          f"hindsight {sum(r[3] for r in ours)} ({time.perf_counter() - t0:.0f} s)")
+
+
+def fresh(n: int, workers: int) -> None:
+    missions = study_missions(n, 56000, "single_charge")
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(workers) as pool:
+        base = list(pool.map(_fly_end, [(m, 56100 + k) for k, m in enumerate(missions)]))
+        rng = np.random.default_rng(56200)
+        times = [float(rng.uniform(0.0, 0.9 * end)) for end in base]
+        jobs = []
+        for reserve in (WEATHER_RESERVE_KT, 0.0):
+            for label in WEATHERS:
+                for k, m in enumerate(missions):
+                    event = "" if label == "none" else f"{label}@{max(1.0, round(times[k])):g}"
+                    jobs.append((label, m, 56100 + k, event, reserve))
+        out = list(pool.map(_fly, jobs))
+    skipped = {label: sum(1 for j, r in zip(jobs, out) if r is None and j[0] == label and j[4] == WEATHER_RESERVE_KT)
+               for label in WEATHERS}
+    rows = [r for r in out if r is not None]
+    _table(rows, list(WEATHERS), skipped, {"none": 0.85, "wind+25": 0.80, "wind-20": 0.80})
+    print(f"({time.perf_counter() - t0:.0f} s, {workers} processes)")
+
+
+def _fly_end(job: tuple) -> float:
+    """The end (s) of a mission's no-change flight (no references): where a change may be drawn."""
+    mission, seed = job
+    rec = fly_mission(mission, seed=seed, references=False)
+    return float(rec.leg_end_s[-1]) if rec.leg_end_s else 1.0
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("what", choices=["demo", "fresh"])
+    p.add_argument("--n", type=int, default=45)
+    p.add_argument("--workers", type=int, default=2)
+    args = p.parse_args(argv)
+    if args.what == "demo":
+        demo(args.workers)
+    else:
+        fresh(args.n, args.workers)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
