@@ -101,7 +101,7 @@ class FlyView(pn.viewable.Viewer):
                                         formatters={"reason": {"type": "textarea"}},
                                         widths={"t (s)": 55, "at": 85, "q_max (C)": 95, "R0 (ohm)": 85,
                                                 "fit flags": 80, "leg wind vs forecast (kt)": 190,
-                                                "common shift (kt)": 135, "wind changed (p)": 75, "next": 85})
+                                                "common shift (kt)": 135, "wind changed (p)": 95, "next": 85})
         self._shown = (-1, -1, -1)
         self._figures()
         self.map_pane = pn.pane.Bokeh(self.map_fig, width=MAP_PX + 10, height=MAP_PX + 10)
