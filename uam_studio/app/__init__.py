@@ -1,13 +1,16 @@
-"""The Panel app: Planner, Fly, Battery lab and Retrain tabs (views and state; it imports the library).
+"""The Panel app: Planner, Fly, Battery lab, Retrain, Fleet and Glossary tabs (views and state; it imports
+the library).
 
     uam-studio serve                 # or: panel serve uam_studio/app/main.py
     from uam_studio.app import create_app; create_app()    # in Jupyter (after pn.extension("tabulator"))
 
-Each tab has a state model, a plain ``param.Parameterized`` class (:mod:`~uam_studio.app.planner_state`,
-:mod:`~uam_studio.app.fly_state`, :mod:`~uam_studio.app.battery_lab_state`,
-:mod:`~uam_studio.app.retrain_state`), separate from its view (:mod:`~uam_studio.app.planner`,
-:mod:`~uam_studio.app.fly`, :mod:`~uam_studio.app.battery_lab`, :mod:`~uam_studio.app.retrain`), a
-``pn.viewable.Viewer`` component. What the sessions of a process share: :mod:`~uam_studio.app.services`
+Each tab but the Glossary has a state model, a plain ``param.Parameterized`` class
+(:mod:`~uam_studio.app.planner_state`, :mod:`~uam_studio.app.fly_state`,
+:mod:`~uam_studio.app.battery_lab_state`, :mod:`~uam_studio.app.retrain_state`,
+:mod:`~uam_studio.app.fleet_state`), separate from its view (:mod:`~uam_studio.app.planner`,
+:mod:`~uam_studio.app.fly`, :mod:`~uam_studio.app.battery_lab`, :mod:`~uam_studio.app.retrain`,
+:mod:`~uam_studio.app.fleet`), a ``pn.viewable.Viewer`` component. HoloViews figures draw on the
+canvas (:func:`~uam_studio.app.style.draw_on_canvas`), so they draw without a GPU. What the sessions of a process share: :mod:`~uam_studio.app.services`
 (thread pool, Dynaformer, agent registry), :mod:`~uam_studio.app.plans` (the plan cache) and
 :mod:`~uam_studio.app.comparison` (the plan comparison and its runner).
 """

@@ -6,11 +6,13 @@ an exit code. Bad input of any kind (an :class:`~uam_studio.errors.InputError`, 
 rejects) prints one line ``error: ...`` to stderr and exits with code 2.
 
 Commands: ``serve`` (start the Panel app), ``simulate`` (fly a route of a mission file and report voltage and EOD), ``plan`` (plan
-a mission with the DQN agent, the oracle or the greedy baseline; physics-checked), ``fly`` (fly it in
+a mission with the attention planner (default), the DQN agent, the oracle or the greedy baseline;
+physics-checked), ``fly`` (fly it in
 a world the operator cannot see, re-planning from its sensors), ``fleet`` (a fleet's day or life under
 three dispatchers), ``findings`` (the paper's four findings, agents trained on the Dask engine), ``train``
-(``dynaformer`` or ``dqn``; never into ``pretrained/``), ``evaluate`` (a model on held-out data, or ``real``: the models on
-the CMU eVTOL dataset's real cells) and ``identify`` (a real cell's parameter set), each in the module of
+(``dynaformer``, ``dqn`` or ``attention``; never into ``pretrained/``), ``evaluate`` (``dynaformer``: a
+model on held-out data; ``real``: the models on the CMU eVTOL dataset's real cells; ``lives``: leave one
+of its real lives out) and ``identify`` (a real cell's parameter set), each in the module of
 its name; :mod:`uam_studio.cli.common` holds what they share.
 """
 
