@@ -28,12 +28,12 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
+from uam_studio.classroom import asset_path
 from uam_studio.errors import InputError
 from uam_studio.planning import load_mission
 from uam_studio.planning.operations import WEATHER_RESERVE_KT, fly_mission, parse_event
 from uam_studio.studies.flying import study_missions
 
-ROOT = __file__.rsplit("/benchmarks/", 1)[0]
 WEATHERS = ("none", "wind+25", "wind-20", "wind+35")
 
 
@@ -73,7 +73,7 @@ def _table(rows: list[tuple], labels: list[str], skipped: dict[str, int], goals:
 
 
 def demo(workers: int) -> None:
-    mission = load_mission(f"{ROOT}/assets/example_mission.json")
+    mission = load_mission(asset_path("example_mission.json"))
     jobs = [(f"+25 kt at {t} s", mission, seed, f"wind+25@{t}", reserve)
             for reserve in (WEATHER_RESERVE_KT, 0.0) for t in (60, 300, 900) for seed in range(5)]
     t0 = time.perf_counter()

@@ -14,24 +14,19 @@ from pathlib import Path
 
 from playwright.sync_api import sync_playwright
 
-from uam_studio.app.battery_lab import EOD_COLOR, FAMILY_COLORS
-from uam_studio.app.fleet import COLORS
-from uam_studio.app.fly import EVENT_COLOR
-from uam_studio.app.map_geometry import FAILED_COLOR
 from uam_studio.app.serve import ServedApp
-from uam_studio.app.style import MEASURED_COLOR, PHYSICS_COLOR, PREDICTED_COLOR
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from drawn import assert_drawn  # noqa: E402
-
-PLANNER = {"physics": (PHYSICS_COLOR, 1.0), "Dynaformer": (PREDICTED_COLOR, 1.0), "EOD": (FAILED_COLOR, 1.0)}
-LAB_R0 = {f"R0 {r} ohm": (FAMILY_COLORS[k], 0.8) for k, r in enumerate(("0.017", "0.1", "0.2", "0.3"))} | {
-    "this setting": ("#000000", 1.0), "EOD": (EOD_COLOR, 1.0)}
-FLY = {"predicted (operator)": (PREDICTED_COLOR, 1.0), "true (hidden)": (PHYSICS_COLOR, 1.0),
-       "measured": (MEASURED_COLOR, 0.8), "EOD cut-off": (FAILED_COLOR, 1.0), "wind change": (EVENT_COLOR, 1.0)}
-DAYS = {"health-aware": (COLORS["aware"], 1.0), "health-blind": (COLORS["blind"], 1.0),
-        "hindsight": (COLORS["hindsight"], 1.0), "upper bound": ("#000000", 1.0)}
-PACKS = {"belief": (COLORS["aware"], 1.0), "truth (hidden)": ("#000000", 1.0)}
+from drawn import (  # noqa: E402
+    FLEET_DAYS,
+    FLEET_PACKS,
+    FLY_VOLTAGE,
+    LAB_CURRENT,
+    LAB_R0_VOLTAGE,
+    PLANNER_VOLTAGE,
+    RETRAIN_ORACLE,
+    assert_drawn,
+)
 
 
 def main() -> None:
@@ -46,14 +41,14 @@ def main() -> None:
             page.locator(".uam-plan-compare[data-pending='false']").wait_for(timeout=120_000)
             page.wait_for_timeout(1500)
             page.screenshot(path=str(out / f"planner_{w}.png"))
-            assert_drawn(page, "Voltage: physics", PLANNER)
+            assert_drawn(page, "Voltage: physics", PLANNER_VOLTAGE)
             page.locator(".bk-tab", has_text="Battery lab").click()
             page.locator(".uam-lab-summary").get_by_text("this setting").wait_for()
             page.locator(".bk-btn", has_text="R0").click()
             page.locator(".uam-lab-summary").get_by_text("R0 0.45 ohm").wait_for()
             page.wait_for_timeout(1500)
-            assert_drawn(page, "Voltage (physics", LAB_R0)
-            assert_drawn(page, "Per-cell current", {"this setting": ("#000000", 1.0)})
+            assert_drawn(page, "Voltage (physics", LAB_R0_VOLTAGE)
+            assert_drawn(page, "Per-cell current", LAB_CURRENT)
             page.locator(".bk-tab", has_text="Battery lab").scroll_into_view_if_needed()
             page.screenshot(path=str(out / f"battery_{w}.png"))
             page.locator(".bk-tab", has_text="Fly").click()
@@ -68,9 +63,9 @@ def main() -> None:
             page.locator(".uam-fly-status").get_by_text("flown:").wait_for(timeout=120_000)
             page.wait_for_timeout(1500)
             page.screenshot(path=str(out / f"fly_{w}.png"))
-            assert_drawn(page, "voltage: measured", FLY)
+            assert_drawn(page, "voltage: measured", FLY_VOLTAGE)
             page.locator(".bk-tab", has_text="Retrain").click()
-            assert_drawn(page, "Destinations reached", {"exact oracle (this map)": ("#333333", 1.0)}, timeout_s=60)
+            assert_drawn(page, "Destinations reached", RETRAIN_ORACLE, timeout_s=60)
             page.locator(".bk-tab", has_text="Retrain").scroll_into_view_if_needed()
             page.screenshot(path=str(out / f"retrain_{w}.png"))
             page.locator(".bk-tab", has_text="Fleet").click()
@@ -81,8 +76,8 @@ def main() -> None:
                 if day in (1, 3):
                     page.locator(".bk-tab", has_text="Fleet").scroll_into_view_if_needed()
                     page.screenshot(path=str(out / f"fleet_day{day}_{w}.png"))
-                    assert_drawn(page, "Served priority", DAYS)
-                    assert_drawn(page, "Each pack after", PACKS)
+                    assert_drawn(page, "Served priority", FLEET_DAYS)
+                    assert_drawn(page, "Each pack after", FLEET_PACKS)
             page.locator(".bk-tab", has_text="Glossary").click()
             page.wait_for_timeout(1000)
             page.screenshot(path=str(out / f"glossary_{w}.png"))

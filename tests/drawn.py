@@ -4,7 +4,8 @@ A table or a data source can be right while the canvas stays blank (a WebGL glyp
 nothing). :func:`missing_colours` screenshots the frame of the figure whose title starts with a given text,
 paints its legends white (a legend's swatches are drawn even when the glyphs are not), and counts the
 pixels of each colour the legend promises. Used by the browser tests and by
-``benchmarks/teacher_screenshots.py``.
+``benchmarks/teacher_screenshots.py``, with the glyphs each tab's figures promise (the constants below:
+legend label -> (colour, alpha), read from the views' own colours).
 """
 
 from __future__ import annotations
@@ -14,6 +15,39 @@ import time
 from collections.abc import Mapping
 
 import numpy as np
+
+from uam_studio.app.battery_lab import EOD_COLOR, FAMILY_COLORS
+from uam_studio.app.fleet import COLORS
+from uam_studio.app.fly import EVENT_COLOR
+from uam_studio.app.map_geometry import FAILED_COLOR
+from uam_studio.app.style import MEASURED_COLOR, PHYSICS_COLOR, PREDICTED_COLOR
+
+BLACK = ("#000000", 1.0)
+# The Planner's voltage figure ("Voltage: physics ...").
+PLANNER_VOLTAGE = {"physics": (PHYSICS_COLOR, 1.0), "Dynaformer": (PREDICTED_COLOR, 1.0), "EOD": (FAILED_COLOR, 1.0)}
+
+
+def lab_voltage(labels: list[str]) -> dict[str, tuple[str, float]]:
+    """The Battery lab's voltage figure: its family's curves in legend order (``None``: a curve not asked
+    for, e.g. one hidden under the black "this setting" curve), the black curve and the EOD line."""
+    return {label: (FAMILY_COLORS[k], 0.8) for k, label in enumerate(labels) if label is not None} | {
+        "this setting": BLACK, "EOD": (EOD_COLOR, 1.0)}
+
+
+# Varying R0: its 0.45 ohm curve ends after 0.2 min, under the others' first sample, and is not asked for;
+# R0 does not change the current, which shows as the black curve alone.
+LAB_R0_VOLTAGE = lab_voltage(["R0 0.017 ohm", "R0 0.1 ohm", "R0 0.2 ohm", "R0 0.3 ohm"])
+LAB_CURRENT = {"this setting": BLACK}
+# The Fly tab's voltage figure after a flight with an injected wind change.
+FLY_VOLTAGE = {"predicted (operator)": (PREDICTED_COLOR, 1.0), "true (hidden)": (PHYSICS_COLOR, 1.0),
+               "measured": (MEASURED_COLOR, 0.8), "EOD cut-off": (FAILED_COLOR, 1.0),
+               "wind change": (EVENT_COLOR, 1.0)}
+# Retrain's dashed reference line, on each learning-curve figure.
+RETRAIN_ORACLE = {"exact oracle (this map)": ("#333333", 1.0)}
+# The Fleet's per-day chart and its packs' belief against truth.
+FLEET_DAYS = {"health-aware": (COLORS["aware"], 1.0), "health-blind": (COLORS["blind"], 1.0),
+              "hindsight": (COLORS["hindsight"], 1.0), "upper bound": BLACK}
+FLEET_PACKS = {"belief": (COLORS["aware"], 1.0), "truth (hidden)": BLACK}
 
 # The plot frame (page pixels) of the first figure whose title starts with the argument, and the boxes
 # (the same coordinates) of its legends; null if there is no such figure or it is not laid out.

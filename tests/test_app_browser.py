@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
-from drawn import assert_drawn
+from drawn import LAB_CURRENT, LAB_R0_VOLTAGE, PLANNER_VOLTAGE, RETRAIN_ORACLE, assert_drawn, lab_voltage
 
 pytest.importorskip("playwright")
 
@@ -151,11 +151,7 @@ def test_planner_map_table_slider_update_route_and_summary(page, app_url):
             if not r.url.startswith(("http://127.0.0.1", "ws://127.0.0.1", "data:", "blob:")) else None)
     summary = _open(page, app_url)
     text0 = summary.inner_text()
-    from uam_studio.app.map_geometry import FAILED_COLOR
-    from uam_studio.app.style import PHYSICS_COLOR, PREDICTED_COLOR
-
-    assert_drawn(page, "Voltage: physics", {"physics": (PHYSICS_COLOR, 1.0), "Dynaformer": (PREDICTED_COLOR, 1.0),
-                                            "EOD": (FAILED_COLOR, 1.0)})
+    assert_drawn(page, "Voltage: physics", PLANNER_VOLTAGE)
     for needle in ("Route: vertiport", "Reached:", "physics: safe by", "predicted: safe by", "(90%: "):
         assert needle in text0, needle
     assert page.get_by_text("q_max (C)").count() == 1 and page.get_by_text("R0 (ohm)").count() == 1
@@ -257,8 +253,7 @@ def test_attention_planner_retrains_with_live_curves_and_is_selectable(page, app
     _open(page, app_url)
     page.locator(".bk-tab", has_text="Retrain").click()
     page.locator(".uam-train-model button", has_text="Attention").click()
-    oracle = {"exact oracle (this map)": ("#333333", 1.0)}
-    assert_drawn(page, "Priority of its plan", oracle, timeout_s=60)  # the reference line, before any epoch
+    assert_drawn(page, "Priority of its plan", RETRAIN_ORACLE, timeout_s=60)  # the reference line, before any epoch
     for css, value in ((".uam-train-missions", "10"), (".uam-train-epochs", "3")):
         box = page.locator(css).locator("input")
         box.fill(value)
@@ -270,7 +265,7 @@ def test_attention_planner_retrains_with_live_curves_and_is_selectable(page, app
     # the two plots are separate document patches: each is waited for (a loaded machine delivers them apart)
     page.wait_for_function(f"() => ({JS_CURVE_LENGTH})('Priority of its plan') === 3")
     page.wait_for_function(f"() => ({JS_CURVE_LENGTH})('Imitation of the exact oracle') === 3", timeout=15_000)
-    assert_drawn(page, "Priority of its plan", {**oracle, "its plan (Planner's search)": ("#08519c", 1.0)})
+    assert_drawn(page, "Priority of its plan", {**RETRAIN_ORACLE, "its plan (Planner's search)": ("#08519c", 1.0)})
     assert page.locator(".uam-curve-reached").first.is_hidden()  # the DQN's curves are not shown
     progress = page.locator(".uam-train-progress-text").inner_text()
     assert progress.startswith("10 of 10 missions solved by the oracle, 3 of 3 epochs (100%)"), progress
@@ -503,23 +498,14 @@ def test_battery_lab_loads_the_vtc6_cell(page, app_url):
 def test_battery_lab_draws_every_curve_after_a_factor_change(page, app_url):
     """The Battery lab's plots draw their curves (pixels of each legend colour in the frame) at the first
     load and after the factor changes to R0, under chromium's software GL."""
-    from uam_studio.app.battery_lab import EOD_COLOR, FAMILY_COLORS
-
     _open(page, app_url)
     page.locator(".bk-tab", has_text="Battery lab").click()
     table = page.locator(".uam-lab-summary")
     table.get_by_text("altitude 500 m").wait_for()
-    setting, eod = ("#000000", 1.0), (EOD_COLOR, 1.0)
     # at 1000 m "this setting" (black) lies on the 1000 m curve; the others show
-    assert_drawn(page, "Voltage (physics", {"altitude 500 m": (FAMILY_COLORS[0], 0.8), "altitude 2000 m":
-                                            (FAMILY_COLORS[2], 0.8), "altitude 3000 m": (FAMILY_COLORS[3], 0.8),
-                                            "this setting": setting, "EOD": eod})
+    assert_drawn(page, "Voltage (physics", lab_voltage(["altitude 500 m", None, "altitude 2000 m", "altitude 3000 m"]))
     page.locator(".bk-btn", has_text="R0").click()
     table.get_by_text("R0 0.45 ohm").wait_for()
     page.wait_for_function(f"() => ({JS_LAB})().legend.includes('R0 0.3 ohm')")
-    # R0 0.45 ohm ends after 0.2 min, under the others' first sample: not asked for
-    assert_drawn(page, "Voltage (physics", {f"R0 {r} ohm": (FAMILY_COLORS[k], 0.8) for k, r in
-                                            enumerate(("0.017", "0.1", "0.2", "0.3"))} | {"this setting": setting,
-                                                                                         "EOD": eod})
-    # R0 does not change the current: every curve lies under the black one, which must show
-    assert_drawn(page, "Per-cell current", {"this setting": setting})
+    assert_drawn(page, "Voltage (physics", LAB_R0_VOLTAGE)
+    assert_drawn(page, "Per-cell current", LAB_CURRENT)

@@ -12,7 +12,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-from drawn import assert_drawn
+from drawn import FLEET_DAYS, FLEET_PACKS, FLY_VOLTAGE, assert_drawn
 
 pytest.importorskip("playwright")
 
@@ -87,12 +87,7 @@ def test_fly_tab_flies_plays_and_takes_a_wind_change(browser, app_url):
     _speed(page, "1000")  # on to the landing: then the result and the references show
     status.get_by_text("hindsight oracle (best known plan)").wait_for(timeout=TIMEOUT_MS)
     status.get_by_text("flown:").wait_for(timeout=TIMEOUT_MS)
-    from uam_studio.app.fly import EOD_COLOR, EVENT_COLOR
-    from uam_studio.app.style import MEASURED_COLOR, PHYSICS_COLOR, PREDICTED_COLOR
-
-    assert_drawn(page, "voltage: measured", {"predicted (operator)": (PREDICTED_COLOR, 1.0), "true (hidden)":
-                                             (PHYSICS_COLOR, 1.0), "measured": (MEASURED_COLOR, 0.8),
-                                             "EOD cut-off": (EOD_COLOR, 1.0), "wind change": (EVENT_COLOR, 1.0)})
+    assert_drawn(page, "voltage: measured", FLY_VOLTAGE)
     # the playback went on from the injection: the next arrival's re-plan is in the log
     log.get_by_text(re.compile(r"plan (changed|unchanged)")).first.wait_for(timeout=TIMEOUT_MS)
     # The operator noticed the change: the log shows what each leg measured against the forecast, the
@@ -147,18 +142,13 @@ def test_fleet_tab_runs_a_day_for_the_three_dispatchers(browser, app_url):
                            "v.model.title && v.model.title.text).map(v => v.model.title.text)")
     for start in ("Served priority", "Last day, health-aware", "Each pack after"):
         assert any(t.startswith(start) for t in titles), titles
-    from uam_studio.app.fleet import COLORS
-
-    days = {"health-aware": (COLORS["aware"], 1.0), "health-blind": (COLORS["blind"], 1.0),
-            "hindsight": (COLORS["hindsight"], 1.0), "upper bound": ("#000000", 1.0)}
-    packs = {"belief": (COLORS["aware"], 1.0), "truth (hidden)": ("#000000", 1.0)}
-    assert_drawn(page, "Served priority", days)  # one day: its markers
-    assert_drawn(page, "Each pack after", packs)
+    assert_drawn(page, "Served priority", FLEET_DAYS)  # one day: its markers
+    assert_drawn(page, "Each pack after", FLEET_PACKS)
     for day in (2, 3):
         page.locator(".uam-fleet-run button").click(timeout=TIMEOUT_MS)
         status.get_by_text(f"day {day}:").wait_for(timeout=TIMEOUT_MS)
-    assert_drawn(page, "Served priority", days)
-    assert_drawn(page, "Each pack after", packs)
+    assert_drawn(page, "Served priority", FLEET_DAYS)
+    assert_drawn(page, "Each pack after", FLEET_PACKS)
     if os.environ.get("UAM_SCREENSHOTS") == "1":
         page.screenshot(path=str(ROOT / "assets" / "screenshots" / "fleet_tab.png"))
     assert page.evaluate("() => document.documentElement.scrollWidth") <= 1366 + 1

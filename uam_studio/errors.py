@@ -1,9 +1,12 @@
-"""One error type for bad user input, with a one-line message naming the field and its range."""
+"""One error type for bad user input, with a one-line message naming the field and its range, and its
+kind for a bad data file (the message names the file too)."""
 
 from __future__ import annotations
 
 import math
 import numbers
+import os
+from pathlib import Path
 from typing import Any
 
 MAX_SEED = 2**32 - 1  # seeds are integers in [0, MAX_SEED]: what numpy's and gymnasium's seeding accept
@@ -15,6 +18,18 @@ class InputError(ValueError):
     def __init__(self, field: str, message: str) -> None:
         self.field = field
         super().__init__(f"{field}: {message}")
+
+
+class DataFileError(InputError):
+    """A data file of the wrong shape; ``str(err)`` is one line naming the file, the field and what is wrong."""
+
+    def __init__(self, path: str | os.PathLike, field: str, message: str) -> None:
+        self.path = str(path)
+        super().__init__(field, message)
+        self.args = (f"{Path(path).name}: {field}: {message}",)
+
+    def __str__(self) -> str:
+        return self.args[0]
 
 
 def short_repr(value: Any, limit: int = 60) -> str:

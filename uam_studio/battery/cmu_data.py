@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import DataFileError, InputError
 
 DATA_ENV = "UAM_STUDIO_CMU_DATA"  # environment variable: the dataset's folder
 DATASET_DOI = "10.1184/R1/14226830"
@@ -58,16 +58,8 @@ _CSV_COLUMNS = {
 _MAT_FIELDS = {"time_s": "Time_s", "current_a": "Current", "voltage_v": "Voltage_V", "temperature_c": "Temperature_C"}
 
 
-class CellDataError(InputError):
+class CellDataError(DataFileError):
     """A cell data file that is not a CMU eVTOL (VTC6) log; ``str(err)`` names the file and the field."""
-
-    def __init__(self, path: str | os.PathLike, field: str, message: str) -> None:
-        self.path = str(path)
-        super().__init__(field, message)
-        self.args = (f"{Path(path).name}: {field}: {message}",)
-
-    def __str__(self) -> str:
-        return self.args[0]
 
 
 @dataclass(frozen=True)

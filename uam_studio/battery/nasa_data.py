@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from uam_studio.battery.parameters import DEFAULT_EOD_V
-from uam_studio.errors import InputError
+from uam_studio.errors import DataFileError
 
 __all__ = ["COLUMNS", "LOADED_A", "MIN_SAMPLES", "NasaCell", "NasaDataError", "NasaDischarge", "load_nasa_cell",
            "load_nasa_folder", "nasa_cell_files", "persistence_s", "same_conditions"]
@@ -40,16 +40,8 @@ MIN_SAMPLES = 10  # a discharge with fewer samples is too short to score
 CELL_GLOB = "B*.csv.gz"
 
 
-class NasaDataError(InputError):
+class NasaDataError(DataFileError):
     """A file that is not a cell of the NASA PCoE format; ``str(err)`` names the file and the field."""
-
-    def __init__(self, path: str | os.PathLike, field: str, message: str) -> None:
-        self.path = str(path)
-        super().__init__(field, message)
-        self.args = (f"{Path(path).name}: {field}: {message}",)
-
-    def __str__(self) -> str:
-        return self.args[0]
 
 
 @dataclass(frozen=True)

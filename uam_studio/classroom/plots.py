@@ -29,6 +29,7 @@ from uam_studio.planning.operations import FlightRecord
 
 __all__ = ["curves", "draw_on_canvas", "flight_voltage", "mission_map", "sorties"]
 
+
 def draw_on_canvas() -> None:
     """Make every HoloViews figure of this kernel draw on a 2D canvas, not with WebGL (HoloViews' default,
     which draws no line or marker in a browser without a GPU). Called when this module is imported."""

@@ -202,8 +202,7 @@ def _hindsight(mission: Mission, scenario: str, new_world: Callable[[], World], 
 def breach_cause(world: World, reserve_kt: float) -> str:
     """Why a flight in ``world`` breached, in one line: the change of the weather the legs flew in
     exceeded the weather reserve (kt), or it did not and the breach is a decision error."""
-    changes = [sum(e.delta_kts for e in world.events if e.start_s <= leg.start_s) for leg in world.legs]
-    worst = max(changes, default=0.0)
+    worst = max((world.change_kts(leg.start_s) for leg in world.legs), default=0.0)
     if worst > reserve_kt:
         return f"the change exceeded the reserve ({worst:+g} kt against a {reserve_kt:g} kt reserve)"
     return (f"a decision error: the weather changed by {worst:+g} kt, within the {reserve_kt:g} kt reserve"

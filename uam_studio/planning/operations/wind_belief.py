@@ -124,26 +124,19 @@ class WindBelief:
         self.residuals: list[float] = []
         self.nodes: list[str] = []  # the legs flown, by where they went
         self.log_w = np.zeros(1)  # log posterior of run length L = 0..n (index L); L = n: no change yet
-        self.surprises = 0  # legs after which a change became believed (p crossed CHANGE_P)
 
     def _prior(self, length: int) -> float:
         """The prior std (kt) of the level of a segment of the last ``length`` legs."""
         return SHIFT_PRIOR_KT if length == len(self.residuals) else EVENT_PRIOR_KT
 
     def _segments(self) -> list[tuple[float, float, float]]:
-        """(weight, mean kt, std kt) of the level now under each run length with any weight."""
+        """(weight, mean kt, std kt) of the level now under each run length with any weight (after a leg
+        is flown, run length 0 has none: the legs are never empty)."""
         w = np.exp(self.log_w - self.log_w.max())
         w /= w.sum()
         n = len(self.residuals)
-        out = []
-        for length in range(n + 1):
-            if w[length] < 1e-12:
-                continue
-            if length == 0:  # a change just before the next leg: nothing flown in it yet
-                out.append((float(w[length]), 0.0, EVENT_PRIOR_KT))
-            else:
-                out.append((float(w[length]), *_segment(self.residuals[n - length:], self._prior(length), self.sigma)))
-        return out
+        return [(float(w[length]), *_segment(self.residuals[n - length:], self._prior(length), self.sigma))
+                for length in range(1, n + 1) if w[length] >= 1e-12]
 
     def observe(self, node: str, wind_kts: float) -> tuple[float, bool]:
         """Record the actual wind (kt) of a flown leg to ``node``; returns (residual to the forecast, kt;
@@ -153,14 +146,12 @@ class WindBelief:
         n = len(self.residuals)
         s2 = self.sigma ** 2
         h = self.hazard if n > 0 else 0.0
-        grow = np.full(n + 2, -np.inf)  # new log weights, run length 0..n+1 after this leg
+        grow = np.full(n + 2, -np.inf)  # new log weights, run length 0..n+1 after this leg (0 stays -inf)
         new_segment = -np.inf
         for length in range(n + 1):
             if not np.isfinite(self.log_w[length]):
                 continue
-            seg = self.residuals[n - length:]
-            prior = SHIFT_PRIOR_KT if length == n else EVENT_PRIOR_KT
-            mean, sd = _segment(seg, prior, self.sigma)
+            mean, sd = _segment(self.residuals[n - length:], self._prior(length), self.sigma)
             if h < 1.0:
                 grow[length + 1] = self.log_w[length] + math.log(1.0 - h) + _log_normal(r, mean, sd ** 2 + s2)
             if h > 0.0:
@@ -169,14 +160,11 @@ class WindBelief:
         # run length 1 after this leg: the change came just before it (never at the first leg)
         if n > 0:
             grow[1] = np.logaddexp(grow[1], new_segment)
-        grow[0] = -np.inf
         self.log_w = grow - np.logaddexp.reduce(grow[np.isfinite(grow)])
         self.residuals.append(r)
         self.nodes.append(node)
         self.observed[node] = (float(wind_kts), self.shift()[0])
-        detected = self.change().detected and not before
-        self.surprises += int(detected)
-        return r, detected
+        return r, self.change().detected and not before
 
     def change_p(self) -> float:
         """Posterior probability that the weather changed during the flight."""

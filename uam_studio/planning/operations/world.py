@@ -139,10 +139,13 @@ class World:
         self.last_true_current_a = np.zeros(0)  # and its current (A)
 
     # ------------------------------------------------------------------ truth
+    def change_kts(self, t_s: float) -> float:
+        """The scripted events' change of every leg's wind (kt, + headwind) for a leg taking off at ``t_s`` (s)."""
+        return sum(e.delta_kts for e in self.events if e.start_s <= t_s)
+
     def wind(self, to: str, t_s: float) -> float:
         """Actual wind (kt) on a leg to ``to`` that takes off at ``t_s`` (s)."""
-        w = self.base_winds[to] + sum(e.delta_kts for e in self.events if e.start_s <= t_s)
-        return float(np.clip(w, *WIND_RANGE_KTS))
+        return float(np.clip(self.base_winds[to] + self.change_kts(t_s), *WIND_RANGE_KTS))
 
     def _sense(self, current: np.ndarray, voltage: np.ndarray, t0: float, landed: bool) -> Readings:
         n = current.size
