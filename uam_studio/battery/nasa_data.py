@@ -31,13 +31,16 @@ from uam_studio.battery.parameters import DEFAULT_EOD_V
 from uam_studio.errors import DataFileError
 
 __all__ = ["COLUMNS", "LOADED_A", "MIN_SAMPLES", "NasaCell", "NasaDataError", "NasaDischarge", "load_nasa_cell",
-           "load_nasa_folder", "nasa_cell_files", "persistence_s", "same_conditions"]
+           "load_nasa_folder", "nasa_cell_files", "nasa_folder", "persistence_s", "same_conditions"]
 
 COLUMNS = ("discharge", "uid", "ambient_C", "time_s", "voltage_V", "current_A", "temperature_C",
            "current_load_A", "voltage_load_V")
 LOADED_A = 0.1  # A: a sample drawing more discharge current than this is under load
 MIN_SAMPLES = 10  # a discharge with fewer samples is too short to score
 CELL_GLOB = "B*.csv.gz"
+DATA_ENV = "UAM_STUDIO_NASA_DATA"
+BESIDE_CHECKOUT = Path(__file__).resolve().parents[3] / "shared" / "data" / "nasa_pcoe"
+"""Where the data sit beside a source checkout (``../shared/data/nasa_pcoe`` from the repository root)."""
 
 
 class NasaDataError(DataFileError):
@@ -170,6 +173,21 @@ def load_nasa_cell(path: str | os.PathLike, cutoff_v: float = DEFAULT_EOD_V) -> 
             continue
         out.append(d)
     return NasaCell(name, str(path), tuple(out), tuple(skipped), float(cutoff_v))
+
+
+def nasa_folder(path: str | os.PathLike | None = None) -> Path:
+    """The data's folder: ``path`` if given, else ``$UAM_STUDIO_NASA_DATA``, else :data:`BESIDE_CHECKOUT`
+    if it holds a cell file.
+
+    :raises NasaDataError: none found; the message says where it looked.
+    """
+    text = str(path) if path is not None else os.environ.get(DATA_ENV, "")
+    if not text and any(BESIDE_CHECKOUT.glob(CELL_GLOB)):
+        text = str(BESIDE_CHECKOUT)
+    if not text:
+        raise NasaDataError(BESIDE_CHECKOUT, "data", f"no NASA PCoE folder given, none at ${DATA_ENV} nor beside "
+                                                     "the checkout; pass --data DIR")
+    return Path(text)
 
 
 def nasa_cell_files(folder: str | os.PathLike, cells: list[str] | None = None) -> list[Path]:

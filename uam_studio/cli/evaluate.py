@@ -1,6 +1,7 @@
 """``uam-studio evaluate``: a Dynaformer on held-out synthetic data (or its noise table), ``real``: the
-models on the CMU eVTOL dataset's real cells, or ``lives``: every landing of its four resampled lives
-predicted leave one cell out."""
+models on the CMU eVTOL dataset's real cells, ``lives``: every landing of its four resampled lives
+predicted leave one cell out, or ``nasa``: every discharge of a folder of NASA PCoE cells predicted
+online."""
 
 from __future__ import annotations
 
@@ -12,18 +13,27 @@ from uam_studio.errors import check_range
 
 
 def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", choices=["dynaformer", "real", "lives"],
+    p.add_argument("model", choices=["dynaformer", "real", "lives", "nasa"],
                    help="dynaformer: held-out synthetic data; real: the battery, health and safety models on the "
                         "CMU eVTOL dataset's real VTC6 cells (needs --data); lives: each baseline mission's landing "
                         "of the dataset's four resampled lives predicted from the flight before it, on a parameter "
                         "set identified without that cell, with the 90%% interval's coverage and missed breaches "
-                        "(about 10 min)")
+                        "(about 10 min); nasa: every discharge of each NASA PCoE cell file in --data predicted online "
+                        "from the cell's earlier discharges, its first --context-s and its planned current, beside "
+                        "persistence and progpy's default model (a cell the bundled model trained on is scored "
+                        "leave one cell out)")
     p.add_argument("--data", default=None, metavar="PATH",
                    help="real, lives: the CMU eVTOL dataset's folder (default: $UAM_STUDIO_CMU_DATA; DOI "
                         "10.1184/R1/14226830)")
     p.add_argument("--cell", action="append", default=None,
-                   help="lives: only this life, VAH07, VAH09, VAH27 or VAH30 (repeat for more; default all four)")
-    p.add_argument("--every", type=int, default=None, help="lives: score every n-th mission (1-1000, default 1)")
+                   help="lives: only this life, VAH07, VAH09, VAH27 or VAH30 (repeat for more; default all four); "
+                        "nasa: only this cell, e.g. B0005 (repeat for more; default every cell file in --data)")
+    p.add_argument("--every", type=int, default=None,
+                   help="lives: score every n-th mission; nasa: every n-th discharge (1-1000, default 1)")
+    p.add_argument("--context-s", type=float, default=None,
+                   help="nasa: seconds of each discharge's voltage read before predicting (10-3600, default 300)")
+    p.add_argument("--cutoff-v", type=float, default=None,
+                   help="nasa: the cut-off whose time is predicted (2.5-3.6 V, default 3.0)")
     p.add_argument("--max-nfev", type=int, default=None,
                    help="lives: evaluations of each parameter set's identification (1-10000, default 100)")
     p.add_argument("--quick", action="store_true",
@@ -48,8 +58,8 @@ def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
 
 
 # Each option but --json, and the models that read it: any other model refuses it in one line.
-OPTION_MODELS = {"data": ("real", "lives"), "quick": ("real",), "refit": ("real",), "cell": ("lives",),
-                 "every": ("lives",), "max_nfev": ("lives",), "weights": ("dynaformer",), "table": ("dynaformer",),
+OPTION_MODELS = {"data": ("real", "lives", "nasa"), "quick": ("real",), "refit": ("real",), "cell": ("lives", "nasa"),
+                 "every": ("lives", "nasa"), "context_s": ("nasa",), "cutoff_v": ("nasa",), "max_nfev": ("lives",), "weights": ("dynaformer",), "table": ("dynaformer",),
                  "n": ("dynaformer",), "compare": ("dynaformer",), "seed": ("dynaformer", "lives")}
 
 
@@ -69,6 +79,8 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     from ..dynaformer.predictor import load_predictor
 
     _check_options(args)
+    if args.model == "nasa":
+        return _run_nasa(args)
     if args.model == "lives":
         from ..studies.real_lives import format_scores, leave_one_cell_out, totals_line
 
@@ -105,6 +117,32 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         return EXIT_OK
     metrics = evaluate(pred, n=n, seed=seed)
     print(json.dumps(metrics, indent=2) if args.json else format_report(metrics))
+    return EXIT_OK
+
+
+def _run_nasa(args: argparse.Namespace) -> int:
+    from ..battery.nasa_data import load_nasa_folder, nasa_folder
+    from ..battery.nasa_model import bundled_model
+    from ..studies.nasa_eod import evaluate_nasa, format_table
+
+    context_s = check_range("--context-s", 300.0 if args.context_s is None else args.context_s, 10.0, 3600.0, " s")
+    cutoff_v = check_range("--cutoff-v", 3.0 if args.cutoff_v is None else args.cutoff_v, 2.5, 3.6, " V")
+    every = int(check_range("--every", 1 if args.every is None else args.every, 1, 1000))
+    folder = nasa_folder(args.data)
+    cells = load_nasa_folder(folder, args.cell, cutoff_v)
+    model = bundled_model(context_s, cutoff_v)
+    training = None
+    if any(c.name in model.trained_on for c in cells):
+        training = [c for c in load_nasa_folder(folder, None, cutoff_v) if c.name in model.trained_on]
+    rows = evaluate_nasa(cells, model, training, every=every)
+    if args.json:
+        print(json.dumps({"context_s": context_s, "cutoff_v": cutoff_v, "discharges": [r.as_dict() for r in rows]},
+                         indent=1, allow_nan=False))
+    else:
+        print(f"NASA PCoE cells in {folder}: time to {cutoff_v:g} V predicted {context_s:g} s after the load; errors "
+              "in % of the true time left then; cov90: share inside the 90% interval; miss95/miss99: share below "
+              "the 5%/1% risk bound; (loco): scored by a model fitted without that cell")
+        print(format_table(rows, cells, context_s))
     return EXIT_OK
 
 

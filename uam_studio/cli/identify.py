@@ -4,19 +4,31 @@ from __future__ import annotations
 
 import argparse
 
-from uam_studio.cli.common import EXIT_OK, Command
+from uam_studio.cli.common import EXIT_INPUT, EXIT_OK, CliExit, Command
 
 
 def _add_identify_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("cell", choices=["vtc6"], help="the cell to identify (the CMU eVTOL dataset's Sony-Murata VTC6)")
+    p.add_argument("cell", choices=["vtc6", "nasa"],
+                   help="vtc6: the CMU eVTOL dataset's Sony-Murata VTC6 cell's parameter set; nasa: the NASA PCoE "
+                        "end-of-discharge predictor's cross-cell numbers (battery/nasa_model.py), from every cell "
+                        "file in --data")
     p.add_argument("--data", default=None, metavar="PATH",
-                   help="the CMU eVTOL dataset's folder (default: $UAM_STUDIO_CMU_DATA; DOI 10.1184/R1/14226830)")
+                   help="vtc6: the CMU eVTOL dataset's folder (default: $UAM_STUDIO_CMU_DATA; DOI 10.1184/R1/14226830); "
+                        "nasa: a NASA PCoE folder (default: $UAM_STUDIO_NASA_DATA)")
     p.add_argument("--hold-out", choices=["none", "landing", "cell"], default="none",
                    help="none: the bundled set (VTC6); landing: without VAH01's landing and rest (VTC6_LANDING_HELD_OUT); "
                         "cell: without VAH01 (VTC6_CELL_HELD_OUT)")
 
 
 def _run_identify(args: argparse.Namespace) -> int:
+    if args.cell == "nasa":
+        from ..battery.nasa_data import load_nasa_folder, nasa_folder
+        from ..studies.nasa_eod import fit_bundled, models_literal
+
+        if args.hold_out != "none":
+            raise CliExit("--hold-out: only with 'identify vtc6'", EXIT_INPUT)
+        print(models_literal(fit_bundled(load_nasa_folder(nasa_folder(args.data)))))
+        return EXIT_OK
     from ..battery.cmu_data import data_folder
     from ..battery.real_cells import cell_literal, identify_vtc6
 

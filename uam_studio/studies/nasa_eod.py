@@ -1,0 +1,328 @@
+"""Every NASA discharge's end predicted online (:mod:`uam_studio.battery.nasa_predict`), scored against what
+happened, beside the persistence baseline and progpy's default model with no health estimate.
+
+- :func:`fit_nasa_model`: the cross-cell numbers of a :class:`NasaEodModel` from training cells.
+- :func:`score_cell`: one cell's life run through the online protocol: one :class:`ScoredDischarge`
+  per discharge that ends after the context.
+- :func:`evaluate_nasa`: a folder of cells; a cell among the bundled model's training cells is scored by a
+  model refitted without it (leave one cell out) when the other training cells are in the folder, else
+  by the bundled model, and its rows say which (``fit``: 'loco', 'bundled' or 'in-sample').
+- :func:`summarise`: the table per cell and per condition.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from uam_studio.battery.nasa_data import LOADED_A, NasaCell, NasaDischarge, persistence_s, same_conditions
+from uam_studio.battery.nasa_predict import (
+    RISKS,
+    CellBelief,
+    NasaEodModel,
+    ambient_band,
+    known_before,
+    voltage_shift_v,
+)
+from uam_studio.battery.parameters import DEFAULT_Q_MAX, DEFAULT_R0
+from uam_studio.battery.simulate import simulate
+
+__all__ = ["ScoredDischarge", "condition_of", "evaluate_nasa", "fit_nasa_model", "progpy_default_s", "score_cell",
+           "summarise"]
+
+YOUNG = 5  # a cell's first this many discharges at a condition give its "young" charge
+MIN_BAND = 100  # an ambient band with fewer training errors takes the pooled quantiles
+
+
+@dataclass(frozen=True)
+class ScoredDischarge:
+    """One discharge predicted at ``context_s`` (s) and what happened; times (s) from the first loaded
+    sample. ``persistence_s`` and ``progpy_s`` are the baselines (None where there is none)."""
+
+    cell: str
+    discharge: int
+    ambient_c: float
+    condition: str
+    context_s: float
+    true_s: float
+    median_s: float
+    low_s: float
+    high_s: float
+    bound95_s: float
+    bound99_s: float
+    persistence_s: float | None
+    progpy_s: float | None
+    method: str
+    flag: str | None
+    fit: str
+
+    def as_dict(self) -> dict:
+        """The row as plain JSON types."""
+        return asdict(self)
+
+
+def condition_of(d) -> str:
+    """A discharge's test condition: ambient (C), mean load (A), and 'square wave' where the load is on
+    for less than 80% of the samples after it starts."""
+    on = d.current_a[d.load_start:] > LOADED_A
+    on = on[:np.flatnonzero(on)[-1] + 1]
+    pulsed = " square wave" if on.mean() < 0.8 else ""
+    return f"{round(d.ambient_c):d} C, {d.mean_load_a():.0f} A{pulsed}"
+
+
+def progpy_default_s(d: NasaDischarge, cutoff_v: float) -> float | None:
+    """progpy's default cell (q_max 7600 C, R0 0.117 ohm, no health estimate) along ``d``'s measured
+    current, held between samples at 1 s steps and carried on at its last load past the record: its time
+    (s) to ``cutoff_v`` (V) from the first loaded sample; None if it never gets there within 3x the record."""
+    t = d.time_s[d.load_start:] - d.load_time_s
+    grid = np.arange(0.0, 3.0 * t[-1] + 1.0, 1.0)
+    idx = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, t.size - 1)
+    cur = np.clip(d.current_a[d.load_start:][idx], 0.0, None)
+    on = d.current_a[d.load_start:] > LOADED_A
+    cur[grid > t[-1]] = float(d.current_a[d.load_start:][on][-1])
+    r = simulate(cur, 1.0, DEFAULT_Q_MAX, DEFAULT_R0, cutoff_v)
+    return None if math.isnan(float(r.eod_s)) else float(r.eod_s) - 1.0
+
+
+def _charge_table(cells: list[NasaCell], cutoff_v: float) -> tuple[tuple[float, float, float, float], ...]:
+    from uam_studio.battery.nasa_predict import _charge_ah
+
+    groups: dict[tuple[float, float], tuple[list[float], list[float]]] = {}
+    for c in cells:
+        seen: dict[tuple[float, float], int] = {}
+        for d in c.discharges:
+            t = d.time_to_cutoff_s(cutoff_v)
+            if t is None:
+                continue
+            key = (round(d.mean_load_a() * 2) / 2, float(round(d.ambient_c)))
+            q = float(np.interp(t, d.time_s[d.load_start:] - d.load_time_s,
+                                _charge_ah(d.time_s, d.current_a, d.load_start)))
+            every, young = groups.setdefault(key, ([], []))
+            every.append(q)
+            if seen.get(key, 0) < YOUNG:
+                young.append(q)
+            seen[key] = seen.get(key, 0) + 1
+    return tuple((k[0], k[1], float(np.median(e)), float(np.median(y))) for k, (e, y) in sorted(groups.items()))
+
+
+def _pairs(cells: list[NasaCell], context_s: float, cutoff_v: float) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """(relative change, context shift V, ambient band) of each discharge that has a previous one at the
+    same conditions."""
+    y, dv, band = [], [], []
+    for c in cells:
+        for k, d in enumerate(c.discharges):
+            t = d.time_to_cutoff_s(cutoff_v)
+            if t is None or t <= context_s:
+                continue
+            p = next((q for q in reversed(c.discharges[:k]) if same_conditions(q, d)
+                      and q.time_to_cutoff_s(cutoff_v) is not None), None)
+            if p is None:
+                continue
+            t_p = float(p.time_to_cutoff_s(cutoff_v))
+            y.append((t - t_p) / t_p)
+            dv.append(voltage_shift_v(known_before(d, context_s), p))
+            band.append(ambient_band(d.ambient_c))
+    return np.array(y), np.array(dv), band
+
+
+def _conservative(x: np.ndarray, risk: float) -> float:
+    """The ``risk`` quantile of ``x``, taken one order statistic further out (split-conformal style)."""
+    x = np.sort(x)
+    n = x.size
+    if risk < 0.5:
+        return float(x[max(0, math.floor(risk * (n + 1)) - 1)])
+    if risk > 0.5:
+        return float(x[min(n - 1, math.ceil(risk * (n + 1)) - 1)])
+    return float(np.median(x))
+
+
+def fit_nasa_model(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: float = 3.0) -> NasaEodModel:
+    """Fit the cross-cell numbers on ``cells`` (every discharge of each, online in order)."""
+    y, dv, band = _pairs(cells, context_s, cutoff_v)
+    a, b = least_squares(lambda p: p[0] + p[1] * dv - y, np.zeros(2), loss="soft_l1", f_scale=0.01).x
+    res = np.log(np.clip((1 + y) / np.clip(1 + a + b * dv, 0.05, None), 1e-6, None))
+    scale = {}
+    for name in ("cold", "room", "hot"):
+        r = res[[k for k, n in enumerate(band) if n == name]]
+        if r.size >= 5:
+            scale[name] = float(1.4826 * np.median(np.abs(r - np.median(r))))
+    if not scale:
+        scale["room"] = float(1.4826 * np.median(np.abs(res - np.median(res))))
+    draft = NasaEodModel(context_s, cutoff_v, float(a), float(b), scale, {"all": (0.0,) * len(RISKS)},
+                         _charge_table(cells, cutoff_v), (0.0,) * len(RISKS), tuple(c.name for c in cells))
+    studentized: dict[str, list[float]] = {"all": []}
+    logs = []
+    for c in cells:
+        belief = CellBelief(draft)
+        for d in c.discharges:
+            t = d.time_to_cutoff_s(cutoff_v)
+            known = known_before(d, context_s)
+            if t is not None and t > context_s:
+                pred = belief.predict(known)
+                p = belief._previous(known)
+                if p is not None:
+                    e = (math.log(t / belief.centre_s(known, p)) - belief.bias()) / belief.spread(known, p)
+                    studentized["all"].append(e)
+                    studentized.setdefault(ambient_band(d.ambient_c), []).append(e)
+                else:
+                    logs.append(math.log(t / pred.median_s))
+                belief.observe(d, pred, known)
+            else:
+                belief.observe(d)
+    z = {band: tuple(_conservative(np.array(e), r) for r in RISKS) for band, e in studentized.items()
+         if band == "all" or len(e) >= MIN_BAND}
+    prior_log = tuple(_conservative(np.array(logs), r) for r in RISKS) if len(logs) >= 5 else (-1.0, -0.5, 0.0, 0.5)
+    return NasaEodModel(context_s, cutoff_v, float(a), float(b), scale, z, draft.charge, prior_log,
+                        tuple(c.name for c in cells))
+
+
+def score_cell(cell: NasaCell, model: NasaEodModel, fit: str = "bundled", progpy: bool = True,
+               every: int = 1) -> list[ScoredDischarge]:
+    """Run ``cell``'s life through the online protocol with ``model``; one row per ``every``-th discharge
+    whose cut-off comes after the context (those that end within it need no prediction). The belief takes
+    in every discharge."""
+    belief = CellBelief(model)
+    out = []
+    for k, d in enumerate(cell.discharges):
+        t = d.time_to_cutoff_s(model.cutoff_v)
+        known = known_before(d, model.context_s)
+        if t is None or t <= model.context_s or k % every:
+            belief.observe(d)
+            continue
+        pred = belief.predict(known)
+        out.append(ScoredDischarge(
+            cell.name, d.index, d.ambient_c, condition_of(d), model.context_s, t, pred.median_s, pred.low_s,
+            pred.high_s, pred.bound95_s, pred.bound99_s, persistence_s(cell, k, model.cutoff_v),
+            progpy_default_s(d, model.cutoff_v) if progpy else None, pred.method, pred.flag, fit))
+        belief.observe(d, pred, known)
+    return out
+
+
+def evaluate_nasa(cells: list[NasaCell], bundled: NasaEodModel, training: list[NasaCell] | None = None,
+                  progpy: bool = True, every: int = 1) -> list[ScoredDischarge]:
+    """Score every cell. A cell the bundled model trained on is scored by a model fitted on ``training``
+    (default: the other cells given that the bundled model trained on) without it, if that leaves at least
+    half the bundled model's training cells; else by the bundled model, labelled 'in-sample'."""
+    pool = training if training is not None else [c for c in cells if c.name in bundled.trained_on]
+    rows = []
+    for c in cells:
+        if c.name in bundled.trained_on:
+            others = [o for o in pool if o.name != c.name]
+            if len(others) >= len(bundled.trained_on) / 2:
+                model, fit = fit_nasa_model(others, bundled.context_s, bundled.cutoff_v), "loco"
+            else:
+                model, fit = bundled, "in-sample"
+        else:
+            model, fit = bundled, "bundled"
+        rows += score_cell(c, model, fit, progpy, every)
+    return rows
+
+
+def ended_in_context(cell: NasaCell, context_s: float) -> int:
+    """How many of ``cell``'s discharges reach its cut-off within ``context_s`` (s): nothing to predict."""
+    return sum(1 for d in cell.discharges if float(d.time_to_cutoff_s(cell.cutoff_v)) <= context_s)
+
+
+def _stats(rows: list[ScoredDischarge]) -> dict:
+    t = np.array([r.true_s for r in rows])
+    left = t - np.array([r.context_s for r in rows])
+    med = np.array([r.median_s for r in rows])
+    err = (med - t) / left
+    pers = [(r.persistence_s - r.true_s) / (r.true_s - r.context_s) for r in rows if r.persistence_s is not None]
+    prog = [(r.progpy_s - r.true_s) / (r.true_s - r.context_s) for r in rows if r.progpy_s is not None]
+
+    def pct(x, q):
+        return float(100 * np.percentile(np.abs(x), q)) if len(x) else None
+
+    return {"n": len(rows), "median_pct": pct(err, 50), "p95_pct": pct(err, 95),
+            "bias_pct": float(100 * np.median(err)),
+            "coverage90": float(np.mean([(r.low_s <= r.true_s <= r.high_s) for r in rows])),
+            "miss95": float(np.mean([r.true_s < r.bound95_s for r in rows])),
+            "miss99": float(np.mean([r.true_s < r.bound99_s for r in rows])),
+            "width_pct": float(100 * np.median([(r.high_s - r.low_s) / (r.true_s - r.context_s) for r in rows])),
+            "flagged": sum(r.flag is not None for r in rows),
+            "persistence_n": len(pers), "persistence_median_pct": pct(pers, 50), "persistence_p95_pct": pct(pers, 95),
+            "progpy_median_pct": pct(prog, 50), "progpy_p95_pct": pct(prog, 95)}
+
+
+def summarise(rows: list[ScoredDischarge], key: str = "cell") -> dict[str, dict]:
+    """Statistics per ``key`` ('cell', 'condition' or 'method'), and 'all'."""
+    out: dict[str, dict] = {}
+    for name in sorted({getattr(r, key) for r in rows}):
+        out[name] = _stats([r for r in rows if getattr(r, key) == name])
+    if rows:
+        out["all"] = _stats(rows)
+    return out
+
+
+BUNDLED_SETTINGS = ((300.0, 3.0), (60.0, 3.0), (300.0, 3.2), (60.0, 3.2))
+"""(context s, cut-off V) of the bundled models; another setting takes the nearest (nasa_model.bundled_model)."""
+
+
+def fit_bundled(cells: list[NasaCell]) -> list[NasaEodModel]:
+    """One model per :data:`BUNDLED_SETTINGS`, each fitted on every cell given (each loaded at its cut-off)."""
+    from uam_studio.battery.nasa_data import load_nasa_cell
+
+    out = []
+    for context_s, cutoff_v in BUNDLED_SETTINGS:
+        at = [c if c.cutoff_v == cutoff_v else load_nasa_cell(c.path, cutoff_v) for c in cells]
+        out.append(fit_nasa_model(at, context_s, cutoff_v))
+    return out
+
+
+def _r(x: float) -> str:
+    return f"{x:.6g}"
+
+
+def models_literal(models: list[NasaEodModel]) -> str:
+    """Python source of ``BUNDLED = (...)`` for :mod:`uam_studio.battery.nasa_model`."""
+    lines = ["BUNDLED = ("]
+    for m in models:
+        z = ", ".join(f"{b!r}: ({', '.join(_r(v) for v in q)})" for b, q in m.z.items())
+        scale = ", ".join(f"{b!r}: {_r(v)}" for b, v in m.scale.items())
+        charge = ", ".join(f"({', '.join(_r(v) for v in row)})" for row in m.charge)
+        lines += [
+            "    NasaEodModel(",
+            f"        context_s={_r(m.context_s)}, cutoff_v={_r(m.cutoff_v)}, a={_r(m.a)}, b={_r(m.b)},",
+            f"        scale={{{scale}}},",
+            f"        z={{{z}}},",
+            f"        charge=({charge},),",
+            f"        prior_log=({', '.join(_r(v) for v in m.prior_log)}),",
+            f"        trained_on={m.trained_on!r},",
+            "    ),"]
+    lines.append(")")
+    return "\n".join(lines)
+
+
+COLUMNS = ("scored", "skipped", "med %", "p95 %", "bias %", "cov90", "miss95", "miss99", "width %", "flagged",
+           "| pers med %", "pers p95 %", "progpy med %", "progpy p95 %")
+
+
+def _fmt(x, pct: bool = True) -> str:
+    if x is None:
+        return "-"
+    return f"{x:.2f}" if pct else f"{x:.3f}"
+
+
+def format_table(rows: list[ScoredDischarge], cells: list[NasaCell], context_s: float) -> str:
+    """The table per cell, per condition and over all: errors in % of the true time left at the prediction
+    instant, beside persistence and progpy's default model on the same discharges."""
+    skipped = {c.name: len(c.skipped) + ended_in_context(c, context_s) for c in cells}
+    fits = {r.cell: r.fit for r in rows}
+    head = f"{'':26s}" + " ".join(f"{c:>9s}" for c in COLUMNS)
+    out = [head]
+    for title, key in (("cell", "cell"), ("condition", "condition")):
+        out.append(f"-- per {title}")
+        for name, st in summarise(rows, key).items():
+            skip = skipped.get(name, sum(skipped.values()) if name == "all" else None)
+            label = f"{name} ({fits[name]})" if key == "cell" and name in fits else name
+            vals = [str(st["n"]), "-" if skip is None else str(skip), _fmt(st["median_pct"]), _fmt(st["p95_pct"]),
+                    f"{st['bias_pct']:+.2f}", _fmt(st["coverage90"], False), _fmt(st["miss95"], False),
+                    _fmt(st["miss99"], False), _fmt(st["width_pct"]), str(st["flagged"]),
+                    _fmt(st["persistence_median_pct"]), _fmt(st["persistence_p95_pct"]),
+                    _fmt(st["progpy_median_pct"]), _fmt(st["progpy_p95_pct"])]
+            out.append(f"{label[:26]:26s}" + " ".join(f"{v:>9s}" for v in vals))
+    return "\n".join(out)
