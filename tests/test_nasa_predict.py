@@ -159,3 +159,12 @@ def test_on_real_2a_lives_left_out_it_beats_persistence_and_its_bounds_hold():
     assert st["median_pct"] <= 1.0 and st["p95_pct"] <= 3.0, st
     assert st["median_pct"] < st["persistence_median_pct"], st
     assert st["miss95"] <= 0.08 and 0.82 <= st["coverage90"] <= 0.98, st
+
+
+@pytest.mark.skipif(not DATA.is_dir(), reason="the NASA PCoE lives are not beside the checkout")
+def test_the_bundled_default_model_is_what_identify_nasa_prints():
+    from uam_studio.battery.nasa_data import load_nasa_folder
+    from uam_studio.studies.nasa_eod import models_literal
+
+    refit = fit_nasa_model(load_nasa_folder(DATA), 300.0, 3.0)
+    assert models_literal([refit]) == models_literal([BUNDLED[0]])

@@ -42,6 +42,9 @@ __all__ = ["RISKS", "UNSEEN_WIDEN", "CellBelief", "EodPrediction", "KnownDischar
            "ambient_band", "known_before", "voltage_shift_v"]
 
 RISKS = (0.01, 0.05, 0.5, 0.95)  # the quantiles every prediction carries: bound99, bound95/low, median, high
+Z_LEVELS = (0.001, 0.0025, 0.005, 0.01, 0.02, 0.035, 0.05, 0.075, 0.1, 0.15, 0.25, 0.5, 0.75, 0.85, 0.9, 0.925,
+            0.95, 0.965, 0.98, 0.99, 0.995)  # the levels at which a model holds its studentized error quantiles
+ACI_GAIN = 0.01  # how fast a cell's own misses move its quantile levels
 UNSEEN_WIDEN = 2.0  # an unseen condition's log-ratio quantiles are multiplied by this
 BAND_EDGES_C = (12.0, 34.0)  # ambient (C) below the first is cold, above the second hot
 N0_SCALE = 5.0  # weight (discharges) of the prior scale against the cell's own errors
@@ -139,7 +142,7 @@ class NasaEodModel:
         conditions (fade per discharge, -).
     :param b: relative change per volt of context shift (1/V).
     :param scale: prior scale of the relative error of a history prediction, per ambient band (-).
-    :param z: studentized quantiles of that error at :data:`RISKS`, per ambient band and 'all' (the
+    :param z: studentized quantiles of that error at :data:`Z_LEVELS`, per ambient band and 'all' (the
         quantiles of a band with few training errors).
     :param charge: (load A, ambient C, median charge to the cut-off Ah over all discharges, over the first
         five of each cell) per training condition.
@@ -191,6 +194,7 @@ class CellBelief:
     model: NasaEodModel
     finished: list[NasaDischarge] = field(default_factory=list)
     errors: list[float] = field(default_factory=list)
+    levels: list[float] = field(default_factory=lambda: list(RISKS))
 
     def bias(self) -> float:
         """The median of the cell's latest log errors, shrunk to zero (its fade beyond the training mean)."""
@@ -224,7 +228,8 @@ class CellBelief:
 
     def _history(self, known: KnownDischarge, p: NasaDischarge) -> np.ndarray:
         """The quantiles (s) at :data:`RISKS` of a history prediction from ``p``."""
-        z = self.model.z.get(ambient_band(known.ambient_c), self.model.z["all"])
+        table = self.model.z.get(ambient_band(known.ambient_c), self.model.z["all"])
+        z = np.interp(self.levels, Z_LEVELS, table)
         return self.centre_s(known, p) * np.exp(self.bias() + self.spread(known, p) * np.array(z))
 
     def _prior(self, known: KnownDischarge) -> tuple[np.ndarray, str | None]:
@@ -278,4 +283,10 @@ class CellBelief:
             p = self._previous(known)
             if p is not None:
                 self.errors.append(math.log(t / self.centre_s(known, p)))
+            # adaptive conformal levels: each quantile's level moves towards the miss rate it declares
+            for k, (risk, q) in enumerate(zip(RISKS, (prediction.bound99_s, prediction.bound95_s, None,
+                                                        prediction.high_s))):
+                if q is not None:
+                    level = self.levels[k] + ACI_GAIN * (risk - float(t < q))
+                    self.levels[k] = float(np.clip(level, Z_LEVELS[0], Z_LEVELS[-1]))
         self.finished.append(d)

@@ -21,6 +21,7 @@ from scipy.optimize import least_squares
 from uam_studio.battery.nasa_data import LOADED_A, NasaCell, NasaDischarge, persistence_s, same_conditions
 from uam_studio.battery.nasa_predict import (
     RISKS,
+    Z_LEVELS,
     CellBelief,
     NasaEodModel,
     ambient_band,
@@ -151,7 +152,7 @@ def fit_nasa_model(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: fl
             scale[name] = float(1.4826 * np.median(np.abs(r - np.median(r))))
     if not scale:
         scale["room"] = float(1.4826 * np.median(np.abs(res - np.median(res))))
-    draft = NasaEodModel(context_s, cutoff_v, float(a), float(b), scale, {"all": (0.0,) * len(RISKS)},
+    draft = NasaEodModel(context_s, cutoff_v, float(a), float(b), scale, {"all": (0.0,) * len(Z_LEVELS)},
                          _charge_table(cells, cutoff_v), (0.0,) * len(RISKS), tuple(c.name for c in cells))
     studentized: dict[str, list[float]] = {"all": []}
     logs = []
@@ -172,7 +173,7 @@ def fit_nasa_model(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: fl
                 belief.observe(d, pred, known)
             else:
                 belief.observe(d)
-    z = {band: tuple(_conservative(np.array(e), r) for r in RISKS) for band, e in studentized.items()
+    z = {band: tuple(_conservative(np.array(e), r) for r in Z_LEVELS) for band, e in studentized.items()
          if band == "all" or len(e) >= MIN_BAND}
     prior_log = tuple(_conservative(np.array(logs), r) for r in RISKS) if len(logs) >= 5 else (-1.0, -0.5, 0.0, 0.5)
     return NasaEodModel(context_s, cutoff_v, float(a), float(b), scale, z, draft.charge, prior_log,

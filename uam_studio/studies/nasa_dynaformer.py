@@ -1,0 +1,202 @@
+"""The bundled NASA Dynaformer scored zero-shot on real NASA PCoE discharges, under the online protocol of
+:mod:`uam_studio.battery.nasa_predict`.
+
+What it reads: only a :class:`~uam_studio.battery.nasa_predict.KnownDischarge` per prediction, i.e. the
+discharge's sample times (s from its start), its whole planned current (A, + = discharge) and its voltage
+(V) up to ``context_s`` s after the first loaded sample. The measured discharge (all its voltage) is read
+only by :func:`score_dynaformer`, for the true time to the cut-off.
+
+How (:func:`dynaformer_eod_s`): the context and the planned current are put on the predictor's 1 s grid
+(sample k covers [k, k + 1) s from the log's start; its current is the sample held there, its voltage is
+the one at k + 1 s), and :meth:`~uam_studio.dynaformer.predictor.DynaformerPredictor.eod_interval_s` gives a
+90% interval of the time to the cut-off. The current is held between the ~10 s samples (the 4 A
+square-wave cells alternate 4 A / 0 A sample to sample); the voltage is interpolated linearly between two
+samples at the same load and held where the load changes between them (it belongs to the held current).
+
+The planned current of a NASA record drops to 0 A when the cell reaches its own, lower cut-off (2.0-2.7
+V): that end tells when the cell got there. With ``extend_load`` (default), the profile after the last
+loaded sample is replaced by its last two samples repeated (a constant load goes on, a square wave keeps
+its phase) up to :data:`HORIZON_S`, so a prediction never reads when the load ended.
+
+All times are in s from the first loaded sample, currents in A, voltages in V.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from uam_studio.battery.fit_intervals import with_preroll
+from uam_studio.battery.nasa_data import LOADED_A, NasaCell, NasaDischarge
+from uam_studio.battery.nasa_predict import KnownDischarge, known_before
+from uam_studio.dynaformer.model import Dynaformer
+from uam_studio.dynaformer.predictor import DynaformerPredictor, load_pretrained
+from uam_studio.dynaformer.predictor_inputs import _leading_rest
+
+__all__ = ["HORIZON_S", "Example", "dynaformer_eod_s", "finetune_dynaformer", "score_dynaformer",
+           "summarise_dynaformer", "training_example"]
+
+HORIZON_S = 12000.0  # s from the log's start: the extended profile's length (NASA runs end before 7000 s)
+
+
+def _planned(known: KnownDischarge, start: int, extend_load: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Sample times (s from the discharge's start) and currents (A) of the planned load from sample
+    ``start`` on; with ``extend_load``, the samples after the last loaded one replaced by its last two
+    repeated at the median sample step, up to :data:`HORIZON_S` s after sample ``start``."""
+    t, i = known.time_s, known.current_a
+    if not extend_load:
+        return t[start:], i[start:]
+    last = int(np.flatnonzero(i > LOADED_A)[-1])
+    step = float(np.median(np.diff(t[known.load_start:last + 1]))) if last > known.load_start else 10.0
+    m = np.arange(1, int((t[start] + HORIZON_S - t[last]) / step) + 2)
+    pattern = i[[max(last - 1, known.load_start), last]]
+    return np.r_[t[start:last + 1], t[last] + m * step], np.r_[i[start:last + 1], pattern[(m + 1) % 2]]
+
+
+def _grid_voltage(t: np.ndarray, i: np.ndarray, v: np.ndarray, at: np.ndarray, first: int) -> np.ndarray:
+    """Voltage (V) at the times ``at`` (s, each the end of a 1 s grid step) from samples ``first``.. of
+    (``t`` s, ``i`` A, ``v`` V): linear between two samples at the same load, else the earlier sample's
+    (held with its current, as the grid holds the current)."""
+    j = np.clip(np.searchsorted(t, at - 0.5, side="right") - 1, first, t.size - 2)
+    frac = np.clip((at - t[j]) / (t[j + 1] - t[j]), 0.0, 1.0)
+    same = np.abs(i[j + 1] - i[j]) <= LOADED_A
+    return np.where(same, v[j] + frac * (v[j + 1] - v[j]), v[j])
+
+
+def _context_voltage(known: KnownDischarge, start: int, n_grid: int) -> np.ndarray:
+    """The context voltage (V) at 1, 2, ..., ``n_grid`` s after sample ``start``, from the known samples only."""
+    n = known.voltage_v.size
+    at = known.time_s[start] + np.arange(1, n_grid + 1, dtype=float)
+    return _grid_voltage(known.time_s[:n], known.current_a[:n], known.voltage_v, at, start)
+
+
+def dynaformer_eod_s(predictor: DynaformerPredictor, known: KnownDischarge, cutoff_v: float = 3.0, *,
+                     start_at_rest: bool = True, extend_load: bool = True) -> tuple[float, float, float] | None:
+    """(low, median, high) of the 90% interval of the time (s, from the first loaded sample) to the first
+    predicted voltage below ``cutoff_v`` (V), from ``known`` only; None where the median never crosses
+    within the profile (a high end beyond it is ``math.inf``).
+
+    :param start_at_rest: start the log at the rest sample before the load (0 A held until the first
+        loaded sample); else at the first loaded sample (the fit then looks for a pre-roll).
+    :param extend_load: replace the rest after the last loaded sample by the load going on (see module).
+    """
+    start = known.load_start - 1 if start_at_rest else known.load_start
+    t0 = float(known.time_s[start])
+    n_ctx = int(math.floor(float(known.time_s[known.voltage_v.size - 1]) - t0 + 1e-9))
+    times, current = _planned(known, start, extend_load)
+    n_grid = int(math.floor(float(times[-1]) - t0 + 1e-9)) if not extend_load else int(HORIZON_S)
+    if n_ctx < 20 or n_grid <= n_ctx:
+        return None
+    held = np.clip(np.searchsorted(times, t0 + np.arange(n_grid) + 0.5, side="right") - 1, 0, times.size - 1)
+    grid_i = current[held]
+    ctx_v = _context_voltage(known, start, n_ctx)
+    iv = predictor.eod_interval_s(grid_i[:n_ctx], ctx_v, grid_i, dt_s=1.0, level=0.9, eod_v=cutoff_v)
+    if iv.censored[1]:
+        return None
+    shift = float(known.time_s[known.load_start]) - t0
+    return iv.low_s - shift, iv.median_s - shift, (math.inf if iv.censored[2] else iv.high_s - shift)
+
+
+def score_dynaformer(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: float = 3.0, every: int = 1,
+                     predictor: DynaformerPredictor | None = None, **options) -> list[dict]:
+    """One row per scored discharge (every ``every``-th of each cell, from its first) whose true time to
+    ``cutoff_v`` (V) is after ``context_s`` (s): cell, discharge, ambient_c (C), context_s, true_s,
+    median_s, low_s, high_s (s from the first loaded sample; None where the Dynaformer gives no crossing).
+    ``options`` go to :func:`dynaformer_eod_s`; ``predictor`` defaults to the bundled NASA one."""
+    predictor = predictor or load_pretrained()
+    rows = []
+    for cell in cells:
+        for d in cell.discharges[::every]:
+            true_s = d.time_to_cutoff_s(cutoff_v)
+            if true_s is None or true_s <= context_s:
+                continue
+            pred = dynaformer_eod_s(predictor, known_before(d, context_s), cutoff_v, **options)
+            low, med, high = pred if pred is not None else (None, None, None)
+            rows.append({"cell": cell.name, "discharge": d.index, "ambient_c": d.ambient_c, "context_s": context_s,
+                         "true_s": true_s, "median_s": med, "low_s": low, "high_s": high})
+    return rows
+
+
+def summarise_dynaformer(rows: list[dict]) -> dict:
+    """n, predictions with no crossing (``none``), and over the rest: median and 95th percentile of
+    |median_s - true_s| / (true_s - context_s) (%), its median signed value (bias, %) and the 90%
+    interval's coverage (-)."""
+    ok = [r for r in rows if r["median_s"] is not None]
+    out: dict = {"n": len(rows), "none": len(rows) - len(ok)}
+    if ok:
+        err = np.array([(r["median_s"] - r["true_s"]) / (r["true_s"] - r["context_s"]) for r in ok])
+        out.update(median_pct=float(100 * np.median(np.abs(err))), p95_pct=float(100 * np.percentile(np.abs(err), 95)),
+                   bias_pct=float(100 * np.median(err)),
+                   coverage90=float(np.mean([r["low_s"] <= r["true_s"] <= r["high_s"] for r in ok])))
+    return out
+
+
+# ------------------------------------------------------------------ fine-tuning on real discharges
+Example = tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+"""A training discharge: (cell name, decoder latent [2], decoder current [n] (A, 1 s grid), measured
+voltage [n] (V) at the end of each step, loss weight [n] (0 where nothing was measured under load))."""
+
+
+def training_example(predictor: DynaformerPredictor, d: NasaDischarge, context_s: float = 300.0) -> Example | None:
+    """``d`` as the decoder reads it at inference (:func:`dynaformer_eod_s`, log from the rest sample): the
+    latent of the physics fit of its first ``context_s`` s (re-observed, as in ``_decode``), its current
+    up to the last loaded sample on the grid (the fit's pre-roll before it, its leading rest cut), and the
+    measured voltage there as the target (the whole record: training cells only). Loss weight 4x between
+    2.8 and 3.3 V (as :mod:`uam_studio.dynaformer.train`). None where the context is too short."""
+    known = known_before(d, context_s)
+    start, last = d.load_start - 1, int(np.flatnonzero(d.current_a > LOADED_A)[-1])
+    t0 = float(d.time_s[start])
+    n_ctx = int(math.floor(float(known.time_s[known.voltage_v.size - 1]) - t0 + 1e-9))
+    n = int(math.floor(float(d.time_s[last]) - t0 + 1e-9))
+    if n_ctx < 20 or n <= n_ctx:
+        return None
+    cur = d.current_a[np.searchsorted(d.time_s, t0 + np.arange(n) + 0.5, side="right") - 1]
+    est = predictor.health_estimate(cur[:n_ctx], _context_voltage(known, start, n_ctx))
+    grid, k_pre = with_preroll([est], cur[None], 1.0)
+    k0 = int(_leading_rest(grid)[0])
+    grid = grid[:, k0:]
+    latent = predictor._reobserved_latent(np.array([[est.q_max, est.r0]]), grid)[0].numpy()
+    at = t0 + k0 + 1 - k_pre + np.arange(grid.shape[1], dtype=float)
+    volt = _grid_voltage(d.time_s, d.current_a, d.voltage_v, at, start)
+    weight = ((at >= d.load_time_s) & (at <= d.time_s[last])) * (1.0 + 3.0 * ((volt > 2.8) & (volt < 3.3)))
+    return d.cell, latent, grid[0], volt, weight
+
+
+def finetune_dynaformer(examples: list[Example], base: DynaformerPredictor | None = None, steps: int = 3000,
+                        batch: int = 16, lr: float = 3e-4, seed: int = 0) -> DynaformerPredictor:
+    """The ``base`` Dynaformer (default: the bundled NASA one) with its decoder fine-tuned on ``examples``
+    (:func:`training_example`): AdamW, weighted MSE (V^2), ``steps`` batches of ``batch`` discharges of
+    similar length, linear warm-up over 100 steps then cosine decay, gradients clipped at 1. Kept in memory,
+    never written. Its intervals reuse the base weights' decoder-error calibration (``source``)."""
+    base = base or load_pretrained()
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    model = Dynaformer(base.model.cfg)
+    model.load_state_dict(base.model.state_dict())
+    model.train()
+    opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
+    sched = torch.optim.lr_scheduler.LambdaLR(
+        opt, lambda s: min(1.0, (s + 1) / 100) * (0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * min(s, steps) / steps))))
+    order = np.argsort([e[2].size for e in examples], kind="stable")
+    buckets = [b for b in np.array_split(order, max(1, len(examples) // (4 * batch))) if b.size]
+    chunk = model.cfg.chunk
+    for _ in range(steps):
+        bucket = buckets[int(rng.integers(len(buckets)))]
+        rows = [examples[k] for k in rng.choice(bucket, min(batch, bucket.size), replace=False)]
+        t = int(math.ceil(max(r[2].size for r in rows) / chunk) * chunk)
+        cur, volt, w = (np.zeros((len(rows), t), np.float32) for _ in range(3))
+        for k, r in enumerate(rows):
+            cur[k, :r[2].size], volt[k, :r[2].size], w[k, :r[2].size] = r[2], r[3], r[4]
+        w_t = torch.as_tensor(w)
+        pred = model.decode(torch.as_tensor(np.stack([r[1] for r in rows])), torch.as_tensor(cur))
+        loss = (w_t * (pred - torch.as_tensor(volt)) ** 2).sum() / w_t.sum().clamp_min(1.0)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+        opt.step()
+        sched.step()
+    model.eval()
+    meta = {**base.meta, "finetuned_on": sorted({e[0] for e in examples}), "finetune_steps": steps}
+    return DynaformerPredictor(model, base.pca, meta, base.source)
