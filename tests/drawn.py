@@ -17,6 +17,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from uam_studio.app.battery_lab import EOD_COLOR, FAMILY_COLORS
+from uam_studio.app.battery_lab_nasa import NASA_COLORS
 from uam_studio.app.fleet import COLORS
 from uam_studio.app.fly import EVENT_COLOR
 from uam_studio.app.map_geometry import FAILED_COLOR
@@ -48,6 +49,10 @@ RETRAIN_ORACLE = {"exact oracle (this map)": ("#333333", 1.0)}
 FLEET_DAYS = {"health-aware": (COLORS["aware"], 1.0), "health-blind": (COLORS["blind"], 1.0),
               "hindsight": (COLORS["hindsight"], 1.0), "upper bound": BLACK}
 FLEET_PACKS = {"belief": (COLORS["aware"], 1.0), "truth (hidden)": BLACK}
+# The Battery lab's real NASA discharge (a mid-life one: persistence drawn too).
+NASA_LAB = {label: (NASA_COLORS[key], 1.0) for label, key in (
+    ("measured", "measured"), ("predicted", "predicted"), ("bound, 5% risk", "bound"),
+    ("persistence", "persistence"), ("progpy default", "progpy"), ("EOD", "EOD"))}
 
 # The plot frame (page pixels) of the first figure whose title starts with the argument, and the boxes
 # (the same coordinates) of its legends; null if there is no such figure or it is not laid out.

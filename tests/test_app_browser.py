@@ -7,13 +7,22 @@ The tests are skipped only if no chromium is installed.
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import time
 from pathlib import Path
 
 import pytest
-from drawn import LAB_CURRENT, LAB_R0_VOLTAGE, PLANNER_VOLTAGE, RETRAIN_ORACLE, assert_drawn, lab_voltage
+from drawn import (
+    LAB_CURRENT,
+    LAB_R0_VOLTAGE,
+    NASA_LAB,
+    PLANNER_VOLTAGE,
+    RETRAIN_ORACLE,
+    assert_drawn,
+    lab_voltage,
+)
 
 pytest.importorskip("playwright")
 
@@ -509,3 +518,31 @@ def test_battery_lab_draws_every_curve_after_a_factor_change(page, app_url):
     page.wait_for_function(f"() => ({JS_LAB})().legend.includes('R0 0.3 ohm')")
     assert_drawn(page, "Voltage (physics", LAB_R0_VOLTAGE)
     assert_drawn(page, "Per-cell current", LAB_CURRENT)
+
+
+NASA_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "nasa_pcoe"
+
+
+def test_battery_lab_replays_a_real_nasa_discharge_at_1366x768(browser, app_url, tmp_path):
+    """A student opens the Battery lab on a laptop screen: a real NASA discharge, predicted at the end of its
+    context, drawn against what happened; a cold cell shows its flag. Without the data: one line saying
+    where to put it."""
+    page = browser.new_page(viewport={"width": 1366, "height": 768})
+    try:
+        _open(page, app_url)
+        page.locator(".bk-tab", has_text="Battery lab").click()
+        if not NASA_DATA.is_dir():
+            page.locator(".uam-nasa-missing").get_by_text("No NASA PCoE data").wait_for()
+            return
+        summary = page.locator(".uam-nasa-summary")
+        summary.get_by_text("real 2,661 s").wait_for(timeout=90_000)  # B0005, discharge 84, fitted without B0005
+        text = summary.inner_text()
+        assert "predicted" in text and "bound" in text and "Persistence" in text and "nan" not in text, text
+        assert_drawn(page, "B0005, discharge 84", NASA_LAB)
+        page.screenshot(path=str(tmp_path / "nasa_b0005.png"), full_page=True)
+        page.locator("select").filter(has_text="B0045").select_option("B0045")
+        summary.get_by_text("cold (4 C").wait_for(timeout=90_000)
+        assert_drawn(page, "B0045, discharge", {k: v for k, v in NASA_LAB.items() if k != "persistence"})
+        page.screenshot(path=str(Path(os.environ.get("UAM_SHOTS", tmp_path)) / "nasa_b0045.png"), full_page=False)
+    finally:
+        page.close()

@@ -2,7 +2,8 @@
 
 One leg (distance, altitude, wind) flown by one cell (q_max, R0), ``legs`` times back to back, and a
 family of curves varying one factor (altitude, wind, R0 or q_max): per-cell current and voltage
-(physics model) with the EOD line, on one time axis. The numbers come from
+(physics model) with the EOD line, on one time axis. Below, a real NASA discharge predicted before its
+end (:mod:`uam_studio.app.battery_lab_nasa`). The numbers come from
 :class:`~uam_studio.app.battery_lab_state.BatteryLabState`; this view only draws its ``result``. The plots are
 built once per factor (their legend names the factor's values in ascending order) and a slider move
 only sends new data to them.
@@ -19,6 +20,7 @@ import numpy as np
 import panel as pn
 import param
 
+from uam_studio.app.battery_lab_nasa import NasaLabState, NasaLabView
 from uam_studio.app.battery_lab_state import CELLS, VARY, BatteryLabState
 from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE
 from uam_studio.app.session import ensure_bokeh_backend, respond_at_once, session_dispatcher
@@ -48,10 +50,11 @@ class BatteryLabView(pn.viewable.Viewer):
 
     state = param.ClassSelector(class_=BatteryLabState)
 
-    def __init__(self, state: BatteryLabState | None = None, **params: Any) -> None:
+    def __init__(self, state: BatteryLabState | None = None, nasa: NasaLabView | None = None, **params: Any) -> None:
         ensure_bokeh_backend()
         super().__init__(state=state or BatteryLabState(), **params)
         s = self.state
+        self.nasa = nasa or NasaLabView(NasaLabState(background=s.background, dispatch=s.dispatch))
         w = 250
         self.widgets = {
             "cell": pn.widgets.Select(name="Cell", options=list(CELLS), value=s.cell, width=w),
@@ -106,7 +109,7 @@ class BatteryLabView(pn.viewable.Viewer):
                           styles={"flex": "1 1 560px"})
         table = pn.Column(heading("End of discharge"), self.eod_table, width=300)
         body = pn.FlexBox(controls, plots, table, flex_wrap="wrap", gap="10px", sizing_mode="stretch_width")
-        return pn.Column(text, self.message, body, sizing_mode="stretch_width")
+        return pn.Column(text, self.message, body, self.nasa, sizing_mode="stretch_width")
 
     def _on_cell(self, *events: Any) -> None:
         """The state's new cell set its health and ranges: the sliders follow.

@@ -105,15 +105,18 @@ def voltage_shift_v(known: KnownDischarge, prev: NasaDischarge) -> float:
     ptau = prev.time_s[prev.load_start:] - prev.load_time_s
     pcur = prev.current_a[prev.load_start:]
     pv = prev.voltage_v[prev.load_start:]
+    on = cur > LOADED_A
+    tau, cur, v = tau[on], cur[on], v[on]
     diffs = []
-    for t, i, vk in zip(tau, cur, v):
-        if i <= LOADED_A:
-            continue
+    levels = np.round(cur / 0.05) * 0.05  # samples at about the same current share one mask
+    for level in np.unique(levels):
+        at = levels == level
+        i = float(np.mean(cur[at]))
         near = np.abs(pcur - i) <= 0.25 * i + 0.05
         if near.sum() < 2:
             continue
-        diffs.append(vk - float(np.interp(t, ptau[near], pv[near])))
-    return float(np.mean(diffs)) if diffs else 0.0
+        diffs.append(v[at] - np.interp(tau[at], ptau[near], pv[near]))
+    return float(np.mean(np.concatenate(diffs))) if diffs else 0.0
 
 
 def _charge_ah(time_s: np.ndarray, current_a: np.ndarray, start: int) -> np.ndarray:
@@ -195,6 +198,7 @@ class CellBelief:
     finished: list[NasaDischarge] = field(default_factory=list)
     errors: list[float] = field(default_factory=list)
     levels: list[float] = field(default_factory=lambda: list(RISKS))
+    _centres: dict[tuple[int, int, float], float] = field(default_factory=dict, repr=False)
 
     def bias(self) -> float:
         """The median of the cell's latest log errors, shrunk to zero (its fade beyond the training mean)."""
@@ -223,8 +227,11 @@ class CellBelief:
 
     def centre_s(self, known: KnownDischarge, p: NasaDischarge) -> float:
         """The history prediction of ``known`` from ``p`` before the cell's own bias (s)."""
-        t_p = float(p.time_to_cutoff_s(self.model.cutoff_v))
-        return t_p * max(1.0 + self.model.a + self.model.b * voltage_shift_v(known, p), 0.05)
+        key = (known.index, p.index, known.context_s)
+        if key not in self._centres:
+            t_p = float(p.time_to_cutoff_s(self.model.cutoff_v))
+            self._centres[key] = t_p * max(1.0 + self.model.a + self.model.b * voltage_shift_v(known, p), 0.05)
+        return self._centres[key]
 
     def _history(self, known: KnownDischarge, p: NasaDischarge) -> np.ndarray:
         """The quantiles (s) at :data:`RISKS` of a history prediction from ``p``."""

@@ -31,8 +31,8 @@ from uam_studio.battery.nasa_predict import (
 from uam_studio.battery.parameters import DEFAULT_Q_MAX, DEFAULT_R0
 from uam_studio.battery.simulate import simulate
 
-__all__ = ["ScoredDischarge", "condition_of", "evaluate_nasa", "fit_nasa_model", "progpy_default_s", "score_cell",
-           "summarise"]
+__all__ = ["BUNDLED_SETTINGS", "ScoredDischarge", "condition_of", "evaluate_nasa", "fit_bundled", "fit_nasa_model",
+           "format_table", "models_literal", "progpy_default_curve", "progpy_default_s", "score_cell", "summarise"]
 
 YOUNG = 5  # a cell's first this many discharges at a condition give its "young" charge
 MIN_BAND = 100  # an ambient band with fewer training errors takes the pooled quantiles
@@ -74,10 +74,10 @@ def condition_of(d) -> str:
     return f"{round(d.ambient_c):d} C, {d.mean_load_a():.0f} A{pulsed}"
 
 
-def progpy_default_s(d: NasaDischarge, cutoff_v: float) -> float | None:
+def progpy_default_curve(d: NasaDischarge, cutoff_v: float = 2.5) -> tuple[np.ndarray, np.ndarray, float | None]:
     """progpy's default cell (q_max 7600 C, R0 0.117 ohm, no health estimate) along ``d``'s measured
-    current, held between samples at 1 s steps and carried on at its last load past the record: its time
-    (s) to ``cutoff_v`` (V) from the first loaded sample; None if it never gets there within 3x the record."""
+    current, held between samples at 1 s steps and carried on at its last load past the record (up to 3x
+    its length): (time s from the first loaded sample, voltage V, time s to ``cutoff_v`` V or None)."""
     t = d.time_s[d.load_start:] - d.load_time_s
     grid = np.arange(0.0, 3.0 * t[-1] + 1.0, 1.0)
     idx = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, t.size - 1)
@@ -85,7 +85,15 @@ def progpy_default_s(d: NasaDischarge, cutoff_v: float) -> float | None:
     on = d.current_a[d.load_start:] > LOADED_A
     cur[grid > t[-1]] = float(d.current_a[d.load_start:][on][-1])
     r = simulate(cur, 1.0, DEFAULT_Q_MAX, DEFAULT_R0, cutoff_v)
-    return None if math.isnan(float(r.eod_s)) else float(r.eod_s) - 1.0
+    keep = np.asarray(r.valid)
+    eod = None if math.isnan(float(r.eod_s)) else float(r.eod_s) - 1.0
+    return np.r_[0.0, np.asarray(r.time_s)[keep]], np.r_[float(np.asarray(r.voltage_v)[0]), np.asarray(r.voltage_v)[keep]], eod
+
+
+def progpy_default_s(d: NasaDischarge, cutoff_v: float) -> float | None:
+    """:func:`progpy_default_curve`'s time (s, from the first loaded sample) to ``cutoff_v`` (V); None if it
+    never gets there within 3x the record."""
+    return progpy_default_curve(d, cutoff_v)[2]
 
 
 def _charge_table(cells: list[NasaCell], cutoff_v: float) -> tuple[tuple[float, float, float, float], ...]:
