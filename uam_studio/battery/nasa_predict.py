@@ -38,7 +38,7 @@ import numpy as np
 
 from uam_studio.battery.nasa_data import LOADED_A, NasaDischarge, same_conditions
 
-__all__ = ["RISKS", "UNSEEN_WIDEN", "CellBelief", "EodPrediction", "KnownDischarge", "NasaEodModel",
+__all__ = ["EARLY_ERRORS", "RISKS", "UNSEEN_WIDEN", "CellBelief", "EodPrediction", "KnownDischarge", "NasaEodModel",
            "ambient_band", "known_before", "voltage_shift_v"]
 
 RISKS = (0.01, 0.05, 0.5, 0.95)  # the quantiles every prediction carries: bound99, bound95/low, median, high
@@ -50,6 +50,7 @@ BAND_EDGES_C = (12.0, 34.0)  # ambient (C) below the first is cold, above the se
 N0_SCALE = 5.0  # weight (discharges) of the prior scale against the cell's own errors
 N0_BIAS = 10.0  # weight (discharges) of zero bias against the cell's own mean error
 SCALE_WINDOW = 20  # the cell's own scale reads its latest this many errors
+EARLY_ERRORS = 5  # until a cell has this many errors of its own, its prior scale is at least the 'early' one
 
 
 def ambient_band(ambient_c: float) -> str:
@@ -144,7 +145,8 @@ class NasaEodModel:
     :param a: mean relative change of the time to cut-off from one discharge to the next at the same
         conditions (fade per discharge, -).
     :param b: relative change per volt of context shift (1/V).
-    :param scale: prior scale of the relative error of a history prediction, per ambient band (-).
+    :param scale: prior scale of the log error of a history prediction, per ambient band, and 'early': that
+        of a cell's first :data:`EARLY_ERRORS` history predictions (a new cell's first cycles change most).
     :param z: studentized quantiles of that error at :data:`Z_LEVELS`, per ambient band and 'all' (the
         quantiles of a band with few training errors).
     :param charge: (load A, ambient C, median charge to the cut-off Ah over all discharges, over the first
@@ -209,6 +211,8 @@ class CellBelief:
         """The log-error scale: the band's prior scale and the robust scale (1.4826 MAD) of the cell's latest
         errors, pooled."""
         s0 = self.model.scale.get(band, max(self.model.scale.values()))
+        if len(self.errors) < EARLY_ERRORS:
+            s0 = max(s0, self.model.scale.get("early", s0))
         recent = np.array(self.errors[-SCALE_WINDOW:])
         own = 1.4826 * float(np.median(np.abs(recent - np.median(recent)))) if recent.size else 0.0
         return float(math.sqrt((N0_SCALE * s0 ** 2 + recent.size * own ** 2) / (N0_SCALE + recent.size)))

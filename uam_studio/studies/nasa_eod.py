@@ -20,6 +20,7 @@ from scipy.optimize import least_squares
 
 from uam_studio.battery.nasa_data import LOADED_A, NasaCell, NasaDischarge, persistence_s, same_conditions
 from uam_studio.battery.nasa_predict import (
+    EARLY_ERRORS,
     RISKS,
     Z_LEVELS,
     CellBelief,
@@ -36,6 +37,7 @@ __all__ = ["BUNDLED_SETTINGS", "ScoredDischarge", "condition_of", "evaluate_nasa
 
 YOUNG = 5  # a cell's first this many discharges at a condition give its "young" charge
 MIN_BAND = 100  # an ambient band with fewer training errors takes the pooled quantiles
+EARLY = EARLY_ERRORS  # a cell's first history predictions, whose errors set the 'early' prior scale
 
 
 @dataclass(frozen=True)
@@ -118,10 +120,11 @@ def _charge_table(cells: list[NasaCell], cutoff_v: float) -> tuple[tuple[float, 
 
 
 def _pairs(cells: list[NasaCell], context_s: float, cutoff_v: float) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """(relative change, context shift V, ambient band) of each discharge that has a previous one at the
-    same conditions."""
+    """(relative change, context shift V, ambient band, or 'early' for a cell's first :data:`EARLY`) of
+    each discharge that has a previous one at the same conditions."""
     y, dv, band = [], [], []
     for c in cells:
+        seen = 0
         for k, d in enumerate(c.discharges):
             t = d.time_to_cutoff_s(cutoff_v)
             if t is None or t <= context_s:
@@ -133,7 +136,8 @@ def _pairs(cells: list[NasaCell], context_s: float, cutoff_v: float) -> tuple[np
             t_p = float(p.time_to_cutoff_s(cutoff_v))
             y.append((t - t_p) / t_p)
             dv.append(voltage_shift_v(known_before(d, context_s), p))
-            band.append(ambient_band(d.ambient_c))
+            band.append("early" if seen < EARLY else ambient_band(d.ambient_c))
+            seen += 1
     return np.array(y), np.array(dv), band
 
 
@@ -154,7 +158,7 @@ def fit_nasa_model(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: fl
     a, b = least_squares(lambda p: p[0] + p[1] * dv - y, np.zeros(2), loss="soft_l1", f_scale=0.01).x
     res = np.log(np.clip((1 + y) / np.clip(1 + a + b * dv, 0.05, None), 1e-6, None))
     scale = {}
-    for name in ("cold", "room", "hot"):
+    for name in ("cold", "room", "hot", "early"):
         r = res[[k for k, n in enumerate(band) if n == name]]
         if r.size >= 5:
             scale[name] = float(1.4826 * np.median(np.abs(r - np.median(r))))
