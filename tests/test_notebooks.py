@@ -27,6 +27,7 @@ EXPECTED = [
     "09_flying_with_surprises.ipynb",
     "10_real_cells.ipynb",
     "11_fleet.ipynb",
+    "12_nasa_cells.ipynb",
 ]
 
 
