@@ -101,6 +101,9 @@ def main() -> None:
           f"{first['width_pct']:7.2f}")
     verdicts.append(f"prior predictions (first discharges, new conditions): coverage {first['coverage90']:.3f} "
                     f"{_ok(0.85 <= first['coverage90'] <= 0.95)}")
+    firsts = _stats([r for r in rows if r.discharge == 0])
+    verdicts.append(f"first discharges of a cell: n {firsts['n']}, coverage {firsts['coverage90']:.3f} "
+                    f"{_ok(0.85 <= firsts['coverage90'] <= 0.95)}, median width {firsts['width_pct']:.0f}%")
     st = _stats(rows)
     print(f"{'all':36s} {st['n']:5d} {st['median_pct']:6.2f} {st['p95_pct']:7.2f} {st['bias_pct']:+6.2f} "
           f"{st['coverage90']:6.3f} {st['miss95']:7.3f} {st['miss99']:7.3f} {st['width_pct']:7.2f} {st['flagged']:5d} | "
