@@ -13,10 +13,10 @@ import pytest
 from nasa_synthetic import synthetic_cell, synthetic_rows, write_cell
 
 from uam_studio.battery.nasa_data import NasaCell
+from uam_studio.battery.nasa_eval import evaluate_nasa, fit_nasa_model, score_cell, summarise
 from uam_studio.battery.nasa_model import BUNDLED, bundled_model
 from uam_studio.battery.nasa_predict import CellBelief, known_before
 from uam_studio.cli import main
-from uam_studio.studies.nasa_eod import evaluate_nasa, fit_nasa_model, score_cell, summarise
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "nasa_pcoe"
 
@@ -164,7 +164,7 @@ def test_on_real_2a_lives_left_out_it_beats_persistence_and_its_bounds_hold():
 @pytest.mark.skipif(not DATA.is_dir(), reason="the NASA PCoE lives are not beside the checkout")
 def test_the_bundled_default_model_is_what_identify_nasa_prints():
     from uam_studio.battery.nasa_data import load_nasa_folder
-    from uam_studio.studies.nasa_eod import models_literal
+    from uam_studio.battery.nasa_eval import models_literal
 
     refit = fit_nasa_model(load_nasa_folder(DATA), 300.0, 3.0)
     assert models_literal([refit]) == models_literal([BUNDLED[0]])

@@ -2,7 +2,7 @@
 would have, against what happened.
 
 :class:`NasaLabState` holds the cell and the discharge (a position over its life) and its :attr:`result`,
-a :class:`~uam_studio.studies.nasa_replay.NasaReplay` (or a one-line error); :class:`NasaLabView` draws
+a :class:`~uam_studio.battery.nasa_replay.NasaReplay` (or a one-line error); :class:`NasaLabView` draws
 it: the measured voltage, the end of the context, the prediction's median, 90% band and 5%-risk bound,
 the persistence guess, progpy's default model along the same current, and a sentence on what happened.
 Without the data, one line says where to put it.
@@ -36,7 +36,7 @@ PLOT_HEIGHT_CSS = "max(300px, calc((100vh - 230px) * 0.55))"
 
 
 class NasaLabState(param.Parameterized):
-    """One real discharge of a NASA PCoE cell, replayed (:func:`~uam_studio.studies.nasa_replay.replay_discharge`).
+    """One real discharge of a NASA PCoE cell, replayed (:func:`~uam_studio.battery.nasa_replay.replay_discharge`).
 
     ``cell`` is a file name stem in the data folder (:func:`~uam_studio.battery.nasa_data.nasa_folder`);
     ``position`` counts the cell's scoreable discharges from 0. :attr:`result` is ``{"replay": NasaReplay}``
@@ -85,7 +85,7 @@ class NasaLabState(param.Parameterized):
 
     def _compute(self, request: tuple) -> dict[str, Any]:
         from uam_studio.battery.nasa_data import load_nasa_cell
-        from uam_studio.studies.nasa_replay import replay_discharge
+        from uam_studio.battery.nasa_replay import replay_discharge
 
         name, position, context_s = request
         try:

@@ -3,7 +3,7 @@
 
 Fitted on all 26 lives of ``../shared/data/nasa_pcoe`` (``trained_on``): every number printed here is
 in-sample for those cells. Scores of those cells come from models refitted without the cell scored (leave
-one cell out, :func:`uam_studio.studies.nasa_eod.evaluate_nasa`); a cell outside them is scored with these.
+one cell out, :func:`uam_studio.battery.nasa_eval.evaluate_nasa`); a cell outside them is scored with these.
 Reproduce (about 20 s)::
 
     uam-studio identify nasa --data ../shared/data/nasa_pcoe > literal.txt

@@ -23,7 +23,7 @@ def _add_identify_arguments(p: argparse.ArgumentParser) -> None:
 def _run_identify(args: argparse.Namespace) -> int:
     if args.cell == "nasa":
         from ..battery.nasa_data import load_nasa_folder, nasa_folder
-        from ..studies.nasa_eod import fit_bundled, models_literal
+        from ..battery.nasa_eval import fit_bundled, models_literal
 
         if args.hold_out != "none":
             raise CliExit("--hold-out: only with 'identify vtc6'", EXIT_INPUT)

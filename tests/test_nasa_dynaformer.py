@@ -1,0 +1,83 @@
+"""The bundled Dynaformer on real NASA PCoE discharges (uam_studio.dynaformer.nasa_discharges): finite, positive
+predictions, and predictions that never read the voltage after the context. Skipped where the data
+(``../shared/data/nasa_pcoe`` or ``$UAM_STUDIO_NASA_DATA``) is not present."""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from uam_studio.battery.nasa_data import load_nasa_folder
+from uam_studio.battery.nasa_predict import known_before
+from uam_studio.dynaformer.nasa_discharges import (
+    dynaformer_eod_s,
+    finetune_dynaformer,
+    score_dynaformer,
+    summarise_dynaformer,
+    training_example,
+)
+from uam_studio.dynaformer.predictor import load_pretrained
+
+
+def _data() -> Path | None:
+    for p in (os.environ.get("UAM_STUDIO_NASA_DATA"), Path(__file__).resolve().parents[2] / "shared" / "data" / "nasa_pcoe"):
+        if p and Path(p, "B0005.csv.gz").is_file():
+            return Path(p)
+    return None
+
+
+DATA = _data()
+needs_data = pytest.mark.skipif(DATA is None, reason="no NASA PCoE data (../shared/data/nasa_pcoe or "
+                                                     "$UAM_STUDIO_NASA_DATA)")
+
+
+@pytest.fixture(scope="module")
+def b0005():
+    return load_nasa_folder(DATA, ["B0005"])[0]
+
+
+@needs_data
+def test_three_b0005_discharges_score_finite_and_positive(b0005):
+    cell = replace(b0005, discharges=b0005.discharges[:3])
+    rows = score_dynaformer([cell], context_s=300.0, cutoff_v=3.0)
+    assert [r["discharge"] for r in rows] == [0, 1, 2]
+    for r in rows:
+        low, med, high = r["low_s"], r["median_s"], r["high_s"]
+        assert all(x is not None and math.isfinite(x) and x > 0 for x in (low, med, high, r["true_s"]))
+        assert low <= med <= high
+        assert med > 300.0 - 20.0  # the cut-off is not seen within the context
+    s = summarise_dynaformer(rows)
+    assert s["n"] == 3 and s["none"] == 0 and math.isfinite(s["median_pct"])
+
+
+@needs_data
+@pytest.mark.parametrize("k", [0, 100])
+def test_prediction_never_reads_the_voltage_after_the_context(b0005, k):
+    d = b0005.discharges[k]
+    end = known_before(d, 300.0).voltage_v.size
+    hidden = replace(d, voltage_v=np.r_[d.voltage_v[:end], np.full(d.voltage_v.size - end, np.nan)])
+    predictor = load_pretrained()
+    for rest in (True, False):
+        a = dynaformer_eod_s(predictor, known_before(d, 300.0), 3.0, start_at_rest=rest)
+        b = dynaformer_eod_s(predictor, known_before(hidden, 300.0), 3.0, start_at_rest=rest)
+        assert a is not None and a == b
+
+
+@needs_data
+def test_a_short_fine_tune_runs_and_leaves_the_bundled_weights_alone(b0005):
+    base = load_pretrained()
+    before = {k: v.clone() for k, v in base.model.state_dict().items()}
+    examples = [training_example(base, d) for d in b0005.discharges[:2]]
+    name, latent, cur, volt, weight = examples[0]
+    assert name == "B0005" and latent.shape == (2,) and cur.shape == volt.shape == weight.shape
+    assert np.all(np.isfinite(volt)) and weight.min() > 0
+    tuned = finetune_dynaformer(examples, base, steps=2, batch=2)
+    assert tuned.meta["finetuned_on"] == ["B0005"]
+    assert all((base.model.state_dict()[k] == v).all() for k, v in before.items())
+    pred = dynaformer_eod_s(tuned, known_before(b0005.discharges[2], 300.0))
+    assert pred is not None and all(math.isfinite(x) and x > 0 for x in pred)
