@@ -88,6 +88,12 @@ GLOSSARY: dict[str, str] = {
                  "demand and every pack's truth: only the requests some pack flies safely, within what the "
                  "aircraft and chargers can turn round in the day (a proven upper bound; "
                  "uam_studio.fleet.hindsight).",
+    "Persistence (NASA cells)": "The simplest guess of when a real NASA discharge will end: exactly when the "
+                                "cell's previous discharge at the same load and temperature ended. Any "
+                                "health-aware prediction must beat it where the load repeats.",
+    "Bound at 5% risk": "A time the discharge should outlast 95 times in 100: the one-sided lower bound of a "
+                        "NASA prediction. A plan that finishes before it accepts that risk; on cells the "
+                        "model never read it is missed about 5% of the time (benchmarks/RESULTS.md).",
 }
 
 
