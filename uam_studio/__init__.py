@@ -10,10 +10,40 @@ and ``cli`` on top.
 
 Importing the package registers the planning environment's gymnasium ids
 (:data:`uam_studio.registration.ENV_IDS`, e.g. ``"uam_studio/SingleCharge-v0"``).
+
+The front door: the names of the main jobs, imported when first used (the README's example runs them):
+simulate a cell (:func:`simulate`), fit its health (:func:`fit_health`), load, plan and fly a mission
+(:func:`load_mission`, :func:`plan_mission`, :func:`fly_mission`), run a fleet's day (:class:`Fleet`,
+:func:`poisson_demand`, :func:`simulate_day`), and predict a real NASA discharge's end
+(:func:`load_nasa_folder`, :func:`replay_discharge`).
 """
+
+import importlib
 
 from uam_studio.registration import register_envs as _register_envs
 
 __version__ = "0.1.0"
+
+_FRONT_DOOR = {
+    "simulate": "uam_studio.battery",
+    "fit_health": "uam_studio.battery",
+    "load_mission": "uam_studio.planning",
+    "plan_mission": "uam_studio.planning",
+    "fly_mission": "uam_studio.planning",
+    "Fleet": "uam_studio.fleet.day",
+    "simulate_day": "uam_studio.fleet.day",
+    "poisson_demand": "uam_studio.fleet.demand",
+    "load_nasa_folder": "uam_studio.battery.nasa_data",
+    "replay_discharge": "uam_studio.battery.nasa_replay",
+}
+
+__all__ = sorted(_FRONT_DOOR)
+
+
+def __getattr__(name: str):
+    if name in _FRONT_DOOR:
+        return getattr(importlib.import_module(_FRONT_DOOR[name]), name)
+    raise AttributeError(f"module 'uam_studio' has no attribute {name!r}")
+
 
 _register_envs()
