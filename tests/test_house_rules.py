@@ -22,3 +22,9 @@ def test_the_readme_layer_table_names_every_subpackage():
     named = set(re.findall(r"^\| [a-z]+ \| `uam_studio/([a-z_]+)/`", text, flags=re.M))
     packages = {p.parent.name for p in (ROOT / "uam_studio").glob("*/__init__.py")}
     assert packages - named == set(), f"not in the README's layer table: {sorted(packages - named)}"
+
+
+def test_every_module_is_at_most_450_lines():
+    long = {str(p.relative_to(ROOT)): n for p in (ROOT / "uam_studio").rglob("*.py")
+            if (n := len(p.read_text().splitlines())) > 450}
+    assert long == {}, long

@@ -171,15 +171,13 @@ class Operator:
         return self._observed.note if self._observed is not None else ""
 
     def health(self) -> tuple[float, float, float, float]:
-        """(w, its std, r0 ohm, its std) from all readings so far and the fleet prior; w = 6500 C / q_max
-        (:meth:`HealthBelief.health`)."""
+        """(w, its std, r0 ohm, its std) from all readings and the fleet prior; w = 6500 C / q_max."""
         return self.health_belief.health()
 
     # ------------------------------------------------------------------ planning
     def _belief(self, health: tuple[float, float, float, float], health_z: float, wind_z: float
                 ) -> tuple[Mission, float, float]:
-        """The mission as the operator believes it, each quantity ``z`` std to the cautious side:
-        the cell (less q_max, more R0) and every leg's wind (more headwind)."""
+        """The mission as believed, ``z`` std to the cautious side: less q_max, more R0, more headwind."""
         w, w_sd, r, r_sd = health
         q_plan = float(np.clip(Q_REF_C / max(w + health_z * w_sd, 1e-3), *Q_PLAN_RANGE))
         r_plan = float(np.clip(r + health_z * r_sd, *R0_PLAN_RANGE))
@@ -196,8 +194,7 @@ class Operator:
         return belief, q_plan, r_plan
 
     def _episode(self, belief: Mission) -> Episode:
-        """The episode of a believed mission (:meth:`_belief`): its forecast legs, its believed cell
-        (q_max C, R0 ohm) flown to the mission's cut-off (V), the flight's scenario."""
+        """The episode of a believed mission (:meth:`_belief`): its legs, cell, cut-off (V) and scenario."""
         return Episode.of(LegTable(belief), self.scenario)
 
     def _state(self, q_plan: float, r_plan: float) -> BatteryState:
@@ -434,8 +431,7 @@ class Operator:
 
     def _best_effort_home(self, episode: Episode, here: int, state: np.ndarray
                           ) -> tuple[list[str], list[float], str]:
-        """Home when no way is safe on the cautious belief: the level that is safe on the expected belief
-        (``episode``) with the highest minimum voltage, else the one that gets furthest before the cut-off."""
+        """Home when no way is cautiously safe: the safest level on ``episode``, else the one that gets furthest."""
         legs = episode.legs
         levels = [a for a in range(len(ALTITUDES_M)) if legs.feasible[here, VERTIPORT_SLOT, a]] or [0]
         best, best_key = levels[0], None
