@@ -539,10 +539,11 @@ def test_battery_lab_replays_a_real_nasa_discharge_at_1366x768(browser, app_url,
         text = summary.inner_text()
         assert "predicted" in text and "bound" in text and "Persistence" in text and "nan" not in text, text
         assert_drawn(page, "B0005, discharge 84", NASA_LAB)
-        page.screenshot(path=str(tmp_path / "nasa_b0005.png"), full_page=True)
+        shots = Path(os.environ.get("UAM_SHOTS", tmp_path))  # where a person looks at them
+        page.screenshot(path=str(shots / "nasa_b0005.png"))
         page.locator("select").filter(has_text="B0045").select_option("B0045")
         summary.get_by_text("cold (4 C").wait_for(timeout=90_000)
         assert_drawn(page, "B0045, discharge", {k: v for k, v in NASA_LAB.items() if k != "persistence"})
-        page.screenshot(path=str(Path(os.environ.get("UAM_SHOTS", tmp_path)) / "nasa_b0045.png"), full_page=False)
+        page.screenshot(path=str(shots / "nasa_b0045.png"))
     finally:
         page.close()
