@@ -99,7 +99,7 @@ def progpy_default_s(d: NasaDischarge, cutoff_v: float) -> float | None:
 
 
 def _charge_table(cells: list[NasaCell], cutoff_v: float) -> tuple[tuple[float, float, float, float], ...]:
-    from uam_studio.battery.nasa_predict import _charge_ah
+    from uam_studio.battery.nasa_predict import charge_ah
 
     groups: dict[tuple[float, float], tuple[list[float], list[float]]] = {}
     for c in cells:
@@ -110,7 +110,7 @@ def _charge_table(cells: list[NasaCell], cutoff_v: float) -> tuple[tuple[float, 
                 continue
             key = (round(d.mean_load_a() * 2) / 2, float(round(d.ambient_c)))
             q = float(np.interp(t, d.time_s[d.load_start:] - d.load_time_s,
-                                _charge_ah(d.time_s, d.current_a, d.load_start)))
+                                charge_ah(d.time_s, d.current_a, d.load_start)))
             every, young = groups.setdefault(key, ([], []))
             every.append(q)
             if seen.get(key, 0) < YOUNG:
@@ -175,7 +175,7 @@ def fit_nasa_model(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: fl
             known = known_before(d, context_s)
             if t is not None and t > context_s:
                 pred = belief.predict(known)
-                p = belief._previous(known)
+                p = belief.previous(known)
                 if p is not None:
                     e = (math.log(t / belief.centre_s(known, p)) - belief.bias()) / belief.spread(known, p)
                     studentized["all"].append(e)

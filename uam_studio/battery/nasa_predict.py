@@ -120,7 +120,7 @@ def voltage_shift_v(known: KnownDischarge, prev: NasaDischarge) -> float:
     return float(np.mean(np.concatenate(diffs))) if diffs else 0.0
 
 
-def _charge_ah(time_s: np.ndarray, current_a: np.ndarray, start: int) -> np.ndarray:
+def charge_ah(time_s: np.ndarray, current_a: np.ndarray, start: int) -> np.ndarray:
     """Cumulative charge (Ah) delivered from sample ``start`` at each later sample (trapezoids)."""
     t, i = time_s[start:], np.clip(current_a[start:], 0.0, None)
     return np.r_[0.0, np.cumsum(0.5 * (i[1:] + i[:-1]) * np.diff(t))] / 3600.0
@@ -129,7 +129,7 @@ def _charge_ah(time_s: np.ndarray, current_a: np.ndarray, start: int) -> np.ndar
 def time_for_charge_s(time_s: np.ndarray, current_a: np.ndarray, start: int, charge_ah: float) -> float:
     """Time (s from sample ``start``) at which the current delivers ``charge_ah`` (Ah); past the profile's
     end, its last loaded current carries on."""
-    q = _charge_ah(time_s, current_a, start)
+    q = charge_ah(time_s, current_a, start)
     t = time_s[start:] - time_s[start]
     if charge_ah <= q[-1]:
         return float(np.interp(charge_ah, q, t))
@@ -223,7 +223,8 @@ class CellBelief:
         gap = sum(1 for q in self.finished if q.index > p.index) + 1
         return self.scale(ambient_band(known.ambient_c)) * math.sqrt(gap)
 
-    def _previous(self, known: KnownDischarge) -> NasaDischarge | None:
+    def previous(self, known: KnownDischarge) -> NasaDischarge | None:
+        """The latest finished discharge at ``known``'s load and ambient that reached the cut-off."""
         for p in reversed(self.finished):
             if same_conditions(p, known) and p.time_to_cutoff_s(self.model.cutoff_v) is not None:
                 return p
@@ -252,7 +253,7 @@ class CellBelief:
             charge = target
         else:
             t_last = float(last.time_to_cutoff_s(cut))
-            q_last = _charge_ah(last.time_s, last.current_a, last.load_start)
+            q_last = charge_ah(last.time_s, last.current_a, last.load_start)
             delivered = float(np.interp(t_last, last.time_s[last.load_start:] - last.load_time_s, q_last))
             then, near_then = self.model.condition_charge_ah(last.mean_load_a(), last.ambient_c, young=False)
             charge = delivered * target / then
@@ -268,7 +269,7 @@ class CellBelief:
 
     def predict(self, known: KnownDischarge) -> EodPrediction:
         """Predict ``known``'s time to the model's cut-off from what the belief holds and ``known``."""
-        p = self._previous(known)
+        p = self.previous(known)
         band = ambient_band(known.ambient_c)
         flag = None if band == "room" else (
             f"{band} ({known.ambient_c:.0f} C, outside {BAND_EDGES_C[0]:g}-{BAND_EDGES_C[1]:g} C): the interval "
@@ -291,7 +292,7 @@ class CellBelief:
         """Take a finished discharge in; with the history prediction made for it, record its error."""
         t = d.time_to_cutoff_s(self.model.cutoff_v)
         if known is not None and prediction is not None and prediction.method == "history" and t is not None:
-            p = self._previous(known)
+            p = self.previous(known)
             if p is not None:
                 self.errors.append(math.log(t / self.centre_s(known, p)))
             # adaptive conformal levels: each quantile's level moves towards the miss rate it declares
