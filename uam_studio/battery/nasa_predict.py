@@ -126,16 +126,16 @@ def charge_ah(time_s: np.ndarray, current_a: np.ndarray, start: int) -> np.ndarr
     return np.r_[0.0, np.cumsum(0.5 * (i[1:] + i[:-1]) * np.diff(t))] / 3600.0
 
 
-def time_for_charge_s(time_s: np.ndarray, current_a: np.ndarray, start: int, charge_ah: float) -> float:
-    """Time (s from sample ``start``) at which the current delivers ``charge_ah`` (Ah); past the profile's
+def time_for_charge_s(time_s: np.ndarray, current_a: np.ndarray, start: int, target_ah: float) -> float:
+    """Time (s from sample ``start``) at which the current delivers ``target_ah`` (Ah); past the profile's
     end, its last loaded current carries on."""
     q = charge_ah(time_s, current_a, start)
     t = time_s[start:] - time_s[start]
-    if charge_ah <= q[-1]:
-        return float(np.interp(charge_ah, q, t))
+    if target_ah <= q[-1]:
+        return float(np.interp(target_ah, q, t))
     on = current_a[start:] > LOADED_A
     last = float(current_a[start:][on][-1]) if on.any() else 1.0
-    return float(t[-1] + (charge_ah - q[-1]) * 3600.0 / max(last, LOADED_A))
+    return float(t[-1] + (target_ah - q[-1]) * 3600.0 / max(last, LOADED_A))
 
 
 @dataclass(frozen=True)
