@@ -97,7 +97,8 @@ class FlyView(pn.viewable.Viewer):
                                                               "wind changed (p)", "next", "reason"]),
                                         disabled=True, show_index=False, sizing_mode="stretch_both",
                                         css_classes=["uam-fly-log"], layout="fit_columns",
-                                        configuration={"columnDefaults": {"headerWordWrap": True}},
+                                        configuration={"columnDefaults": {"headerWordWrap": True},
+                                                       "renderVertical": "basic"},  # every row in the page
                                         formatters={"reason": {"type": "textarea"}},
                                         widths={"t (s)": 55, "at": 85, "q_max (C)": 95, "R0 (ohm)": 85,
                                                 "fit flags": 80, "leg wind vs forecast (kt)": 190,
