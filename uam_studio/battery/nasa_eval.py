@@ -26,6 +26,7 @@ from uam_studio.battery.nasa_predict import (
     CellBelief,
     NasaEodModel,
     ambient_band,
+    charge_to_cutoff_ah,
     known_before,
     voltage_shift_v,
 )
@@ -99,18 +100,14 @@ def progpy_default_s(d: NasaDischarge, cutoff_v: float) -> float | None:
 
 
 def _charge_table(cells: list[NasaCell], cutoff_v: float) -> tuple[tuple[float, float, float, float], ...]:
-    from uam_studio.battery.nasa_predict import charge_ah
-
     groups: dict[tuple[float, float], tuple[list[float], list[float]]] = {}
     for c in cells:
         seen: dict[tuple[float, float], int] = {}
         for d in c.discharges:
-            t = d.time_to_cutoff_s(cutoff_v)
-            if t is None:
+            q = charge_to_cutoff_ah(d, cutoff_v)
+            if q is None:
                 continue
             key = (round(d.mean_load_a() * 2) / 2, float(round(d.ambient_c)))
-            q = float(np.interp(t, d.time_s[d.load_start:] - d.load_time_s,
-                                charge_ah(d.time_s, d.current_a, d.load_start)))
             every, young = groups.setdefault(key, ([], []))
             every.append(q)
             if seen.get(key, 0) < YOUNG:
@@ -170,21 +167,14 @@ def fit_nasa_model(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: fl
     logs = []
     for c in cells:
         belief = CellBelief(draft)
-        for d in c.discharges:
-            t = d.time_to_cutoff_s(cutoff_v)
-            known = known_before(d, context_s)
-            if t is not None and t > context_s:
-                pred = belief.predict(known)
-                p = belief.previous(known)
-                if p is not None:
-                    e = (math.log(t / belief.centre_s(known, p)) - belief.bias()) / belief.spread(known, p)
-                    studentized["all"].append(e)
-                    studentized.setdefault(ambient_band(d.ambient_c), []).append(e)
-                else:
-                    logs.append(math.log(t / pred.median_s))
-                belief.observe(d, pred, known)
+        for _, d, known, pred, t in belief.walk(c.discharges):
+            p = belief.previous(known)
+            if p is not None:
+                e = (math.log(t / belief.centre_s(known, p)) - belief.bias()) / belief.spread(known, p)
+                studentized["all"].append(e)
+                studentized.setdefault(ambient_band(d.ambient_c), []).append(e)
             else:
-                belief.observe(d)
+                logs.append(math.log(t / pred.median_s))
     z = {band: tuple(_conservative(np.array(e), r) for r in Z_LEVELS) for band, e in studentized.items()
          if band == "all" or len(e) >= MIN_BAND}
     prior_log = tuple(_conservative(np.array(logs), r) for r in RISKS) if len(logs) >= 5 else (-1.0, -0.5, 0.0, 0.5)
@@ -195,22 +185,16 @@ def fit_nasa_model(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: fl
 def score_cell(cell: NasaCell, model: NasaEodModel, fit: str = "bundled", progpy: bool = True,
                every: int = 1) -> list[ScoredDischarge]:
     """Run ``cell``'s life through the online protocol with ``model``; one row per ``every``-th discharge
-    whose cut-off comes after the context (those that end within it need no prediction). The belief takes
-    in every discharge."""
-    belief = CellBelief(model)
+    whose cut-off comes after the context (those that end within it need no prediction). The belief
+    predicts and takes in every discharge, whether or not its row is kept."""
     out = []
-    for k, d in enumerate(cell.discharges):
-        t = d.time_to_cutoff_s(model.cutoff_v)
-        known = known_before(d, model.context_s)
-        if t is None or t <= model.context_s or k % every:
-            belief.observe(d)
+    for k, d, _, pred, t in CellBelief(model).walk(cell.discharges):
+        if k % every:
             continue
-        pred = belief.predict(known)
         out.append(ScoredDischarge(
             cell.name, d.index, d.ambient_c, condition_of(d), model.context_s, t, pred.median_s, pred.low_s,
             pred.high_s, pred.bound95_s, pred.bound99_s, persistence_s(cell, k, model.cutoff_v),
             progpy_default_s(d, model.cutoff_v) if progpy else None, pred.method, pred.flag, fit))
-        belief.observe(d, pred, known)
     return out
 
 

@@ -32,13 +32,14 @@ it) is flagged, and its interval widened by :data:`UNSEEN_WIDEN`. The fitted num
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from uam_studio.battery.nasa_data import LOADED_A, NasaDischarge, same_conditions
 
-__all__ = ["EARLY_ERRORS", "RISKS", "UNSEEN_WIDEN", "CellBelief", "EodPrediction", "KnownDischarge", "NasaEodModel",
+__all__ = ["EARLY_ERRORS", "RISKS", "UNSEEN_WIDEN", "CellBelief", "charge_to_cutoff_ah", "EodPrediction", "KnownDischarge", "NasaEodModel",
            "ambient_band", "known_before", "voltage_shift_v"]
 
 RISKS = (0.01, 0.05, 0.5, 0.95)  # the quantiles every prediction carries: bound99, bound95/low, median, high
@@ -124,6 +125,15 @@ def charge_ah(time_s: np.ndarray, current_a: np.ndarray, start: int) -> np.ndarr
     """Cumulative charge (Ah) delivered from sample ``start`` at each later sample (trapezoids)."""
     t, i = time_s[start:], np.clip(current_a[start:], 0.0, None)
     return np.r_[0.0, np.cumsum(0.5 * (i[1:] + i[:-1]) * np.diff(t))] / 3600.0
+
+
+def charge_to_cutoff_ah(d: NasaDischarge, cutoff_v: float) -> float | None:
+    """The charge (Ah) ``d`` delivered from its first loaded sample to its first sample below ``cutoff_v``
+    (V); None if it never got there."""
+    t = d.time_to_cutoff_s(cutoff_v)
+    if t is None:
+        return None
+    return float(np.interp(t, d.time_s[d.load_start:] - d.load_time_s, charge_ah(d.time_s, d.current_a, d.load_start)))
 
 
 def time_for_charge_s(time_s: np.ndarray, current_a: np.ndarray, start: int, target_ah: float) -> float:
@@ -252,9 +262,7 @@ class CellBelief:
         if last is None:
             charge = target
         else:
-            t_last = float(last.time_to_cutoff_s(cut))
-            q_last = charge_ah(last.time_s, last.current_a, last.load_start)
-            delivered = float(np.interp(t_last, last.time_s[last.load_start:] - last.load_time_s, q_last))
+            delivered = float(charge_to_cutoff_ah(last, cut))
             then, near_then = self.model.condition_charge_ah(last.mean_load_a(), last.ambient_c, young=False)
             charge = delivered * target / then
             near = near and near_then
@@ -286,6 +294,22 @@ class CellBelief:
         seen = float(known.time_s[n - 1] - known.load_time_s) if n > known.load_start else 0.0
         q = np.maximum(np.sort(q), seen)
         return EodPrediction(float(q[2]), float(q[1]), float(q[3]), float(q[1]), float(q[0]), method, flag)
+
+    def walk(self, discharges: Iterable[NasaDischarge]) -> Iterator[tuple[int, NasaDischarge, KnownDischarge,
+                                                                           EodPrediction, float]]:
+        """Run ``discharges`` (a cell's, in order) through the belief. Each that ends after the context is
+        predicted and yielded as (position, discharge, known view, prediction, true time s) *before* the
+        belief takes it in, so the caller reads the belief as the prediction saw it; every discharge is
+        then observed (with its prediction, where one was made)."""
+        for k, d in enumerate(discharges):
+            t = d.time_to_cutoff_s(self.model.cutoff_v)
+            if t is None or t <= self.model.context_s:
+                self.observe(d)
+                continue
+            known = known_before(d, self.model.context_s)
+            prediction = self.predict(known)
+            yield k, d, known, prediction, t
+            self.observe(d, prediction, known)
 
     def observe(self, d: NasaDischarge, prediction: EodPrediction | None = None,
                 known: KnownDischarge | None = None) -> None:

@@ -10,7 +10,7 @@ progpy's default model. The Battery lab and notebook 12 draw this; nothing here 
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -98,14 +98,9 @@ def replay_discharge(cell: NasaCell | str | Path, position: int, context_s: floa
     fit = "given"
     if model is None:
         model, fit = model_for(cell, context_s)
-    belief = CellBelief(model)
-    for d in cell.discharges[:position]:
-        t = d.time_to_cutoff_s(model.cutoff_v)
-        known = known_before(d, context_s)
-        if t is not None and t > context_s:
-            belief.observe(d, belief.predict(known), known)
-        else:
-            belief.observe(d)
+    belief = CellBelief(replace(model, context_s=context_s))  # the context asked for, whatever the model's
+    for _ in belief.walk(cell.discharges[:position]):
+        pass  # each earlier discharge predicted, then taken in
     d = cell.discharges[position]
     prediction = belief.predict(known_before(d, context_s))
     pt, pv, _ = progpy_default_curve(d, 2.5)
