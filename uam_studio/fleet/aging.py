@@ -36,7 +36,7 @@ from uam_studio.battery.cmu_data import data_folder, load_cell_log, reference_di
 from uam_studio.errors import InputError, check_range
 
 __all__ = ["AGING_LAW", "END_OF_LIFE_FRACTION", "LIFE_FILES", "AgingLaw", "LifePoints", "PackHealth",
-           "fit_aging_law", "leave_one_cell_out", "life_points"]
+           "fit_aging_law", "fit_resistance_growth", "leave_one_cell_out", "life_points"]
 
 LIFE_FILES = ("VAH07.csv.mat", "VAH09.csv.mat", "VAH27.csv.mat", "VAH30.csv.mat")
 END_OF_LIFE_FRACTION = 0.8  # a pack retires below 80% of its first capacity
@@ -146,7 +146,12 @@ def fit_aging_law(lives: list[LifePoints]) -> AgingLaw:
     ea_bound = 2e4 if len(temps) > 1 else 1e-9  # one temperature: no Arrhenius term to fit
     fit = least_squares(residual, x0=[math.log(1e-3), 0.8, 0.0], bounds=([-20.0, 0.1, -ea_bound], [0.0, 2.0, ea_bound]))
     ln_a, b, ea = (float(v) for v in fit.x)
-    # resistance: ir = r_i * (1 + k_r * efc), r_i per life; linear in (r_i, r_i * k_r) -> fit by least squares
+    return AgingLaw(a=math.exp(ln_a), b=b, ea_k=ea if len(temps) > 1 else 0.0, k_r=fit_resistance_growth(lives))
+
+
+def fit_resistance_growth(lives: list[LifePoints]) -> float:
+    """``k_r`` (per equivalent full cycle, >= 0): ``ir = r_i (1 + k_r efc)`` with a starting resistance
+    ``r_i`` per life, linear in (r_i, r_i k_r) and fitted by least squares; the lives' pooled growth."""
     rows, y = [], []
     for i, lf in enumerate(lives):
         for ee, ir in zip(lf.ir_efc, lf.ir_ohm):
@@ -156,8 +161,7 @@ def fit_aging_law(lives: list[LifePoints]) -> AgingLaw:
             y.append(ir)
     coef = np.linalg.lstsq(np.array(rows), np.array(y), rcond=None)[0]
     r_i, slope_i = coef[0::2], coef[1::2]
-    k_r = float(np.sum(slope_i) / np.sum(r_i))  # the lives' pooled growth per cycle, relative
-    return AgingLaw(a=math.exp(ln_a), b=b, ea_k=ea if len(temps) > 1 else 0.0, k_r=max(k_r, 0.0))
+    return max(float(np.sum(slope_i) / np.sum(r_i)), 0.0)  # the lives' pooled growth per cycle, relative
 
 
 def leave_one_cell_out(lives: list[LifePoints]) -> list[dict]:

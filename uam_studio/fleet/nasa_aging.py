@@ -29,7 +29,7 @@ from scipy.optimize import least_squares
 
 from uam_studio.battery.nasa_data import NasaDataError, load_nasa_folder, nasa_folder
 from uam_studio.errors import InputError
-from uam_studio.fleet.aging import AGING_LAW, T_REF_C, ZERO_C_K, AgingLaw, LifePoints, fit_aging_law
+from uam_studio.fleet.aging import AGING_LAW, T_REF_C, ZERO_C_K, AgingLaw, LifePoints, fit_resistance_growth
 
 __all__ = ["NASA_AGING_LAW", "CapacityBelief", "fit_nasa_law", "forecast_score", "nasa_leave_one_cell_out",
            "nasa_life_points"]
@@ -99,7 +99,7 @@ def reference_ah(lf: LifePoints) -> float:
 def fit_nasa_law(lives: list[LifePoints]) -> AgingLaw:
     """The law's capacity fade (``a``, ``b``, ``ea_k``) fitted to ``lives`` with a free starting capacity
     per life and a robust loss (a rest's recovery is not fade), and ``k_r`` from the impedance tests
-    (:func:`~uam_studio.fleet.aging.fit_aging_law`'s resistance fit)."""
+    (:func:`~uam_studio.fleet.aging.fit_resistance_growth`)."""
     if not lives:
         raise InputError("lives", "no life to fit")
     inv = [1.0 / (T_REF_C + ZERO_C_K) - 1.0 / (lf.temperature_c + ZERO_C_K) for lf in lives]
@@ -114,8 +114,7 @@ def fit_nasa_law(lives: list[LifePoints]) -> AgingLaw:
     lo = np.r_[-25.0, 0.2, -2e4, np.full(n, 0.01)]
     hi = np.r_[0.0, 3.0, 2e4, np.full(n, 3.0)]
     fit = least_squares(residual, x0, bounds=(lo, hi), loss="soft_l1", f_scale=0.02)
-    k_r = fit_aging_law(lives).k_r
-    return AgingLaw(a=math.exp(fit.x[0]), b=float(fit.x[1]), ea_k=float(fit.x[2]), k_r=k_r)
+    return AgingLaw(a=math.exp(fit.x[0]), b=float(fit.x[1]), ea_k=float(fit.x[2]), k_r=fit_resistance_growth(lives))
 
 
 def _rms(law: AgingLaw, lf: LifePoints) -> float:
