@@ -55,6 +55,7 @@ class NasaLabState(param.Parameterized):
                  dispatch: Callable[[Callable[[], None]], None] | None = None, **params: Any) -> None:
         super().__init__(**params)
         self.background = background
+        self._cell = None  # the NasaCell shown, read once per cell
         self._worker: LatestWorker[tuple, dict[str, Any]] = LatestWorker(
             self._compute, self._apply, lambda _r, err: {"error": one_line(err)}, dispatch=dispatch)
         try:
@@ -89,7 +90,9 @@ class NasaLabState(param.Parameterized):
 
         name, position, context_s = request
         try:
-            cell = load_nasa_cell(self.folder / f"{name}.csv.gz")
+            if self._cell is None or self._cell.name != name:  # a slider move replays the cell already read
+                self._cell = load_nasa_cell(self.folder / f"{name}.csv.gz")
+            cell = self._cell
             n = len(cell.discharges)
             return {"replay": replay_discharge(cell, min(position, max(n - 1, 0)), context_s), "discharges": n}
         except InputError as err:
