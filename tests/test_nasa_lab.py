@@ -46,6 +46,16 @@ def test_the_lab_replays_a_cell_it_never_saw_and_clamps_the_discharge(folder):
     assert len(nasa_figure(state.result["replay"])) >= 6
 
 
+def test_the_figure_builds_whatever_backend_another_pane_left_current(folder, monkeypatch):
+    import holoviews as hv
+
+    state = NasaLabState(folder=str(folder))
+    monkeypatch.setattr(hv.Store, "current_backend", "matplotlib")  # a fresh process's default, never loaded here
+    overlay = nasa_figure(state.result["replay"])  # before hv.renderer, which makes its backend current
+    fig = hv.renderer("bokeh").get_plot(overlay).state
+    assert fig.title.text.startswith("B0301, discharge 11") and len(fig.renderers) >= 6
+
+
 def test_a_replay_reads_no_voltage_after_the_context_and_refuses_a_bad_position(folder):
     cell = load_nasa_cell(folder / "B0302.csv.gz")
     model = fit_nasa_model([load_nasa_cell(folder / "B0301.csv.gz"), load_nasa_cell(folder / "B0303.csv.gz")])

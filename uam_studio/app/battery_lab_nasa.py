@@ -113,11 +113,13 @@ class NasaLabState(param.Parameterized):
 
 def _vline(x: float, ylim: tuple[float, float], label: str, color: str, dash: str = "solid", width: float = 2.0):
     return hv.Curve(([x, x], list(ylim)), "time since the load (min)", "voltage (V)", label=label).opts(
-        color=color, line_dash=dash, line_width=width)
+        color=color, line_dash=dash, line_width=width, backend="bokeh")
 
 
 def nasa_figure(r) -> hv.Overlay:
     """The replay drawn: measured voltage, context end, band, median, bound, persistence, progpy, EOD."""
+    ensure_bokeh_backend()  # Bokeh's styling options exist once its backend is loaded; each names it, so a
+    # current backend switched elsewhere in the process (another pane, another test) cannot reject them
     p = r.prediction
     t_max = max(float(r.time_s[-1]), p.high_s, r.persistence_s or 0.0) / 60.0 * 1.05
     keep = r.progpy_time_s <= t_max * 60.0
@@ -125,16 +127,16 @@ def nasa_figure(r) -> hv.Overlay:
     ylim = (float(np.nanmin(volts)) - 0.05, float(np.nanmax(volts)) + 0.05)
     x = "time since the load (min)"
     parts = [
-        hv.VSpan(p.low_s / 60.0, p.high_s / 60.0).opts(color=NASA_COLORS["predicted"], alpha=0.15),
+        hv.VSpan(p.low_s / 60.0, p.high_s / 60.0).opts(color=NASA_COLORS["predicted"], alpha=0.15, backend="bokeh"),
         hv.Curve((r.progpy_time_s[keep] / 60.0, r.progpy_voltage_v[keep]), x, "voltage (V)",
-                 label="progpy default (no health)").opts(color=NASA_COLORS["progpy"], line_width=1.5),
+                 label="progpy default (no health)").opts(color=NASA_COLORS["progpy"], line_width=1.5, backend="bokeh"),
         hv.Curve((r.time_s / 60.0, r.voltage_v), x, "voltage (V)", label="measured").opts(
-            color=NASA_COLORS["measured"], line_width=2.5),
+            color=NASA_COLORS["measured"], line_width=2.5, backend="bokeh"),
         _vline(r.context_s / 60.0, ylim, f"context end ({r.context_s:g} s)", NASA_COLORS["context"], "dotted", 1.5),
         _vline(p.median_s / 60.0, ylim, "predicted (90% band)", NASA_COLORS["predicted"], width=3.0),
         _vline(p.bound95_s / 60.0, ylim, "bound, 5% risk", NASA_COLORS["bound"], "dashed", 3.0),
         hv.Curve(([0.0, t_max], [r.cutoff_v, r.cutoff_v]), x, "voltage (V)", label=f"EOD {r.cutoff_v:g} V").opts(
-            color=NASA_COLORS["EOD"], line_dash="dashed", line_width=1.5),
+            color=NASA_COLORS["EOD"], line_dash="dashed", line_width=1.5, backend="bokeh"),
     ]
     if r.persistence_s is not None:
         parts.insert(4, _vline(r.persistence_s / 60.0, ylim, "persistence (previous discharge)",
@@ -143,7 +145,7 @@ def nasa_figure(r) -> hv.Overlay:
         hv.opts.Overlay(responsive=True, title=f"{r.cell}, discharge {r.discharge} ({r.condition})", xlabel=x,
                         ylabel="voltage (V)",
                         hooks=[no_scroll_zoom], legend_position="right", show_grid=True, xlim=(0.0, t_max),
-                        ylim=ylim, fontsize={"title": "10pt", "legend": "8pt"}))
+                        ylim=ylim, fontsize={"title": "10pt", "legend": "8pt"}, backend="bokeh"))
 
 
 class NasaLabView(pn.viewable.Viewer):
