@@ -261,12 +261,12 @@ def test_operator_belief_holds_a_flagged_fit_with_caution():
     volt = _flight(7500.0, 0.1, 240, cell) + rng.normal(size=240) * 1e-3
     belief = HealthBelief(1e-3, 3.0, prior=fleet_prior(cell))
     belief.observe(CUR, volt)
-    w, w_sd, _, _ = belief.health()
+    health = belief.health()
     est = belief.fit()
     assert est.q_max > 7000.0  # the readings alone: a cell beyond its fleet
-    assert 6500.0 / w <= 4000.0 + 1e-6  # planned as the fleet's best cell
+    assert health.q_max_c <= 4000.0 + 1e-6  # planned as the fleet's best cell
     trusting = np.linalg.inv(np.linalg.inv(fleet_prior(cell).cov) + np.linalg.inv(est.cov_w))
-    assert w_sd > np.sqrt(trusting[0, 0])  # and wider than trusting the fit over the fleet
+    assert health.inverse_capacity_sd > np.sqrt(trusting[0, 0])  # and wider than trusting the fit over the fleet
 
 
 @given(lik=st.tuples(st.floats(0.2, 2.0), st.floats(0.0, 0.6)), sd=st.tuples(st.floats(1e-4, 0.2), st.floats(1e-4, 0.1)),
@@ -307,6 +307,7 @@ def test_the_operators_decisions_carry_the_fits_flags():
     belief.observe(CUR, volt + 0.02 * np.sin(np.arange(240) / 20.0))  # a wave the model has no term for
     belief.health()
     assert FLAG_MISFIT in belief.flags()
-    d = Decision(0.0, "vertiport", "plan", "", 1.0, 1.0, 0.1, 0.01, 1.0, 0.1, 0.0, 1.0, (), (), None, None,
-                 health_flags=belief.flags())
+    d = Decision(time_s=0.0, node="vertiport", kind="plan", reason="", **belief.health().in_units(),
+                 plan_q_max_c=1.0, plan_r0_ohm=0.1, wind_shift_kts=0.0, wind_shift_sd_kts=1.0, route=(),
+                 altitudes_m=(), next_to=None, next_altitude_m=None, health_flags=belief.flags())
     assert d.to_dict()["health_flags"] == list(belief.flags())

@@ -1,5 +1,6 @@
-"""House rules as checks: every benchmark script is listed in benchmarks/README.md (and every listed one exists);
-the README's layer table names every subpackage."""
+"""House rules as checks: every benchmark script is listed in benchmarks/README.md (and every listed one exists)
+and has a scoreboard row linked to its log entry in RESULTS.md; the README's layer table names every subpackage;
+no module is longer than 450 lines."""
 
 from __future__ import annotations
 
@@ -28,3 +29,20 @@ def test_every_module_is_at_most_450_lines():
     long = {str(p.relative_to(ROOT)): n for p in (ROOT / "uam_studio").rglob("*.py")
             if (n := len(p.read_text().splitlines())) > 450}
     assert long == {}, long
+
+
+def _anchor(heading: str) -> str:
+    """GitHub's anchor of a Markdown heading: lower case, punctuation dropped, spaces to '-'."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def test_the_scoreboard_has_a_row_per_benchmark_and_each_row_links_to_a_log_entry():
+    text = (ROOT / "benchmarks" / "README.md").read_text()
+    board = text.split("## Scoreboard", 1)[1].split("\n## ", 1)[0]
+    rows = [line for line in board.splitlines() if line.startswith("| `")]
+    scripts = {p.name for p in (ROOT / "benchmarks").glob("bench_*.py")}
+    named = {m for line in rows for m in re.findall(r"`(bench_\w+\.py)`", line.split("|")[1])}
+    assert scripts - named == set(), f"no scoreboard row: {sorted(scripts - named)}"
+    anchors = {_anchor(h) for h in re.findall(r"^#{2,3} (.+)$", (ROOT / "benchmarks" / "RESULTS.md").read_text(), re.M)}
+    links = [link for line in rows for link in re.findall(r"\(RESULTS\.md#([^)]+)\)", line)]
+    assert links and [a for a in links if a not in anchors] == []

@@ -28,9 +28,9 @@ def configure_server_threads() -> None:
     """One torch thread per call in the server process.
 
     The sessions, the planning pool and any retraining share the machine's cores. With torch's
-    default intra-op threads, a Dynaformer prediction on a busy 2-core machine took about 0.5 s
-    instead of about 5 ms (threads spinning against each other), so the served app runs torch
-    single-threaded and gets its parallelism from the sessions instead.
+    default intra-op threads, a Dynaformer prediction on a busy machine waits on threads spinning
+    against each other (many times its single-thread time; ``benchmarks/RESULTS.md``), so the served
+    app runs torch single-threaded and gets its parallelism from the sessions instead.
     """
     import torch
 

@@ -73,7 +73,8 @@ def _loco(folder: str, name: str, context_s: float, cutoff_v: float) -> NasaEodM
 
 def model_for(cell: NasaCell, context_s: float = 300.0) -> tuple[NasaEodModel, str]:
     """(model, 'loco' or 'bundled'): a model that never read ``cell``. For one of the bundled model's
-    training cells, refitted on the other training cells in the same folder (about 6 s, cached)."""
+    training cells, refitted on the other training cells in the same folder (cached per folder, cell and
+    setting)."""
     bundled = bundled_model(context_s, cell.cutoff_v)
     if cell.name not in bundled.trained_on:
         return bundled, "bundled"

@@ -20,8 +20,8 @@ def _add_serve_arguments(p: argparse.ArgumentParser) -> None:
                         "to reach this one; PORT defaults to --port); repeatable. Other names get 403")
     p.add_argument("--num-procs", type=int, default=1, metavar="N",
                    help="server processes sharing the port, each with its own sessions (0: one per core; "
-                        "default 1). On a 2-core machine 2 processes served 30 first loads in 35 s instead of 45 s "
-                        "for twice the memory (benchmarks/RESULTS.md)")
+                        "default 1). Each process holds its own copy of the app's models: more processes serve more "
+                        "first loads at once for more memory (measured: benchmarks/RESULTS.md)")
     p.add_argument("--show", action=argparse.BooleanOptionalAction, default=True,
                    help="open the app in a browser (default: yes)")
 

@@ -9,7 +9,7 @@ from typing import Any
 __all__ = ["Decision"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Decision:
     """One (re-)plan: when, where, what it knew, what it chose and why.
 

@@ -240,7 +240,10 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
         raise InputError("policy", f"{policy!r} is not an in-flight policy; allowed: {', '.join(IN_FLIGHT_PLANNERS)}")
     check_destination_count(len(mission.destinations), N_MAX, "fly")  # the hindsight oracle and policy "oracle": exact, 8 at most
     scenario = scenario or mission.scenario
-    world = World(mission, forecast_sigma_kt, sensor_noise_mv, sensor_noise_ma, events, seed)
+    def new_world() -> World:  # the same hidden truth for the operator, the blind plan and hindsight
+        return World(mission, forecast_sigma_kt, sensor_noise_mv, sensor_noise_ma, events, seed)
+
+    world = new_world()
     known = dataclasses.replace(mission, battery=Battery(DEFAULT_Q_MAX, DEFAULT_R0))  # the operator's view
     op = Operator(known, scenario, world.forecast_sigma_kt, world.sensor_noise_mv, health_z, wind_z, plan_wind_z,
                   policy, reserve_kt)
@@ -305,13 +308,12 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
         first_plan = next((e for e in rec.events if e.kind == "plan"), None)
         rec.static_route = list(first_plan.route) if first_plan else []
         rec.static_altitudes_m = list(first_plan.altitudes_m) if first_plan else []
-        blind = World(mission, forecast_sigma_kt, sensor_noise_mv, sensor_noise_ma, events, seed)
+        blind = new_world()
         rec.static_breached, static_reached = _fly_fixed(blind, rec.static_route, rec.static_altitudes_m, takeoff)
         rec.static_priority = 0 if rec.static_breached else _priority(mission, static_reached)
         end_s = max(end_s, blind.time_s)
         route, alts, rec.hindsight_priority = _hindsight(
-            mission, scenario, lambda: World(mission, forecast_sigma_kt, sensor_noise_mv, sensor_noise_ma, events, seed),
-            takeoff, (rec.route, rec.altitudes_m))
+            mission, scenario, new_world, takeoff, (rec.route, rec.altitudes_m))
         rec.hindsight_route, rec.hindsight_altitudes_m = route, alts
         rec.hindsight_exact = not world.events
     late = [e for e in world.events if e.start_s > end_s]

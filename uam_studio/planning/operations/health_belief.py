@@ -2,8 +2,8 @@
 charge flown so far (:func:`uam_studio.battery.fit.fit_health` of all readings since each full
 charge, fitted without the prior and multiplied by it once).
 
-Public API: :class:`HealthBelief` (``observe`` readings, ``recharged`` at the vertiport, ``health``:
-(w, its std, R0 ohm, its std), w = 6500 C / q_max).
+Public API: :class:`HealthBelief` (``observe`` readings, ``recharged`` at the vertiport, ``health``: a
+:class:`BelievedHealth`).
 """
 
 from __future__ import annotations
@@ -16,13 +16,48 @@ import numpy as np
 from uam_studio.battery.fit import fit_health
 from uam_studio.battery.fit_quality import FLAG_MISFIT, FLAG_OUTSIDE_FLEET, FLEET_Z, fit_flags
 from uam_studio.battery.health_estimate import MIN_CONTEXT_S, HealthEstimate, clip_to_box
-from uam_studio.battery.health_prior import HealthPrior, combine, fleet_prior, hold_to_fleet
+from uam_studio.battery.health_prior import Q_REF_C, HealthPrior, combine, fleet_prior, hold_to_fleet
 from uam_studio.errors import InputError
 from uam_studio.planning.legs import DT_S
 
-__all__ = ["MIN_FIT_SAMPLES", "ChargeReadings", "HealthBelief"]
+__all__ = ["MIN_FIT_SAMPLES", "BelievedHealth", "ChargeReadings", "HealthBelief"]
 
 MIN_FIT_SAMPLES = int(MIN_CONTEXT_S)  # readings (1 Hz) before a fit: the fit's shortest context
+
+
+@dataclass(frozen=True, kw_only=True)
+class BelievedHealth:
+    """What the operator believes of its cell's health: a Gaussian on ``inverse_capacity`` (6500 C / q_max,
+    the health fits' linear parameter, dimensionless) with std ``inverse_capacity_sd``, and on
+    ``r0_ohm`` (ohm) with std ``r0_sd_ohm``."""
+
+    inverse_capacity: float
+    inverse_capacity_sd: float
+    r0_ohm: float
+    r0_sd_ohm: float
+
+    @property
+    def q_max_c(self) -> float:
+        """The believed q_max (C)."""
+        return Q_REF_C / self.inverse_capacity
+
+    @property
+    def q_max_sd_c(self) -> float:
+        """Its std (C), to first order."""
+        return Q_REF_C * self.inverse_capacity_sd / self.inverse_capacity ** 2
+
+    def cautious_q_max_c(self, z: float) -> float:
+        """q_max (C) ``z`` std to the weak side (in inverse capacity, where the belief is Gaussian)."""
+        return Q_REF_C / max(self.inverse_capacity + z * self.inverse_capacity_sd, 1e-3)
+
+    def cautious_r0_ohm(self, z: float) -> float:
+        """R0 (ohm) ``z`` std to the weak side."""
+        return self.r0_ohm + z * self.r0_sd_ohm
+
+    def in_units(self) -> dict[str, float]:
+        """q_max and its std (C), R0 and its std (ohm), by the names a decision records them under."""
+        return {"q_max_c": self.q_max_c, "q_max_sd_c": self.q_max_sd_c, "r0_ohm": self.r0_ohm,
+                "r0_sd_ohm": self.r0_sd_ohm}
 
 
 @dataclass
@@ -76,9 +111,8 @@ class HealthBelief:
             return None
         return fit_health(cur, volt, DT_S, noise_v=self.noise_v, eod_v=self.eod_v, prior=False)
 
-    def health(self) -> tuple[float, float, float, float]:
-        """(w, its std, r0 ohm, its std) from all readings so far and the prior; w = 6500 C / q_max.
-        Readings that put the cell beyond its prior's box on the optimistic side are held with caution
+    def health(self) -> BelievedHealth:
+        """The belief from all readings so far and the prior. Readings that put the cell beyond its prior's box on the optimistic side are held with caution
         (:func:`~uam_studio.battery.health_prior.hold_to_fleet`: a cell better than any of its fleet is
         planned as the fleet's best, with the difference in its std).
 
@@ -97,7 +131,8 @@ class HealthBelief:
         # the Gaussian combination can put the mean a little outside the fit's box (a cell at its edge,
         # R0 = 0 say): the estimate the operator plans with stays inside it
         w, r0 = clip_to_box(mean)
-        return float(w), float(math.sqrt(cov[0, 0])), float(r0), float(math.sqrt(cov[1, 1]))
+        return BelievedHealth(inverse_capacity=float(w), inverse_capacity_sd=float(math.sqrt(cov[0, 0])),
+                              r0_ohm=float(r0), r0_sd_ohm=float(math.sqrt(cov[1, 1])))
 
     def flags(self) -> tuple[str, ...]:
         """The flags of the fits behind the belief (this charge's latest and the earlier charges'), each
@@ -105,7 +140,8 @@ class HealthBelief:
         fits = self.past + ([self.estimate] if self.estimate is not None else [])
         return fit_flags(any(FLAG_MISFIT in e.flags for e in fits), any(FLAG_OUTSIDE_FLEET in e.flags for e in fits))
 
-    def prior_health(self) -> tuple[float, float, float, float]:
-        """(w, its std, r0 ohm, its std) of the prior alone."""
+    def prior_health(self) -> BelievedHealth:
+        """The prior alone."""
         mean, cov = self.prior.mean, self.prior.cov
-        return float(mean[0]), math.sqrt(cov[0, 0]), float(mean[1]), math.sqrt(cov[1, 1])
+        return BelievedHealth(inverse_capacity=float(mean[0]), inverse_capacity_sd=math.sqrt(cov[0, 0]),
+                              r0_ohm=float(mean[1]), r0_sd_ohm=math.sqrt(cov[1, 1]))

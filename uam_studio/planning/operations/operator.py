@@ -36,7 +36,6 @@ import time
 import numpy as np
 
 from uam_studio.battery import BatteryState, full_charge, simulate
-from uam_studio.battery.health_prior import Q_REF_C
 from uam_studio.battery.simulate import simulate_cell
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight import leg_profile
@@ -52,7 +51,7 @@ from uam_studio.planning.missions.mission import (
 from uam_studio.planning.missions.scenario import check_scenario
 from uam_studio.planning.operations.decision import Decision
 from uam_studio.planning.operations.defaults import DEFAULT_FORECAST_SIGMA_KT, WEATHER_RESERVE_KT
-from uam_studio.planning.operations.health_belief import HealthBelief
+from uam_studio.planning.operations.health_belief import BelievedHealth, HealthBelief
 from uam_studio.planning.operations.wind_belief import WindBelief, wind_from_duration
 from uam_studio.planning.solvers.oracle import (
     Sortie,
@@ -170,17 +169,15 @@ class Operator:
         """What the last leg flown told about the wind ("" once a decision has read it)."""
         return self._observed.note if self._observed is not None else ""
 
-    def health(self) -> tuple[float, float, float, float]:
-        """(w, its std, r0 ohm, its std) from all readings and the fleet prior; w = 6500 C / q_max."""
+    def health(self) -> BelievedHealth:
+        """What it believes of its cell's health, from all readings and the fleet prior."""
         return self.health_belief.health()
 
     # ------------------------------------------------------------------ planning
-    def _belief(self, health: tuple[float, float, float, float], health_z: float, wind_z: float
-                ) -> tuple[Mission, float, float]:
+    def _belief(self, health: BelievedHealth, health_z: float, wind_z: float) -> tuple[Mission, float, float]:
         """The mission as believed, ``z`` std to the cautious side: less q_max, more R0, more headwind."""
-        w, w_sd, r, r_sd = health
-        q_plan = float(np.clip(Q_REF_C / max(w + health_z * w_sd, 1e-3), *Q_PLAN_RANGE))
-        r_plan = float(np.clip(r + health_z * r_sd, *R0_PLAN_RANGE))
+        q_plan = float(np.clip(health.cautious_q_max_c(health_z), *Q_PLAN_RANGE))
+        r_plan = float(np.clip(health.cautious_r0_ohm(health_z), *R0_PLAN_RANGE))
         lo, hi = WIND_RANGE_KTS
         m = self.forecast_mission
 
@@ -265,13 +262,14 @@ class Operator:
         """The flight ends before any plan (the take-off check fell below the cut-off): a decision of kind
         ``"abort"`` with the belief so far (the fleet prior where the readings are too short to fit)."""
         try:
-            w, w_sd, r, r_sd = self.health()
+            est = self.health()
         except InputError:
-            w, w_sd, r, r_sd = self.health_belief.prior_health()
-        q, q_sd = Q_REF_C / w, Q_REF_C * w_sd / w ** 2
+            est = self.health_belief.prior_health()
         shift, shift_sd = self.winds.shift()
-        d = Decision(self.time_s, self.node, "abort", reason, q, q_sd, r, r_sd, q, r, shift, shift_sd, (), (),
-                     None, None, health_flags=self.health_belief.flags(), reserve_kt=self.reserve_kt)
+        d = Decision(time_s=self.time_s, node=self.node, kind="abort", reason=reason, **est.in_units(),
+                     plan_q_max_c=est.q_max_c, plan_r0_ohm=est.r0_ohm, wind_shift_kts=shift,
+                     wind_shift_sd_kts=shift_sd, route=(), altitudes_m=(), next_to=None, next_altitude_m=None,
+                     health_flags=self.health_belief.flags(), reserve_kt=self.reserve_kt)
         self.decisions.append(d)
         return d
 
@@ -284,8 +282,7 @@ class Operator:
         """
         t0 = time.perf_counter()
         health = self.health()
-        w, w_sd, r, r_sd = health
-        q, q_sd = Q_REF_C / w, Q_REF_C * w_sd / w ** 2
+        q, r = health.q_max_c, health.r0_ohm
         expected, q_exp, r_exp = self._belief(health, 0.0, self.plan_wind_z)
         cautious, q_plan, r_plan = self._belief(health, self.health_z, 0.0)
         slot = {n: k for k, n in enumerate(self.names)}
@@ -325,10 +322,13 @@ class Operator:
                                          if seen_leg is not None else (None, None, False))
         nxt = route[0] if route else None
         change = self.winds.change()
-        d = Decision(self.time_s, self.node, kind, reason, q, q_sd, r, r_sd, q_plan, r_plan, shift, shift_sd,
-                     tuple(route), tuple(alts), nxt, alts[0] if route else None, time.perf_counter() - t0,
-                     self.health_belief.flags(), leg_wind, leg_resid, surprise, change.p,
-                     change.text() if change.worth_saying else "", self.reserve_kt)
+        d = Decision(time_s=self.time_s, node=self.node, kind=kind, reason=reason, **health.in_units(),
+                     plan_q_max_c=q_plan, plan_r0_ohm=r_plan, wind_shift_kts=shift, wind_shift_sd_kts=shift_sd,
+                     route=tuple(route), altitudes_m=tuple(alts), next_to=nxt,
+                     next_altitude_m=alts[0] if route else None, compute_s=time.perf_counter() - t0,
+                     health_flags=self.health_belief.flags(), leg_wind_kts=leg_wind,
+                     leg_wind_vs_forecast_kts=leg_resid, wind_surprise=surprise, wind_change_p=change.p,
+                     wind_change=change.text() if change.worth_saying else "", reserve_kt=self.reserve_kt)
         self._last_route = tuple(route[1:])
         self.decisions.append(d)
         if nxt is not None:

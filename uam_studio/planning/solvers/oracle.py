@@ -44,11 +44,9 @@ labels that survive pruning, so they are best-effort. The oracle plans with the 
 is a bound on what any policy can reach, not a policy that could be flown without knowing the
 health.
 
-Cost, measured on 2 CPU cores shared with a training job (``stats["time_s"]`` of each plan):
-10 held-out 8-destination missions (``held_out_missions(10, 777, n_dest=(8, 8))``) took
-median 1.1 s, max 6.9 s; a fresh cell (r0 0.017 ohm, q_max 8000 C) with 8 destinations
-8-45 km out, about 5-7 s (40-50 thousand legs flown, 250 feasible sets). The time is almost all
-battery integration.
+Cost: ``stats["time_s"]`` of each plan; it grows with the feasible sets (a fresh cell with 8
+destinations close by flies tens of thousands of legs) and is almost all battery integration. The
+measured times are in ``benchmarks/RESULTS.md`` (``bench_reference.py``, ``bench_fly.py speed``).
 
 The dominance assumption was also checked outside the tests on 44 random 5-destination missions
 over all 4 levels (the default random cells, 8-45 km): the feasible sets with and without pruning
