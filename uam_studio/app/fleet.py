@@ -45,7 +45,7 @@ class FleetView(pn.viewable.Viewer):
             "rate_per_h": pn.widgets.FloatSlider(name="Requests per hour", start=0.5, end=20, step=0.5,
                                                  value=s.rate_per_h, width=w),
             "age_spread_efc": pn.widgets.FloatSlider(name="Packs' age spread (equivalent full cycles)", start=0,
-                                                     end=600, step=50, value=s.age_spread_efc, width=w),
+                                                     end=150, step=2, value=s.age_spread_efc, width=w),
             "seed": pn.widgets.IntInput(name="Seed", value=s.seed, start=0, width=w),
         }
         for key, widget in self.widgets.items():

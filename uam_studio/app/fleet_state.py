@@ -2,9 +2,10 @@
 
 :class:`FleetState` holds the settings (aircraft, demand rate, packs' age spread, seed), a
 :class:`~uam_studio.fleet.day.Fleet` per dispatcher (the same packs at the start) and the days flown
-so far. :meth:`FleetState.next_day` flies the next day of Poisson demand for the three dispatchers
+so far. The packs are the paper's NASA cell, aging by the law fitted to the NASA lives.
+:meth:`FleetState.next_day` flies the next day of Poisson demand for the three dispatchers
 (:func:`~uam_studio.fleet.day.simulate_day`, the call ``uam-studio fleet`` makes) in the flights' thread
-pool, the newest request winning. The tables the view draws come from here: the last day's flights
+pool, the newest request winning; a pack that retired is replaced overnight. The tables the view draws come from here: the last day's flights
 per aircraft (:meth:`timeline`), each pack's belief against its truth (:meth:`packs`) and the served
 priority per day (:meth:`per_day`).
 """
@@ -18,7 +19,7 @@ import param
 
 from uam_studio.app.services import FLIGHT_POOL, LatestWorker, one_line
 from uam_studio.errors import InputError
-from uam_studio.fleet.day import DayResult, Fleet, day_of_life_seed, simulate_day
+from uam_studio.fleet.day import DayResult, Fleet, day_of_life_seed, default_age_spread, simulate_day
 from uam_studio.fleet.demand import poisson_demand
 from uam_studio.fleet.dispatch import DISPATCHERS, HEALTH_Z
 
@@ -30,7 +31,10 @@ def _fly_day(job: tuple[dict[str, Fleet], int, float, int, int]) -> tuple[int, d
     try:
         day_seed = day_of_life_seed(seed, day)  # as simulate_life: the same days as `uam-studio fleet`
         demand = poisson_demand(day_seed, rate, vertiports=vertiports)
-        return day, {d: simulate_day(f, demand, d, day_seed) for d, f in fleets.items()}, ""
+        results = {d: simulate_day(f, demand, d, day_seed) for d, f in fleets.items()}
+        for f in fleets.values():
+            f.renew_retired(seed, day + 1)  # a retired pack is replaced overnight, as over a life
+        return day, results, ""
     except InputError as err:
         return day, {}, one_line(err)
 
@@ -52,7 +56,7 @@ class FleetState(param.Parameterized):
     aircraft = param.Integer(default=6, bounds=(1, 12))
     vertiports = param.Integer(default=1, bounds=(1, 4))
     rate_per_h = param.Number(default=4.0, bounds=(0.5, 20.0))
-    age_spread_efc = param.Number(default=300.0, bounds=(0.0, 600.0))
+    age_spread_efc = param.Number(default=default_age_spread("nasa"), bounds=(0.0, 150.0))  # 80% near 90 cycles
     seed = param.Integer(default=0, bounds=(0, 10**9))
     days = param.List(default=[])
     last = param.Dict(default={})

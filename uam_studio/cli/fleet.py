@@ -28,8 +28,14 @@ def _add_fleet_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--vertiports", type=int, default=1,
                    help="vertiports the aircraft are spread over, each with its own chargers and requests "
                         "(1-10, at most one per aircraft; default 1)")
-    p.add_argument("--age-spread", type=float, default=300.0, metavar="EFC",
-                   help="the packs' age at the start: U(0, EFC) equivalent full cycles (0-2000; default 300)")
+    p.add_argument("--age-spread", type=float, default=None, metavar="EFC",
+                   help="the packs' age at the start: U(0, EFC) equivalent full cycles (0-2000; default 60%% of "
+                        "the law's cycles to 80%% capacity: about 54 for nasa, 294 for vtc6)")
+    p.add_argument("--law", choices=["nasa", "vtc6"], default="nasa",
+                   help="the packs' cell type and the aging law they follow: nasa (the paper's cell, fitted to the "
+                        "NASA PCoE lives; default) or vtc6 (fitted to the CMU lives)")
+    p.add_argument("--keep-retired", action="store_true",
+                   help="over a life, a retired pack stays grounded (default: it is replaced overnight)")
     p.add_argument("--dispatcher", action="append", choices=["aware", "blind", "hindsight"], default=None,
                    help="which dispatchers (repeatable; default all three)")
     p.add_argument("--seeds", type=int, default=1, help="lives per dispatcher, seeded --seed, --seed+1, ... "
@@ -67,23 +73,29 @@ def _run_fleet(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from uam_studio.errors import check_range
-    from uam_studio.fleet.day import Fleet, day_of_life_seed, simulate_day
+    from uam_studio.fleet.day import Fleet, day_of_life_seed, default_age_spread, simulate_day
     from uam_studio.fleet.demand import load_demand
 
     for flag, value, lo, hi in (("--aircraft", args.aircraft, 1, 50), ("--days", args.days, 1, 3650),
                                 ("--rate", args.rate, 0.0, 60.0), ("--chargers", args.chargers, 1, 50),
-                                ("--age-spread", args.age_spread, 0.0, 2000.0), ("--max-km", args.max_km, 8.0, 100.0),
+                                ("--max-km", args.max_km, 8.0, 100.0),
                                 ("--vertiports", args.vertiports, 1, min(10, args.aircraft))):
         check_range(flag, value, lo, hi)  # before any work: one line naming the flag
+    if args.age_spread is None:
+        args.age_spread = default_age_spread(args.law)
+    check_range("--age-spread", args.age_spread, 0.0, 2000.0)
     _check_csv_path(args.csv)
     dispatchers = args.dispatcher or ["aware", "blind", "hindsight"]
     out = {}
     if args.demand is not None:
         demand = load_demand(args.demand)
         for d in dispatchers:
-            fleet = Fleet.new(args.aircraft, args.seed, args.age_spread, args.vertiports)
-            days = [simulate_day(fleet, demand, d, day_of_life_seed(args.seed, k), args.chargers).to_dict()
-                    for k in range(int(args.days))]
+            fleet = Fleet.new(args.aircraft, args.seed, args.age_spread, args.vertiports, args.law)
+            days = []
+            for k in range(int(args.days)):
+                days.append(simulate_day(fleet, demand, d, day_of_life_seed(args.seed, k), args.chargers).to_dict())
+                if not args.keep_retired:
+                    fleet.renew_retired(args.seed, k + 1)
             out[d] = {"dispatcher": d, "days": days}
     else:
         from uam_studio.fleet.study import fleet_study, summarize
@@ -95,7 +107,7 @@ def _run_fleet(args: argparse.Namespace) -> int:
             rows = fleet_study((args.aircraft,), args.days, seeds, dispatchers, args.rate, args.chargers,
                                args.age_spread, workers=args.workers, address=args.address,
                                progress=lambda done, _n: bar.update(done - bar.n), max_km=args.max_km,
-                               vertiports=args.vertiports)
+                               vertiports=args.vertiports, law=args.law, renew=not args.keep_retired)
         if args.csv is not None:
             _write_csv(args.csv, [{"dispatcher": r["dispatcher"], "seed": r["seed"], "day": d + 1,
                                    **{k: r[k][d] for k in DAY_FIELDS}} for r in rows for d in range(len(r["priority"]))])
@@ -105,7 +117,8 @@ def _run_fleet(args: argparse.Namespace) -> int:
             return EXIT_OK
         print(f"{args.aircraft} aircraft at {args.vertiports} vertiport(s), {args.days} day(s) x {len(seeds)} seed(s) "
               f"from {args.seed}, Poisson {args.rate:g} requests/h up to {args.max_km:g} km, {args.chargers} charger(s) "
-              f"per vertiport, packs aged U(0, {args.age_spread:g}) cycles")
+              f"per vertiport, {args.law} packs aged U(0, {args.age_spread:.0f}) cycles, "
+              f"{'retired packs grounded' if args.keep_retired else 'a retired pack replaced overnight'}")
         print(f"{'dispatcher':10} {'priority/day':>12} {'5-95%':>9} {'served':>7} {'refused':>8} {'breaches':>9} "
               f"{'packs retired':>13} {'mean day':>8} {'bound/day':>9}")
         for r in summarize(rows):

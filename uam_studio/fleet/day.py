@@ -10,7 +10,14 @@ aircraft charges at 1 C back to full on one of its vertiport's chargers (a queue
 A fleet may be based at several vertiports: each aircraft serves the requests of its own vertiport
 and charges there.
 
-Public API: :func:`simulate_day`, :func:`simulate_life`, :class:`DayResult`, :class:`Fleet`.
+A fleet's packs age by the law of their cell type (:data:`PACK_LAWS`): ``"nasa"`` (default; the paper's
+cell, the law fitted to the NASA PCoE lives, :data:`~uam_studio.fleet.nasa_aging.NASA_AGING_LAW`) or
+``"vtc6"`` (the law fitted to the CMU lives of Sony VTC6 cells). The aircraft's beliefs age by the same
+law (a model the operator holds, not the pack's truth). Over a life, a pack that retired is replaced
+overnight by a new one from the factory (:meth:`Fleet.renew_retired`), as an operator would.
+
+Public API: :func:`simulate_day`, :func:`simulate_life`, :class:`DayResult`, :class:`Fleet`,
+:data:`PACK_LAWS`, :func:`default_age_spread`.
 """
 
 from __future__ import annotations
@@ -22,7 +29,7 @@ import numpy as np
 import simpy
 
 from uam_studio.errors import InputError, check_range, check_seed
-from uam_studio.fleet.aging import PackHealth
+from uam_studio.fleet.aging import AGING_LAW, END_OF_LIFE_FRACTION, AgingLaw, PackHealth
 from uam_studio.fleet.demand import (
     DAY_S,
     DEFAULT_MAX_KM,
@@ -45,9 +52,10 @@ from uam_studio.fleet.dispatch import (
     round_trip_margin,
 )
 from uam_studio.fleet.hindsight import Job, day_bound
+from uam_studio.fleet.nasa_aging import NASA_AGING_LAW
 
-__all__ = ["DayResult", "END_S", "Fleet", "FIT_WINDOW_S", "day_of_life_seed", "hindsight_bound", "simulate_day",
-           "simulate_life"]
+__all__ = ["AGE_SPREAD_LIFE", "DayResult", "END_S", "Fleet", "FIT_WINDOW_S", "PACK_LAWS", "day_of_life_seed",
+           "default_age_spread", "hindsight_bound", "simulate_day", "simulate_life"]
 
 FIT_WINDOW_S = 600  # s of each flight's readings fitted for its pack's health
 FORECAST_SIGMA_KT = 8.0  # kt: the actual wind is the forecast plus N(0, this)
@@ -55,6 +63,27 @@ NOISE_V, NOISE_A = 0.005, 0.020  # sensor noise std (V, A)
 CHARGE_C_RATE = 1.0  # charge current, in q_max per hour
 END_S = DAY_S + 6 * 3600.0  # s: the simulation's end (flights in the air at the day's end land)
 SEED_STRIDE = 100_003  # day d of the life seeded ``seed`` is seeded ``seed * SEED_STRIDE + d``
+PACK_LAWS: dict[str, AgingLaw] = {"nasa": NASA_AGING_LAW, "vtc6": AGING_LAW}  # how a fleet's packs age, by cell type
+AGE_SPREAD_LIFE = 0.6  # default: the packs have delivered U(0, this share of their law's cycles to 80%)
+FACTORY_Q_MAX_C = (7300.0, 7900.0)  # C: a new pack's q_max, uniform over this range
+FACTORY_R0_OHM = (0.10, 0.13)  # ohm: a new pack's R0, uniform over this range
+
+
+def default_age_spread(law: str = "nasa") -> float:
+    """The packs' default age spread (equivalent full cycles): :data:`AGE_SPREAD_LIFE` of the cycles to
+    80% of the first capacity under ``law`` at 25 C, to a whole cycle (54 for ``"nasa"``, 294 for
+    ``"vtc6"``)."""
+    return float(round(AGE_SPREAD_LIFE * _law(law).cycles_to(END_OF_LIFE_FRACTION)))
+
+
+def _law(name: str) -> AgingLaw:
+    if name not in PACK_LAWS:
+        raise InputError("law", f"{name!r}: allowed {', '.join(PACK_LAWS)}")
+    return PACK_LAWS[name]
+
+
+def _factory_pack(rng: np.random.Generator) -> tuple[float, float]:
+    return float(rng.uniform(*FACTORY_Q_MAX_C)), float(rng.uniform(*FACTORY_R0_OHM))
 
 
 def day_of_life_seed(seed: int, day: int) -> int:
@@ -66,14 +95,16 @@ def day_of_life_seed(seed: int, day: int) -> int:
 class Fleet:
     """The aircraft: each one's true pack (``truth``, the world's) and its own ``belief``; ``in_service``
     false once a pack has retired (below 80% of its first capacity); ``base``: each one's vertiport
-    (default all at vertiport 0)."""
+    (default all at vertiport 0); ``law``: the packs' cell type, a key of :data:`PACK_LAWS`."""
 
     truth: list[PackHealth]
     belief: list[PackBelief]
     in_service: list[bool] = field(default_factory=list)
     base: list[int] = field(default_factory=list)
+    law: str = "nasa"
 
     def __post_init__(self) -> None:
+        _law(self.law)
         if len(self.truth) != len(self.belief) or not 1 <= len(self.truth) <= 50:
             raise InputError("aircraft", f"{len(self.truth)} aircraft: allowed 1-50, a belief for each")
         if not self.in_service:
@@ -88,26 +119,48 @@ class Fleet:
         """How many vertiports the fleet is based at (numbered from 0)."""
         return max(self.base) + 1
 
+    @property
+    def aging_law(self) -> AgingLaw:
+        """The law the packs age by (and the beliefs with them)."""
+        return PACK_LAWS[self.law]
+
     @classmethod
-    def new(cls, n: int, seed: int, age_spread_efc: float = 300.0, vertiports: int = 1) -> Fleet:
-        """``n`` aircraft whose packs left the factory with q_max ~ U(7300, 7900) C and R0 ~ U(0.10, 0.13)
-        ohm and have since delivered U(0, ``age_spread_efc``) equivalent full cycles; each belief
-        starts from the nominal new pack aged by the logged throughput. Aircraft ``i`` is based at
-        vertiport ``i % vertiports`` (1-10, at most one per aircraft)."""
+    def new(cls, n: int, seed: int, age_spread_efc: float | None = None, vertiports: int = 1,
+            law: str = "nasa") -> Fleet:
+        """``n`` aircraft whose packs of cell type ``law`` left the factory with q_max ~ U(7300, 7900) C and
+        R0 ~ U(0.10, 0.13) ohm and have since delivered U(0, ``age_spread_efc``) equivalent full cycles
+        (default :func:`default_age_spread`); each belief starts from the nominal new pack aged by the
+        logged throughput. Aircraft ``i`` is based at vertiport ``i % vertiports`` (1-10, at most one per
+        aircraft)."""
+        aging = _law(law)
         n = int(check_range("aircraft", n, 1, 50))
         ports = int(check_range("vertiports", vertiports, 1, min(MAX_VERTIPORTS, n)))
-        spread = check_range("age_spread_efc", age_spread_efc, 0.0, 2000.0)
+        spread = check_range("age_spread_efc", default_age_spread(law) if age_spread_efc is None else age_spread_efc,
+                             0.0, 2000.0)
         rng = np.random.default_rng([check_seed("seed", seed), 42])
         truth, belief = [], []
         for _ in range(n):
-            q0, r0 = float(rng.uniform(7300.0, 7900.0)), float(rng.uniform(0.10, 0.13))
+            q0, r0 = _factory_pack(rng)
             delivered = float(rng.uniform(0.0, spread)) * q0
-            truth.append(PackHealth(q0, r0, delivered))
-            belief.append(PackBelief.new_pack(delivered))
-        return cls(truth, belief, base=[i % ports for i in range(n)])
+            truth.append(PackHealth(q0, r0, delivered, law=aging))
+            belief.append(PackBelief.new_pack(delivered, aging))
+        return cls(truth, belief, base=[i % ports for i in range(n)], law=law)
+
+    def renew_retired(self, seed: int, night: int = 0) -> list[int]:
+        """Replace every retired pack by a new one from the factory (its belief: the nominal new pack),
+        drawn with (``seed``, ``night``: the nights since the life began); the aircraft are back in
+        service. Returns the aircraft renewed."""
+        rng = np.random.default_rng([check_seed("seed", seed), 43, int(check_range("night", night, 0, 10**6))])
+        renewed = [i for i, s in enumerate(self.in_service) if not s]
+        for i in renewed:
+            q0, r0 = _factory_pack(rng)
+            self.truth[i] = PackHealth(q0, r0, 0.0, law=self.aging_law)
+            self.belief[i] = PackBelief.new_pack(0.0, self.aging_law)
+            self.in_service[i] = True
+        return renewed
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class DayResult:
     """One day: ``priority`` served (stars of the requests flown without a breach), ``served``,
     ``refused`` (never flown), ``breaches``, ``flights``, ``charge_ah`` (per cell, delivered),
@@ -181,8 +234,9 @@ def _bound(fleet: Fleet, demand: list[Request], winds: dict[str, tuple[float, fl
             sim = round_trip(req, truth.q_max, truth.r0, *winds[req.name])
             if sim.safe:
                 _, charge, flight_s = _delivered(sim)
-                jobs.append(Job(r, i, req.vertiport, req.t_s, req.t_s + req.window_s, flight_s,
-                                _recharge_s(charge, truth.q_max), int(req.priority)))
+                jobs.append(Job(request=r, aircraft=i, port=req.vertiport, earliest_s=req.t_s,
+                                latest_s=req.t_s + req.window_s, flight_s=flight_s,
+                                charge_s=_recharge_s(charge, truth.q_max), priority=int(req.priority)))
     per_port = [sum(1 for i, b in enumerate(fleet.base) if b == p and fleet.in_service[i]) for p in range(len(counts))]
     return day_bound(jobs, counts, per_port, END_S)
 
@@ -253,7 +307,7 @@ def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int
         log.append((float(env.now), i, req.name, float(sim.min_voltage_v) - sim.eod_v, flight_s))
         yield env.timeout(flight_s)
         fleet.truth[i] = truth.after(charge)
-        belief = fleet.belief[i].aged(charge)
+        belief = fleet.belief[i].aged(charge, fleet.aging_law)
         m = min(FIT_WINDOW_S, k)
         if m >= 30:
             est = _fit(cur[:m] + noise.normal(0.0, NOISE_A, m),
@@ -290,9 +344,9 @@ def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int
     env.process(arrivals())
     env.run(until=END_S)  # flights in the air at the day's end land
     flown = {entry[2] for entry in log}
-    return DayResult(stats["priority"], stats["served"], len(demand) - len(flown), stats["breaches"],
-                     stats["flights"], stats["charge_c"] / 3600.0, stats["wait_s"], tuple(log),
-                     bound)
+    return DayResult(priority=stats["priority"], served=stats["served"], refused=len(demand) - len(flown),
+                     breaches=stats["breaches"], flights=stats["flights"], charge_ah=stats["charge_c"] / 3600.0,
+                     charger_wait_s=stats["wait_s"], log=tuple(log), bound=bound)
 
 
 def _fit(current: np.ndarray, voltage: np.ndarray, dt_s: float) -> tuple[float, float, float, float] | None:
@@ -308,27 +362,40 @@ def _fit(current: np.ndarray, voltage: np.ndarray, dt_s: float) -> tuple[float, 
 
 
 def simulate_life(aircraft: int, days: int, seed: int, dispatcher: str, rate_per_h: float = DEFAULT_RATE_PER_H,
-                  chargers: int = 2, age_spread_efc: float = 300.0,
+                  chargers: int = 2, age_spread_efc: float | None = None,
                   progress: Callable[[int], None] | None = None, max_km: float = DEFAULT_MAX_KM,
-                  vertiports: int = 1) -> dict:
+                  vertiports: int = 1, law: str = "nasa", renew: bool = True) -> dict:
     """A fleet's life over ``days`` operating days of Poisson demand, requests up to ``max_km`` (km) away
     (the same days for every dispatcher with the same ``seed``), the aircraft spread over ``vertiports``
-    vertiports of ``chargers`` chargers each: per day its :class:`DayResult`; per pack the day it retired
-    (None: still in service); the fleet at the end (truth and belief)."""
+    vertiports of ``chargers`` chargers each, packs of cell type ``law`` aged U(0, ``age_spread_efc``)
+    equivalent full cycles at the start (default :func:`default_age_spread`). With ``renew`` a retired
+    pack is replaced overnight (and one already retired at the start, before the first day).
+
+    :return: per day its :class:`DayResult` (as a dict); ``retired_day``: for each pack that retired, the
+        day it did (0: before the first day), and None for each pack in service at the end; the fleet at
+        the end (truth and belief)."""
     days = int(check_range("days", days, 1, 3650))
     seed = check_seed("seed", seed)
-    fleet = Fleet.new(aircraft, seed, age_spread_efc, vertiports)
-    results, retired = [], [None if s else 0 for s in fleet.in_service]
+    fleet = Fleet.new(aircraft, seed, age_spread_efc, vertiports, law)
+    retired: list[int | None] = [0 for s in fleet.in_service if not s]
+    counted = [not s for s in fleet.in_service]
+    if renew:
+        for i in fleet.renew_retired(seed, 0):
+            counted[i] = False
+    results = []
     for d in range(days):
         demand = poisson_demand(day_of_life_seed(seed, d), rate_per_h, max_km=max_km, vertiports=vertiports)
         results.append(simulate_day(fleet, demand, dispatcher, day_of_life_seed(seed, d), chargers))
         for i, s in enumerate(fleet.in_service):
-            if not s and retired[i] is None:
-                retired[i] = d + 1
+            if not s and not counted[i]:
+                retired.append(d + 1)
+                counted[i] = True
+        if renew:
+            for i in fleet.renew_retired(seed, d + 1):
+                counted[i] = False
         if progress is not None:
             progress(d + 1)
+    retired += [None] * sum(fleet.in_service)
     return {"dispatcher": dispatcher, "days": [r.to_dict() for r in results], "retired_day": retired,
             "truth": [(t.q_max, t.r0, t.fraction) for t in fleet.truth],
             "belief": [(b.q_max, b.q_max_sd, b.r0, b.r0_sd) for b in fleet.belief]}
-
-

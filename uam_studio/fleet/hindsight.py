@@ -37,7 +37,7 @@ from uam_studio.errors import InputError
 __all__ = ["Job", "day_bound"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Job:
     """One way to serve request number ``request``: aircraft ``aircraft`` based at vertiport ``port``
     takes off in [``earliest_s``, ``latest_s``] (s into the day), flies ``flight_s`` (s) and recharges

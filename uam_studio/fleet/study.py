@@ -15,16 +15,17 @@ import numpy as np
 
 from uam_studio.engine import run_tasks
 from uam_studio.errors import InputError, check_range, check_seed
-from uam_studio.fleet.day import simulate_life
+from uam_studio.fleet.day import PACK_LAWS, simulate_life
 from uam_studio.fleet.dispatch import DISPATCHERS
 
 __all__ = ["fleet_study", "summarize"]
 
 
-def _life_row(size: int, seed: int, dispatcher: str, days: int, rate: float, chargers: int, spread: float,
-              max_km: float, vertiports: int = 1) -> dict:
+def _life_row(size: int, seed: int, dispatcher: str, days: int, rate: float, chargers: int, spread: float | None,
+              max_km: float, vertiports: int = 1, law: str = "nasa", renew: bool = True) -> dict:
     """One task: a fleet's life, reduced to what the summary needs (picklable, small)."""
-    life = simulate_life(size, days, seed, dispatcher, rate, chargers, spread, max_km=max_km, vertiports=vertiports)
+    life = simulate_life(size, days, seed, dispatcher, rate, chargers, spread, max_km=max_km, vertiports=vertiports,
+                         law=law, renew=renew)
     return {"aircraft": size, "seed": seed, "dispatcher": dispatcher,
             "priority": [d["priority"] for d in life["days"]], "refused": [d["refused"] for d in life["days"]],
             "breaches": [d["breaches"] for d in life["days"]], "served": [d["served"] for d in life["days"]],
@@ -33,13 +34,14 @@ def _life_row(size: int, seed: int, dispatcher: str, days: int, rate: float, cha
 
 def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[int] = (0, 1, 2, 3, 4),
                 dispatchers: Sequence[str] = DISPATCHERS, rate_per_h: float = 4.0, chargers: int = 2,
-                age_spread_efc: float = 300.0, workers: int | None = None, address: str | None = None,
+                age_spread_efc: float | None = None, workers: int | None = None, address: str | None = None,
                 progress: Callable[[int, int], None] | None = None, max_km: float = 45.0,
-                vertiports: int = 1) -> list[dict]:
+                vertiports: int = 1, law: str = "nasa", renew: bool = True) -> list[dict]:
     """Every (fleet size, seed, dispatcher) life as a Dask task (:func:`uam_studio.engine.run_tasks`): on
     the scheduler at ``address`` (``tcp://host:8786``) if given, else on a local cluster of ``workers``
     processes (default: one per core), one thread each. ``workers=0`` runs the tasks here, one after
-    another (no Dask).
+    another (no Dask). ``law``, ``renew`` and ``age_spread_efc`` (None: the law's default) as in
+    :func:`~uam_studio.fleet.day.simulate_life`.
 
     :return: one row per task in task order (sizes, then seeds, then dispatchers): per day its
         priority, refusals, breaches, served requests and bound (hindsight; None for the others), and
@@ -53,14 +55,18 @@ def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[
              for a, s, d in product(aircraft, seeds, dispatchers)]
     if not tasks:
         raise InputError("seeds", "no task: give at least one fleet size, seed and dispatcher")
-    args = (days, float(rate_per_h), int(chargers), float(age_spread_efc), float(max_km), int(vertiports))
+    if law not in PACK_LAWS:
+        raise InputError("law", f"{law!r}: allowed {', '.join(PACK_LAWS)}")
+    spread = None if age_spread_efc is None else float(age_spread_efc)
+    args = (days, float(rate_per_h), int(chargers), spread, float(max_km), int(vertiports), law, bool(renew))
     return run_tasks(_life_row, [(*t, *args) for t in tasks], workers=workers, address=address,
                      progress=progress, name="fleet-life")
 
 
 def summarize(rows: list[dict]) -> list[dict]:
     """Per (fleet size, dispatcher): served priority per day (mean, 5% and 95% over every day of every
-    seed), refusals, breaches and packs retired (with the mean retirement day) over all lives; for
+    seed), refusals, breaches and packs retired (with the mean retirement day; a retired pack renewed
+    overnight counts once per retirement) over all lives; for
     hindsight ``bound_per_day``, the mean of each day's upper bound on any dispatcher's stars from its
     fleet (None for the others)."""
     out = []

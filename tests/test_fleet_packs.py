@@ -1,0 +1,72 @@
+"""A fleet's packs: the law of their cell type (NASA by default), and a retired pack replaced overnight."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from uam_studio.errors import InputError
+from uam_studio.fleet.aging import AGING_LAW, END_OF_LIFE_FRACTION
+from uam_studio.fleet.day import PACK_LAWS, Fleet, default_age_spread, simulate_life
+from uam_studio.fleet.nasa_aging import NASA_AGING_LAW
+
+
+def test_a_new_fleet_flies_nasa_packs_that_age_and_are_believed_to_age_by_the_nasa_law():
+    fleet = Fleet.new(4, seed=3)
+    assert fleet.law == "nasa" and fleet.aging_law is NASA_AGING_LAW
+    assert all(t.law is NASA_AGING_LAW for t in fleet.truth)
+    life = NASA_AGING_LAW.cycles_to(END_OF_LIFE_FRACTION)
+    assert 80.0 < life < 100.0 < AGING_LAW.cycles_to(END_OF_LIFE_FRACTION)  # NASA cells fade five times faster
+    assert all(t.efc <= default_age_spread() == round(0.6 * life) for t in fleet.truth)
+    pack = fleet.truth[0]
+    assert pack.after(pack.q_max0 * (life - pack.efc) * 1.01).retired
+    assert not pack.after(pack.q_max0 * (life - pack.efc) * 0.99).retired
+    # the belief ages by the same law (its mean moves as the truth's would, from the same start)
+    b0 = fleet.belief[0]
+    b1 = b0.aged(10.0 * b0.q_max_nominal, fleet.aging_law)
+    e0 = b0.delivered_c / b0.q_max_nominal
+    expect = NASA_AGING_LAW.capacity_fraction(e0 + 10.0) / NASA_AGING_LAW.capacity_fraction(e0)
+    assert b1.q_max / b0.q_max == pytest.approx(float(expect), rel=1e-9)
+
+
+def test_an_unknown_cell_type_is_refused_in_one_line_naming_the_law():
+    with pytest.raises(InputError, match=r"law.*allowed nasa, vtc6"):
+        Fleet.new(2, seed=0, law="lfp")
+    assert set(PACK_LAWS) == {"nasa", "vtc6"}
+
+
+@settings(max_examples=4, deadline=None)
+@given(n=st.integers(1, 6), seed=st.integers(0, 2**31), night=st.integers(0, 1000), law=st.sampled_from(["nasa", "vtc6"]))
+def test_renewal_replaces_exactly_the_retired_packs_with_new_ones(n, seed, night, law):
+    fleet = Fleet.new(n, seed, age_spread_efc=1.5 * PACK_LAWS[law].cycles_to(END_OF_LIFE_FRACTION), law=law)
+    before = list(fleet.truth)
+    grounded = [i for i, s in enumerate(fleet.in_service) if not s]
+    assert fleet.renew_retired(seed, night) == grounded and all(fleet.in_service)
+    for i, (old, new) in enumerate(zip(before, fleet.truth)):
+        if i in grounded:
+            assert new.delivered_c == 0.0 and new.law is PACK_LAWS[law] and 7300.0 <= new.q_max <= 7900.0
+            assert fleet.belief[i].delivered_c == 0.0
+        else:
+            assert new is old
+
+
+def test_a_life_of_worn_nasa_packs_replaces_them_and_serves_more_than_one_left_grounded():
+    kw = dict(rate_per_h=3.0, age_spread_efc=200.0)  # most packs past the NASA law's 80% (about 90 cycles)
+    renewed = simulate_life(3, 2, 11, "aware", **kw)
+    grounded = simulate_life(3, 2, 11, "aware", renew=False, **kw)
+    at_start = grounded["retired_day"].count(0)
+    assert at_start >= 1 and renewed["retired_day"].count(0) == at_start  # retired before day 1
+    assert renewed["retired_day"].count(None) == 3  # every aircraft flies a pack in service at the end
+    assert grounded["retired_day"].count(None) == 3 - sum(d is not None for d in grounded["retired_day"])
+    served = [sum(d["served"] for d in life["days"]) for life in (renewed, grounded)]
+    assert served[0] > served[1]
+
+
+def test_the_fleet_package_exports_the_names_of_a_fleet_study():
+    import uam_studio.fleet as fleet
+
+    assert {"Fleet", "simulate_day", "simulate_life", "poisson_demand", "fleet_study", "summarize",
+            "NASA_AGING_LAW", "PACK_LAWS"} <= set(fleet.__all__)
+    assert all(getattr(fleet, name) is not None for name in fleet.__all__)
+    assert fleet.Fleet is Fleet and fleet.PACK_LAWS["nasa"] is NASA_AGING_LAW
