@@ -246,7 +246,7 @@ def test_a_page_closing_mid_message_is_one_log_line_not_a_traceback(caplog):
                      "a page closed with messages on their way (StreamClosedError)"]
 
 
-@pytest.mark.parametrize("value", ["-1", "65"])
+@pytest.mark.parametrize("value", ["-1", "65", "two", "1.5"])
 def test_num_procs_out_of_range_is_one_line(value, capsys):
     from uam_studio.cli import main
 
@@ -320,3 +320,13 @@ def test_child_pids_lists_the_processes_this_one_started():
         child.kill()
         child.wait()
     assert child.pid not in child_pids(os.getpid())
+
+
+def test_num_procs_auto_is_one_process_per_core(monkeypatch):
+    import uam_studio.app.serve as served
+    from uam_studio.cli import main
+
+    seen = {}
+    monkeypatch.setattr(served, "serve", lambda **kw: seen.update(kw))
+    assert main(["serve", "--no-show", "--num-procs", "auto"]) == 0 and seen["num_procs"] == 0
+    assert main(["serve", "--no-show", "--num-procs", "3"]) == 0 and seen["num_procs"] == 3

@@ -18,8 +18,8 @@ def _add_serve_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--allow-origin", action="append", default=[], metavar="HOST[:PORT]",
                    help="also answer requests addressed to HOST[:PORT] (the name or IP other machines use "
                         "to reach this one; PORT defaults to --port); repeatable. Other names get 403")
-    p.add_argument("--num-procs", type=int, default=1, metavar="N",
-                   help="server processes sharing the port, each with its own sessions (0: one per core; "
+    p.add_argument("--num-procs", default="1", metavar="N",
+                   help="server processes sharing the port, each with its own sessions (auto or 0: one per core; "
                         "default 1). Each process holds its own copy of the app's models: more processes serve more "
                         "first loads at once for more memory (measured: benchmarks/RESULTS.md)")
     p.add_argument("--show", action=argparse.BooleanOptionalAction, default=True,
@@ -29,8 +29,11 @@ def _add_serve_arguments(p: argparse.ArgumentParser) -> None:
 def _run_serve(args: argparse.Namespace) -> int:
     if not 0 <= args.port <= 65535:
         raise CliExit(f"--port: {args.port} is out of range; allowed [0, 65535]", EXIT_INPUT)
-    if not 0 <= args.num_procs <= 64:
-        raise CliExit(f"--num-procs: {args.num_procs} is out of range; allowed [0, 64] (0: one per core)", EXIT_INPUT)
+    procs = "0" if str(args.num_procs).strip().lower() == "auto" else str(args.num_procs).strip()
+    if not (procs.isdigit() and 0 <= int(procs) <= 64):
+        raise CliExit(f"--num-procs: {args.num_procs} is out of range; allowed [0, 64] or auto (one per core)",
+                      EXIT_INPUT)
+    args.num_procs = int(procs)
     try:
         from uam_studio.app.serve import DEFAULT_ADDRESS, serve, split_host
     except ImportError as err:
