@@ -201,16 +201,16 @@ def test_stored_decoder_calibration_of_the_vtc6_weights_is_what_calibration_give
     from uam_studio.dynaformer.decoder_error import (
         BUNDLED_DECODER_LAMBDA,
         CAL_PROBS,
-        _conformal_quantiles,
-        _sha256,
+        conformal_quantiles,
         decoder_error_scores,
+        file_sha256,
     )
 
     if not bundled_weights_path(key).is_file():
         pytest.skip(f"bundled {key} weights not present")
     pred = load_predictor(bundled_weights_path(key))
-    stored = BUNDLED_DECODER_LAMBDA[_sha256(pred.source)]
-    np.testing.assert_allclose(_conformal_quantiles(decoder_error_scores(pred), CAL_PROBS), stored, atol=6e-5)
+    stored = BUNDLED_DECODER_LAMBDA[file_sha256(pred.source)]
+    np.testing.assert_allclose(conformal_quantiles(decoder_error_scores(pred), CAL_PROBS), stored, atol=6e-5)
 
 
 @settings(max_examples=15, deadline=None, derandomize=True)

@@ -46,3 +46,15 @@ def test_the_scoreboard_has_a_row_per_benchmark_and_each_row_links_to_a_log_entr
     anchors = {_anchor(h) for h in re.findall(r"^#{2,3} (.+)$", (ROOT / "benchmarks" / "RESULTS.md").read_text(), re.M)}
     links = [link for line in rows for link in re.findall(r"\(RESULTS\.md#([^)]+)\)", line)]
     assert links and [a for a in links if a not in anchors] == []
+
+
+def test_no_private_name_is_imported_from_another_module():
+    import ast
+
+    found = []
+    for path in (ROOT / "uam_studio").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and (node.level > 0 or (node.module or "").startswith("uam_studio")):
+                found += [f"{path.relative_to(ROOT)}: {a.name}" for a in node.names
+                          if a.name.startswith("_") and not a.name.startswith("__")]
+    assert found == []

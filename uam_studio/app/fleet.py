@@ -68,7 +68,8 @@ class FleetView(pn.viewable.Viewer):
         text = intro(
             "A small fleet at one or more vertiports through operating days of 12 h. Each request is a round "
             "trip from its vertiport, flown by an aircraft based there; the "
-            "packs age with every flight (a law fitted to real cells flown to their end of life), and each "
+            "packs (the paper's NASA cell) age with every flight by a law fitted to NASA's cells cycled to their "
+            "end of life, a pack below 80% is replaced overnight, and each "
             "aircraft learns its own pack from its flights. **Health-aware** dispatching uses that belief, "
             "**health-blind** takes every pack as new with a fixed reserve, **hindsight** knows the truth. "
             "The same requests and packs for all three. The dotted line is the most any dispatcher could "

@@ -37,7 +37,7 @@ def _rk_polynomial(coeffs: tuple[float, ...]) -> tuple[float, ...]:
     return tuple((poly / FARADAY)[::-1])
 
 
-def _redlich_kister(x: np.ndarray, coeffs: tuple[float, ...]) -> np.ndarray:
+def redlich_kister(x: np.ndarray, coeffs: tuple[float, ...]) -> np.ndarray:
     """Sum over k of A_k/F * ((2x-1)^(k+1) - 2 k x (1-x) (2x-1)^(k-1)) (V)."""
     poly = _rk_polynomial(tuple(coeffs))
     z = 2.0 * x - 1.0
@@ -61,8 +61,8 @@ def surface_fractions(qns, qps, q_surface_max):
 def equilibrium_voltage(xns, xps, tb, cell: CellParameters) -> np.ndarray:
     """Open-circuit voltage Vep - Ven (V) at surface fractions xns, xps and temperature tb (K)."""
     rt_f = GAS_CONSTANT * tb / FARADAY
-    ven = cell.u0n + rt_f * np.log((1.0 - xns) / xns) + _redlich_kister(xns, cell.an)
-    vep = cell.u0p + rt_f * np.log((1.0 - xps) / xps) + _redlich_kister(xps, cell.ap)
+    ven = cell.u0n + rt_f * np.log((1.0 - xns) / xns) + redlich_kister(xns, cell.an)
+    vep = cell.u0p + rt_f * np.log((1.0 - xps) / xps) + redlich_kister(xps, cell.ap)
     return vep - ven
 
 

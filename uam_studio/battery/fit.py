@@ -49,7 +49,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError, check_range
-from .fit_likelihood import NOISE_FLOOR_V, _lm, _search_preroll, _start, current_noise_covariance
+from .fit_likelihood import (
+    NOISE_FLOOR_V,
+    current_noise_covariance,
+    levenberg_marquardt,
+    search_preroll,
+    start_point,
+)
 from .fit_quality import (
     FLEET_Z,
     MAX_FIT_RMS_V,
@@ -60,7 +66,7 @@ from .fit_quality import (
     not_white,
     residual_autocorrelation,
 )
-from .health_estimate import _PRIOR_PREC, HealthEstimate, _check_noise, _cov_qr, _rep_state, check_context
+from .health_estimate import PRIOR_PRECISION, HealthEstimate, check_context, check_noise, cov_qr, rep_state
 from .health_prior import Q_REF_C, HealthPrior, disagrees, fleet_prior
 from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, CellParameters
 from .simulate import EOD_RANGE
@@ -82,7 +88,7 @@ def fit_health_batch(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | N
     :return: one :class:`HealthEstimate` per row.
     """
     cur, volt, dt = check_context(current_a, voltage_v, dt_s, ndim=(1, 2))
-    noise = _check_noise(noise_v)
+    noise = check_noise(noise_v)
     if start not in ("auto", "full"):
         raise InputError("start", f"{start!r} is not allowed; use 'auto' or 'full'")
     cur, volt = np.atleast_2d(cur), np.atleast_2d(volt)
@@ -96,7 +102,7 @@ def fit_health_batch(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | N
     if initial_state is not None and initial_state.batch_size not in (1, cur.shape[0]):
         raise InputError("initial_state", f"batch {initial_state.batch_size} does not match {cur.shape[0]}")
     if initial_state is not None and initial_state.batch_size == 1 and cur.shape[0] > 1:
-        initial_state = _rep_state(initial_state, cur.shape[0])
+        initial_state = rep_state(initial_state, cur.shape[0])
     if not isinstance(prior, (bool, HealthPrior)):
         raise InputError("prior", "expected True (the cell type's fleet prior), False or a HealthPrior")
     fleet = fleet_prior(cell)
@@ -104,8 +110,8 @@ def fit_health_batch(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | N
     b = cur.shape[0]
     preroll = np.zeros(b)
     with np.errstate(all="ignore"):
-        wr0, _ = _start(cur, volt, dt, initial_state, cell)
-        wr, cost, jac, mask, iters, resid = _lm(cur, volt, dt, initial_state, cell, wr0)
+        wr0, _ = start_point(cur, volt, dt, initial_state, cell)
+        wr, cost, jac, mask, iters, resid = levenberg_marquardt(cur, volt, dt, initial_state, cell, wr0)
         n_par = np.full(b, 2)
         jac3: dict[int, np.ndarray] = {}  # the 3-parameter Jacobians of rows with a pre-roll
         if start == "auto" and initial_state is None:
@@ -113,11 +119,11 @@ def fit_health_batch(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | N
             exact = cost / np.maximum(mask.sum(-1), 1) < (0.1 * NOISE_FLOOR_V) ** 2
             under = np.where((np.abs(cur[:, 0]) >= REST_CURRENT_A) & ~exact)[0]
             if under.size:
-                steps, wr_s = _search_preroll(cur[under], volt[under], dt, cell)
+                steps, wr_s = search_preroll(cur[under], volt[under], dt, cell)
                 alt = under[steps > 0]
                 if alt.size:  # fit (w, r0, pre-roll) for those rows; keep it where it fits significantly better
                     start3 = np.column_stack([wr_s[steps > 0], steps[steps > 0] * dt])
-                    p3, c3, j3, m3, it3, r3 = _lm(cur[alt], volt[alt], dt, None, cell, start3, i0=cur[alt, 0])
+                    p3, c3, j3, m3, it3, r3 = levenberg_marquardt(cur[alt], volt[alt], dt, None, cell, start3, i0=cur[alt, 0])
                     sig2 = np.maximum(c3 / np.maximum(m3.sum(-1) - 3, 1), NOISE_FLOOR_V ** 2)
                     win = (cost[alt] - c3) / sig2 > PREROLL_CHI2
                     for k, row in enumerate(alt):
@@ -163,13 +169,13 @@ def fit_health_batch(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | N
             cov_data = var * a_inv + cov_cur[k][0]
         # the model's discrepancy: residuals still not white noise of the assumed std -> HAC, where larger
         factor = excess_factor(cov_data, hac_covariance(j, resid[k], mask[k], float(rho[k]))) if suspect[k] else 1.0
-        prior_prec = np.diag(_PRIOR_PREC[:j.shape[1]])
+        prior_prec = np.diag(PRIOR_PRECISION[:j.shape[1]])
         cw = np.linalg.inv(np.linalg.inv(cov_data * factor) + prior_prec)[:2, :2]  # with a pre-roll: the marginal
         face = np.linalg.inv(np.linalg.inv(cov_data) + prior_prec)[:2, :2]  # at face value: without the factor
         w, r = float(wr[k, 0]), float(wr[k, 1])
         cw = 0.5 * (cw + cw.T)
         outside = bool(disagrees(np.array([w, r]), face, fleet, FLEET_Z).any())
-        est = HealthEstimate(q_max=Q_REF_C / w, r0=r, cov=_cov_qr(w, cw), noise_v=float(sig[k]),
+        est = HealthEstimate(q_max=Q_REF_C / w, r0=r, cov=cov_qr(w, cw), noise_v=float(sig[k]),
                              n_samples=int(mask[k].sum()), cov_w=cw, rms_residual_v=float(rms[k]),
                              iterations=int(iters[k]), preroll_s=float(preroll[k]),
                              preroll_current_a=float(cur[k, 0]) if preroll[k] > 0 else 0.0,
@@ -199,7 +205,7 @@ def fit_health(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | None = 
         may have begun up to 60 s into the load: unless the fit from full charge is exact, a
         third parameter, the pre-roll (0-60 s of the first logged current from full charge,
         continuous; started from the best whole step of
-        :func:`~uam_studio.battery.fit_likelihood._search_preroll`), is fitted as well, and kept
+        :func:`~uam_studio.battery.fit_likelihood.search_preroll`), is fitted as well, and kept
         where it lowers the chi-square by more than :data:`PREROLL_CHI2`
         (``HealthEstimate.preroll_s``; the covariance is then the (w, R0) marginal).
         ``"full"``: full and rested at the first sample.
@@ -214,5 +220,5 @@ def fit_health(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | None = 
     """
     check_range("eod_v", eod_v, *EOD_RANGE, " V")
     cur, volt, dt = check_context(current_a, voltage_v, dt_s, ndim=(1,))
-    _check_noise(noise_v)
+    check_noise(noise_v)
     return fit_health_batch(cur[None], volt[None], dt, noise_v, initial_state, start, cell, prior)[0]

@@ -25,12 +25,12 @@ from .health_estimate import (
     CURVE_CUTOFF_V,
     FIT_Q_RANGE,
     HealthEstimate,
-    _array,
-    _chol,
-    _prepend_preroll,
-    _rep_state,
-    _to_qr,
+    checked_array,
+    cholesky_factor,
+    prepend_preroll,
     preroll_states,
+    rep_state,
+    w_to_qr,
 )
 from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, CellParameters
 from .simulate import CURRENT_LIMIT_A, DT_RANGE, EOD_RANGE, simulate
@@ -42,7 +42,7 @@ __all__ = ["EodInterval", "band_from_sigma_points", "crossing_times", "eod_inter
 
 def _check_profile(current_a, dt_s: float, level: float) -> tuple[np.ndarray, float, float]:
     dt = check_range("dt_s", dt_s, *DT_RANGE, " s")
-    cur = _array("current_a", current_a, (1,))
+    cur = checked_array("current_a", current_a, (1,))
     if np.any(np.abs(cur) > CURRENT_LIMIT_A):
         raise InputError("current_a", f"|current| must be <= {CURRENT_LIMIT_A:g} A")
     lv = check_range("level", level, 0.5, 0.999)
@@ -102,7 +102,7 @@ def with_preroll(estimates: list[HealthEstimate], current: np.ndarray, dt: float
     if not steps.any():
         return current, 0
     i0 = np.array([e.preroll_current_a for e in estimates])
-    c, _, _ = _prepend_preroll(np.asarray(current, float), np.zeros_like(current, dtype=float), steps, i0)
+    c, _, _ = prepend_preroll(np.asarray(current, float), np.zeros_like(current, dtype=float), steps, i0)
     return c, int(steps.max())
 
 
@@ -113,7 +113,7 @@ def _start_states(estimates: list[HealthEstimate], points: np.ndarray, per: int,
     else each estimate's pre-roll (None: all full and rested)."""
     b = len(estimates)
     if initial_state is not None:
-        return _rep_state(initial_state, per) if initial_state.batch_size == b and b > 1 else initial_state
+        return rep_state(initial_state, per) if initial_state.batch_size == b and b > 1 else initial_state
     if not any(e.preroll_s > 0.0 for e in estimates):
         return None
     i0 = np.repeat([e.preroll_current_a for e in estimates], per)
@@ -150,11 +150,11 @@ def interval_points(estimate: HealthEstimate, eod_cont: np.ndarray, level: float
         return None
     g = np.array([(eod_cont[1] - eod_cont[2]) / 2.0, (eod_cont[3] - eod_cont[4]) / 2.0])  # s per std
     norm = float(np.hypot(*g))
-    chol = _chol(estimate.cov_w)
+    chol = cholesky_factor(estimate.cov_w)
     centre = np.array([estimate.w, estimate.r0])
     d = chol @ (g / norm) if norm > 0 else np.zeros(2)
     z = two_sided_z(level)
-    return _to_qr(np.array([centre - z * d, centre + z * d]))
+    return w_to_qr(np.array([centre - z * d, centre + z * d]))
 
 
 def interval_ends(estimates: list[HealthEstimate], current: np.ndarray, dt: float, level: float, eod_v: float,
@@ -196,7 +196,7 @@ def eod_intervals(estimates: list[HealthEstimate], current_a, dt_s: float = 1.0,
     dt = check_range("dt_s", dt_s, *DT_RANGE, " s")
     lv = check_range("level", level, 0.5, 0.999)
     eod = check_range("eod_v", eod_v, *EOD_RANGE, " V")
-    cur = _array("current_a", current_a, (1, 2))
+    cur = checked_array("current_a", current_a, (1, 2))
     if np.any(np.abs(cur) > CURRENT_LIMIT_A):
         raise InputError("current_a", f"|current| must be <= {CURRENT_LIMIT_A:g} A")
     ests = list(estimates)

@@ -15,14 +15,14 @@ import math
 import numpy as np
 
 from .health_estimate import (
-    _HI,
-    _LO,
-    _PRIOR_PREC,
     CURVE_CUTOFF_V,
     FIT_R0_RANGE,
-    _prepend_preroll,
-    _rep_state,
+    PARAM_HI,
+    PARAM_LO,
+    PRIOR_PRECISION,
+    prepend_preroll,
     preroll_states,
+    rep_state,
 )
 from .health_prior import Q_REF_C
 from .parameters import PAPER_Q_RANGE, PAPER_R0_RANGE, CellParameters
@@ -64,7 +64,7 @@ def _simulate_pts(current: np.ndarray, pts: np.ndarray, i0: np.ndarray | None, d
     return res.voltage_v, res.valid
 
 
-def _start(cur: np.ndarray, volt: np.ndarray, dt: float, state, cell,
+def start_point(cur: np.ndarray, volt: np.ndarray, dt: float, state, cell,
            obs: np.ndarray | None = None, ws=_START_W) -> tuple[np.ndarray, np.ndarray]:
     """Coarse start (w, r0) [B, 2] and its mean squared residual [B] (V^2): each w of ``ws`` with R0
     solved in closed form (the voltage is linear in R0 up to the weak thermal coupling), best kept.
@@ -74,7 +74,7 @@ def _start(cur: np.ndarray, volt: np.ndarray, dt: float, state, cell,
     nw, nr = len(ws), len(start_r0)
     grid = np.array([(w, r) for w in ws for r in start_r0])  # [nw * nr, 2]
     pts = np.tile(grid, (b, 1))
-    v, ok = _simulate_pts(np.repeat(cur, nw * nr, axis=0), pts, None, dt, _rep_state(state, nw * nr), cell)
+    v, ok = _simulate_pts(np.repeat(cur, nw * nr, axis=0), pts, None, dt, rep_state(state, nw * nr), cell)
     v = v.reshape(b, nw, nr, -1)
     ok = ok.reshape(b, nw, nr, -1).all(axis=2)
     if obs is not None:
@@ -102,7 +102,7 @@ def _eval(cur: np.ndarray, volt: np.ndarray, pts: np.ndarray, i0: np.ndarray | N
     for k in range(n_par):
         trial[k + 1::m, k] += _H[k]
     v, ok = _simulate_pts(np.repeat(cur, m, axis=0), trial, None if i0 is None else np.repeat(i0, m), dt,
-                          _rep_state(state, m), cell)
+                          rep_state(state, m), cell)
     v = v.reshape(b, m, -1)
     mask = ok.reshape(b, m, -1).all(axis=1)
     if obs is not None:
@@ -112,13 +112,13 @@ def _eval(cur: np.ndarray, volt: np.ndarray, pts: np.ndarray, i0: np.ndarray | N
     return resid, jac * mask[..., None], mask
 
 
-def _lm(cur: np.ndarray, volt: np.ndarray, dt: float, state: BatteryState | None, cell: CellParameters,
+def levenberg_marquardt(cur: np.ndarray, volt: np.ndarray, dt: float, state: BatteryState | None, cell: CellParameters,
         start: np.ndarray, i0: np.ndarray | None = None):
     """Levenberg-Marquardt for all rows at once from ``start`` [B, P]: P = 2 (w, r0), or 3 (w, r0,
     pre-roll s of ``i0`` A). Returns (params [B, P], sum of squared residuals [B], Jacobian
     [B, T, P], mask of counted samples [B, T], iterations [B], residuals [B, T] V)."""
     b, n_par = start.shape
-    lo, hi, prior_prec = _LO[:n_par], _HI[:n_par], _PRIOR_PREC[:n_par]
+    lo, hi, prior_prec = PARAM_LO[:n_par], PARAM_HI[:n_par], PRIOR_PRECISION[:n_par]
     pts = start.copy()
     resid, jac, mask = _eval(cur, volt, pts, i0, dt, state, cell)
     cost = (resid ** 2).sum(-1)
@@ -155,7 +155,7 @@ def _lm(cur: np.ndarray, volt: np.ndarray, dt: float, state: BatteryState | None
     return pts, cost, jac, mask, iters, resid
 
 
-def _search_preroll(cur: np.ndarray, volt: np.ndarray, dt: float, cell: CellParameters):
+def search_preroll(cur: np.ndarray, volt: np.ndarray, dt: float, cell: CellParameters):
     """Start of the pre-roll fit per row: the whole-step pre-roll among :data:`PREROLL_CANDIDATES_S`
     with the least coarse residual (q_max 8125 or 5417 C for the NASA fleet, R0 in closed form) on the first
     :data:`PREROLL_WINDOW_S` s, and the coarse (w, r0) there. Returns (steps [B], (w, r0) [B, 2])."""
@@ -163,12 +163,12 @@ def _search_preroll(cur: np.ndarray, volt: np.ndarray, dt: float, cell: CellPara
     w = min(cur.shape[1], int(math.ceil(PREROLL_WINDOW_S / dt)))
     cands = np.unique(np.round(np.asarray(PREROLL_CANDIDATES_S) / dt).astype(int))
     nc = cands.size
-    c, v, obs = _prepend_preroll(np.repeat(cur[:, :w], nc, axis=0), np.repeat(volt[:, :w], nc, axis=0),
+    c, v, obs = prepend_preroll(np.repeat(cur[:, :w], nc, axis=0), np.repeat(volt[:, :w], nc, axis=0),
                                  np.tile(cands, b), np.repeat(cur[:, 0], nc))
-    _, cost = _start(c, v, dt, None, cell, obs, ws=(0.8, 1.2))
+    _, cost = start_point(c, v, dt, None, cell, obs, ws=(0.8, 1.2))
     best = cands[np.argmin(cost.reshape(b, nc), axis=1)]
-    c, v, obs = _prepend_preroll(cur[:, :w], volt[:, :w], best, cur[:, 0])
-    wr, _ = _start(c, v, dt, None, cell, obs)
+    c, v, obs = prepend_preroll(cur[:, :w], volt[:, :w], best, cur[:, 0])
+    wr, _ = start_point(c, v, dt, None, cell, obs)
     return best, wr
 
 
@@ -191,7 +191,7 @@ def current_noise_covariance(current: np.ndarray, pts: np.ndarray, i0: np.ndarra
     cur = np.concatenate([current[:, None], current[:, None] + sigma_i[:, None, None] * z[None]], axis=1)
     p = np.repeat(np.asarray(pts, float), m + 1, axis=0)
     v, ok = _simulate_pts(cur.reshape(r * (m + 1), t), p, None if i0 is None else np.repeat(i0, m + 1), dt,
-                          _rep_state(state, m + 1), cell)
+                          rep_state(state, m + 1), cell)
     v, ok = v.reshape(r, m + 1, t), ok.reshape(r, m + 1, t)
     n_par = jac.shape[-1]
     covs, dv2 = np.zeros((r, n_par, n_par)), np.zeros(r)

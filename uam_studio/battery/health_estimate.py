@@ -7,7 +7,7 @@
   points and its product with a fleet prior (:class:`~uam_studio.battery.health_prior.HealthPrior`).
 - The checks of a context (current in A, voltage in V, step in s; at least :data:`MIN_CONTEXT_S` s).
 - The pre-roll of a log that starts under load: the state after it (:func:`preroll_states`) and the
-  profiles with it in front (:func:`_prepend_preroll`).
+  profiles with it in front (:func:`prepend_preroll`).
 """
 
 from __future__ import annotations
@@ -36,9 +36,9 @@ FIT_R0_RANGE = (0.0, 1.0)  # ohm
 CURVE_CUTOFF_V = EOD_RANGE[0]  # V: contexts and bands are simulated down to here
 PREROLL_MAX_S = 60.0  # s: longest load before the log's first sample that the fit looks for
 _W_BOX = (Q_REF_C / FIT_Q_RANGE[1], Q_REF_C / FIT_Q_RANGE[0])
-_LO = np.array([_W_BOX[0], FIT_R0_RANGE[0], 0.0])
-_HI = np.array([_W_BOX[1], FIT_R0_RANGE[1], PREROLL_MAX_S])
-_PRIOR_PREC = 1.0 / (_HI - _LO) ** 2  # weak prior: std = box width, in (w, R0, pre-roll)
+PARAM_LO = np.array([_W_BOX[0], FIT_R0_RANGE[0], 0.0])
+PARAM_HI = np.array([_W_BOX[1], FIT_R0_RANGE[1], PREROLL_MAX_S])
+PRIOR_PRECISION = 1.0 / (PARAM_HI - PARAM_LO) ** 2  # weak prior: std = box width, in (w, R0, pre-roll)
 
 
 @dataclass(frozen=True, eq=False)
@@ -97,8 +97,8 @@ class HealthEstimate:
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """``n`` draws of (q_max C, r0 ohm), shape [n, 2]: Gaussian in (w, r0), clipped to the box."""
         n = int(n)
-        z = rng.standard_normal((n, 2)) @ _chol(self.cov_w).T
-        return _to_qr(np.array([self.w, self.r0]) + z)
+        z = rng.standard_normal((n, 2)) @ cholesky_factor(self.cov_w).T
+        return w_to_qr(np.array([self.w, self.r0]) + z)
 
     def initial_states(self, points: np.ndarray, dt: float, cell: CellParameters = DEFAULT_CELL) -> BatteryState | None:
         """The state at the log's first sample for cells (q_max C, r0 ohm) ``points`` [N, 2]: after
@@ -119,28 +119,28 @@ class HealthEstimate:
         if FLAG_OUTSIDE_FLEET in self.flags:
             # the flag has decided (at face value): hold every component beyond the fleet's optimistic edge
             mean, cov_w = hold_to_fleet(mean, cov_w, np.array([self.w, self.r0]), self.cov_w, prior, 0.0)
-        w, r = (float(x) for x in np.clip(mean, _LO[:2], _HI[:2]))
+        w, r = (float(x) for x in np.clip(mean, PARAM_LO[:2], PARAM_HI[:2]))
         cov_w = 0.5 * (cov_w + cov_w.T)
-        return replace(self, q_max=Q_REF_C / w, r0=r, cov=_cov_qr(w, cov_w), cov_w=cov_w)
+        return replace(self, q_max=Q_REF_C / w, r0=r, cov=cov_qr(w, cov_w), cov_w=cov_w)
 
     def sigma_points(self, scale: float = 1.0) -> np.ndarray:
         """(q_max C, r0 ohm) at the estimate and at +-``scale`` along each Cholesky column of
         ``cov_w``, shape [5, 2] (rows: centre, +col0, -col0, +col1, -col1), clipped to the box."""
-        chol = _chol(self.cov_w)
+        chol = cholesky_factor(self.cov_w)
         centre = np.array([self.w, self.r0])
         pts = [centre]
         for i in range(2):
             pts += [centre + scale * chol[:, i], centre - scale * chol[:, i]]
-        return _to_qr(np.array(pts))
+        return w_to_qr(np.array(pts))
 
 
-def _cov_qr(w: float, cov_w: np.ndarray) -> np.ndarray:
+def cov_qr(w: float, cov_w: np.ndarray) -> np.ndarray:
     """Covariance of (q_max C, r0 ohm) from that of (w, r0): the delta method at w."""
     t = np.array([[-Q_REF_C / w ** 2, 0.0], [0.0, 1.0]])  # d(q_max, r0) / d(w, r0)
     return t @ cov_w @ t.T
 
 
-def _chol(cov: np.ndarray) -> np.ndarray:
+def cholesky_factor(cov: np.ndarray) -> np.ndarray:
     c = 0.5 * (cov + cov.T) + np.diag([1e-18, 1e-18])
     try:
         return np.linalg.cholesky(c)
@@ -155,14 +155,14 @@ def clip_to_box(wr: np.ndarray) -> np.ndarray:
     return np.stack([np.clip(wr[..., 0], *_W_BOX), np.clip(wr[..., 1], *FIT_R0_RANGE)], axis=-1)
 
 
-def _to_qr(wr: np.ndarray) -> np.ndarray:
+def w_to_qr(wr: np.ndarray) -> np.ndarray:
     """(w, r0) [..., 2] -> (q_max C, r0 ohm), clipped to the box."""
     box = clip_to_box(wr)
     return np.stack([Q_REF_C / box[..., 0], box[..., 1]], axis=-1)
 
 
 # ------------------------------------------------------------------------------------ input checks
-def _array(field: str, value, ndim: tuple[int, ...]) -> np.ndarray:
+def checked_array(field: str, value, ndim: tuple[int, ...]) -> np.ndarray:
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
@@ -179,8 +179,8 @@ def check_context(current_a, voltage_v, dt_s: float, ndim: tuple[int, ...] = (1,
                   names: tuple[str, str] = ("current_a", "voltage_v")) -> tuple[np.ndarray, np.ndarray, float]:
     """Validated (current A, voltage V, dt s) of a context; :class:`InputError` naming the field."""
     dt = check_range("dt_s", dt_s, *DT_RANGE, " s")
-    cur = _array(names[0], current_a, ndim)
-    volt = _array(names[1], voltage_v, ndim)
+    cur = checked_array(names[0], current_a, ndim)
+    volt = checked_array(names[1], voltage_v, ndim)
     if np.any(np.abs(cur) > CURRENT_LIMIT_A):
         raise InputError(names[0], f"|current| must be <= {CURRENT_LIMIT_A:g} A, got {np.abs(cur).max():g}")
     if np.any((volt < 0.0) | (volt > 5.0)):
@@ -193,7 +193,7 @@ def check_context(current_a, voltage_v, dt_s: float, ndim: tuple[int, ...] = (1,
     return cur, volt, dt
 
 
-def _check_noise(noise_v) -> float | None:
+def check_noise(noise_v) -> float | None:
     if noise_v is None:
         return None
     return check_range("noise_v", noise_v, 0.0, 1.0, " V")
@@ -221,14 +221,14 @@ def preroll_states(current_a: np.ndarray, preroll_s: np.ndarray, q_max: np.ndarr
     return BatteryState.from_array(arr[rows, lo] * (1.0 - frac) + arr[rows, hi] * frac)
 
 
-def _rep_state(state: BatteryState | None, n: int) -> BatteryState | None:
+def rep_state(state: BatteryState | None, n: int) -> BatteryState | None:
     """Repeat each row of a batched state n times (None stays None)."""
     if state is None:
         return None
     return BatteryState.from_array(np.repeat(state.as_array(), n, axis=0))
 
 
-def _prepend_preroll(cur: np.ndarray, volt: np.ndarray, steps: np.ndarray, i0: np.ndarray):
+def prepend_preroll(cur: np.ndarray, volt: np.ndarray, steps: np.ndarray, i0: np.ndarray):
     """Rows [B, K + T] with ``steps`` samples of ``i0`` (A) before each log, after leading zeros (a
     rested full cell is unchanged by them), K = max steps; the mask of the log's samples."""
     b, t = cur.shape

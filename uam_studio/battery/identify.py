@@ -25,7 +25,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .electrochem import _redlich_kister, equilibrium_voltage, surface_fractions
+from .electrochem import equilibrium_voltage, redlich_kister, surface_fractions
 from .parameters import CellParameters
 from .simulate import simulate
 from .solver import integrate_current
@@ -81,7 +81,7 @@ def _ocv_basis(xps: np.ndarray, n_ap: int) -> np.ndarray:
     ``xps``: columns [1, RK_0(x), ..., RK_{n_ap-1}(x)] (V per unit coefficient), shape [N, 1 + n_ap]."""
     cols = [np.ones_like(xps)]
     for k in range(n_ap):
-        cols.append(_redlich_kister(xps, tuple(1.0 if j == k else 0.0 for j in range(k + 1))))
+        cols.append(redlich_kister(xps, tuple(1.0 if j == k else 0.0 for j in range(k + 1))))
     return np.stack([c.ravel() for c in cols], axis=1)
 
 

@@ -40,7 +40,7 @@ BUNDLED_DECODER_LAMBDA: dict[str, tuple[float, ...]] = {
 }
 
 
-def _quantile_combine(med: np.ndarray, health_end: np.ndarray, decoder_end: np.ndarray, side: int) -> np.ndarray:
+def quantile_combine(med: np.ndarray, health_end: np.ndarray, decoder_end: np.ndarray, side: int) -> np.ndarray:
     """One end of an interval from a median and two independent spreads, added in quadrature
     (side -1: low, +1: high). Infinite times (no cut-off in the profile) stay conservative."""
     with np.errstate(invalid="ignore"):
@@ -52,14 +52,14 @@ def _quantile_combine(med: np.ndarray, health_end: np.ndarray, decoder_end: np.n
     return np.where(finite, out, extreme)
 
 
-def _conformal_quantiles(scores: np.ndarray, probs) -> np.ndarray:
+def conformal_quantiles(scores: np.ndarray, probs) -> np.ndarray:
     """Split-conformal quantiles of ``scores``: the ceil((n + 1) p)-th smallest (the largest if beyond)."""
     s = np.sort(np.asarray(scores, float))
     k = np.minimum(np.ceil((s.size + 1) * np.asarray(probs)).astype(int), s.size) - 1
     return s[k]
 
 
-def _sha256(path) -> str:
+def file_sha256(path) -> str:
     try:
         return hashlib.sha256(Path(path).read_bytes()).hexdigest()
     except OSError:

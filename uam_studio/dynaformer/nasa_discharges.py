@@ -39,7 +39,7 @@ from uam_studio.battery.nasa_data import LOADED_A, NasaCell, NasaDischarge
 from uam_studio.battery.nasa_predict import KnownDischarge, known_before
 from uam_studio.dynaformer.model import Dynaformer
 from uam_studio.dynaformer.predictor import DynaformerPredictor, load_pretrained
-from uam_studio.dynaformer.predictor_inputs import _leading_rest
+from uam_studio.dynaformer.predictor_inputs import leading_rest
 
 __all__ = ["HORIZON_S", "Example", "dynaformer_eod_s", "finetune_dynaformer", "score_dynaformer",
            "summarise_dynaformer", "training_example"]
@@ -161,7 +161,7 @@ def training_example(predictor: DynaformerPredictor, d: NasaDischarge, context_s
     cur = d.current_a[np.searchsorted(d.time_s, t0 + np.arange(n) + 0.5, side="right") - 1]
     est = predictor.health_estimate(cur[:n_ctx], _context_voltage(known, start, n_ctx))
     grid, k_pre = with_preroll([est], cur[None], 1.0)
-    k0 = int(_leading_rest(grid)[0])
+    k0 = int(leading_rest(grid)[0])
     grid = grid[:, k0:]
     latent = predictor._reobserved_latent(np.array([[est.q_max, est.r0]]), grid)[0].numpy()
     at = t0 + k0 + 1 - k_pre + np.arange(grid.shape[1], dtype=float)

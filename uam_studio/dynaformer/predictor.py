@@ -44,12 +44,12 @@ from .decoder_error import (
     CAL_PROBS,
     DECODER_CAL_N,
     DECODER_ERROR_SHAPE,
-    _conformal_quantiles,
-    _quantile_combine,
-    _sha256,
+    conformal_quantiles,
     decoder_error_scores,
+    file_sha256,
+    quantile_combine,
 )
-from .predictor_inputs import MAX_PROFILE_S, _as_2d, _clamped_latent, _leading_rest, _to_grid
+from .predictor_inputs import MAX_PROFILE_S, as_2d, clamped_latent, leading_rest, to_grid
 
 HEALTH_SOURCES = ("fit", "model")
 
@@ -100,8 +100,8 @@ class DynaformerPredictor:
 
     def _raw_context(self, context_current_a, context_voltage_v, batch: int | None = None):
         """Validated context arrays [B, L] (A, V) on their own grid, and whether the input was 1-D."""
-        ci, single_i = _as_2d("context_current_a", context_current_a)
-        cv, _ = _as_2d("context_voltage_v", context_voltage_v)
+        ci, single_i = as_2d("context_current_a", context_current_a)
+        cv, _ = as_2d("context_voltage_v", context_voltage_v)
         if ci.shape != cv.shape:
             raise InputError("context_voltage_v", f"shape {cv.shape} does not match context_current_a {ci.shape}")
         if np.any(np.abs(ci) > 50):
@@ -115,8 +115,8 @@ class DynaformerPredictor:
     def _context(self, context_current_a, context_voltage_v, dt_s: float, batch: int | None = None):
         """The weights' own estimator's input: context tensors on the 1 s grid (A, V)."""
         ci, cv, single_i = self._raw_context(context_current_a, context_voltage_v, batch)
-        ci = _to_grid(ci, dt_s, hold=True)
-        cv = _to_grid(cv, dt_s, hold=False)
+        ci = to_grid(ci, dt_s, hold=True)
+        cv = to_grid(cv, dt_s, hold=False)
         if self.model.cfg.health == "takeoff":  # reads the take-off window from t = 0, nothing after it
             w = self.model.cfg.health_window
             if ci.shape[1] < w:
@@ -150,14 +150,14 @@ class DynaformerPredictor:
         if source == "fit":
             ci, cv, single = self._raw_context(context_current_a, context_voltage_v, batch)
             ests = self._estimates(ci, cv, dt, noise_v, estimate)
-            lat = _clamped_latent(np.array([e.r0 for e in ests]), np.array([e.q_max for e in ests]), self.model.cfg)
+            lat = clamped_latent(np.array([e.r0 for e in ests]), np.array([e.q_max for e in ests]), self.model.cfg)
             return lat, ests, cv, single
         ci_t, cv_t, single = self._context(context_current_a, context_voltage_v, dt, batch)
         _, cv, _ = self._raw_context(context_current_a, context_voltage_v, batch)
         return self.model.encode(ci_t, cv_t), None, cv, single
 
     def _profile(self, current_a, dt: float) -> tuple[np.ndarray, bool]:
-        cur, single = _as_2d("current_a", current_a)
+        cur, single = as_2d("current_a", current_a)
         if np.any(np.abs(cur) > 50):
             raise InputError("current_a", "|current| must be <= 50 A")
         if cur.shape[1] * dt > MAX_PROFILE_S:
@@ -168,14 +168,14 @@ class DynaformerPredictor:
     def _decode(self, latent: torch.Tensor | None, grid: np.ndarray, skip_rest: bool,
                 estimates: list[HealthEstimate] | None = None, points: np.ndarray | None = None) -> np.ndarray:
         """Decoded voltage (V) [B, n] for latents [B, d] and a 1 s current grid [B, n] (A). With
-        ``skip_rest``, each row's leading rest (:func:`_leading_rest`) is cut before decoding and
+        ``skip_rest``, each row's leading rest (:func:`leading_rest`) is cut before decoding and
         filled with the rested full cell's voltage. With ``estimates`` (one per row), each row's
         pre-roll (:func:`uam_studio.battery.fit_intervals.with_preroll`) is decoded before it and dropped.
         With ``points`` [B, 2] (q_max C, r0 ohm) instead of latents: :meth:`_reobserved_latent`."""
         n_out = grid.shape[1]
         grid, k_pre = with_preroll(estimates, grid, 1.0) if estimates is not None else (grid, 0)
         b, n = grid.shape
-        k0 = _leading_rest(grid) if skip_rest else np.zeros(b, int)
+        k0 = leading_rest(grid) if skip_rest else np.zeros(b, int)
         padded = int(math.ceil(max(1, n) / self.chunk) * self.chunk)
         g = np.zeros((b, padded), np.float32)
         for r in range(b):
@@ -196,12 +196,12 @@ class DynaformerPredictor:
         first ``health_window`` s of that grid, simulated with the physics model. The decoder was
         trained on exactly these readings (of noise-free take-offs), whose small systematic errors
         on some loads it has learned to expect; feeding it (R0, 1/q_max) directly
-        (:func:`_clamped_latent`) costs accuracy on generic loads. The reading is sensitive to current
+        (:func:`clamped_latent`) costs accuracy on generic loads. The reading is sensitive to current
         noise (20 mA moves it by about 1% of q_max), so the window's current is median-filtered over 9
         samples first (no change to a noise-free take-off; about half the noise's effect)."""
         w = self.model.cfg.health_window
         if grid.shape[1] < w:
-            return _clamped_latent(points[:, 1], points[:, 0], self.model.cfg)
+            return clamped_latent(points[:, 1], points[:, 0], self.model.cfg)
         first = median_filter(np.asarray(grid[:, :w], np.float64), size=(1, 9), mode="nearest")
         volt = simulate(first, 1.0, np.clip(points[:, 0], 1.0, None), np.clip(points[:, 1], 0.0, None),
                         eod_v=2.5, cell=self.cell).voltage_v  # held below 2.5 V, as in the training data
@@ -288,7 +288,7 @@ class DynaformerPredictor:
         source = self._source(health_source)
         latent, ests, obs, single_ctx = self._latent(source, context_current_a, context_voltage_v, dt,
                                                      cur.shape[0], noise_v, estimate)
-        grid = _to_grid(cur, dt, hold=True)
+        grid = to_grid(cur, dt, hold=True)
         b = max(grid.shape[0], latent.shape[0])
         grid = np.broadcast_to(grid, (b, grid.shape[1]))
         if latent.shape[0] != b:
@@ -320,10 +320,10 @@ class DynaformerPredictor:
         lv = check_range("level", level, 0.5, 0.999)
         with self._cal_lock:
             if self._decoder_quantiles is None:
-                known = BUNDLED_DECODER_LAMBDA.get(_sha256(self.source))
+                known = BUNDLED_DECODER_LAMBDA.get(file_sha256(self.source))
                 if known is None:
                     scores = decoder_error_scores(self, n=DECODER_CAL_N // 2)
-                    known = tuple(float(x) for x in _conformal_quantiles(scores, CAL_PROBS))
+                    known = tuple(float(x) for x in conformal_quantiles(scores, CAL_PROBS))
                 self._decoder_quantiles = known
         lam = float(np.interp(lv, CAL_PROBS, self._decoder_quantiles))
         return lam * DECODER_ERROR_SHAPE[0], lam * DECODER_ERROR_SHAPE[1]
@@ -364,7 +364,7 @@ class DynaformerPredictor:
         b = cur.shape[0]
         ends = interval_ends(ests, np.ascontiguousarray(cur), dt, lv, eod, cell=self.cell)  # [b, 2, 2] (q_max, r0)
         pts = np.concatenate([np.array([[e.q_max, e.r0] for e in ests])[:, None], ends], axis=1)  # [b, 3, 2]
-        grid = _to_grid(cur, dt, hold=True)
+        grid = to_grid(cur, dt, hold=True)
         v = self._decode(None, np.repeat(grid, 3, axis=0), skip_rest=True, estimates=[e for e in ests for _ in range(3)],
                          points=pts.reshape(-1, 2)).reshape(b, 3, -1)
         h_v, h_t = self.decoder_error(lv)
@@ -376,8 +376,8 @@ class DynaformerPredictor:
         h_lo, h_hi = np.minimum(times[:, 1], times[:, 2]), np.maximum(times[:, 1], times[:, 2])
         d_lo = np.minimum(times[:, 3], np.where(np.isfinite(med), med * (1.0 - h_t), np.inf))
         d_hi = np.maximum(times[:, 4], med * (1.0 + h_t))
-        low = _quantile_combine(med, np.minimum(h_lo, med), np.minimum(d_lo, med), -1)
-        high = _quantile_combine(med, np.maximum(h_hi, med), np.maximum(d_hi, med), +1)
+        low = quantile_combine(med, np.minimum(h_lo, med), np.minimum(d_lo, med), -1)
+        high = quantile_combine(med, np.maximum(h_hi, med), np.maximum(d_hi, med), +1)
         low = np.where(np.isfinite(low), np.maximum(np.ceil(low / dt - 1e-9) * dt, dt), low)
         high = np.where(np.isfinite(high), np.ceil(high / dt - 1e-9) * dt, high)
         if single:
@@ -400,7 +400,7 @@ class DynaformerPredictor:
                                                                dt_s, level, noise_v, estimate, health_source)
         b = cur.shape[0]
         pts = np.stack([e.sigma_points() for e in ests])  # [b, 5, 2]
-        grid = _to_grid(cur, dt, hold=True)
+        grid = to_grid(cur, dt, hold=True)
         v = self._decode(None, np.repeat(grid, 5, axis=0), skip_rest=True, estimates=[e for e in ests for _ in range(5)],
                          points=pts.reshape(-1, 2)).reshape(b, 5, -1)
         h_v, h_t = self.decoder_error(lv)

@@ -18,7 +18,7 @@ REST_CURRENT_A = 0.1  # A: leading samples below this, holding < REST_CHARGE_C i
 REST_CHARGE_C = 1.0  # C
 
 
-def _as_2d(field: str, arr) -> tuple[np.ndarray, bool]:
+def as_2d(field: str, arr) -> tuple[np.ndarray, bool]:
     try:
         a = np.asarray(arr, dtype=np.float64)
     except (TypeError, ValueError):
@@ -32,7 +32,7 @@ def _as_2d(field: str, arr) -> tuple[np.ndarray, bool]:
     return np.atleast_2d(a), a.ndim == 1
 
 
-def _to_grid(values: np.ndarray, dt_s: float, hold: bool) -> np.ndarray:
+def to_grid(values: np.ndarray, dt_s: float, hold: bool) -> np.ndarray:
     """Resample [B, T] samples at step dt_s onto the model's 1 s grid."""
     if dt_s == 1.0:
         return values
@@ -46,14 +46,14 @@ def _to_grid(values: np.ndarray, dt_s: float, hold: bool) -> np.ndarray:
     return np.stack([np.interp(np.arange(1, n + 1), src_t, row) for row in values])
 
 
-def _clamped_latent(r0_ohm: np.ndarray, q_max_c: np.ndarray, cfg=None) -> torch.Tensor:
+def clamped_latent(r0_ohm: np.ndarray, q_max_c: np.ndarray, cfg=None) -> torch.Tensor:
     """The take-off decoder's latent [B, 2] for (R0 ohm, q_max C), clamped like TakeoffHealth's output
     (``cfg``: the weights' :class:`~uam_studio.dynaformer.model.DynaformerConfig`, for its scales)."""
     h = takeoff_targets(np.asarray(r0_ohm, float), np.asarray(q_max_c, float), cfg)
     return torch.stack([h[:, 0].clamp(-1.5, 1.5), h[:, 1].clamp(-2.5, 4.0)], 1).float()
 
 
-def _leading_rest(grid: np.ndarray) -> np.ndarray:
+def leading_rest(grid: np.ndarray) -> np.ndarray:
     """Per row of a 1 s current grid [B, n] (A): leading samples at rest (|i| < REST_CURRENT_A, together
     under REST_CHARGE_C). A full, rested cell is unchanged by them, so the decoder skips them."""
     quiet = np.abs(grid) < REST_CURRENT_A

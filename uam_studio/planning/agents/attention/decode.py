@@ -141,7 +141,7 @@ class _Beam:
     stopped: bool = False  # chose to stop at the vertiport
 
 
-class _Search:
+class DecodeSearch:
     """One decode of one mission (see the module docstring)."""
 
     def __init__(self, net: AttentionPolicy, tok: MissionTokens, episode: Episode,
@@ -393,7 +393,7 @@ def attention_plan(mission: Mission | dict, net: AttentionPolicy | None = None, 
     net = net if net is not None else load_policy_cached()
     tok = mission_tokens(legs, scenario)
     with _one_thread():
-        search = _Search(net, tok, episode, width, safety_filter, per_beam)
+        search = DecodeSearch(net, tok, episode, width, safety_filter, per_beam)
         best, finished = search.run()
     assert best is not None  # from the vertiport on a full charge, stopping is always allowed
     stats.update(legs_flown=search.legs_flown, routes_finished=len(finished))
@@ -440,7 +440,7 @@ def continue_route(episode: Episode, here: int, state: np.ndarray, visited: np.n
             lv = legs.cheapest_level(int(tok.leg_index[token]), int(tok.leg_index[t]))
             allowed[t] = lv is not None and bool(first_moves[int(tok.leg_index[t]), lv])
     with _one_thread():
-        search = _Search(net, tok, episode, width, True, per_beam)
+        search = DecodeSearch(net, tok, episode, width, True, per_beam)
         start = _Beam(token, np.asarray(visited, dtype=bool)[:n].copy(), x, used, int(sorties))
         best, _ = search.run(start, allowed)
     if best is None or not best.tokens:

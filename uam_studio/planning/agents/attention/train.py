@@ -42,7 +42,7 @@ from uam_studio.atomic_io import atomic_save, remove_stale_temps
 from uam_studio.bundled import is_bundled
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.attention import WEIGHTS_NAME
-from uam_studio.planning.agents.attention.decode import FORMAT, _Search
+from uam_studio.planning.agents.attention.decode import FORMAT, DecodeSearch
 from uam_studio.planning.agents.attention.features import mission_tokens, step_features
 from uam_studio.planning.agents.attention.model import AttentionConfig, AttentionPolicy
 from uam_studio.planning.episode import Episode
@@ -207,7 +207,7 @@ def _search_job(args: tuple[int, int, tuple[int, int], str, int]) -> tuple[Missi
     m = random_mission(np.random.default_rng([seed, 1, k]), dest, scenario, name=f"search {seed}/{k}")
     episode = Episode.of(LegTable(m, max(N_MAX, len(m.destinations))), scenario)
     tok = mission_tokens(episode.legs, scenario)
-    best, _ = _Search(_SEARCH_NET, tok, episode, beam, True, min(beam, 4)).run()
+    best, _ = DecodeSearch(_SEARCH_NET, tok, episode, beam, True, min(beam, 4)).run()
     sorties: list[list[int]] = [[]]
     for t in best.tokens:
         if t == tok.n:
