@@ -58,3 +58,39 @@ def test_no_private_name_is_imported_from_another_module():
                 found += [f"{path.relative_to(ROOT)}: {a.name}" for a in node.names
                           if a.name.startswith("_") and not a.name.startswith("__")]
     assert found == []
+
+
+def _is_package(name: str) -> bool:
+    import importlib.util
+
+    spec = importlib.util.find_spec(name)
+    return spec is not None and spec.submodule_search_locations is not None
+
+
+def test_notebooks_import_only_package_level_names():
+    """The notebooks use the names a package exports (``uam_studio.classroom.plots``, the figures module
+    that imports holoviews, is the one module they import from)."""
+    import json
+
+    deep = []
+    for path in sorted((ROOT / "notebooks").glob("*.ipynb")):
+        for cell in json.loads(path.read_text())["cells"]:
+            if cell["cell_type"] == "code":
+                for module in re.findall(r"^\s*from (uam_studio[\w.]*) import", "".join(cell["source"]), re.M):
+                    if module != "uam_studio.classroom.plots" and not _is_package(module):
+                        deep.append(f"{path.name}: {module}")
+    assert deep == []
+
+
+def test_every_lazy_export_resolves_and_no_submodule_shadows_one():
+    import importlib
+    import pkgutil
+
+    for name in ("uam_studio", "uam_studio.app", "uam_studio.battery", "uam_studio.dynaformer", "uam_studio.fleet",
+                 "uam_studio.flight", "uam_studio.planning", "uam_studio.planning.agents", "uam_studio.studies"):
+        package = importlib.import_module(name)
+        lazy = set(getattr(package, "_LAZY", None) or getattr(package, "_FRONT_DOOR", {}))
+        assert lazy, name
+        assert lazy & {m.name for m in pkgutil.iter_modules(package.__path__)} == set(), name
+        assert lazy <= set(package.__all__), name
+        assert all(getattr(package, n) is not None for n in lazy), name

@@ -1,7 +1,7 @@
 """uam_studio: health-aware mission planning for battery-powered eVTOL aircraft.
 
 Layers (each imports only those above it in this list; ``lint-imports`` checks it):
-``errors``, ``atomic_io``, then ``bundled`` / ``tensor_files`` / ``registration`` / ``engine``
+``errors`` and ``lazy_exports``, ``atomic_io``, then ``bundled`` / ``tensor_files`` / ``registration`` / ``engine``
 (Dask tasks); ``flight`` (leg -> per-cell current), ``battery`` (current -> voltage, EOD; health
 fits; real cells' loaders), ``dynaformer`` (learned battery model), ``planning`` (missions,
 environments, agents, oracle, real-time flight), ``fleet`` (packs that age, dispatchers, a fleet's
@@ -18,8 +18,7 @@ simulate a cell (:func:`simulate`), fit its health (:func:`fit_health`), load, p
 (:func:`load_nasa_folder`, :func:`replay_discharge`).
 """
 
-import importlib
-
+from uam_studio.lazy_exports import lazy_getattr
 from uam_studio.registration import register_envs as _register_envs
 
 __version__ = "0.1.0"
@@ -39,11 +38,7 @@ _FRONT_DOOR = {
 
 __all__ = sorted(_FRONT_DOOR)
 
-
-def __getattr__(name: str):
-    if name in _FRONT_DOOR:
-        return getattr(importlib.import_module(_FRONT_DOOR[name]), name)
-    raise AttributeError(f"module 'uam_studio' has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _FRONT_DOOR)
 
 
 _register_envs()

@@ -15,12 +15,9 @@ canvas (:func:`~uam_studio.app.style.draw_on_canvas`), so they draw without a GP
 :mod:`~uam_studio.app.comparison` (the plan comparison and its runner).
 """
 
-__all__ = ["create_app"]
+from uam_studio.lazy_exports import lazy_getattr
 
-
-def __getattr__(name: str):
-    if name == "create_app":  # lazy: importing the state models does not build any view
-        from uam_studio.app.main import create_app
-
-        return create_app
-    raise AttributeError(f"module 'uam_studio.app' has no attribute {name!r}")
+# lazy: importing the state models does not build any view
+_LAZY = {"create_app": "uam_studio.app.main", "nasa_figure": "uam_studio.app.battery_lab_nasa"}
+__all__ = sorted(_LAZY)
+__getattr__ = lazy_getattr(__name__, _LAZY)

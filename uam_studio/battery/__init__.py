@@ -7,6 +7,8 @@ measured current and voltage (:mod:`uam_studio.battery.fit`): :func:`fit_health`
 :func:`eod_interval_s`, :func:`voltage_band` (:mod:`uam_studio.battery.fit_intervals`).
 """
 
+from uam_studio.lazy_exports import lazy_getattr
+
 from .fit import fit_health, fit_health_batch
 from .fit_intervals import eod_interval_s, eod_intervals, voltage_band
 from .health_estimate import HealthEstimate
@@ -36,3 +38,27 @@ __all__ = [
     "eod_interval_s", "eod_intervals", "fit_health", "fit_health_batch", "full_charge", "rest_voltage",
     "simulate", "simulate_constant_power", "voltage_band",
 ]
+
+# sweeps over the model, real cells (CMU VTC6 and NASA PCoE): imported when first used
+_LAZY = {
+    "curves": "uam_studio.battery.sweeps",
+    "eod_grid": "uam_studio.battery.sweeps",
+    "simulate_profiles": "uam_studio.battery.sweeps",
+    "max_leg_distance_km": "uam_studio.battery.sweeps",
+    "data_folder": "uam_studio.battery.cmu_data",
+    "load_cell_log": "uam_studio.battery.cmu_data",
+    "mission_cycle": "uam_studio.battery.cmu_data",
+    "NASA_18650": "uam_studio.battery.parameters",
+    "VTC6": "uam_studio.battery.parameters",
+    "VTC6_CELL_HELD_OUT": "uam_studio.battery.parameters",
+    "replay_mission": "uam_studio.battery.real_cells",
+    "NasaDataError": "uam_studio.battery.nasa_data",
+    "load_nasa_folder": "uam_studio.battery.nasa_data",
+    "nasa_folder": "uam_studio.battery.nasa_data",
+    "score_cell": "uam_studio.battery.nasa_eval",
+    "summarise": "uam_studio.battery.nasa_eval",
+    "model_for": "uam_studio.battery.nasa_replay",
+    "replay_discharge": "uam_studio.battery.nasa_replay",
+}
+__all__ += sorted(_LAZY)
+__getattr__ = lazy_getattr(__name__, _LAZY)

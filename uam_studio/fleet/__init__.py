@@ -8,8 +8,6 @@ The aging names are imported here; the day, the demand and the studies when firs
 and the planner).
 """
 
-import importlib
-
 from uam_studio.fleet.aging import (
     AGING_LAW,
     END_OF_LIFE_FRACTION,
@@ -20,6 +18,7 @@ from uam_studio.fleet.aging import (
     leave_one_cell_out,
     life_points,
 )
+from uam_studio.lazy_exports import lazy_getattr
 
 _LAZY = {
     "NASA_AGING_LAW": "uam_studio.fleet.nasa_aging",
@@ -42,7 +41,4 @@ __all__ = ["AGING_LAW", "CapacityBelief", "DISPATCHERS", "DayResult", "END_OF_LI
            "summarize"]
 
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module 'uam_studio.fleet' has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _LAZY)

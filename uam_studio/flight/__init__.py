@@ -32,6 +32,7 @@ from uam_studio.flight.tables import (
     phase_power_kw,
     phase_rows,
 )
+from uam_studio.lazy_exports import lazy_getattr
 
 __all__ = [
     "TAKEOFF_CONTEXT_S",
@@ -61,3 +62,14 @@ __all__ = [
     "phase_rows",
     "power_kw_to_cell_current_a",
 ]
+
+# the sweeps behind the notebooks' figures: imported when first used
+_LAZY = {
+    "altitude_profiles": "uam_studio.flight.sweeps",
+    "breakeven_distance_km": "uam_studio.flight.sweeps",
+    "charge_line": "uam_studio.flight.sweeps",
+    "charge_table": "uam_studio.flight.sweeps",
+    "wind_profiles": "uam_studio.flight.sweeps",
+}
+__all__ += sorted(_LAZY)
+__getattr__ = lazy_getattr(__name__, _LAZY)

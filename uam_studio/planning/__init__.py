@@ -32,8 +32,7 @@ and flying a mission with surprises, :func:`fly_mission`.
 ``import uam_studio.planning`` stays light (no gymnasium, no torch).
 """
 
-import importlib
-
+from uam_studio.lazy_exports import lazy_getattr
 from uam_studio.planning.legs import ALTITUDES_M, N_ACTIONS, N_MAX, decode_action, encode_action
 from uam_studio.planning.missions.check import Plan, PlanCheck, check_plan, make_plan
 from uam_studio.planning.missions.generate import held_out_missions, random_mission
@@ -70,14 +69,12 @@ _LAZY = {
     "fly_mission": "operations",
 }
 
-
-def __getattr__(name):
-    if name in _LAZY:
-        return getattr(importlib.import_module(f"uam_studio.planning.{_LAZY[name]}"), name)
-    raise AttributeError(f"module 'uam_studio.planning' has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, {name: f"uam_studio.planning.{module}" for name, module in _LAZY.items()})
 
 
 __all__ = [
+    "fly_mission",
+    "safety_verdict",
     "ALTITUDES_M",
     "N_ACTIONS",
     "N_MAX",

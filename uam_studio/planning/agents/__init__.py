@@ -8,23 +8,21 @@ and imported when first used, so that importing this package (and :mod:`.retrain
 stays torch-free for the CLI and the app.
 """
 
-import importlib
+from uam_studio.lazy_exports import lazy_getattr
 
 _LAZY = {
-    "DQNTrainConfig": "training",
-    "train_dqn": "training",
-    "retrain_dqn": "retrain",
-    "training_setup": "retrain",
-    "bundled_agent_path": "rollout",
-    "rollout_agent": "rollout",
-    "episode_columns": "learning_curves",
-    "moving_average": "learning_curves",
+    "DQNTrainConfig": "uam_studio.planning.agents.training",
+    "train_dqn": "uam_studio.planning.agents.training",
+    "retrain_dqn": "uam_studio.planning.agents.retrain",
+    "training_setup": "uam_studio.planning.agents.retrain",
+    "bundled_agent_path": "uam_studio.planning.agents.rollout",
+    "rollout_agent": "uam_studio.planning.agents.rollout",
+    "episode_columns": "uam_studio.planning.agents.learning_curves",
+    "moving_average": "uam_studio.planning.agents.learning_curves",
+    "EpisodeRecorder": "uam_studio.planning.agents.learning_curves",
 }
 
 __all__ = sorted(_LAZY)
 
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        return getattr(importlib.import_module(f"uam_studio.planning.agents.{_LAZY[name]}"), name)
-    raise AttributeError(f"module 'uam_studio.planning.agents' has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _LAZY)
