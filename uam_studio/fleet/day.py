@@ -55,7 +55,7 @@ from uam_studio.fleet.hindsight import Job, day_bound
 from uam_studio.fleet.nasa_aging import NASA_AGING_LAW
 
 __all__ = ["AGE_SPREAD_LIFE", "DayResult", "END_S", "Fleet", "FIT_WINDOW_S", "PACK_LAWS", "day_of_life_seed",
-           "default_age_spread", "hindsight_bound", "simulate_day", "simulate_life"]
+           "default_age_spread", "hindsight_bound", "pack_law", "simulate_day", "simulate_life"]
 
 FIT_WINDOW_S = 600  # s of each flight's readings fitted for its pack's health
 FORECAST_SIGMA_KT = 8.0  # kt: the actual wind is the forecast plus N(0, this)
@@ -73,10 +73,11 @@ def default_age_spread(law: str = "nasa") -> float:
     """The packs' default age spread (equivalent full cycles): :data:`AGE_SPREAD_LIFE` of the cycles to
     80% of the first capacity under ``law`` at 25 C, to a whole cycle (54 for ``"nasa"``, 294 for
     ``"vtc6"``)."""
-    return float(round(AGE_SPREAD_LIFE * _law(law).cycles_to(END_OF_LIFE_FRACTION)))
+    return float(round(AGE_SPREAD_LIFE * pack_law(law).cycles_to(END_OF_LIFE_FRACTION)))
 
 
-def _law(name: str) -> AgingLaw:
+def pack_law(name: str) -> AgingLaw:
+    """The aging law of cell type ``name`` (a key of :data:`PACK_LAWS`); one line naming ``law`` otherwise."""
     if name not in PACK_LAWS:
         raise InputError("law", f"{name!r}: allowed {', '.join(PACK_LAWS)}")
     return PACK_LAWS[name]
@@ -104,7 +105,7 @@ class Fleet:
     law: str = "nasa"
 
     def __post_init__(self) -> None:
-        _law(self.law)
+        pack_law(self.law)
         if len(self.truth) != len(self.belief) or not 1 <= len(self.truth) <= 50:
             raise InputError("aircraft", f"{len(self.truth)} aircraft: allowed 1-50, a belief for each")
         if not self.in_service:
@@ -132,7 +133,7 @@ class Fleet:
         (default :func:`default_age_spread`); each belief starts from the nominal new pack aged by the
         logged throughput. Aircraft ``i`` is based at vertiport ``i % vertiports`` (1-10, at most one per
         aircraft)."""
-        aging = _law(law)
+        aging = pack_law(law)
         n = int(check_range("aircraft", n, 1, 50))
         ports = int(check_range("vertiports", vertiports, 1, min(MAX_VERTIPORTS, n)))
         spread = check_range("age_spread_efc", default_age_spread(law) if age_spread_efc is None else age_spread_efc,

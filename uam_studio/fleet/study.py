@@ -15,7 +15,7 @@ import numpy as np
 
 from uam_studio.engine import run_tasks
 from uam_studio.errors import InputError, check_range, check_seed
-from uam_studio.fleet.day import PACK_LAWS, simulate_life
+from uam_studio.fleet.day import pack_law, simulate_life
 from uam_studio.fleet.dispatch import DISPATCHERS
 
 __all__ = ["fleet_study", "summarize"]
@@ -55,8 +55,7 @@ def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[
              for a, s, d in product(aircraft, seeds, dispatchers)]
     if not tasks:
         raise InputError("seeds", "no task: give at least one fleet size, seed and dispatcher")
-    if law not in PACK_LAWS:
-        raise InputError("law", f"{law!r}: allowed {', '.join(PACK_LAWS)}")
+    pack_law(law)  # before any task: one line naming the law
     spread = None if age_spread_efc is None else float(age_spread_efc)
     args = (days, float(rate_per_h), int(chargers), spread, float(max_km), int(vertiports), law, bool(renew))
     return run_tasks(_life_row, [(*t, *args) for t in tasks], workers=workers, address=address,
