@@ -20,8 +20,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 from _timing import best_of  # noqa: E402
 
 from uam_studio.battery import simulate  # noqa: E402
-from uam_studio.battery.fit import fit_health  # noqa: E402
-from uam_studio.battery.fit_intervals import eod_interval_s  # noqa: E402
+from uam_studio.battery.health.fit import fit_health  # noqa: E402
+from uam_studio.battery.health.intervals import eod_interval_s  # noqa: E402
 from uam_studio.dynaformer import load_predictor  # noqa: E402
 from uam_studio.dynaformer.data import flight_profile  # noqa: E402
 

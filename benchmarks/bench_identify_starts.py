@@ -23,7 +23,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from uam_studio.battery.cmu_data import (
+from uam_studio.battery.parameters import Cell, CellParameters
+from uam_studio.battery.real.cmu_data import (
     LANDING,
     MISSION_FILE,
     MissionLog,
@@ -34,9 +35,7 @@ from uam_studio.battery.cmu_data import (
     reference_discharges,
     resampled_missions,
 )
-from uam_studio.battery.identify import BOUNDS, identify_cell
-from uam_studio.battery.parameters import Cell, CellParameters
-from uam_studio.battery.real_cells import (
+from uam_studio.battery.real.cmu_replay import (
     HOLD_OUTS,
     IDENTIFICATION_FILE,
     START_Q_MAX,
@@ -44,6 +43,7 @@ from uam_studio.battery.real_cells import (
     vtc6_fit_segments,
     vtc6_start,
 )
+from uam_studio.battery.real.identify import BOUNDS, identify_cell
 from uam_studio.studies.real_cells import physics_row
 
 _SCALED = ("kn", "kp", "t_sn_s", "t_sp_s", "r0_activation_k", "k_activation_k", "thermal_tau_s")

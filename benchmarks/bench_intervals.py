@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from uam_studio.battery import eod_interval_s, fit_health, simulate
-from uam_studio.battery.health_estimate import FIT_Q_RANGE
+from uam_studio.battery.health.estimate import FIT_Q_RANGE
 from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.dynaformer import load_pretrained
 from uam_studio.flight import leg_profile

@@ -44,9 +44,9 @@ def _rows(args: argparse.Namespace) -> tuple[list, float]:
     if args.rows:
         with open(args.rows) as fh:
             return [SimpleNamespace(**r) for r in json.load(fh)["discharges"]], float("nan")
-    from uam_studio.battery.nasa_data import load_nasa_folder, nasa_folder
-    from uam_studio.battery.nasa_eval import evaluate_nasa
-    from uam_studio.battery.nasa_model import bundled_model
+    from uam_studio.battery.real.nasa_data import load_nasa_folder, nasa_folder
+    from uam_studio.battery.real.nasa_eval import evaluate_nasa
+    from uam_studio.battery.real.nasa_model import bundled_model
 
     t0 = time.perf_counter()
     cells = load_nasa_folder(nasa_folder(args.data), None, args.cutoff_v)
@@ -60,7 +60,7 @@ def _ok(flag: bool) -> str:
 
 
 def main() -> None:
-    from uam_studio.battery.nasa_eval import _stats
+    from uam_studio.battery.real.nasa_eval import _stats
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--data", default=None)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from uam_studio.battery.nasa_data import COLUMNS, LOADED_A, NasaCell, NasaDischarge, load_nasa_cell
+from uam_studio.battery.real.nasa_data import COLUMNS, LOADED_A, NasaCell, NasaDischarge, load_nasa_cell
 from uam_studio.battery.simulate import simulate
 
 SAMPLE_S = 10

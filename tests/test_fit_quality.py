@@ -1,4 +1,4 @@
-"""The health fit's model-discrepancy terms and flags (uam_studio.battery.fit_quality): unchanged where the
+"""The health fit's model-discrepancy terms and flags (uam_studio.battery.health.quality): unchanged where the
 context is the model plus white noise, wider and flagged where it is not (issue 38)."""
 
 from __future__ import annotations
@@ -13,8 +13,9 @@ from hypothesis import strategies as st
 from scipy.stats import chi2  # the reference for the library's chi-square quantile
 
 from uam_studio.battery import simulate
-from uam_studio.battery.fit import fit_health
-from uam_studio.battery.fit_quality import (
+from uam_studio.battery.health.fit import fit_health
+from uam_studio.battery.health.prior import combine, disagrees, fleet_prior, hold_to_fleet
+from uam_studio.battery.health.quality import (
     FLAG_MISFIT,
     FLAG_OUTSIDE_FLEET,
     andrews_bandwidth,
@@ -25,7 +26,6 @@ from uam_studio.battery.fit_quality import (
     not_white,
     residual_autocorrelation,
 )
-from uam_studio.battery.health_prior import combine, disagrees, fleet_prior, hold_to_fleet
 from uam_studio.battery.parameters import DEFAULT_CELL
 from uam_studio.flight import leg_profile
 from uam_studio.glossary import GLOSSARY

@@ -57,7 +57,7 @@ def test_bad_temperature_and_fraction_name_the_field():
 
 @pytest.fixture(scope="module")
 def lives():
-    from uam_studio.battery.cmu_data import data_folder
+    from uam_studio.battery.real.cmu_data import data_folder
     from uam_studio.fleet import life_points
 
     try:

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from uam_studio.battery import rest_voltage, simulate
-from uam_studio.battery.fit import fit_health, fit_health_batch
-from uam_studio.battery.fit_intervals import eod_interval_s, eod_intervals, voltage_band
-from uam_studio.battery.health_estimate import FIT_Q_RANGE, FIT_R0_RANGE, HealthEstimate
+from uam_studio.battery.health.estimate import FIT_Q_RANGE, FIT_R0_RANGE, HealthEstimate
+from uam_studio.battery.health.fit import fit_health, fit_health_batch
+from uam_studio.battery.health.intervals import eod_interval_s, eod_intervals, voltage_band
 from uam_studio.dynaformer.artifact import bundled_weights_path
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_profile

@@ -8,9 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from uam_studio.battery import simulate
-from uam_studio.battery.fit import fit_health, fit_health_batch
-from uam_studio.battery.health_estimate import FIT_Q_RANGE, FIT_R0_RANGE
-from uam_studio.battery.health_prior import Q_REF_C, HealthPrior, combine, fleet_prior
+from uam_studio.battery.health.estimate import FIT_Q_RANGE, FIT_R0_RANGE
+from uam_studio.battery.health.fit import fit_health, fit_health_batch
+from uam_studio.battery.health.prior import Q_REF_C, HealthPrior, combine, fleet_prior
 from uam_studio.battery.parameters import DEFAULT_CELL, PAPER_Q_RANGE, PAPER_R0_RANGE, VTC6_PARAMS
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_profile

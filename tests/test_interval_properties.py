@@ -18,7 +18,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from uam_studio.battery import eod_interval_s, fit_health, simulate
-from uam_studio.battery.health_estimate import FIT_Q_RANGE
+from uam_studio.battery.health.estimate import FIT_Q_RANGE
 from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.flight import leg_profile
 from uam_studio.flight.profile import leg_feasible

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from uam_studio.battery.nasa_data import (
+from uam_studio.battery.real.nasa_data import (
     COLUMNS,
     NasaDataError,
     load_nasa_cell,

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from uam_studio.battery.nasa_data import load_nasa_folder
-from uam_studio.battery.nasa_predict import known_before
+from uam_studio.battery.real.nasa_data import load_nasa_folder
+from uam_studio.battery.real.nasa_predict import known_before
 from uam_studio.dynaformer.nasa_discharges import (
     dynaformer_eod_s,
     finetune_dynaformer,

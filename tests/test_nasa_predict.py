@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 from nasa_synthetic import synthetic_cell, synthetic_rows, write_cell
 
-from uam_studio.battery.nasa_data import NasaCell
-from uam_studio.battery.nasa_eval import evaluate_nasa, fit_nasa_model, score_cell, summarise
-from uam_studio.battery.nasa_model import BUNDLED, bundled_model
-from uam_studio.battery.nasa_predict import CellBelief, known_before
+from uam_studio.battery.real.nasa_data import NasaCell
+from uam_studio.battery.real.nasa_eval import evaluate_nasa, fit_nasa_model, score_cell, summarise
+from uam_studio.battery.real.nasa_model import BUNDLED, bundled_model
+from uam_studio.battery.real.nasa_predict import CellBelief, known_before
 from uam_studio.cli import main
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "nasa_pcoe"
@@ -151,7 +151,7 @@ def test_the_cli_refuses_bad_data_in_one_line_with_exit_code_2(tmp_path, capsys,
 
 @pytest.mark.skipif(not DATA.is_dir(), reason="the NASA PCoE lives are not beside the checkout")
 def test_on_real_2a_lives_left_out_it_beats_persistence_and_its_bounds_hold():
-    from uam_studio.battery.nasa_data import load_nasa_folder
+    from uam_studio.battery.real.nasa_data import load_nasa_folder
 
     cells = load_nasa_folder(DATA, ["B0005", "B0007", "B0018", "B0036", "B0029", "B0030"])
     rows = score_cell(cells[0], fit_nasa_model(cells[1:]), "loco", progpy=False)  # B0005 never read by the fit
@@ -163,8 +163,8 @@ def test_on_real_2a_lives_left_out_it_beats_persistence_and_its_bounds_hold():
 
 @pytest.mark.skipif(not DATA.is_dir(), reason="the NASA PCoE lives are not beside the checkout")
 def test_the_bundled_default_model_is_what_identify_nasa_prints():
-    from uam_studio.battery.nasa_data import load_nasa_folder
-    from uam_studio.battery.nasa_eval import models_literal
+    from uam_studio.battery.real.nasa_data import load_nasa_folder
+    from uam_studio.battery.real.nasa_eval import models_literal
 
     refit = fit_nasa_model(load_nasa_folder(DATA), 300.0, 3.0)
     assert models_literal([refit]) == models_literal([BUNDLED[0]])

@@ -38,7 +38,7 @@ def test_every_notebook_is_there():
 def test_notebook_10_runs_where_the_dataset_is():
     """nbval runs notebook 10 only where the CMU dataset is found (conftest.py); elsewhere this test
     says so in the suite's summary instead of the notebook silently not running."""
-    from uam_studio.battery.cmu_data import MISSION_FILE, data_folder, load_cell_log
+    from uam_studio.battery.real.cmu_data import MISSION_FILE, data_folder, load_cell_log
     from uam_studio.errors import InputError
 
     try:

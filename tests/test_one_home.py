@@ -17,7 +17,7 @@ HOMES = {
 }
 # literals of the same value that mean something else, each named with what it is
 OTHER_MEANINGS = {
-    ("battery/cmu_data.py", 0.45),  # REFERENCE_CURRENT_A: the CMU C/5 discharges' lowest current, A
+    ("battery/real/cmu_data.py", 0.45),  # REFERENCE_CURRENT_A: the CMU C/5 discharges' lowest current, A
 }
 
 

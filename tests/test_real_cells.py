@@ -14,7 +14,8 @@ import pytest
 from scipy.io import savemat
 
 from uam_studio.battery import DEFAULT_CELL, simulate, simulate_constant_power
-from uam_studio.battery.cmu_data import (
+from uam_studio.battery.parameters import NASA_18650, VTC6, VTC6_CELL_HELD_OUT
+from uam_studio.battery.real.cmu_data import (
     CRUISE,
     LANDING,
     TAKEOFF,
@@ -25,9 +26,8 @@ from uam_studio.battery.cmu_data import (
     reference_discharges,
     resampled_missions,
 )
-from uam_studio.battery.identify import FitSegment, identify_cell
-from uam_studio.battery.parameters import NASA_18650, VTC6, VTC6_CELL_HELD_OUT
-from uam_studio.battery.real_cells import START_Q_MAX, START_R0, replay_mission, vtc6_start
+from uam_studio.battery.real.cmu_replay import START_Q_MAX, START_R0, replay_mission, vtc6_start
+from uam_studio.battery.real.identify import FitSegment, identify_cell
 from uam_studio.cli import main
 from uam_studio.errors import InputError
 
@@ -172,7 +172,7 @@ def test_unknown_suffix_and_missing_folder(tmp_path, monkeypatch):
     with pytest.raises(CellDataError, match="x.txt: path: expected a .csv or .mat"):
         load_cell_log(tmp_path / "x.txt")
     monkeypatch.delenv("UAM_STUDIO_CMU_DATA", raising=False)
-    monkeypatch.setattr("uam_studio.battery.cmu_data.BESIDE_CHECKOUT", tmp_path / "nowhere")
+    monkeypatch.setattr("uam_studio.battery.real.cmu_data.BESIDE_CHECKOUT", tmp_path / "nowhere")
     with pytest.raises(ValueError, match="data: no dataset folder") as err:
         data_folder(None)
     text = str(err.value)  # one line, saying where it looked and how to point at the data from a notebook

@@ -13,9 +13,9 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from uam_studio.battery.cmu_data import LANDING, LIFE_FILES, load_cell_log, resampled_missions
 from uam_studio.battery.parameters import VTC6
-from uam_studio.battery.real_cells import mission_current
+from uam_studio.battery.real.cmu_data import LANDING, LIFE_FILES, load_cell_log, resampled_missions
+from uam_studio.battery.real.cmu_replay import mission_current
 from uam_studio.cli import main
 from uam_studio.errors import InputError
 from uam_studio.studies.real_lives import (

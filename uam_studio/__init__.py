@@ -32,8 +32,8 @@ _FRONT_DOOR = {
     "Fleet": "uam_studio.fleet.day",
     "simulate_day": "uam_studio.fleet.day",
     "poisson_demand": "uam_studio.fleet.demand",
-    "load_nasa_folder": "uam_studio.battery.nasa_data",
-    "replay_discharge": "uam_studio.battery.nasa_replay",
+    "load_nasa_folder": "uam_studio.battery.real.nasa_data",
+    "replay_discharge": "uam_studio.battery.real.nasa_replay",
 }
 
 __all__ = sorted(_FRONT_DOOR)

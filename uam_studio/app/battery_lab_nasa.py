@@ -2,7 +2,7 @@
 would have, against what happened.
 
 :class:`NasaLabState` holds the cell and the discharge (a position over its life) and its :attr:`result`,
-a :class:`~uam_studio.battery.nasa_replay.NasaReplay` (or a one-line error); :class:`NasaLabView` draws
+a :class:`~uam_studio.battery.real.nasa_replay.NasaReplay` (or a one-line error); :class:`NasaLabView` draws
 it: the measured voltage, the end of the context, the prediction's median, 90% band and 5%-risk bound,
 the persistence guess, progpy's default model along the same current, and a sentence on what happened.
 Without the data, one line says where to put it.
@@ -22,7 +22,7 @@ import param
 from uam_studio.app.services import LatestWorker, one_line
 from uam_studio.app.session import ensure_bokeh_backend
 from uam_studio.app.style import heading, no_scroll_zoom, window_height
-from uam_studio.battery.nasa_data import DATA_ENV, NasaDataError, nasa_cell_files, nasa_folder
+from uam_studio.battery.real.nasa_data import DATA_ENV, NasaDataError, nasa_cell_files, nasa_folder
 from uam_studio.errors import InputError
 
 __all__ = ["NASA_COLORS", "NasaLabState", "NasaLabView"]
@@ -36,9 +36,9 @@ PLOT_HEIGHT_CSS = "max(300px, calc((100vh - 230px) * 0.55))"
 
 
 class NasaLabState(param.Parameterized):
-    """One real discharge of a NASA PCoE cell, replayed (:func:`~uam_studio.battery.nasa_replay.replay_discharge`).
+    """One real discharge of a NASA PCoE cell, replayed (:func:`~uam_studio.battery.real.nasa_replay.replay_discharge`).
 
-    ``cell`` is a file name stem in the data folder (:func:`~uam_studio.battery.nasa_data.nasa_folder`);
+    ``cell`` is a file name stem in the data folder (:func:`~uam_studio.battery.real.nasa_data.nasa_folder`);
     ``position`` counts the cell's scoreable discharges from 0. :attr:`result` is ``{"replay": NasaReplay}``
     or ``{"error": one line}``; without the data, :attr:`missing` says where to put it.
     """
@@ -85,8 +85,8 @@ class NasaLabState(param.Parameterized):
         self._worker.submit(request)
 
     def _compute(self, request: tuple) -> dict[str, Any]:
-        from uam_studio.battery.nasa_data import load_nasa_cell
-        from uam_studio.battery.nasa_replay import replay_discharge
+        from uam_studio.battery.real.nasa_data import load_nasa_cell
+        from uam_studio.battery.real.nasa_replay import replay_discharge
 
         name, position, context_s = request
         try:

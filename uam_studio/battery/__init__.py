@@ -2,17 +2,15 @@
 
 Public API: :func:`simulate` (current in A), :func:`simulate_constant_power`
 (power in W), :class:`SimulationResult`, :class:`BatteryState`, :func:`full_charge`; health from
-measured current and voltage (:mod:`uam_studio.battery.fit`): :func:`fit_health` ->
-:class:`HealthEstimate` (q_max in C, R0 in ohm, covariance; :mod:`uam_studio.battery.health_estimate`),
-:func:`eod_interval_s`, :func:`voltage_band` (:mod:`uam_studio.battery.fit_intervals`).
+measured current and voltage (:mod:`uam_studio.battery.health`): :func:`fit_health` ->
+:class:`HealthEstimate` (q_max in C, R0 in ohm, covariance; :mod:`uam_studio.battery.health.estimate`),
+:func:`eod_interval_s`, :func:`voltage_band` (:mod:`uam_studio.battery.health.intervals`).
 """
 
-from uam_studio.lazy_exports import lazy_getattr
-
-from .fit import fit_health, fit_health_batch
-from .fit_intervals import eod_interval_s, eod_intervals, voltage_band
-from .health_estimate import HealthEstimate
-from .parameters import (
+from uam_studio.battery.health.estimate import HealthEstimate
+from uam_studio.battery.health.fit import fit_health, fit_health_batch
+from uam_studio.battery.health.intervals import eod_interval_s, eod_intervals, voltage_band
+from uam_studio.battery.parameters import (
     DEFAULT_CELL,
     DEFAULT_EOD_V,
     DEFAULT_Q_MAX,
@@ -21,7 +19,7 @@ from .parameters import (
     PAPER_R0_RANGE,
     CellParameters,
 )
-from .simulate import (
+from uam_studio.battery.simulate import (
     EOD_RANGE,
     Q_MAX_RANGE,
     R0_RANGE,
@@ -30,7 +28,8 @@ from .simulate import (
     simulate,
     simulate_constant_power,
 )
-from .state import STATE_NAMES, BatteryState, full_charge
+from uam_studio.battery.state import STATE_NAMES, BatteryState, full_charge
+from uam_studio.lazy_exports import lazy_getattr
 
 __all__ = [
     "BatteryState", "CellParameters", "DEFAULT_CELL", "DEFAULT_EOD_V", "DEFAULT_Q_MAX", "DEFAULT_R0",
@@ -45,20 +44,20 @@ _LAZY = {
     "eod_grid": "uam_studio.battery.sweeps",
     "simulate_profiles": "uam_studio.battery.sweeps",
     "max_leg_distance_km": "uam_studio.battery.sweeps",
-    "data_folder": "uam_studio.battery.cmu_data",
-    "load_cell_log": "uam_studio.battery.cmu_data",
-    "mission_cycle": "uam_studio.battery.cmu_data",
+    "data_folder": "uam_studio.battery.real.cmu_data",
+    "load_cell_log": "uam_studio.battery.real.cmu_data",
+    "mission_cycle": "uam_studio.battery.real.cmu_data",
     "NASA_18650": "uam_studio.battery.parameters",
     "VTC6": "uam_studio.battery.parameters",
     "VTC6_CELL_HELD_OUT": "uam_studio.battery.parameters",
-    "replay_mission": "uam_studio.battery.real_cells",
-    "NasaDataError": "uam_studio.battery.nasa_data",
-    "load_nasa_folder": "uam_studio.battery.nasa_data",
-    "nasa_folder": "uam_studio.battery.nasa_data",
-    "score_cell": "uam_studio.battery.nasa_eval",
-    "summarise": "uam_studio.battery.nasa_eval",
-    "model_for": "uam_studio.battery.nasa_replay",
-    "replay_discharge": "uam_studio.battery.nasa_replay",
+    "replay_mission": "uam_studio.battery.real.cmu_replay",
+    "NasaDataError": "uam_studio.battery.real.nasa_data",
+    "load_nasa_folder": "uam_studio.battery.real.nasa_data",
+    "nasa_folder": "uam_studio.battery.real.nasa_data",
+    "score_cell": "uam_studio.battery.real.nasa_eval",
+    "summarise": "uam_studio.battery.real.nasa_eval",
+    "model_for": "uam_studio.battery.real.nasa_replay",
+    "replay_discharge": "uam_studio.battery.real.nasa_replay",
 }
 __all__ += sorted(_LAZY)
 __getattr__ = lazy_getattr(__name__, _LAZY)

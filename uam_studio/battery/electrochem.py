@@ -15,7 +15,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .parameters import FARADAY, GAS_CONSTANT, CellParameters
+from uam_studio.battery.parameters import FARADAY, GAS_CONSTANT, CellParameters
 
 _X_EPS = 1e-12  # mole fractions are clipped into (eps, 1-eps); only reached after EOD
 

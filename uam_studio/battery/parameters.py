@@ -67,7 +67,7 @@ class CellParameters:
     k_activation_k: float = 0.0
     t_reference_k: float = 298.15
     # The health range of the fleet this cell type comes from: what is known of a cell of this type
-    # before it is measured (the prior of a health fit, :mod:`uam_studio.battery.health_prior`).
+    # before it is measured (the prior of a health fit, :mod:`uam_studio.battery.health.prior`).
     fleet_q_range: tuple[float, float] = PAPER_Q_RANGE  # C
     fleet_r0_range: tuple[float, float] = PAPER_R0_RANGE  # ohm
 

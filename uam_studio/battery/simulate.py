@@ -6,9 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError, check_range
-from .eod import first_below
-from .parameters import (
+from uam_studio.battery.eod import first_below
+from uam_studio.battery.parameters import (
     DEFAULT_CELL,
     DEFAULT_EOD_V,
     DEFAULT_Q_MAX,
@@ -17,8 +16,9 @@ from .parameters import (
     Cell,
     CellParameters,
 )
-from .solver import integrate_current, output_voltage, step
-from .state import STATE_NAMES, BatteryState, full_charge
+from uam_studio.battery.solver import integrate_current, output_voltage, step
+from uam_studio.battery.state import STATE_NAMES, BatteryState, full_charge
+from uam_studio.errors import InputError, check_range
 
 R0_RANGE = (0.0, 5.0)  # ohm; the paper trains on 0.017-0.45
 EOD_RANGE = (2.5, 4.0)  # V

@@ -22,9 +22,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg.lapack import dtbtrs
 
-from .electrochem import equilibrium_voltage, overpotential_gains, surface_fractions
-from .parameters import CellParameters
-from .state import BatteryState
+from uam_studio.battery.electrochem import equilibrium_voltage, overpotential_gains, surface_fractions
+from uam_studio.battery.parameters import CellParameters
+from uam_studio.battery.state import BatteryState
 
 # K. The temperature iterates contract by about 1e-3 a pass, so the accepted pass is far closer to
 # the fixed point than this: against a 1e-13 K solve, 1e-5 K moves the voltage by < 1e-11 V

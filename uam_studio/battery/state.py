@@ -6,9 +6,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from uam_studio.battery.parameters import DEFAULT_CELL, Q_MAX_RANGE, CellParameters
 from uam_studio.errors import InputError, check_range
-
-from .parameters import DEFAULT_CELL, Q_MAX_RANGE, CellParameters
 
 STATE_NAMES = ("tb", "vo", "vsn", "vsp", "qnb", "qns", "qpb", "qps")
 

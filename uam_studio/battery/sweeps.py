@@ -18,11 +18,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError, check_range
-from ..flight import leg_feasible, leg_profile, min_leg_distance_km
-from ..flight.profile import MAX_DISTANCE_KM
-from .parameters import DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0
-from .simulate import SimulationResult, simulate
+from uam_studio.battery.parameters import DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0
+from uam_studio.battery.simulate import SimulationResult, simulate
+from uam_studio.errors import InputError, check_range
+from uam_studio.flight import leg_feasible, leg_profile, min_leg_distance_km
+from uam_studio.flight.profile import MAX_DISTANCE_KM
 
 __all__ = ["Curve", "curves", "eod_grid", "max_leg_distance_km", "simulate_profiles"]
 

@@ -121,9 +121,9 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 
 
 def _run_nasa(args: argparse.Namespace) -> int:
-    from ..battery.nasa_data import load_nasa_folder, nasa_folder
-    from ..battery.nasa_eval import evaluate_nasa, format_table
-    from ..battery.nasa_model import bundled_model
+    from ..battery.real.nasa_data import load_nasa_folder, nasa_folder
+    from ..battery.real.nasa_eval import evaluate_nasa, format_table
+    from ..battery.real.nasa_model import bundled_model
 
     context_s = check_range("--context-s", 300.0 if args.context_s is None else args.context_s, 10.0, 3600.0, " s")
     cutoff_v = check_range("--cutoff-v", 3.0 if args.cutoff_v is None else args.cutoff_v, 2.5, 3.6, " V")

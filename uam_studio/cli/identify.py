@@ -10,7 +10,7 @@ from uam_studio.cli.common import EXIT_INPUT, EXIT_OK, CliExit, Command
 def _add_identify_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("cell", choices=["vtc6", "nasa"],
                    help="vtc6: the CMU eVTOL dataset's Sony-Murata VTC6 cell's parameter set; nasa: the NASA PCoE "
-                        "end-of-discharge predictor's cross-cell numbers (battery/nasa_model.py), from every cell "
+                        "end-of-discharge predictor's cross-cell numbers (battery/real/nasa_model.py), from every cell "
                         "file in --data")
     p.add_argument("--data", default=None, metavar="PATH",
                    help="vtc6: the CMU eVTOL dataset's folder (default: $UAM_STUDIO_CMU_DATA; DOI 10.1184/R1/14226830); "
@@ -22,15 +22,15 @@ def _add_identify_arguments(p: argparse.ArgumentParser) -> None:
 
 def _run_identify(args: argparse.Namespace) -> int:
     if args.cell == "nasa":
-        from ..battery.nasa_data import load_nasa_folder, nasa_folder
-        from ..battery.nasa_eval import fit_bundled, models_literal
+        from ..battery.real.nasa_data import load_nasa_folder, nasa_folder
+        from ..battery.real.nasa_eval import fit_bundled, models_literal
 
         if args.hold_out != "none":
             raise CliExit("--hold-out: only with 'identify vtc6'", EXIT_INPUT)
         print(models_literal(fit_bundled(load_nasa_folder(nasa_folder(args.data)))))
         return EXIT_OK
-    from ..battery.cmu_data import data_folder
-    from ..battery.real_cells import cell_literal, identify_vtc6
+    from ..battery.real.cmu_data import data_folder
+    from ..battery.real.cmu_replay import cell_literal, identify_vtc6
 
     print(cell_literal(identify_vtc6(data_folder(args.data), hold_out=args.hold_out), args.hold_out))
     return EXIT_OK

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from ..battery import DEFAULT_EOD_V
-from ..battery.fit_intervals import crossing_times
+from ..battery.health.intervals import crossing_times
 
 DECODER_CAL_SEED = 424242  # seed of the decoder-error calibration flights (disjoint from training and evaluation)
 DECODER_CAL_N = 400  # flights

@@ -1,5 +1,5 @@
 """Held-out evaluation of a Dynaformer: EOD timing (RTE), voltage RMSE, health correlations, each
-beside the physics model's maximum-likelihood fit (:mod:`uam_studio.battery.fit`), the reference.
+beside the physics model's maximum-likelihood fit (:mod:`uam_studio.battery.health.fit`), the reference.
 
 RTE = |t_EOD,pred - t_EOD,true| / t_EOD,true with EOD at 3.0 V, on profiles whose
 true EOD falls inside the profile. RMSE is over the true-valid samples (above 3.0 V).
@@ -19,8 +19,8 @@ import numpy as np
 
 from ..battery import rest_voltage, simulate
 from ..battery.eod import first_below
-from ..battery.fit import fit_health, fit_health_batch
-from ..battery.fit_intervals import crossing_times, eod_intervals
+from ..battery.health.fit import fit_health, fit_health_batch
+from ..battery.health.intervals import crossing_times, eod_intervals
 from ..battery.parameters import DEFAULT_CELL, DEFAULT_EOD_V, CellParameters
 from .data import make_dataset
 from .decoder_error import decode_given_health
@@ -163,7 +163,7 @@ def format_report(m: dict) -> str:
 def physics_fit_eod(ds, context_s: int = 20, noise_v: float = 0.0, seed: int = 0, batch: int = 64,
                     cell: CellParameters = DEFAULT_CELL) -> np.ndarray:
     """The physics fit's predicted voltage [N, T] for a DischargeSet: (q_max, R0) fitted by maximum
-    likelihood (:func:`uam_studio.battery.fit.fit_health_batch`) on the same noisy ``context_s``
+    likelihood (:func:`uam_studio.battery.health.fit.fit_health_batch`) on the same noisy ``context_s``
     contexts as :func:`predict_set` (same seed, batch and draws), then the physics model along the
     whole profile (both on ``cell``, the set's type). The context is returned as observed, as the
     Dynaformer does."""

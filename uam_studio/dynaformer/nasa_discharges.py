@@ -1,7 +1,7 @@
 """The bundled NASA Dynaformer scored zero-shot on real NASA PCoE discharges, under the online protocol of
-:mod:`uam_studio.battery.nasa_predict`.
+:mod:`uam_studio.battery.real.nasa_predict`.
 
-What it reads: only a :class:`~uam_studio.battery.nasa_predict.KnownDischarge` per prediction, i.e. the
+What it reads: only a :class:`~uam_studio.battery.real.nasa_predict.KnownDischarge` per prediction, i.e. the
 discharge's sample times (s from its start), its whole planned current (A, + = discharge) and its voltage
 (V) up to ``context_s`` s after the first loaded sample. The measured discharge (all its voltage) is read
 only by :func:`score_dynaformer`, for the true time to the cut-off.
@@ -34,9 +34,9 @@ import math
 import numpy as np
 import torch
 
-from uam_studio.battery.fit_intervals import with_preroll
-from uam_studio.battery.nasa_data import LOADED_A, NasaCell, NasaDischarge
-from uam_studio.battery.nasa_predict import KnownDischarge, known_before
+from uam_studio.battery.health.intervals import with_preroll
+from uam_studio.battery.real.nasa_data import LOADED_A, NasaCell, NasaDischarge
+from uam_studio.battery.real.nasa_predict import KnownDischarge, known_before
 from uam_studio.dynaformer.model import Dynaformer
 from uam_studio.dynaformer.predictor import DynaformerPredictor, load_pretrained
 from uam_studio.dynaformer.predictor_inputs import leading_rest

@@ -26,8 +26,9 @@ from scipy.ndimage import median_filter
 
 from ..battery import DEFAULT_EOD_V, rest_voltage, simulate
 from ..battery.eod import first_below
-from ..battery.fit import fit_health_batch
-from ..battery.fit_intervals import (
+from ..battery.health.estimate import MIN_CONTEXT_S, HealthEstimate
+from ..battery.health.fit import fit_health_batch
+from ..battery.health.intervals import (
     EodInterval,
     band_from_sigma_points,
     crossing_times,
@@ -35,7 +36,6 @@ from ..battery.fit_intervals import (
     two_sided_z,
     with_preroll,
 )
-from ..battery.health_estimate import MIN_CONTEXT_S, HealthEstimate
 from ..errors import InputError, check_range
 from .artifact import WeightsError, bundled_weights_path, load_artifact
 from .cells import dynaformer_cell
@@ -58,7 +58,7 @@ class DynaformerPredictor:
     """A loaded Dynaformer plus its health PCA. Thread-safe for inference.
 
     Health source (``health_source`` of every method): ``"fit"`` reads the whole context with the
-    physics model's maximum-likelihood fit (:func:`uam_studio.battery.fit.fit_health`); the decoder
+    physics model's maximum-likelihood fit (:func:`uam_studio.battery.health.fit.fit_health`); the decoder
     then reads that cell as it was trained to: the take-off estimator's reading of the fitted cell's
     noise-free take-off, simulated along the profile's first 20 s (:meth:`_reobserved_latent`).
     ``"model"`` uses the weights' own estimator on the measured context (the take-off regression on
@@ -170,7 +170,7 @@ class DynaformerPredictor:
         """Decoded voltage (V) [B, n] for latents [B, d] and a 1 s current grid [B, n] (A). With
         ``skip_rest``, each row's leading rest (:func:`leading_rest`) is cut before decoding and
         filled with the rested full cell's voltage. With ``estimates`` (one per row), each row's
-        pre-roll (:func:`uam_studio.battery.fit_intervals.with_preroll`) is decoded before it and dropped.
+        pre-roll (:func:`uam_studio.battery.health.intervals.with_preroll`) is decoded before it and dropped.
         With ``points`` [B, 2] (q_max C, r0 ohm) instead of latents: :meth:`_reobserved_latent`."""
         n_out = grid.shape[1]
         grid, k_pre = with_preroll(estimates, grid, 1.0) if estimates is not None else (grid, 0)
@@ -233,7 +233,7 @@ class DynaformerPredictor:
     # ------------------------------------------------------------------ public API
     def health_estimate(self, context_current_a, context_voltage_v, dt_s: float = 1.0,
                         noise_v: float | None = None) -> HealthEstimate | list[HealthEstimate]:
-        """The physics fit of the context (:func:`uam_studio.battery.fit.fit_health`): q_max (C), R0
+        """The physics fit of the context (:func:`uam_studio.battery.health.fit.fit_health`): q_max (C), R0
         (ohm), covariance. One :class:`HealthEstimate` for a 1-D context, a list for [B, L]. Pass it
         back as ``estimate=`` to :meth:`predict`, :meth:`eod_interval_s`, :meth:`voltage_band` to skip
         refitting.
@@ -351,11 +351,11 @@ class DynaformerPredictor:
 
         median: the Dynaformer at the fitted health. The health part of the spread: the health at the
         two ends of the physics model's first-order EOD interval
-        (:func:`uam_studio.battery.fit_intervals.interval_points`), decoded. The decoder's own error: the
+        (:func:`uam_studio.battery.health.intervals.interval_points`), decoded. The decoder's own error: the
         band of :meth:`decoder_error` about the median. The two spreads add in quadrature. One physics
         call (5 trajectories per row) and one decoder call (3 per row).
 
-        :return: for a 1-D input an :class:`~uam_studio.battery.fit_intervals.EodInterval` (an end the
+        :return: for a 1-D input an :class:`~uam_studio.battery.health.intervals.EodInterval` (an end the
             profile does not reach censored at its length); else three arrays [B], ``math.inf`` there.
         """
         dt, lv, cur, ests, obs, single = self._interval_inputs(context_current_a, context_voltage_v, current_a,
@@ -390,7 +390,7 @@ class DynaformerPredictor:
                      health_source: str | None = None):
         """Pointwise ``level`` band (low, median, high) of the predicted voltage (V) on ``current_a``'s
         grid, a band to draw. median = :meth:`predict`. Spread: the 5 health sigma points
-        (:meth:`~uam_studio.battery.health_estimate.HealthEstimate.sigma_points`) decoded, linearised per sample,
+        (:meth:`~uam_studio.battery.health.estimate.HealthEstimate.sigma_points`) decoded, linearised per sample,
         plus the decoder's own error (:meth:`decoder_error`: -+ h_v, and the median curve stretched
         in time by -+ h_t) in quadrature. The observed context is returned as observed in all three.
 

@@ -32,7 +32,12 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 
-from uam_studio.battery.cmu_data import data_folder, load_cell_log, reference_discharges, resampled_missions
+from uam_studio.battery.real.cmu_data import (
+    data_folder,
+    load_cell_log,
+    reference_discharges,
+    resampled_missions,
+)
 from uam_studio.errors import InputError, check_range
 
 __all__ = ["AGING_LAW", "END_OF_LIFE_FRACTION", "LIFE_FILES", "AgingLaw", "LifePoints", "PackHealth",
@@ -105,7 +110,7 @@ class LifePoints:
 
 def life_points(data: str | Path | None = None) -> list[LifePoints]:
     """The four lives' reference discharges (:class:`LifePoints`), from the dataset's folder (``data``,
-    else :func:`~uam_studio.battery.cmu_data.data_folder`'s search)."""
+    else :func:`~uam_studio.battery.real.cmu_data.data_folder`'s search)."""
     folder = data_folder(data, needs=LIFE_FILES[0])
     out = []
     for name in LIFE_FILES:

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 
-from uam_studio.battery.nasa_data import NasaDataError, load_nasa_folder, nasa_folder
+from uam_studio.battery.real.nasa_data import NasaDataError, load_nasa_folder, nasa_folder
 from uam_studio.errors import InputError
 from uam_studio.fleet.aging import AGING_LAW, T_REF_C, ZERO_C_K, AgingLaw, LifePoints, fit_resistance_growth
 

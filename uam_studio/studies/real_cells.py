@@ -10,7 +10,7 @@ models on a real VTC6? Every row is scored on measurements; the held-out status 
   landing or the whole cell, and the NASA cell (as bundled, and with q_max/R0 fitted to the mission);
 - health: q_max/R0 fitted to the first 20/60/120 s of the mission (with the VTC6 fleet's prior, as by
   default), the landing's lowest voltage predicted by power with its 90% interval (draws of the fit's
-  uncertainty, model-discrepancy factor and flags included: :mod:`uam_studio.battery.fit_quality`);
+  uncertainty, model-discrepancy factor and flags included: :mod:`uam_studio.battery.health.quality`);
   and the same without the prior (the likelihood alone). On three parameter sets: the two refits that
   never read the scored landing (:data:`SET_LANDING`, :data:`SET_CELL`; held out, the default: the
   bundled literals ``VTC6_LANDING_HELD_OUT`` and ``VTC6_CELL_HELD_OUT``, or identified again from the
@@ -38,7 +38,8 @@ from pathlib import Path
 import numpy as np
 
 from uam_studio.battery import fit_health, simulate, simulate_constant_power
-from uam_studio.battery.cmu_data import (
+from uam_studio.battery.parameters import NASA_18650, VTC6, VTC6_CELL_HELD_OUT, VTC6_LANDING_HELD_OUT, Cell
+from uam_studio.battery.real.cmu_data import (
     LANDING,
     LIFE_FILES,
     MISSION_FILE,
@@ -48,8 +49,7 @@ from uam_studio.battery.cmu_data import (
     mission_cycle,
     reference_discharges,
 )
-from uam_studio.battery.parameters import NASA_18650, VTC6, VTC6_CELL_HELD_OUT, VTC6_LANDING_HELD_OUT, Cell
-from uam_studio.battery.real_cells import ZERO_C, identify_vtc6, replay_mission
+from uam_studio.battery.real.cmu_replay import ZERO_C, identify_vtc6, replay_mission
 from uam_studio.errors import InputError
 
 CONTEXTS_S = (20, 60, 120)
@@ -144,7 +144,7 @@ def dynaformer_rows(mission: MissionLog, cell: str = "nasa18650") -> list[dict]:
     measured current (A), with its default health (the physics fit of the context on the weights' cell);
     ``physics_error_mv``: that fit flown on the physics model along the same current (the reference).
     A refusal or a missing weights file is a row with its one-line ``error``."""
-    from uam_studio.battery.fit_intervals import voltage_band as physics_band
+    from uam_studio.battery.health.intervals import voltage_band as physics_band
     from uam_studio.dynaformer import load_pretrained
 
     log = mission.log

@@ -5,14 +5,14 @@ For each life (VAH07, VAH09, VAH27, VAH30) held out in turn:
 
 1. **The parameter set** is identified on the other three (:func:`identify_without`: each one's first
    C/5 reference discharge and first four missions, the recipe of
-   :func:`~uam_studio.battery.real_cells.vtc6_fit_segments`); nothing of the held-out cell is read.
+   :func:`~uam_studio.battery.real.cmu_replay.vtc6_fit_segments`); nothing of the held-out cell is read.
 2. **The health** for mission k comes from mission k-1 of the same cell (:func:`fit_mission`): q_max
    (C) and R0 (ohm) fitted to all its clean samples along its interpolated current, from a rested start
    whose charge matches the rest voltage measured before its take-off (the rule of step 3; a sample
    before the take-off that is below a later one of the mission is no rest before it,
    :func:`rest_before`: that mission gives no health and is not predicted), with a
    Laplace covariance whose std is the residuals' own and, where they are not white noise, the HAC
-   factor of :mod:`uam_studio.battery.fit_quality` (the model's discrepancy).
+   factor of :mod:`uam_studio.battery.health.quality` (the model's discrepancy).
 3. **The prediction** (:func:`predict_landing`): mission k flown along its own interpolated current from
    a rested start whose charge matches the rest voltage measured just before its take-off, for 200
    draws of that health; the 90% interval of the voltage at each of its landing's sampled times. A
@@ -34,7 +34,15 @@ from pathlib import Path
 
 import numpy as np
 
-from uam_studio.battery.cmu_data import (
+from uam_studio.battery.health.estimate import FIT_Q_RANGE
+from uam_studio.battery.health.quality import (
+    excess_factor,
+    hac_covariance,
+    not_white,
+    residual_autocorrelation,
+)
+from uam_studio.battery.parameters import Cell, CellParameters
+from uam_studio.battery.real.cmu_data import (
     LANDING,
     LIFE_FILES,
     CellLog,
@@ -42,12 +50,8 @@ from uam_studio.battery.cmu_data import (
     data_folder,
     load_cell_log,
 )
-from uam_studio.battery.cmu_data import resampled_missions as find_missions
-from uam_studio.battery.fit_quality import excess_factor, hac_covariance, not_white, residual_autocorrelation
-from uam_studio.battery.health_estimate import FIT_Q_RANGE
-from uam_studio.battery.identify import FitSegment, identify_cell
-from uam_studio.battery.parameters import Cell, CellParameters
-from uam_studio.battery.real_cells import (
+from uam_studio.battery.real.cmu_data import resampled_missions as find_missions
+from uam_studio.battery.real.cmu_replay import (
     START_Q_MAX,
     START_R0,
     ZERO_C,
@@ -56,6 +60,7 @@ from uam_studio.battery.real_cells import (
     reference_segment,
     vtc6_start,
 )
+from uam_studio.battery.real.identify import FitSegment, identify_cell
 from uam_studio.battery.simulate import simulate
 from uam_studio.battery.solver import output_voltage
 from uam_studio.battery.state import rested_state
@@ -157,7 +162,7 @@ def calibrated(low: float, median: float, high: float, margin: float) -> tuple[f
 
 def segments_without(folder: str | Path, held: str, n_missions: int = 4) -> list[FitSegment]:
     """The identification data without the life ``held`` (a file name of
-    :data:`~uam_studio.battery.cmu_data.LIFE_FILES`): each other life's first C/5 reference discharge
+    :data:`~uam_studio.battery.real.cmu_data.LIFE_FILES`): each other life's first C/5 reference discharge
     and its first ``n_missions`` missions, named after their cell."""
     if held not in LIFE_FILES:
         raise InputError("held", f"{held!r}; allowed {', '.join(LIFE_FILES)}")
@@ -339,7 +344,7 @@ def score_life(log: CellLog, cell: Cell, seed: int = 38200, every: int = 1) -> L
 
 
 def life_file(cell: str) -> str:
-    """The file of :data:`~uam_studio.battery.cmu_data.LIFE_FILES` for a cell's name ("VAH27") or file name."""
+    """The file of :data:`~uam_studio.battery.real.cmu_data.LIFE_FILES` for a cell's name ("VAH27") or file name."""
     for name, short in zip(LIFE_FILES, LIFE_NAMES):
         if cell in (name, short):
             return name

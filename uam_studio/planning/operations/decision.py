@@ -19,7 +19,7 @@ class Decision:
     ``wind_shift_sd_kts``), the planned remaining ``route`` and ``altitudes_m``, the next leg
     (``next_to``, ``next_altitude_m``; None: the flight ends), ``compute_s`` (s of wall time) and
     ``health_flags``, the flags of the health fits behind the estimate
-    (:mod:`uam_studio.battery.fit_quality`: ``"misfit"``, ``"outside fleet range"``), and what the
+    (:mod:`uam_studio.battery.health.quality`: ``"misfit"``, ``"outside fleet range"``), and what the
     leg just flown told about the wind: ``leg_wind_kts`` (kt, read off its measured duration),
     ``leg_wind_vs_forecast_kts`` (kt, that wind minus the forecast) and ``wind_surprise`` (with this
     leg the belief came to hold that the weather changed); None before the first leg. What it believes

@@ -1,5 +1,5 @@
 """What the operator believes about its cell's health: the fleet prior, times the health fit of every
-charge flown so far (:func:`uam_studio.battery.fit.fit_health` of all readings since each full
+charge flown so far (:func:`uam_studio.battery.health.fit.fit_health` of all readings since each full
 charge, fitted without the prior and multiplied by it once).
 
 Public API: :class:`HealthBelief` (``observe`` readings, ``recharged`` at the vertiport, ``health``: a
@@ -13,10 +13,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from uam_studio.battery.fit import fit_health
-from uam_studio.battery.fit_quality import FLAG_MISFIT, FLAG_OUTSIDE_FLEET, FLEET_Z, fit_flags
-from uam_studio.battery.health_estimate import MIN_CONTEXT_S, HealthEstimate, clip_to_box
-from uam_studio.battery.health_prior import Q_REF_C, HealthPrior, combine, fleet_prior, hold_to_fleet
+from uam_studio.battery.health.estimate import MIN_CONTEXT_S, HealthEstimate, clip_to_box
+from uam_studio.battery.health.fit import fit_health
+from uam_studio.battery.health.prior import Q_REF_C, HealthPrior, combine, fleet_prior, hold_to_fleet
+from uam_studio.battery.health.quality import FLAG_MISFIT, FLAG_OUTSIDE_FLEET, FLEET_Z, fit_flags
 from uam_studio.errors import InputError
 from uam_studio.planning.legs import DT_S
 
@@ -80,7 +80,7 @@ class HealthBelief:
     :param noise_v: the voltage sensor's stated noise std (V), or None to estimate it from the residuals.
     :param eod_v: the cut-off (V).
     :param prior: what is known before any reading; default: the paper's health box (the fleet of the
-        default cell, :func:`~uam_studio.battery.health_prior.fleet_prior`).
+        default cell, :func:`~uam_studio.battery.health.prior.fleet_prior`).
     """
 
     def __init__(self, noise_v: float | None, eod_v: float, prior: HealthPrior | None = None) -> None:
@@ -113,7 +113,7 @@ class HealthBelief:
 
     def health(self) -> BelievedHealth:
         """The belief from all readings so far and the prior. Readings that put the cell beyond its prior's box on the optimistic side are held with caution
-        (:func:`~uam_studio.battery.health_prior.hold_to_fleet`: a cell better than any of its fleet is
+        (:func:`~uam_studio.battery.health.prior.hold_to_fleet`: a cell better than any of its fleet is
         planned as the fleet's best, with the difference in its std).
 
         :raises InputError: fewer than :data:`MIN_FIT_SAMPLES` readings in all.
@@ -136,7 +136,7 @@ class HealthBelief:
 
     def flags(self) -> tuple[str, ...]:
         """The flags of the fits behind the belief (this charge's latest and the earlier charges'), each
-        once, in :func:`~uam_studio.battery.fit_quality.fit_flags` order."""
+        once, in :func:`~uam_studio.battery.health.quality.fit_flags` order."""
         fits = self.past + ([self.estimate] if self.estimate is not None else [])
         return fit_flags(any(FLAG_MISFIT in e.flags for e in fits), any(FLAG_OUTSIDE_FLEET in e.flags for e in fits))
 

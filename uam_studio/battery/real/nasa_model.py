@@ -1,9 +1,9 @@
-"""The bundled numbers of the NASA end-of-discharge predictor (:mod:`uam_studio.battery.nasa_predict`), one
-:class:`~uam_studio.battery.nasa_predict.NasaEodModel` per (context s, cut-off V) setting.
+"""The bundled numbers of the NASA end-of-discharge predictor (:mod:`uam_studio.battery.real.nasa_predict`), one
+:class:`~uam_studio.battery.real.nasa_predict.NasaEodModel` per (context s, cut-off V) setting.
 
 Fitted on all 26 lives of ``../shared/data/nasa_pcoe`` (``trained_on``): every number printed here is
 in-sample for those cells. Scores of those cells come from models refitted without the cell scored (leave
-one cell out, :func:`uam_studio.battery.nasa_eval.evaluate_nasa`); a cell outside them is scored with these.
+one cell out, :func:`uam_studio.battery.real.nasa_eval.evaluate_nasa`); a cell outside them is scored with these.
 Reproduce (about 20 s)::
 
     uam-studio identify nasa --data ../shared/data/nasa_pcoe > literal.txt
@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from uam_studio.battery.nasa_predict import NasaEodModel
+from uam_studio.battery.real.nasa_predict import NasaEodModel
 
 __all__ = ["BUNDLED", "bundled_model"]
 

@@ -11,7 +11,7 @@ Public API:
 
 A 20 s take-off says much about R0 and little about q_max; with a noisy sensor it says little about
 either, and the fleet's range is then most of what is known. The health fit
-(:func:`uam_studio.battery.fit.fit_health`) multiplies its likelihood's Gaussian by this prior by
+(:func:`uam_studio.battery.health.fit.fit_health`) multiplies its likelihood's Gaussian by this prior by
 default; the operator, which combines the fits of several charges, multiplies the prior in once.
 """
 
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .parameters import DEFAULT_CELL, CellParameters
+from uam_studio.battery.parameters import DEFAULT_CELL, CellParameters
 
 __all__ = ["Q_REF_C", "HealthPrior", "combine", "fleet_prior"]
 

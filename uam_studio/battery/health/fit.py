@@ -4,14 +4,14 @@ physics model, with a Laplace (Gauss-Newton) covariance.
 Public API:
 
 - :func:`fit_health`: one context (current in A, voltage in V, from the log's first sample) ->
-  :class:`~uam_studio.battery.health_estimate.HealthEstimate` (q_max in C, R0 in ohm, their
+  :class:`~uam_studio.battery.health.estimate.HealthEstimate` (q_max in C, R0 in ohm, their
   covariance, the voltage noise).
 - :func:`fit_health_batch`: the same for B contexts of one length, fitted together (one batched
   :func:`~uam_studio.battery.simulate` call per iteration for all of them).
 
 The EOD intervals (s) and voltage bands (V) along a planned profile are in
-:mod:`uam_studio.battery.fit_intervals`; the likelihood (residuals, Levenberg-Marquardt, the pre-roll
-search) in :mod:`uam_studio.battery.fit_likelihood`.
+:mod:`uam_studio.battery.health.intervals`; the likelihood (residuals, Levenberg-Marquardt, the pre-roll
+search) in :mod:`uam_studio.battery.health.likelihood`.
 
 The model. The cell is full and rested at the log's first sample (or in ``initial_state``); a log
 that starts at rest before the take-off has 0 A samples first, which leave a rested, full cell
@@ -19,7 +19,7 @@ unchanged. A log that starts under load may have begun up to 60 s into it: that 
 logged current since full charge, for a fitted, continuous time) becomes a third parameter when it
 explains the data significantly better (see :func:`fit_health`). Voltage noise is Gaussian and white with an unknown std
 (estimated from the residuals, never below
-:data:`~uam_studio.battery.fit_likelihood.NOISE_FLOOR_V`). The measured current is used as
+:data:`~uam_studio.battery.health.likelihood.NOISE_FLOOR_V`). The measured current is used as
 the model's input: current-sensor noise enters only through the ohmic lag (tau 6 s) and the charge
 integral, both small against the voltage noise at tens of mA (errors-in-variables are ignored).
 
@@ -28,17 +28,17 @@ linear. Each iteration simulates the trial point and its finite-difference neigh
 batched call, over the whole context (the state depends on all of it; every sample is a residual). A coarse start (5 values
 of w, R0 solved in closed form for each: the voltage is linear in R0 up to the weak thermal
 coupling) keeps it out of local minima. The estimate is bounded to the box
-:data:`~uam_studio.battery.health_estimate.FIT_Q_RANGE` x
-:data:`~uam_studio.battery.health_estimate.FIT_R0_RANGE`.
+:data:`~uam_studio.battery.health.estimate.FIT_Q_RANGE` x
+:data:`~uam_studio.battery.health.estimate.FIT_R0_RANGE`.
 
 The uncertainty. Covariance of (w, R0) = sigma^2 f (J^T J)^-1 at the optimum (sigma: the noise
-std; f >= 1: the model-discrepancy factor of :mod:`uam_studio.battery.fit_quality`, from the
+std; f >= 1: the model-discrepancy factor of :mod:`uam_studio.battery.health.quality`, from the
 residuals' HAC covariance where they are correlated or, with a stated noise, above it; 1 where they
 look like white noise), plus a weak Gaussian prior as wide as the box; with a fitted pre-roll, the (w, R0)
 marginal. A context that does not fit the model, or whose likelihood puts the cell outside its type's
 fleet range, is flagged (``HealthEstimate.flags``).
 By default (``prior=True``) this Gaussian is then multiplied by the cell type's fleet prior
-(:func:`~uam_studio.battery.health_prior.fleet_prior`: the health range its fleet spans, which is
+(:func:`~uam_studio.battery.health.prior.fleet_prior`: the health range its fleet spans, which is
 known before any measurement): it decides the estimate only where the context says little (a short
 take-off, a noisy sensor). Draws and intervals are Gaussian in (w, R0) and clipped to the box. No
 calibration factor (coverage per noise x context cell: ``benchmarks/bench_intervals.py``).
@@ -48,15 +48,23 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InputError, check_range
-from .fit_likelihood import (
+from uam_studio.battery.health.estimate import (
+    PRIOR_PRECISION,
+    HealthEstimate,
+    check_context,
+    check_noise,
+    cov_qr,
+    rep_state,
+)
+from uam_studio.battery.health.likelihood import (
     NOISE_FLOOR_V,
     current_noise_covariance,
     levenberg_marquardt,
     search_preroll,
     start_point,
 )
-from .fit_quality import (
+from uam_studio.battery.health.prior import Q_REF_C, HealthPrior, disagrees, fleet_prior
+from uam_studio.battery.health.quality import (
     FLEET_Z,
     MAX_FIT_RMS_V,
     current_noise_a,
@@ -66,11 +74,10 @@ from .fit_quality import (
     not_white,
     residual_autocorrelation,
 )
-from .health_estimate import PRIOR_PRECISION, HealthEstimate, check_context, check_noise, cov_qr, rep_state
-from .health_prior import Q_REF_C, HealthPrior, disagrees, fleet_prior
-from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, CellParameters
-from .simulate import EOD_RANGE
-from .state import BatteryState
+from uam_studio.battery.parameters import DEFAULT_CELL, DEFAULT_EOD_V, CellParameters
+from uam_studio.battery.simulate import EOD_RANGE
+from uam_studio.battery.state import BatteryState
+from uam_studio.errors import InputError, check_range
 
 __all__ = ["PREROLL_CHI2", "REST_CURRENT_A", "fit_health", "fit_health_batch"]
 
@@ -192,31 +199,31 @@ def fit_health(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | None = 
 
     :param current_a: measured per-cell current (A), shape [T], ``current_a[k]`` flowing during
         [k dt, (k+1) dt) from the log's first sample; at least
-        :data:`~uam_studio.battery.health_estimate.MIN_CONTEXT_S` s.
+        :data:`~uam_studio.battery.health.estimate.MIN_CONTEXT_S` s.
     :param voltage_v: measured terminal voltage (V) at the end of each step, shape [T].
     :param dt_s: sample step (s).
     :param noise_v: voltage-noise std (V); None: estimated from the residuals. Never below
-        :data:`~uam_studio.battery.fit_likelihood.NOISE_FLOOR_V`.
+        :data:`~uam_studio.battery.health.likelihood.NOISE_FLOOR_V`.
     :param eod_v: the cut-off (V) of later predictions; checked here, the fit itself uses every
-        sample the model keeps above :data:`~uam_studio.battery.health_estimate.CURVE_CUTOFF_V`.
+        sample the model keeps above :data:`~uam_studio.battery.health.estimate.CURVE_CUTOFF_V`.
     :param initial_state: the cell's state at the log's first sample; default: see ``start``.
     :param start: where the log starts, without ``initial_state``. ``"auto"``: a log whose first
         sample draws under :data:`REST_CURRENT_A` starts full and at rest; one that starts under load
         may have begun up to 60 s into the load: unless the fit from full charge is exact, a
         third parameter, the pre-roll (0-60 s of the first logged current from full charge,
         continuous; started from the best whole step of
-        :func:`~uam_studio.battery.fit_likelihood.search_preroll`), is fitted as well, and kept
+        :func:`~uam_studio.battery.health.likelihood.search_preroll`), is fitted as well, and kept
         where it lowers the chi-square by more than :data:`PREROLL_CHI2`
         (``HealthEstimate.preroll_s``; the covariance is then the (w, R0) marginal).
         ``"full"``: full and rested at the first sample.
     :param cell: the cell type's parameter set (its fleet's health range is the default prior).
     :param prior: True: the likelihood's Gaussian in (w, R0) multiplied by the fleet prior of ``cell``
-        (:func:`~uam_studio.battery.health_prior.fleet_prior`); a :class:`HealthPrior`: by that one;
+        (:func:`~uam_studio.battery.health.prior.fleet_prior`); a :class:`HealthPrior`: by that one;
         False: the likelihood alone (with a weak prior as wide as the fit's box), for a caller that
         combines several fits with its own prior once.
     :raises InputError: NaN or inf, a context shorter than 20 s, mismatched lengths, a negative
         noise level, a context that charges the cell (net), or one the model cannot explain at all
-        (RMS residual above :data:`~uam_studio.battery.fit_quality.MAX_FIT_RMS_V`), naming the field.
+        (RMS residual above :data:`~uam_studio.battery.health.quality.MAX_FIT_RMS_V`), naming the field.
     """
     check_range("eod_v", eod_v, *EOD_RANGE, " V")
     cur, volt, dt = check_context(current_a, voltage_v, dt_s, ndim=(1,))

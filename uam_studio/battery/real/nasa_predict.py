@@ -26,7 +26,7 @@ How (:class:`CellBelief`, one per cell, carried along its life):
 
 A condition outside what the training cells cover (a load or ambient with no training discharge near
 it) is flagged, and its interval widened by :data:`UNSEEN_WIDEN`. The fitted numbers live in one
-:class:`NasaEodModel` (see :mod:`uam_studio.battery.nasa_model` for the bundled one and how to refit it).
+:class:`NasaEodModel` (see :mod:`uam_studio.battery.real.nasa_model` for the bundled one and how to refit it).
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from uam_studio.battery.nasa_data import LOADED_A, NasaDischarge, same_conditions
+from uam_studio.battery.real.nasa_data import LOADED_A, NasaDischarge, same_conditions
 
 __all__ = ["EARLY_ERRORS", "RISKS", "UNSEEN_WIDEN", "CellBelief", "charge_to_cutoff_ah", "EodPrediction", "KnownDischarge", "NasaEodModel",
            "ambient_band", "known_before", "voltage_shift_v"]

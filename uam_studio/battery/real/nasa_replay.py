@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from uam_studio.battery.eod import first_below
-from uam_studio.battery.nasa_data import NasaCell, load_nasa_cell, load_nasa_folder, persistence_s
-from uam_studio.battery.nasa_eval import condition_of, fit_nasa_model, progpy_default_curve
-from uam_studio.battery.nasa_model import bundled_model
-from uam_studio.battery.nasa_predict import CellBelief, EodPrediction, NasaEodModel, known_before
+from uam_studio.battery.real.nasa_data import NasaCell, load_nasa_cell, load_nasa_folder, persistence_s
+from uam_studio.battery.real.nasa_eval import condition_of, fit_nasa_model, progpy_default_curve
+from uam_studio.battery.real.nasa_model import bundled_model
+from uam_studio.battery.real.nasa_predict import CellBelief, EodPrediction, NasaEodModel, known_before
 from uam_studio.errors import InputError, check_range
 
 __all__ = ["NasaReplay", "model_for", "replay_discharge"]

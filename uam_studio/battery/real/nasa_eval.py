@@ -1,4 +1,4 @@
-"""Every NASA discharge's end predicted online (:mod:`uam_studio.battery.nasa_predict`), scored against what
+"""Every NASA discharge's end predicted online (:mod:`uam_studio.battery.real.nasa_predict`), scored against what
 happened, beside the persistence baseline and progpy's default model with no health estimate.
 
 - :func:`fit_nasa_model`: the cross-cell numbers of a :class:`NasaEodModel` from training cells.
@@ -18,8 +18,15 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from uam_studio.battery.nasa_data import LOADED_A, NasaCell, NasaDischarge, persistence_s, same_conditions
-from uam_studio.battery.nasa_predict import (
+from uam_studio.battery.parameters import DEFAULT_Q_MAX, DEFAULT_R0
+from uam_studio.battery.real.nasa_data import (
+    LOADED_A,
+    NasaCell,
+    NasaDischarge,
+    persistence_s,
+    same_conditions,
+)
+from uam_studio.battery.real.nasa_predict import (
     EARLY_ERRORS,
     RISKS,
     Z_LEVELS,
@@ -30,7 +37,6 @@ from uam_studio.battery.nasa_predict import (
     known_before,
     voltage_shift_v,
 )
-from uam_studio.battery.parameters import DEFAULT_Q_MAX, DEFAULT_R0
 from uam_studio.battery.simulate import simulate
 
 __all__ = ["BUNDLED_SETTINGS", "ScoredDischarge", "condition_of", "evaluate_nasa", "fit_bundled", "fit_nasa_model",
@@ -261,7 +267,7 @@ BUNDLED_SETTINGS = ((300.0, 3.0), (60.0, 3.0), (300.0, 3.2), (60.0, 3.2))
 
 def fit_bundled(cells: list[NasaCell]) -> list[NasaEodModel]:
     """One model per :data:`BUNDLED_SETTINGS`, each fitted on every cell given (each loaded at its cut-off)."""
-    from uam_studio.battery.nasa_data import load_nasa_cell
+    from uam_studio.battery.real.nasa_data import load_nasa_cell
 
     out = []
     for context_s, cutoff_v in BUNDLED_SETTINGS:
@@ -275,7 +281,7 @@ def _r(x: float) -> str:
 
 
 def models_literal(models: list[NasaEodModel]) -> str:
-    """Python source of ``BUNDLED = (...)`` for :mod:`uam_studio.battery.nasa_model`."""
+    """Python source of ``BUNDLED = (...)`` for :mod:`uam_studio.battery.real.nasa_model`."""
     lines = ["BUNDLED = ("]
     for m in models:
         z = ", ".join(f"{b!r}: ({', '.join(_r(v) for v in q)})" for b, q in m.z.items())

@@ -3,9 +3,9 @@ at trial points (w, R0 in ohm[, pre-roll in s]), w = 6500 C / q_max, its residua
 finite-difference Jacobian, the coarse start, the Levenberg-Marquardt iteration, and the search for
 the pre-roll of a log that starts under load.
 
-Every sample the model keeps above :data:`~uam_studio.battery.health_estimate.CURVE_CUTOFF_V` is a
+Every sample the model keeps above :data:`~uam_studio.battery.health.estimate.CURVE_CUTOFF_V` is a
 residual; the noise std (V) estimated from them is never below :data:`NOISE_FLOOR_V`. The entry
-point is :func:`uam_studio.battery.fit.fit_health`.
+point is :func:`uam_studio.battery.health.fit.fit_health`.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from .health_estimate import (
+from uam_studio.battery.health.estimate import (
     CURVE_CUTOFF_V,
     FIT_R0_RANGE,
     PARAM_HI,
@@ -24,10 +24,10 @@ from .health_estimate import (
     preroll_states,
     rep_state,
 )
-from .health_prior import Q_REF_C
-from .parameters import PAPER_Q_RANGE, PAPER_R0_RANGE, CellParameters
-from .simulate import simulate
-from .state import BatteryState
+from uam_studio.battery.health.prior import Q_REF_C
+from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE, CellParameters
+from uam_studio.battery.simulate import simulate
+from uam_studio.battery.state import BatteryState
 
 __all__ = ["NOISE_FLOOR_V", "current_noise_covariance"]
 

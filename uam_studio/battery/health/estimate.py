@@ -4,7 +4,7 @@
   pre-roll of up to :data:`PREROLL_MAX_S` (s); in the fit's coordinates w = 6500 C / q_max (-), in
   which the voltage is close to linear, with a weak Gaussian prior as wide as the box.
 - :class:`HealthEstimate`: (q_max C, R0 ohm) with its Gaussian in (w, R0), its draws, its sigma
-  points and its product with a fleet prior (:class:`~uam_studio.battery.health_prior.HealthPrior`).
+  points and its product with a fleet prior (:class:`~uam_studio.battery.health.prior.HealthPrior`).
 - The checks of a context (current in A, voltage in V, step in s; at least :data:`MIN_CONTEXT_S` s).
 - The pre-roll of a log that starts under load: the state after it (:func:`preroll_states`) and the
   profiles with it in front (:func:`prepend_preroll`).
@@ -17,14 +17,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import InputError, check_range
-from ..flight.context import TAKEOFF_CONTEXT_S
-from .fit_quality import FLAG_OUTSIDE_FLEET
-from .health_prior import Q_REF_C, HealthPrior, combine, hold_to_fleet
-from .parameters import DEFAULT_CELL, CellParameters
-from .simulate import CURRENT_LIMIT_A, DT_RANGE, EOD_RANGE
-from .solver import integrate_current
-from .state import STATE_NAMES, BatteryState, full_charge
+from uam_studio.battery.health.prior import Q_REF_C, HealthPrior, combine, hold_to_fleet
+from uam_studio.battery.health.quality import FLAG_OUTSIDE_FLEET
+from uam_studio.battery.parameters import DEFAULT_CELL, CellParameters
+from uam_studio.battery.simulate import CURRENT_LIMIT_A, DT_RANGE, EOD_RANGE
+from uam_studio.battery.solver import integrate_current
+from uam_studio.battery.state import STATE_NAMES, BatteryState, full_charge
+from uam_studio.errors import InputError, check_range
+from uam_studio.flight.context import TAKEOFF_CONTEXT_S
 
 __all__ = ["CURVE_CUTOFF_V", "FIT_Q_RANGE", "FIT_R0_RANGE", "MIN_CONTEXT_S", "PREROLL_MAX_S", "HealthEstimate",
            "clip_to_box",
@@ -59,9 +59,9 @@ class HealthEstimate:
         first logged current) since. 0 for a log that starts at the take-off or at rest.
     :param residual_autocorr: lag-1 autocorrelation of the fit's residuals (-).
     :param discrepancy_factor: the model-discrepancy factor (>= 1) the likelihood's covariance was
-        multiplied by (:mod:`uam_studio.battery.fit_quality`).
-    :param flags: :data:`~uam_studio.battery.fit_quality.FLAG_MISFIT` and/or
-        :data:`~uam_studio.battery.fit_quality.FLAG_OUTSIDE_FLEET`; empty for a context that fits.
+        multiplied by (:mod:`uam_studio.battery.health.quality`).
+    :param flags: :data:`~uam_studio.battery.health.quality.FLAG_MISFIT` and/or
+        :data:`~uam_studio.battery.health.quality.FLAG_OUTSIDE_FLEET`; empty for a context that fits.
     """
 
     q_max: float
@@ -80,7 +80,7 @@ class HealthEstimate:
 
     @property
     def flagged(self) -> bool:
-        """Whether the fit is flagged (:mod:`uam_studio.battery.fit_quality`): a context that does not
+        """Whether the fit is flagged (:mod:`uam_studio.battery.health.quality`): a context that does not
         fit the model, or a cell outside its type's fleet range."""
         return bool(self.flags)
 
@@ -111,10 +111,10 @@ class HealthEstimate:
 
     def with_prior(self, prior: HealthPrior) -> HealthEstimate:
         """This estimate's Gaussian in (w, R0) multiplied by ``prior`` (and clipped to the fit's box):
-        the posterior that :func:`~uam_studio.battery.fit.fit_health` returns by default. An estimate
-        flagged outside the fleet's range (:data:`~uam_studio.battery.fit_quality.FLAG_OUTSIDE_FLEET`)
+        the posterior that :func:`~uam_studio.battery.health.fit.fit_health` returns by default. An estimate
+        flagged outside the fleet's range (:data:`~uam_studio.battery.health.quality.FLAG_OUTSIDE_FLEET`)
         on the optimistic side (a better cell than any of its fleet) is not trusted over its fleet:
-        :func:`~uam_studio.battery.health_prior.hold_to_fleet`."""
+        :func:`~uam_studio.battery.health.prior.hold_to_fleet`."""
         mean, cov_w = combine([(np.array([self.w, self.r0]), self.cov_w), (prior.mean, prior.cov)])
         if FLAG_OUTSIDE_FLEET in self.flags:
             # the flag has decided (at face value): hold every component beyond the fleet's optimistic edge

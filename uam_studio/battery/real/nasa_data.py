@@ -39,7 +39,7 @@ LOADED_A = 0.1  # A: a sample drawing more discharge current than this is under 
 MIN_SAMPLES = 10  # a discharge with fewer samples is too short to score
 CELL_GLOB = "B*.csv.gz"
 DATA_ENV = "UAM_STUDIO_NASA_DATA"
-BESIDE_CHECKOUT = Path(__file__).resolve().parents[3] / "shared" / "data" / "nasa_pcoe"
+BESIDE_CHECKOUT = Path(__file__).resolve().parents[4] / "shared" / "data" / "nasa_pcoe"
 """Where the data sit beside a source checkout (``../shared/data/nasa_pcoe`` from the repository root)."""
 
 

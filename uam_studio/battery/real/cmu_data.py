@@ -25,13 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataFileError, InputError
+from uam_studio.errors import DataFileError, InputError
 
 DATA_ENV = "UAM_STUDIO_CMU_DATA"  # environment variable: the dataset's folder
 DATASET_DOI = "10.1184/R1/14226830"
 MISSION_FILE = "VAH01_20.csv"  # the 1 Hz baseline mission (cell VAH01, cycle 20)
 # Where a source checkout finds the dataset without being told: ../shared/data/cmu_evtol beside it.
-BESIDE_CHECKOUT = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "cmu_evtol"
+BESIDE_CHECKOUT = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "cmu_evtol"
 LIFE_FILES = ("VAH07.csv.mat", "VAH09.csv.mat", "VAH27.csv.mat", "VAH30.csv.mat")
 
 # Segment codes (Ns) of a mission cycle in the dataset.

@@ -18,8 +18,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
-from .cmu_data import (
+from uam_studio.battery.parameters import (
+    DEFAULT_CELL,
+    VTC6_FLEET_Q_RANGE,
+    VTC6_FLEET_R0_RANGE,
+    VTC6_PARAMS,
+    Cell,
+    CellParameters,
+)
+from uam_studio.battery.real.cmu_data import (
     CRUISE,
     LANDING,
     MISSION_DURATIONS_S,
@@ -36,16 +43,9 @@ from .cmu_data import (
     reference_discharges,
     resampled_missions,
 )
-from .identify import FitSegment, identify_cell
-from .parameters import (
-    DEFAULT_CELL,
-    VTC6_FLEET_Q_RANGE,
-    VTC6_FLEET_R0_RANGE,
-    VTC6_PARAMS,
-    Cell,
-    CellParameters,
-)
-from .simulate import SimulationResult, simulate, simulate_constant_power
+from uam_studio.battery.real.identify import FitSegment, identify_cell
+from uam_studio.battery.simulate import SimulationResult, simulate, simulate_constant_power
+from uam_studio.errors import InputError
 
 IDENTIFICATION_FILE = "VAH07.csv.mat"
 FINE_DT_S = 1.0  # s: largest step of the fit's simulations of resampled logs

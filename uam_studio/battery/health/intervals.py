@@ -1,4 +1,4 @@
-"""Intervals and bands of a fitted health (:class:`~uam_studio.battery.health_estimate.HealthEstimate`)
+"""Intervals and bands of a fitted health (:class:`~uam_studio.battery.health.estimate.HealthEstimate`)
 along a planned profile (current in A), physics model.
 
 - :func:`eod_interval_s`: (low, median, high) end-of-discharge time (s) for one estimate;
@@ -19,9 +19,8 @@ from statistics import NormalDist
 
 import numpy as np
 
-from ..errors import InputError, check_range
-from .eod import first_below
-from .health_estimate import (
+from uam_studio.battery.eod import first_below
+from uam_studio.battery.health.estimate import (
     CURVE_CUTOFF_V,
     FIT_Q_RANGE,
     HealthEstimate,
@@ -32,9 +31,10 @@ from .health_estimate import (
     rep_state,
     w_to_qr,
 )
-from .parameters import DEFAULT_CELL, DEFAULT_EOD_V, CellParameters
-from .simulate import CURRENT_LIMIT_A, DT_RANGE, EOD_RANGE, simulate
-from .state import BatteryState
+from uam_studio.battery.parameters import DEFAULT_CELL, DEFAULT_EOD_V, CellParameters
+from uam_studio.battery.simulate import CURRENT_LIMIT_A, DT_RANGE, EOD_RANGE, simulate
+from uam_studio.battery.state import BatteryState
+from uam_studio.errors import InputError, check_range
 
 __all__ = ["EodInterval", "band_from_sigma_points", "crossing_times", "eod_interval_s", "eod_intervals", "interval_ends",
            "interval_points", "two_sided_z", "voltage_band", "with_preroll"]
@@ -223,7 +223,7 @@ def eod_interval_s(estimate: HealthEstimate, current_a, dt_s: float = 1.0, level
                    cell: CellParameters = DEFAULT_CELL) -> EodInterval:
     """``level`` interval of the end-of-discharge time (s) along a planned profile, physics model.
 
-    :param estimate: a :class:`HealthEstimate` (from :func:`~uam_studio.battery.fit.fit_health`).
+    :param estimate: a :class:`HealthEstimate` (from :func:`~uam_studio.battery.health.fit.fit_health`).
     :param current_a: the whole per-cell current (A) from the log's t = 0, context included, [T].
     :param dt_s: sample step (s).
     :param level: central probability of the interval, in [0.5, 0.999].
@@ -231,7 +231,7 @@ def eod_interval_s(estimate: HealthEstimate, current_a, dt_s: float = 1.0, level
     :param n_draws: None: the first-order reduction (:func:`interval_ends`: 5 sigma-point
         trajectories, then the two ends and the estimate, 8 in all); an int in [10, 10000]: quantiles
         over that many random draws (:meth:`HealthEstimate.sample`).
-    :param initial_state: the state at the log's first sample, as given to :func:`~uam_studio.battery.fit.fit_health`.
+    :param initial_state: the state at the log's first sample, as given to :func:`~uam_studio.battery.health.fit.fit_health`.
     :param seed: seed of the draws.
     :return: an :class:`EodInterval` (low, median, high): time (s) from the log's first sample to the
         first sample below ``eod_v``, on ``current_a``'s grid; ``median`` at the fitted health; an end

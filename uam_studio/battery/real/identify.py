@@ -25,11 +25,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .electrochem import equilibrium_voltage, redlich_kister, surface_fractions
-from .parameters import CellParameters
-from .simulate import simulate
-from .solver import integrate_current
-from .state import rested_state
+from uam_studio.battery.electrochem import equilibrium_voltage, redlich_kister, surface_fractions
+from uam_studio.battery.parameters import CellParameters
+from uam_studio.battery.simulate import simulate
+from uam_studio.battery.solver import integrate_current
+from uam_studio.battery.state import rested_state
 
 # The nonlinear parameters, in the order of the fit's vector (log space).
 NONLINEAR = ("q_max", "r0", "t_ohmic_s", "kn", "kp", "t_sn_s", "t_sp_s", "r0_activation_k", "k_activation_k",

@@ -6,7 +6,7 @@ the residuals white noise of std sigma. Two terms widen it where that does not h
 - **Current-sensor noise** (errors in variables): the measured current is the model's input, so its
   noise reaches the voltage through the model's lags and moves the fit. Its std is read off the
   current itself (:func:`current_noise_a`), and its effect on the parameters is propagated through the
-  model (:func:`~uam_studio.battery.fit_likelihood.current_noise_covariance`); it is added to the
+  model (:func:`~uam_studio.battery.health.likelihood.current_noise_covariance`); it is added to the
   sensor-noise term (whose std then excludes what the current noise explains).
 - **Model discrepancy** (:func:`not_white`, :func:`hac_covariance`, :func:`excess_factor`): where the
   residuals are still not white noise of the assumed std (a significant lag-1 autocorrelation,
@@ -21,9 +21,9 @@ Flags (:data:`FLAG_MISFIT`, :data:`FLAG_OUTSIDE_FLEET`; see :func:`fit_flags`): 
 not fit the model (the discrepancy factor is above 1), and a likelihood estimate more than
 :data:`FLEET_Z` std (at face value: its covariance without the discrepancy factor) outside the cell
 type's fleet range in q_max or R0
-(:func:`~uam_studio.battery.health_prior.disagrees`: a cell unlike its fleet, or a model that does not
+(:func:`~uam_studio.battery.health.prior.disagrees`: a cell unlike its fleet, or a model that does not
 describe it). The glossary explains them; a cell better than any of its fleet is held to the fleet's
-best (:func:`~uam_studio.battery.health_prior.hold_to_fleet`).
+best (:func:`~uam_studio.battery.health.prior.hold_to_fleet`).
 """
 
 from __future__ import annotations
