@@ -100,7 +100,7 @@ def bench_latency(n: int, n_oracle: int, compares: list[str]) -> list[str]:
     from uam_studio.app.session import configure_server_threads
     from uam_studio.bundled import bundled_path
     from uam_studio.planning import mission_from_dict
-    from uam_studio.planning.agents.rollout import bundled_agent_path
+    from uam_studio.planning.agents.dqn.rollout import bundled_agent_path
     from uam_studio.planning.planner import plan_mission
 
     configure_server_threads()  # as the served app: one torch thread

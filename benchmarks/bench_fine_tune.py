@@ -5,7 +5,7 @@
 Three short runs on the example mission (``assets/example_mission.json``, a random cell each
 episode, the app's Retrain settings): from random weights (the reference), fine-tuning the bundled
 single-charge agent with SB3's uniform random warm-up, and fine-tuning with the agent's own
-epsilon-greedy warm-up (:data:`~uam_studio.planning.agents.training.FINE_TUNE`, the default). Prints
+epsilon-greedy warm-up (:data:`~uam_studio.planning.agents.dqn.training.FINE_TUNE`, the default). Prints
 the mean reached priority and reward of the first ``--episodes`` episodes of each, and the ratios to
 the reference.
 """
@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from uam_studio.planning.agents.dqn.training import train_dqn
 from uam_studio.planning.agents.retrain import training_setup
-from uam_studio.planning.agents.training import train_dqn
 from uam_studio.planning.missions.mission import load_mission
 
 ROOT = Path(__file__).resolve().parents[1]

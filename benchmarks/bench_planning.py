@@ -175,8 +175,8 @@ def retrain(n_maps: int, budget_s: float, seed: int, init_agent: str | None = No
     from random weights. Scores: the agent alone (raw, the paper's setting), with the safety filter,
     and with policy rollout (planning time, not training time).
     """
-    from uam_studio.planning.agents.rollout import rollout_agent
-    from uam_studio.planning.agents.training import DQNTrainConfig, fine_tuning, train_dqn
+    from uam_studio.planning.agents.dqn.rollout import rollout_agent
+    from uam_studio.planning.agents.dqn.training import DQNTrainConfig, fine_tuning, train_dqn
     from uam_studio.planning.env import make_env
     from uam_studio.planning.missions.check import check_plan
     from uam_studio.planning.solvers.oracle import oracle_plan

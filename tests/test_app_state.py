@@ -582,7 +582,7 @@ def test_warm_up_plans_what_a_new_session_shows_first():
 
 def test_training_setup_init_agent_sets_fine_tuning(tmp_path):
     from uam_studio.errors import InputError
-    from uam_studio.planning.agents.training import FINE_TUNE
+    from uam_studio.planning.agents.dqn.training import FINE_TUNE
 
     agent = ROOT / "pretrained" / "dqn_single_charge.zip"
     cfg, _ = training_setup(steps=10, init_agent=agent)

@@ -86,7 +86,7 @@ def test_dynaformer_env_override_comes_before_everything(fake_package, home, tmp
 
 
 def test_missing_file_is_a_one_line_error_naming_the_field(fake_package, home):
-    from uam_studio.planning.agents.rollout import bundled_agent_path
+    from uam_studio.planning.agents.dqn.rollout import bundled_agent_path
 
     assert not bundled_agent_path("single_flight").is_file()
     with pytest.raises(InputError) as err:

@@ -5,7 +5,7 @@ import pytest
 
 from uam_studio.errors import InputError
 from uam_studio.planning import ALTITUDES_M, held_out_missions
-from uam_studio.planning.agents.training import DQNTrainConfig, train_dqn
+from uam_studio.planning.agents.dqn.training import DQNTrainConfig, train_dqn
 from uam_studio.studies.compare import compare_planners, summarize
 from uam_studio.studies.findings import altitude_by_distance, fixed_altitude_reach, reward_sweep, with_wind
 
@@ -104,7 +104,7 @@ def test_reward_sweep_rows():
 
 
 def test_safety_filter_makes_every_plan_safe(tiny_agent):
-    from uam_studio.planning.agents.rollout import rollout_agent
+    from uam_studio.planning.agents.dqn.rollout import rollout_agent
     from uam_studio.planning.missions.check import check_plan
 
     missions = held_out_missions(6, 4040, n_dest=(5, 8))
@@ -121,7 +121,7 @@ def _reward(m, plan) -> int:
 def test_rollout_never_earns_less_than_either_base(tiny_agent):
     """Policy rollout with the filtered agent and the greedy rule as bases: safe, and at least the
     reward of the filtered agent and of the greedy planner; agent-only rollout at least the agent's."""
-    from uam_studio.planning.agents.rollout import rollout_agent
+    from uam_studio.planning.agents.dqn.rollout import rollout_agent
     from uam_studio.planning.missions.check import check_plan
     from uam_studio.planning.solvers.greedy import greedy_plan
 
@@ -182,7 +182,7 @@ def test_env_clone_is_independent():
 def test_ranked_actions_are_valid_and_sorted(tiny_agent):
     import torch as th
 
-    from uam_studio.planning.agents.dqn import ranked_actions
+    from uam_studio.planning.agents.dqn.masked import ranked_actions
     from uam_studio.planning.env import UAMPlanningEnv
 
     env = UAMPlanningEnv(mission=held_out_missions(1, 12)[0])

@@ -13,11 +13,11 @@ from gymnasium import spaces
 from stable_baselines3 import DQN
 from stable_baselines3.common.env_util import make_vec_env
 
-import uam_studio.planning.agents.dqn as dqn_mod
+import uam_studio.planning.agents.dqn.masked as dqn_mod
 from uam_studio.errors import InputError
-from uam_studio.planning.agents.agent_file import load_agent, load_card, save_agent
-from uam_studio.planning.agents.dqn import MaskedDQN, action_mask, greedy_action, masked_target
-from uam_studio.planning.agents.training import FINE_TUNE, DQNTrainConfig, EpisodeStats, train_dqn
+from uam_studio.planning.agents.dqn.agent_file import load_agent, load_card, save_agent
+from uam_studio.planning.agents.dqn.masked import MaskedDQN, action_mask, greedy_action, masked_target
+from uam_studio.planning.agents.dqn.training import FINE_TUNE, DQNTrainConfig, EpisodeStats, train_dqn
 
 X = np.array([3.0, 1.0, 4.0, 2.0, 5.0])  # cell positions; the agent starts at x = 0
 PRIORITY = np.array([1, 2, 3, 1, 2])

@@ -177,8 +177,8 @@ elif kind == "dynaformer":
     save(0, run=folder.parent / "warm-up")  # first-call costs are paid here, not in each victim
 elif kind == "dqn":
     from uam_studio.planning.agents.retrain import training_setup
-    from uam_studio.planning.agents.agent_file import save_agent
-    from uam_studio.planning.agents.training import train_dqn
+    from uam_studio.planning.agents.dqn.agent_file import save_agent
+    from uam_studio.planning.agents.dqn.training import train_dqn
 
     cfg, env_fn = training_setup("single_charge", steps=DQN_STEPS, seed=0)
     model = train_dqn(cfg, env_fn)  # the default (256, 256) network: a 0.9 MB agent
@@ -250,7 +250,7 @@ def _check_dynaformer(folder: Path) -> None:
 
 
 def _check_dqn(folder: Path) -> None:
-    from uam_studio.planning.agents.agent_file import load_agent, load_card
+    from uam_studio.planning.agents.dqn.agent_file import load_agent, load_card
 
     agent, card = folder / "agent.zip", folder / "card.json"
     if agent.exists():
@@ -418,8 +418,8 @@ def test_every_trainer_writes_the_weights_sha256_and_a_changed_byte_is_refused(k
     import hashlib
 
     from uam_studio.dynaformer import load_predictor
-    from uam_studio.planning.agents.agent_file import load_agent
     from uam_studio.planning.agents.attention.decode import load_policy
+    from uam_studio.planning.agents.dqn.agent_file import load_agent
 
     monkeypatch.setenv("TQDM_DISABLE", "1")
     {"attention": _train_attention, "dqn": _train_dqn, "dynaformer": _train_dynaformer}[kind](tmp_path, 1)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from uam_studio.errors import InputError
-from uam_studio.planning.agents.learning_curves import EpisodeRecorder, episode_columns, moving_average
-from uam_studio.planning.agents.training import EpisodeStats
+from uam_studio.planning.agents.dqn.learning_curves import EpisodeRecorder, episode_columns, moving_average
+from uam_studio.planning.agents.dqn.training import EpisodeStats
 from uam_studio.planning.env import UAMPlanningEnv
 
 

@@ -23,7 +23,7 @@ import torch
 
 from uam_studio.cli import main
 from uam_studio.errors import InputError
-from uam_studio.planning.agents.agent_file import (
+from uam_studio.planning.agents.dqn.agent_file import (
     AGENT_ENTRIES,
     NETWORK_KEY,
     OPTIONAL_AGENT_ENTRIES,
@@ -214,7 +214,7 @@ def test_bundled_agents_load_with_their_own_weights_and_the_planning_spaces(tmp_
 
 
 def test_save_agent_describes_the_network_and_a_plain_sb3_zip_loads_too(tmp_path):
-    from uam_studio.planning.agents.agent_file import save_agent
+    from uam_studio.planning.agents.dqn.agent_file import save_agent
 
     model = load_agent(BUNDLED)
     path = tmp_path / "agent.zip"

@@ -341,7 +341,7 @@ def test_band_in_the_same_pass_and_a_failing_band_keeps_the_plan(fail):
 def test_bundled_agents_plan_any_map_safely(scenario):
     """The bundled agents load, plan maps they never saw (with the safety filter) and pass physics."""
     from uam_studio.planning import held_out_missions
-    from uam_studio.planning.agents.rollout import bundled_agent_path, load_agent_cached
+    from uam_studio.planning.agents.dqn.rollout import bundled_agent_path, load_agent_cached
 
     path = bundled_agent_path(scenario)
     assert path.is_file(), f"missing bundled agent {path}"

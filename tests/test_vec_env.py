@@ -10,7 +10,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from uam_studio.errors import InputError
-from uam_studio.planning.agents.training import DQNTrainConfig, train_dqn
+from uam_studio.planning.agents.dqn.training import DQNTrainConfig, train_dqn
 from uam_studio.planning.agents.vec_env import GroupedSubprocVecEnv, WorkerError
 from uam_studio.planning.env import N_FEATURES, UAMPlanningEnv, make_env
 

@@ -81,7 +81,7 @@ def _row_from_plan(plan: PlanResult | dict[str, Any], mission: Mission) -> dict[
 
 
 def _agent_reads_dynaformer(agent_path: str | None, scenario: str) -> bool:
-    from uam_studio.planning.agents.rollout import bundled_agent_path, load_agent_cached
+    from uam_studio.planning.agents.dqn.rollout import bundled_agent_path, load_agent_cached
 
     try:
         card = load_agent_cached(agent_path or bundled_agent_path(scenario))[1]

@@ -37,7 +37,7 @@ def _agent_stamp(req: PlanRequest) -> tuple[str, int, int] | None:
     retrained DQN agent, or the bundled one for the mission's scenario), so a plan cached for another
     or an older file is never reused."""
     from uam_studio.bundled import bundled_path
-    from uam_studio.planning.agents.rollout import bundled_agent_path
+    from uam_studio.planning.agents.dqn.rollout import bundled_agent_path
 
     policy, agent_path = agent_policy(req.policy)
     if agent_path is not None:

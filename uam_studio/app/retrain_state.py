@@ -192,7 +192,7 @@ class RetrainState(param.Parameterized):
             from uam_studio.planning.agents.attention.decode import bundled_weights_path
 
             return str(bundled_weights_path())
-        from uam_studio.planning.agents.rollout import bundled_agent_path
+        from uam_studio.planning.agents.dqn.rollout import bundled_agent_path
 
         return str(bundled_agent_path(self.scenario))
 

@@ -376,7 +376,7 @@ def policy_options(agents: list[Any]) -> dict[str, str]:
 
 
 def _bundled_exists(scenario: str) -> bool:
-    from uam_studio.planning.agents.rollout import bundled_agent_path
+    from uam_studio.planning.agents.dqn.rollout import bundled_agent_path
 
     return bundled_agent_path(scenario).is_file()
 

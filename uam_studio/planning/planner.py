@@ -21,7 +21,7 @@ than 20, unreachable destinations, a cell that cannot finish the take-off) and a
 give messages, never exceptions; bad input (an invalid mission, an unknown policy, out-of-range
 ``q_max``/``r0``, an explicit ``agent_path`` that cannot be loaded, more than 8 destinations for
 ``dqn``) and a missing bundled agent
-(``dqn`` without ``agent_path``, :func:`~uam_studio.planning.agents.rollout.bundled_agent_path`) raise :class:`~uam_studio.errors.InputError`.
+(``dqn`` without ``agent_path``, :func:`~uam_studio.planning.agents.dqn.rollout.bundled_agent_path`) raise :class:`~uam_studio.errors.InputError`.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ import numpy as np
 from uam_studio.bundled import require_bundled
 from uam_studio.errors import InputError, check_range
 from uam_studio.planning.agents.attention import WEIGHTS_NAME
-from uam_studio.planning.agents.rollout import dqn_route
+from uam_studio.planning.agents.dqn.rollout import dqn_route
 from uam_studio.planning.env import observe_takeoff
 from uam_studio.planning.missions.check import Plan, PlanCheck, check_plan
 from uam_studio.planning.missions.mission import SCENARIOS, Mission, as_mission
@@ -234,12 +234,12 @@ def plan_mission(
     :param r0: override the mission's r0 (ohm).
     :param agent_path: the agent: for ``"attention"`` a weights file (default: the bundled
         ``attention_planner.pt``), for ``"dqn"`` an agent zip (default: the bundled ``dqn_<scenario>.zip``,
-        :func:`~uam_studio.planning.agents.rollout.bundled_agent_path`); a missing bundled agent raises InputError.
+        :func:`~uam_studio.planning.agents.dqn.rollout.bundled_agent_path`); a missing bundled agent raises InputError.
     :param predictor: a Dynaformer predictor (``predict(context_current_a, context_voltage_v, current_a,
         dt_s)``), None for the bundled one (its absence is a message), or False to skip the prediction.
     :param lookahead: dqn only: policy rollout over the agent's K best safe actions (and the greedy
         rule's action) per step, continued by the filtered agent and by the greedy rule
-        (:func:`~uam_studio.planning.agents.rollout.rollout_agent`); 0 (default) for the filtered agent alone; 0-8.
+        (:func:`~uam_studio.planning.agents.dqn.rollout.rollout_agent`); 0 (default) for the filtered agent alone; 0-8.
     :param band_level: coverage (0.5-0.99) of the Dynaformer's voltage band along the route, computed
         in the same pass as the prediction (the predictor's ``voltage_band``); None for no band.
     :return: a :class:`PlanResult` (``to_dict()``: the plain-JSON form). Series are rounded to 4

@@ -89,7 +89,7 @@ def compare_planners(
         ``plan_mission(m, "attention")`` runs it: beam search behind the physics safety filter, 1-20
         destinations), ``"attention_raw"`` (the network's own best choice at every step, no search, no
         filter), ``"dqn"`` (the agent with the safety filter of
-        :func:`~uam_studio.planning.agents.rollout.rollout_agent`, as ``uam-studio plan --policy dqn`` runs it) and
+        :func:`~uam_studio.planning.agents.dqn.rollout.rollout_agent`, as ``uam-studio plan --policy dqn`` runs it) and
         ``"dqn_raw"`` (the agent's own greedy choices, the paper's setting) and ``"dqn_rollout"``
         (the filtered agent improved by policy rollout over its ``ROLLOUT_K`` best safe actions and
         the greedy rule's action, each continued by the filtered agent and by the greedy rule), and
@@ -99,7 +99,7 @@ def compare_planners(
     """
     from uam_studio.errors import InputError
     from uam_studio.planning.agents.attention.decode import attention_plan, load_policy_cached
-    from uam_studio.planning.agents.rollout import rollout_agent
+    from uam_studio.planning.agents.dqn.rollout import rollout_agent
     from uam_studio.planning.solvers.greedy import greedy_plan
     from uam_studio.planning.solvers.oracle import oracle_plan
 

@@ -144,8 +144,8 @@ def _sweep_task(name: str, v: float, scenario: str, steps: int, seed: int, weigh
                 missions: list[Mission]) -> tuple[dict[str, Any], list[Any]]:
     """One task of :func:`reward_sweep`: train one agent with ``name = v`` and score it under physics;
     returns its row and its training episodes (for the learning curves)."""
-    from uam_studio.planning.agents.rollout import rollout_agent
-    from uam_studio.planning.agents.training import DQNTrainConfig, train_dqn
+    from uam_studio.planning.agents.dqn.rollout import rollout_agent
+    from uam_studio.planning.agents.dqn.training import DQNTrainConfig, train_dqn
     from uam_studio.planning.env import make_env
     from uam_studio.planning.missions.route import simulate_route
 

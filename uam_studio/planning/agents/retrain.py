@@ -111,8 +111,8 @@ def list_agents(folder: str | os.PathLike[str] | None = None) -> list[AgentInfo]
     readable model card) and attention planners (``*/attention_planner.pt`` with a ``card.json`` of
     model ``attention`` beside it). Unreadable files are skipped (they are not agents); a missing
     folder gives ``[]``."""
-    from uam_studio.planning.agents.agent_file import load_card
     from uam_studio.planning.agents.attention import WEIGHTS_NAME
+    from uam_studio.planning.agents.dqn.agent_file import load_card
 
     d = Path(folder) if folder is not None else agents_dir()
     if not d.is_dir():
@@ -179,11 +179,11 @@ def training_setup(
     :param safe_return: train with the environment's ``safe_return`` rule (a leg that would leave
         no way home ends the episode with ``-gamma``); off is the paper's setting.
     :param init_agent: fine-tune this agent (zip) instead of starting from random weights: its
-        network is copied in and exploration starts at :data:`~uam_studio.planning.agents.training.FINE_TUNE` settings (epsilon 0.2, not 1).
+        network is copied in and exploration starts at :data:`~uam_studio.planning.agents.dqn.training.FINE_TUNE` settings (epsilon 0.2, not 1).
     :raises InputError: bad settings, or a map the environment cannot use (no destinations, more
         than 8, none far enough from the vertiport).
     """
-    from uam_studio.planning.agents.training import DQNTrainConfig, fine_tuning
+    from uam_studio.planning.agents.dqn.training import DQNTrainConfig, fine_tuning
     from uam_studio.planning.env import make_env
 
     if scenario is not None:
@@ -247,27 +247,27 @@ def retrain_dqn(
     source: str | None = None,
     card_path: str | os.PathLike[str] | None = None,
 ) -> RetrainResult | None:
-    """Train a DQN agent (:func:`~uam_studio.planning.agents.training.train_dqn`) and save it with its card.
+    """Train a DQN agent (:func:`~uam_studio.planning.agents.dqn.training.train_dqn`) and save it with its card.
 
-    :param config: a :class:`~uam_studio.planning.agents.training.DQNTrainConfig` (see :func:`training_setup`).
+    :param config: a :class:`~uam_studio.planning.agents.dqn.training.DQNTrainConfig` (see :func:`training_setup`).
     :param env_fn: the env factory from :func:`training_setup`.
     :param agent_path: the agent zip to write (atomically); never inside ``pretrained/``.
     :param mission: the map trained on (recorded in the card), or None for random missions.
-    :param on_episode: called with each :class:`~uam_studio.planning.agents.training.EpisodeStats`, in the
+    :param on_episode: called with each :class:`~uam_studio.planning.agents.dqn.training.EpisodeStats`, in the
         training thread.
     :param stop_event: set it to stop early; the agent trained so far is saved, with
         ``"stopped_early": true`` in its card, unless it has not finished one episode: then nothing is
         saved (an agent that learned nothing is not an agent) and None is returned.
     :param source: a short note on where the run came from (``"cli"``, ``"app"``), kept in the card.
     :param card_path: also write the card as this JSON file, consistent with the agent (see
-        :func:`~uam_studio.planning.agents.agent_file.save_agent`).
+        :func:`~uam_studio.planning.agents.dqn.agent_file.save_agent`).
     :raises InputError: ``agent_path`` inside ``pretrained/``.
 
     Stale temp files left in the agent's folder by killed saves are deleted before training.
     """
     from uam_studio import __version__ as version
-    from uam_studio.planning.agents.agent_file import save_agent
-    from uam_studio.planning.agents.training import train_dqn
+    from uam_studio.planning.agents.dqn.agent_file import save_agent
+    from uam_studio.planning.agents.dqn.training import train_dqn
     from uam_studio.planning.env import OBS_DIM
 
     agent = Path(agent_path)

@@ -56,7 +56,7 @@ class EpisodeQueries:
         level (nothing more for an action that lands at the vertiport, or in single flight, which
         ends at the destination). It is flown on a copy of the
         backend (physics or Dynaformer: what this env believes), so the episode is not changed. A
-        planner uses it as a safety filter (:func:`uam_studio.planning.agents.rollout.rollout_agent`).
+        planner uses it as a safety filter (:func:`uam_studio.planning.agents.dqn.rollout.rollout_agent`).
         """
         a = int(action)
         if self._done or not (0 <= a < N_ACTIONS and self._mask[a]):

@@ -3,14 +3,14 @@ what the agent did in each training episode (route and altitudes).
 
 Public API:
 
-- :func:`episode_columns`: a list of :class:`~uam_studio.planning.agents.training.EpisodeStats` as named
+- :func:`episode_columns`: a list of :class:`~uam_studio.planning.agents.dqn.training.EpisodeStats` as named
   numpy columns (for plotting).
 - :func:`moving_average`: trailing moving average, same length as the input (the paper's
   "moving average of the number of reached destinations").
 - :class:`EpisodeRecorder`: a ``gymnasium.Wrapper`` that appends one :class:`EpisodeRecord` per
   finished episode to a list you own, e.g. the altitude chosen in each episode of a single-flight
   run (the paper's altitude-per-episode figure). Use it inside the ``env_fn`` given to
-  :func:`~uam_studio.planning.agents.training.train_dqn`; with the default ``DummyVecEnv`` all copies run in
+  :func:`~uam_studio.planning.agents.dqn.training.train_dqn`; with the default ``DummyVecEnv`` all copies run in
   one process and share the list.
 """
 

@@ -6,7 +6,7 @@ on the mission (physics battery), with the safety filter and optional policy rol
 :func:`bundled_agent_path` and :func:`load_agent_cached` find and load agent files.
 
 Torch and stable-baselines3 are imported inside the functions that need them
-(:mod:`~uam_studio.planning.agents.agent_file`, :mod:`~uam_studio.planning.agents.dqn`), so that importing this module, and with it
+(:mod:`~uam_studio.planning.agents.dqn.agent_file`, :mod:`~uam_studio.planning.agents.dqn.masked`), so that importing this module, and with it
 :mod:`uam_studio.planning.planner`, the CLI and the app, stays torch-free until an agent is loaded.
 """
 
@@ -72,7 +72,10 @@ def dqn_route(mission: Mission, agent_path: str | os.PathLike[str] | None, predi
 
 @functools.lru_cache(maxsize=8)
 def _cached_agent(path: str, mtime_ns: int, size: int) -> tuple[Any, dict[str, Any]]:
-    from uam_studio.planning.agents.agent_file import load_agent, load_card  # torch: at call time (see above)
+    from uam_studio.planning.agents.dqn.agent_file import (  # torch: at call time (see above)
+        load_agent,
+        load_card,
+    )
 
     return load_agent(path), load_card(path)
 
@@ -96,7 +99,7 @@ def _filtered_candidates(env: Any, model: Any, obs: np.ndarray, k: int = 1) -> t
     the first such action anywhere in the ranking, then up to ``k - 1`` more among the agent's
     ``4 k`` best. If none is safe: the vertiport at the agent's preferred level alone, or [] if
     there is nothing to do. Second value: the filter overrode the agent's first choice."""
-    from uam_studio.planning.agents.dqn import ranked_actions  # torch: at call time (see above)
+    from uam_studio.planning.agents.dqn.masked import ranked_actions  # torch: at call time (see above)
 
     ranked = ranked_actions(model, obs)
     safe: list[int] = []
@@ -142,7 +145,7 @@ def rollout_agent(mission: Mission, agent: Any, predictor: Any = None,
                   bases: tuple[str, ...] = ROLLOUT_BASES) -> Plan:
     """Fly a DQN agent greedily on ``mission`` (physics battery) and return its plan.
 
-    :param agent: an agent zip path, or a trained :class:`~uam_studio.planning.agents.dqn.MaskedDQN` (its
+    :param agent: an agent zip path, or a trained :class:`~uam_studio.planning.agents.dqn.masked.MaskedDQN` (its
         health features are taken to be the physics-only fallback, as in ``uam-studio train dqn``)
 
     With ``shield`` (default) the agent's actions are filtered: at each step it takes its best-Q
@@ -165,7 +168,7 @@ def rollout_agent(mission: Mission, agent: Any, predictor: Any = None,
     if the agent was trained on Dynaformer features, else the physics-only fallback.
     ``messages`` (if given) receives notes about mismatches; the plan's own messages are in the plan.
     """
-    from uam_studio.planning.agents.dqn import greedy_action  # torch: at call time (see above)
+    from uam_studio.planning.agents.dqn.masked import greedy_action  # torch: at call time (see above)
 
     notes = messages if messages is not None else []
     if not bases or any(b not in ROLLOUT_BASES for b in bases):

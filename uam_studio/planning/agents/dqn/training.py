@@ -3,16 +3,16 @@
 Public API:
 
 - :class:`DQNTrainConfig`: every setting of a training run (also what a model card records).
-- :func:`train_dqn`: train a :class:`~uam_studio.planning.agents.dqn.MaskedDQN` on ``n_envs`` copies of an
+- :func:`train_dqn`: train a :class:`~uam_studio.planning.agents.dqn.masked.MaskedDQN` on ``n_envs`` copies of an
   env, streaming one :class:`EpisodeStats` per finished episode, stoppable with a ``threading.Event``.
 - :class:`EpisodeStatsCallback`, :class:`TqdmCallback`: the SB3 callbacks behind it.
 - :func:`fine_tuning`: a config that starts from a saved agent's weights (:data:`FINE_TUNE` exploration).
 
-The agent file (save, load, model card) is :mod:`uam_studio.planning.agents.agent_file`; acting with a
-trained agent is :func:`~uam_studio.planning.agents.dqn.greedy_action` and
-:func:`~uam_studio.planning.agents.dqn.ranked_actions`.
+The agent file (save, load, model card) is :mod:`uam_studio.planning.agents.dqn.agent_file`; acting with a
+trained agent is :func:`~uam_studio.planning.agents.dqn.masked.greedy_action` and
+:func:`~uam_studio.planning.agents.dqn.masked.ranked_actions`.
 
-Env convention (see :mod:`uam_studio.planning.agents.dqn`): flat ``Box`` observations whose last
+Env convention (see :mod:`uam_studio.planning.agents.dqn.masked`): flat ``Box`` observations whose last
 ``action_space.n`` entries are the action mask; ``info`` on each step has ``reached`` (list of
 destination names), ``charging_cycles`` (int), ``eod`` (bool), optionally ``reached_priority``.
 """
@@ -33,8 +33,8 @@ from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from uam_studio.errors import InputError
-from uam_studio.planning.agents.agent_file import load_agent
-from uam_studio.planning.agents.dqn import MaskedDQN, MaskedDQNPolicy
+from uam_studio.planning.agents.dqn.agent_file import load_agent
+from uam_studio.planning.agents.dqn.masked import MaskedDQN, MaskedDQNPolicy
 from uam_studio.planning.agents.vec_env import GroupedSubprocVecEnv
 from uam_studio.planning.env.environment import REWARD_DEFAULTS
 from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO
@@ -228,7 +228,7 @@ def train_dqn(
         model trained so far is returned
     :param progress_bar: show a tqdm progress bar
     :param verbose: SB3 verbosity (0 silent, 1 rollout/train tables)
-    :return: the trained :class:`~uam_studio.planning.agents.dqn.MaskedDQN` (greedy use: :func:`greedy_action`)
+    :return: the trained :class:`~uam_studio.planning.agents.dqn.masked.MaskedDQN` (greedy use: :func:`greedy_action`)
     """
     if config.steps < 1:
         raise InputError("steps", f"{config.steps!r} is out of range; allowed >= 1")

@@ -24,7 +24,7 @@ import numpy as np
 
 from uam_studio.atomic_io import atomic_write_bytes, check_digest
 from uam_studio.errors import InputError
-from uam_studio.planning.agents.dqn import MaskedDQN, MaskedDQNPolicy
+from uam_studio.planning.agents.dqn.masked import MaskedDQN, MaskedDQNPolicy
 
 __all__ = ["AGENT_ENTRIES", "CARD_NAME", "FORMAT", "MAX_ENTRY_BYTES", "NETWORK_KEY", "OPTIONAL_AGENT_ENTRIES",
            "load_agent", "load_card", "network_description", "save_agent"]
@@ -232,13 +232,13 @@ def _spaces(p: Path, obs: Any, act: Any) -> tuple[gym.spaces.Box, gym.spaces.Dis
 
 # The policy's module as SB3 records it: today's, and uam_studio.planning.dqn (agents saved before the
 # planning package was split into rooms, the bundled ones among them).
-_OWN_POLICY_MODULES = (MaskedDQNPolicy.__module__, "uam_studio.planning.dqn")
+_OWN_POLICY_MODULES = (MaskedDQNPolicy.__module__, "uam_studio.planning.agents.dqn", "uam_studio.planning.dqn")  # and its former homes
 
 
 def _policy_class_name(pc: Any) -> str:
     """The class name in the readable fields SB3 writes beside a pickled policy class (its methods'
     reprs, ``<function Name.method at ...>``), prefixed by its module unless that is this package's
-    :mod:`~uam_studio.planning.agents.dqn`; ``"unknown"`` if there is none."""
+    :mod:`~uam_studio.planning.agents.dqn.masked`; ``"unknown"`` if there is none."""
     if not isinstance(pc, dict):
         return "unknown"
     names = [v[len("<function "):].split(".", 1)[0] for v in pc.values()
@@ -309,7 +309,7 @@ def load_agent(path: str | os.PathLike[str], env: gym.Env | None = None) -> Mask
     :data:`OPTIONAL_AGENT_ENTRIES`). SB3's ``data`` entry and the card are read as plain JSON; the
     pickled (``":serialized:"``) values in ``data`` are never decoded, and a pickled value under a key
     SB3 does not pickle refuses the file. The network is rebuilt as a
-    :class:`~uam_studio.planning.agents.dqn.MaskedDQNPolicy` from the card's ``network`` entry
+    :class:`~uam_studio.planning.agents.dqn.masked.MaskedDQNPolicy` from the card's ``network`` entry
     (:func:`network_description`), or for files without one from the readable fields SB3 writes beside
     the pickled spaces and from ``policy_kwargs``; the training settings and counters come from the
     plain values of ``data``. The weights (``policy.pth``) and optimizer state (``policy.optimizer.pth``)
