@@ -26,6 +26,7 @@ from uam_studio.app.plans import PlanRequest, cached_plan, request_key
 from uam_studio.app.services import agent_policy, one_line, predictor
 from uam_studio.errors import InputError
 from uam_studio.planning.missions.mission import Mission
+from uam_studio.planning.planners import PLANNERS
 
 if TYPE_CHECKING:
     from uam_studio.planning.planner import PlanResult
@@ -106,7 +107,7 @@ def compare_row(mission: Mission, policy: str) -> dict[str, Any]:
     name, agent_path = agent_policy(policy)
     try:
         pred: Any = False
-        if name == "dqn" and _agent_reads_dynaformer(agent_path, mission.scenario):
+        if PLANNERS[name].reads_predictor and _agent_reads_dynaformer(agent_path, mission.scenario):
             pred = predictor() or False
         row = _row_from_plan(plan_mission(mission, name, agent_path=agent_path, predictor=pred,
                                             band_level=None), mission)  # rows read no band

@@ -15,8 +15,8 @@ from typing import Any
 
 from uam_studio.app.services import agent_policy, health_estimate, one_line, predictor, predictor_or_error
 from uam_studio.errors import InputError
-from uam_studio.planning.agents.attention import WEIGHTS_NAME
 from uam_studio.planning.missions.mission import Mission
+from uam_studio.planning.planners import PLANNERS
 from uam_studio.planning.safety import takeoff_attempt
 
 __all__ = ["PLAN_CACHE_SIZE", "PlanRequest", "cached_plan", "compute_plan", "request_key"]
@@ -37,15 +37,13 @@ def _agent_stamp(req: PlanRequest) -> tuple[str, int, int] | None:
     retrained DQN agent, or the bundled one for the mission's scenario), so a plan cached for another
     or an older file is never reused."""
     from uam_studio.bundled import bundled_path
-    from uam_studio.planning.agents.dqn.rollout import bundled_agent_path
 
     policy, agent_path = agent_policy(req.policy)
+    bundled = PLANNERS[policy].bundled_file(req.mission.scenario) if policy in PLANNERS else None
     if agent_path is not None:
         path = Path(agent_path)
-    elif policy == "attention":
-        path = bundled_path(WEIGHTS_NAME)
-    elif policy == "dqn":
-        path = bundled_agent_path(req.mission.scenario)
+    elif bundled is not None:
+        path = bundled_path(bundled)
     else:
         return None
     try:

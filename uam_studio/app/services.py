@@ -28,6 +28,7 @@ import param
 
 from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.planning.agents.attention import WEIGHTS_NAME
+from uam_studio.planning.planners import LEARNED_POLICIES, PLANNERS
 
 __all__ = [
     "ACTIVITY",
@@ -57,10 +58,8 @@ APP_R0_RANGE = PAPER_R0_RANGE  # ohm
 APP_EOD_RANGE = (2.5, 3.5)  # V; the Dynaformer is trained down to 2.5 V
 POPULATION_N = 300
 
-POLICY_LABELS = {"Attention (bundled, default)": "attention", "DQN (paper, up to 8)": "dqn",
-                 "Oracle (exact up to 8)": "oracle", "Greedy": "greedy"}
+POLICY_LABELS = {p.label: name for name, p in PLANNERS.items()}
 AGENT_PREFIX = "agent:"  # policy value of a retrained agent: agent:<path>
-LEARNED_POLICIES = ("attention", "dqn")
 
 
 def agent_policy(value: str) -> tuple[str, str | None]:

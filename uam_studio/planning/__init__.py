@@ -24,7 +24,7 @@ Planning: the action space (:mod:`~uam_studio.planning.legs`: ``N_MAX``, ``ALTIT
 (:func:`attention_plan`, the learned default, 1-20 destinations; :func:`oracle_plan`, exact up to 8,
 :func:`reference_plan` beyond; :func:`greedy_plan`, baseline), the physics check
 :func:`check_plan` (-> :class:`PlanCheck`) and the one entry point of the CLI and the app,
-:func:`plan_mission` (any of :data:`POLICIES`, checked on physics, with the Dynaformer's prediction and
+:func:`plan_mission` (any of :data:`POLICIES`, each described in :data:`PLANNERS`, checked on physics, with the Dynaformer's prediction and
 its voltage band; -> :class:`PlanResult`), its :func:`safety_verdict` by source,
 and flying a mission with surprises, :func:`fly_mission`.
 
@@ -63,7 +63,10 @@ _LAZY = {
     "plan_mission": "planner",
     "PlanResult": "planner",
     "plan_csv": "planner",
-    "POLICIES": "planner",
+    "POLICIES": "planners",
+    "PLANNERS": "planners",
+    "PlannerInfo": "planners",
+    "planner_info": "planners",
     "attention_plan": "agents.attention.decode",
     "safety_verdict": "safety",
     "fly_mission": "operations",
@@ -90,6 +93,9 @@ __all__ = [
     "PlanResult",
     "plan_csv",
     "POLICIES",
+    "PLANNERS",
+    "PlannerInfo",
+    "planner_info",
     "attention_plan",
     "MAX_DESTINATIONS",
     "as_mission",

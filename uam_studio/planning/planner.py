@@ -35,15 +35,12 @@ import numpy as np
 
 from uam_studio.bundled import require_bundled
 from uam_studio.errors import InputError, check_range
-from uam_studio.planning.agents.attention import WEIGHTS_NAME
-from uam_studio.planning.agents.dqn.rollout import dqn_route
 from uam_studio.planning.env import observe_takeoff
-from uam_studio.planning.missions.check import Plan, PlanCheck, check_plan
+from uam_studio.planning.missions.check import PlanCheck, check_plan
 from uam_studio.planning.missions.mission import SCENARIOS, Mission, as_mission
-from uam_studio.planning.solvers.greedy import greedy_plan
-from uam_studio.planning.solvers.oracle import oracle_plan
+from uam_studio.planning.planners import LEARNED_POLICIES, PLANNERS, POLICIES, planner_info
+from uam_studio.planning.voltage_predictor import BandPredictor, HealthFittingPredictor, VoltagePredictor
 
-POLICIES = ("attention", "dqn", "oracle", "greedy")
 MAX_POINTS = 2000  # samples per series in the result (JSON size)
 DECIMALS = 4
 
@@ -81,10 +78,13 @@ def _dedupe(messages: list[str]) -> list[str]:
 # ----------------------------------------------------------------------------- Dynaformer prediction
 
 
-def _load_predictor(predictor: Any, messages: list[str]) -> Any:
+def _load_predictor(predictor: VoltagePredictor | bool | None, messages: list[str]) -> VoltagePredictor | None:
     if predictor is False:
         return None
     if predictor is not None:
+        if not isinstance(predictor, VoltagePredictor):
+            raise InputError("predictor", "expected an object with predict(context_current_a, context_voltage_v, "
+                                          "current_a, dt_s), None for the bundled Dynaformer, or False")
         return predictor
     try:
         from uam_studio.dynaformer import WeightsError, load_pretrained
@@ -98,7 +98,7 @@ def _load_predictor(predictor: Any, messages: list[str]) -> Any:
         return None
 
 
-def _predict(check: PlanCheck, predictor: Any, messages: list[str], band_level: float | None
+def _predict(check: PlanCheck, predictor: VoltagePredictor, messages: list[str], band_level: float | None
              ) -> tuple[np.ndarray | None, tuple[np.ndarray, np.ndarray] | None]:
     """Dynaformer voltage (V) on the physics route's time grid, sortie by sortie (each from a full
     charge, read from the take-off's first 20 s on the physics model), or None; with ``band_level``,
@@ -109,10 +109,10 @@ def _predict(check: PlanCheck, predictor: Any, messages: list[str], band_level: 
     ci, cv = observe_takeoff(sim.q_max, sim.r0)  # the take-off context
     cuts = sim.sortie_cuts()
     parts, lows, highs = [], [], []
-    band_fn = getattr(predictor, "voltage_band", None) if band_level is not None else None
-    fit = getattr(predictor, "health_estimate", None)
+    band_fn = predictor.voltage_band if band_level is not None and isinstance(predictor, BandPredictor) else None
     try:  # every sortie reads the same take-off: its health is fitted once, for the prediction and the band
-        kw = {"estimate": fit(ci, cv, dt_s=sim.dt_s)} if fit is not None else {}
+        kw = ({"estimate": predictor.health_estimate(ci, cv, dt_s=sim.dt_s)}
+              if isinstance(predictor, HealthFittingPredictor) else {})
         for a, b in zip(cuts[:-1], cuts[1:]):
             v = np.asarray(predictor.predict(ci, cv, sim.current_a[a:b], dt_s=sim.dt_s, **kw), dtype=float)
             parts.append(v.reshape(-1)[: b - a])
@@ -222,7 +222,7 @@ def plan_mission(
     q_max: float | None = None,
     r0: float | None = None,
     agent_path: str | os.PathLike[str] | None = None,
-    predictor: Any = None,
+    predictor: VoltagePredictor | bool | None = None,
     lookahead: int = 0,
     band_level: float | None = BAND_LEVEL,
 ) -> PlanResult:
@@ -248,8 +248,7 @@ def plan_mission(
     :raises InputError: bad input or a missing bundled agent (see the module docstring); never for a
         hard mission.
     """
-    if policy not in POLICIES:
-        raise InputError("policy", f"{policy!r} is not a policy; allowed: {', '.join(POLICIES)}")
+    info = planner_info(policy)
     if isinstance(lookahead, bool) or not isinstance(lookahead, (int, np.integer)) or not 0 <= lookahead <= 8:
         raise InputError("lookahead", f"{lookahead!r} is out of range; allowed integers in [0, 8]")
     m = as_mission(mission)
@@ -257,40 +256,32 @@ def plan_mission(
         m = m.with_battery(q_max, r0)
     if m.scenario not in SCENARIOS:  # pragma: no cover - Mission validates it
         raise InputError("scenario", f"{m.scenario!r} is not a scenario")
-    if agent_path is None and policy in ("dqn", "attention"):  # an install without it: an error, not an empty plan
-        require_bundled(WEIGHTS_NAME if policy == "attention" else f"dqn_{m.scenario}.zip", "agent", "agent",
+    if agent_path is None and info.learned:  # an install without it: an error, not an empty plan
+        require_bundled(info.bundled_file(m.scenario), "agent", "agent",
                         "plan with the oracle or greedy policy, or give an agent file")
-    if agent_path is not None and policy not in ("dqn", "attention"):
-        raise InputError("agent_path", f"only used with the attention and dqn policies (not {policy})")
-    if lookahead and policy != "dqn":
-        raise InputError("lookahead", f"only used with the dqn policy (not {policy})")
+    if agent_path is not None and not info.learned:
+        raise InputError("agent_path", f"only used with the {' and '.join(LEARNED_POLICIES)} policies (not {policy})")
+    if lookahead and not info.lookahead:
+        allowed = " and ".join(n for n, p in PLANNERS.items() if p.lookahead)
+        raise InputError("lookahead", f"only used with the {allowed} policy (not {policy})")
     if band_level is not None:
         check_range("band_level", band_level, 0.5, 0.99)
     messages: list[str] = []
 
     pred_model = _load_predictor(predictor, messages)
-    exact: bool | None = None
-    plan: Plan | None = None  # the planners' own answer, with its physics check (dqn: none)
-    if policy == "oracle":
-        plan = oracle_plan(m)
-        route, alts = list(plan.route), list(plan.altitudes_m)
-        messages.extend(plan.messages)
-        exact = bool(plan.stats.get("exact", True))
-    elif policy == "attention":
-        from uam_studio.planning.agents.attention.decode import attention_plan, load_policy_cached  # torch
+    kwargs: dict[str, Any] = {}
+    if info.learned:
+        kwargs["agent_path"] = agent_path
+    if info.reads_predictor:
+        kwargs["predictor"] = pred_model
+    if info.lookahead:
+        kwargs["lookahead"] = int(lookahead)
+    plan = info.plan_function()(m, **kwargs)  # the planner's answer, with its physics check where it made one
+    route, alts = list(plan.route), list(plan.altitudes_m)
+    messages.extend(plan.messages)
+    exact = bool(plan.stats.get("exact", True)) if info.reports_exact else None
 
-        net = load_policy_cached(agent_path)
-        plan = attention_plan(m, net)
-        route, alts = list(plan.route), list(plan.altitudes_m)
-        messages.extend(plan.messages)
-    elif policy == "greedy":
-        plan = greedy_plan(m)
-        route, alts = list(plan.route), list(plan.altitudes_m)
-        messages.extend(plan.messages)
-    else:
-        route, alts = dqn_route(m, agent_path, pred_model, messages, int(lookahead))
-
-    check = plan.check if plan is not None and plan.check is not None else check_plan(m, route, alts)
+    check = plan.check if plan.check is not None else check_plan(m, route, alts)
     reached = list(check.sim.reached) if check.sim is not None else []
     if not check.safe:
         messages.append(check.message)

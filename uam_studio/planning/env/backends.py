@@ -23,6 +23,7 @@ from uam_studio.battery.solver import integrate_current
 from uam_studio.errors import InputError
 from uam_studio.flight import TAKEOFF_CONTEXT_S
 from uam_studio.planning.legs import DT_S, takeoff_current
+from uam_studio.planning.voltage_predictor import VoltagePredictor
 
 CONTEXT_S = TAKEOFF_CONTEXT_S  # s of take-off observed to infer the health (uam_studio.flight.context)
 HEALTH_CLIP = 5.0
@@ -183,8 +184,8 @@ class DynaformerBattery(BatteryBackend):
 
     name = "dynaformer"
 
-    def __init__(self, predictor: Any) -> None:
-        if not callable(getattr(predictor, "predict", None)):
+    def __init__(self, predictor: VoltagePredictor) -> None:
+        if not isinstance(predictor, VoltagePredictor):
             raise InputError("predictor", "expected an object with predict(context_current_a, "
                                           "context_voltage_v, current_a, dt_s)")
         self.predictor = predictor

@@ -53,6 +53,7 @@ from uam_studio.planning.operations.decision import Decision
 from uam_studio.planning.operations.defaults import DEFAULT_FORECAST_SIGMA_KT, WEATHER_RESERVE_KT
 from uam_studio.planning.operations.health_belief import BelievedHealth, HealthBelief
 from uam_studio.planning.operations.wind_belief import WindBelief, wind_from_duration
+from uam_studio.planning.planners import IN_FLIGHT_PLANNERS, PLANNERS
 from uam_studio.planning.solvers.oracle import (
     Sortie,
     best_single_sortie,
@@ -70,7 +71,6 @@ Q_PLAN_RANGE = (2000.0, 12000.0)  # C, belief cell bounds
 R0_PLAN_RANGE = (0.005, 1.5)  # ohm
 
 
-IN_FLIGHT_PLANNERS = ("attention", "oracle")  # the operator's planners (the first is the default)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -292,7 +292,7 @@ class Operator:
             visited |= 1 << slot[n]
         moves = self._safe_moves(self._episode(cautious), here, self._state(q_plan, r_plan).as_array()[0], visited)
         state = self._state(q_exp, r_exp).as_array()[0]
-        plan = self._plan if self.planner == "oracle" else self._plan_learned
+        plan = self._plan_learned if PLANNERS[self.planner].learned else self._plan
         believed = self._episode(expected)
         route, alts, why = plan(believed, here, state, visited, moves)
         if route is None:

@@ -23,6 +23,7 @@ from uam_studio.planning.legs import ALTITUDES_M, DT_S, MIN_LEG_KM, N_MAX, LegTa
 from uam_studio.planning.missions.check import Plan, make_plan
 from uam_studio.planning.missions.mission import MAX_DESTINATIONS, Mission, as_mission
 from uam_studio.planning.missions.scenario import check_scenario
+from uam_studio.planning.planners import PLANNERS
 
 # ----------------------------------------------------------------------------- planner preamble
 
@@ -91,9 +92,10 @@ class PlanSetup:
 
 
 def destination_limit(policy: str) -> int:
-    """The most destinations ``policy`` plans: N_MAX (8) for the paper's DQN (its action space), else
-    MAX_DESTINATIONS (20: the greedy rule, the oracle and its reference solver)."""
-    return N_MAX if policy == "dqn" else MAX_DESTINATIONS
+    """The most destinations ``policy`` plans (:data:`~uam_studio.planning.planners.PLANNERS`: N_MAX (8)
+    for the paper's DQN, its action space; MAX_DESTINATIONS (20) for the others and for a name not there)."""
+    info = PLANNERS.get(policy)
+    return MAX_DESTINATIONS if info is None else info.max_destinations
 
 
 def prepare_mission(mission: Any, scenario: str | None, policy: str) -> PlanSetup:
@@ -120,7 +122,8 @@ def prepare_mission(mission: Any, scenario: str | None, policy: str) -> PlanSetu
         msgs.append(f"the planner handles at most {limit} destinations; not planned: {extra}")
         mission = Mission(mission.name, mission.vertiport, dests[:limit], mission.scenario, mission.battery,
                           mission.eod_v)
-    slots = N_MAX if policy == "dqn" else max(N_MAX, len(mission.destinations))
+    fixed = policy in PLANNERS and PLANNERS[policy].fixed_slots
+    slots = N_MAX if fixed else max(N_MAX, len(mission.destinations))
     episode = Episode.of(LegTable(mission, slots=slots), scenario)
     setup = PlanSetup(mission, full_mission, scenario, msgs, stats, episode=episode)
     fail = takeoff_failure(episode.cell)

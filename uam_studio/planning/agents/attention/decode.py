@@ -8,21 +8,18 @@
   (:meth:`~uam_studio.planning.episode.Episode.fly`, the mission's q_max, R0 and cut-off) flies
   the leg there *and* the leg from there home without falling below the cut-off, from the battery
   state the route has reached. So the vertiport can always be reached and every plan is safe. The
-  filter flies only the candidates the search would take (each beam's best ``expand`` by the
-  network, more only when none of those is safe; moves from a full charge at the vertiport are flown
-  once per plan). At the vertiport it may stop only when no destination is safe (a fresh cell).
+  filter flies each beam's best ``expand`` candidates (more only when none is safe; moves from a full
+  charge flown once per plan). At the vertiport it may stop only when no destination is safe.
 - **Search** (:func:`default_search`): beam search. Each beam proposes its ``expand`` best safe
   moves by the network; children in the same situation (same visited set, node and sorties) are
   merged into the one with the most charge left; the ``beam_width`` best children go on, ranked by
-  the network's log-probability (multi_charge: fewer sorties first, which at one step is the same as
-  more destinations, then log-probability). Every finished route is kept and the best by the
+  the network's log-probability (multi_charge: fewer sorties first, then log-probability). Every finished route is kept and the best by the
   scenario's objective is returned: single_charge the most priority (ties: less flight time); multi_charge
   the most destinations, then the fewest sorties, then less time. No hand-written rule proposes moves.
 - **Raw agent** (``safety_filter=False, beam_width=1``): the network's first choice at each step,
-  nothing flown during planning (the plan is checked by the caller, and an unsafe plan scores 0).
+  nothing flown while planning (the caller checks the plan; an unsafe plan scores 0).
 
-single_flight has nothing to choose but the level of its one leg: with the filter, the level with the
-highest minimum voltage on the physics model; raw, the lowest-charge level.
+single_flight chooses only its leg's level: filtered, the highest minimum voltage; raw, the least charge.
 """
 
 from __future__ import annotations
@@ -73,7 +70,7 @@ def default_search(scenario: str, n_dest: int) -> tuple[int, int]:
 
 
 __all__ = ["FORMAT", "WEIGHTS_NAME", "attention_plan", "bundled_weights_path", "continue_route", "default_search",
-           "load_policy", "load_policy_cached"]
+           "load_policy", "load_policy_cached", "plan_with_weights"]
 
 
 def bundled_weights_path() -> Path:
@@ -446,3 +443,8 @@ def continue_route(episode: Episode, here: int, state: np.ndarray, visited: np.n
     if best is None or not best.tokens:
         return None
     return [int(tok.leg_index[t]) for t in best.tokens], list(best.levels)
+
+
+def plan_with_weights(mission: Mission, *, agent_path: str | os.PathLike[str] | None = None) -> Plan:
+    """The ``"attention"`` policy: :func:`attention_plan` with ``agent_path``'s weights (default: bundled)."""
+    return attention_plan(mission, load_policy_cached(agent_path))

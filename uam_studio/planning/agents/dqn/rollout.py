@@ -27,7 +27,7 @@ from uam_studio.planning.missions.check import Plan
 from uam_studio.planning.missions.mission import Mission, check_destination_count
 from uam_studio.planning.solvers.setup import prepare_mission, single_flight_note, too_close
 
-__all__ = ["ROLLOUT_BASES", "bundled_agent_path", "dqn_route", "load_agent_cached", "rollout_agent"]
+__all__ = ["ROLLOUT_BASES", "bundled_agent_path", "dqn_plan", "dqn_route", "load_agent_cached", "rollout_agent"]
 
 
 def bundled_agent_path(scenario: str) -> Path:
@@ -69,6 +69,16 @@ def dqn_route(mission: Mission, agent_path: str | os.PathLike[str] | None, predi
     messages.extend(m for m in plan.messages if not m.startswith("end of discharge"))  # physics check says it
     return list(plan.route), list(plan.altitudes_m)
 
+
+
+def dqn_plan(mission: Mission, *, agent_path: str | os.PathLike[str] | None = None, predictor: Any = None,
+             lookahead: int = 0) -> Plan:
+    """:func:`dqn_route` as a :class:`~uam_studio.planning.missions.check.Plan` (its messages inside, no
+    physics check: the caller makes it): the ``"dqn"`` policy of
+    :func:`~uam_studio.planning.planner.plan_mission`."""
+    messages: list[str] = []
+    route, alts = dqn_route(mission, agent_path, predictor, messages, lookahead)
+    return Plan("dqn", tuple(route), tuple(alts), messages=tuple(messages))
 
 @functools.lru_cache(maxsize=8)
 def _cached_agent(path: str, mtime_ns: int, size: int) -> tuple[Any, dict[str, Any]]:
