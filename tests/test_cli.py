@@ -185,3 +185,38 @@ def test_the_readme_simulate_examples_run_on_the_bundled_missions(capsys):
         args[1] = str(ROOT / args[1])  # the README's paths are from the repository root
         assert main(args) == 0, args
         assert "EOD" in capsys.readouterr().out
+
+
+def _subparser(name: str):
+    import argparse
+
+    from uam_studio.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return sub.choices[name]
+
+
+def _option(parser, flag: str):
+    return next(a for a in parser._actions if flag in a.option_strings)
+
+
+def test_the_cli_states_the_librarys_defaults_and_choices_and_keeps_no_copy_of_them():
+    """The fly command's numeric options default to None (the library's value then applies) and their
+    help states the library's value; the fly and fleet choices are the library's lists."""
+    import re
+
+    from uam_studio.fleet.day import PACK_LAWS
+    from uam_studio.planning.operations import defaults
+    from uam_studio.planning.planners import IN_FLIGHT_PLANNERS
+
+    fly = _subparser("fly")
+    stated = {"--forecast-sigma": defaults.DEFAULT_FORECAST_SIGMA_KT, "--sensor-noise-mv": defaults.DEFAULT_SENSOR_NOISE_MV,
+              "--sensor-noise-ma": defaults.DEFAULT_SENSOR_NOISE_MA, "--reserve": defaults.WEATHER_RESERVE_KT}
+    for flag, value in stated.items():
+        action = _option(fly, flag)
+        assert action.default is None, flag
+        assert float(re.search(r"default (\d+(?:\.\d+)?)", action.help).group(1)) == value, flag
+    policy = _option(fly, "--policy")
+    assert tuple(policy.choices) == IN_FLIGHT_PLANNERS and policy.default == IN_FLIGHT_PLANNERS[0]
+    law = _option(_subparser("fleet"), "--law")
+    assert set(law.choices) == set(PACK_LAWS)

@@ -4,7 +4,7 @@
 :class:`~uam_studio.fleet.day.Fleet` per dispatcher (the same packs at the start) and the days flown
 so far. The packs are the paper's NASA cell, aging by the law fitted to the NASA lives.
 :meth:`FleetState.next_day` flies the next day of Poisson demand for the three dispatchers
-(:func:`~uam_studio.fleet.day.simulate_day`, the call ``uam-studio fleet`` makes) in the flights' thread
+(:func:`~uam_studio.fleet.day.fly_day_of_life`, the call ``uam-studio fleet`` makes) in the flights' thread
 pool, the newest request winning; a pack that retired is replaced overnight. The tables the view draws come from here: the last day's flights
 per aircraft (:meth:`timeline`), each pack's belief against its truth (:meth:`packs`) and the served
 priority per day (:meth:`per_day`).
@@ -19,7 +19,7 @@ import param
 
 from uam_studio.app.services import FLIGHT_POOL, LatestWorker, one_line
 from uam_studio.errors import InputError
-from uam_studio.fleet.day import DayResult, Fleet, day_of_life_seed, default_age_spread, simulate_day
+from uam_studio.fleet.day import DayResult, Fleet, day_of_life_seed, default_age_spread, fly_day_of_life
 from uam_studio.fleet.demand import poisson_demand
 from uam_studio.fleet.dispatch import DISPATCHERS, HEALTH_Z
 
@@ -29,11 +29,8 @@ LABELS = {"aware": "health-aware", "blind": "health-blind", "hindsight": "hindsi
 def _fly_day(job: tuple[dict[str, Fleet], int, float, int, int]) -> tuple[int, dict[str, DayResult], str]:
     fleets, day, rate, seed, vertiports = job
     try:
-        day_seed = day_of_life_seed(seed, day)  # as simulate_life: the same days as `uam-studio fleet`
-        demand = poisson_demand(day_seed, rate, vertiports=vertiports)
-        results = {d: simulate_day(f, demand, d, day_seed) for d, f in fleets.items()}
-        for f in fleets.values():
-            f.renew_retired(seed, day + 1)  # a retired pack is replaced overnight, as over a life
+        demand = poisson_demand(day_of_life_seed(seed, day), rate, vertiports=vertiports)  # the days of `uam-studio fleet`
+        results = {d: fly_day_of_life(f, demand, d, seed, day)[0] for d, f in fleets.items()}  # renewed overnight
         return day, results, ""
     except InputError as err:
         return day, {}, one_line(err)

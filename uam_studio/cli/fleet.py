@@ -73,7 +73,7 @@ def _run_fleet(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from uam_studio.errors import check_range
-    from uam_studio.fleet.day import Fleet, day_of_life_seed, default_age_spread, simulate_day
+    from uam_studio.fleet.day import Fleet, default_age_spread, fly_day_of_life
     from uam_studio.fleet.demand import load_demand
 
     for flag, value, lo, hi in (("--aircraft", args.aircraft, 1, 50), ("--days", args.days, 1, 3650),
@@ -91,11 +91,8 @@ def _run_fleet(args: argparse.Namespace) -> int:
         demand = load_demand(args.demand)
         for d in dispatchers:
             fleet = Fleet.new(args.aircraft, args.seed, args.age_spread, args.vertiports, args.law)
-            days = []
-            for k in range(int(args.days)):
-                days.append(simulate_day(fleet, demand, d, day_of_life_seed(args.seed, k), args.chargers).to_dict())
-                if not args.keep_retired:
-                    fleet.renew_retired(args.seed, k + 1)
+            days = [fly_day_of_life(fleet, demand, d, args.seed, k, args.chargers, not args.keep_retired)[0].to_dict()
+                    for k in range(int(args.days))]
             out[d] = {"dispatcher": d, "days": days}
     else:
         from uam_studio.fleet.study import fleet_study, summarize

@@ -18,11 +18,11 @@ def _add_fly_arguments(p: argparse.ArgumentParser) -> None:
                    help="the operator's planner, on what it believes: attention (the learned planner; default) "
                         "or oracle (exact search, slower)")
     p.add_argument("--seed", type=seed_arg, default=0, help="seeds the forecast errors and the sensor noise")
-    p.add_argument("--forecast-sigma", type=float, default=13.0, metavar="KT",
+    p.add_argument("--forecast-sigma", type=float, default=None, metavar="KT",
                    help="std of the forecast error of each node's wind (kt, 0-60; default 13)")
-    p.add_argument("--sensor-noise-mv", type=float, default=5.0, metavar="MV",
+    p.add_argument("--sensor-noise-mv", type=float, default=None, metavar="MV",
                    help="voltage sensor noise std (mV, 0-100; default 5)")
-    p.add_argument("--sensor-noise-ma", type=float, default=20.0, metavar="MA",
+    p.add_argument("--sensor-noise-ma", type=float, default=None, metavar="MA",
                    help="current sensor noise std (mA, 0-1000; default 20)")
     p.add_argument("--event", action="append", default=[], metavar="wind+KT@S",
                    help="scripted wind change, e.g. wind+30@1200: 30 kt more headwind on legs taking off "
@@ -38,13 +38,15 @@ def _add_fly_arguments(p: argparse.ArgumentParser) -> None:
 
 def _run_fly(args: argparse.Namespace) -> int:
     from uam_studio.planning import load_mission
-    from uam_studio.planning.operations import WEATHER_RESERVE_KT, fly_mission, parse_event
+    from uam_studio.planning.operations import fly_mission, parse_event
 
     events = [parse_event(e) for e in args.event]
     mission = load_mission(args.mission).with_battery(args.q_max, args.r0)
-    rec = fly_mission(mission, args.policy, seed=args.seed, forecast_sigma_kt=args.forecast_sigma,
-                      sensor_noise_mv=args.sensor_noise_mv, sensor_noise_ma=args.sensor_noise_ma, events=events,
-                      reserve_kt=WEATHER_RESERVE_KT if args.reserve is None else args.reserve)
+    given = {"forecast_sigma_kt": args.forecast_sigma, "sensor_noise_mv": args.sensor_noise_mv,
+             "sensor_noise_ma": args.sensor_noise_ma, "reserve_kt": args.reserve}
+    # an option left out takes the library's default (uam_studio.planning.operations.defaults), not a copy
+    rec = fly_mission(mission, args.policy, seed=args.seed, events=events,
+                      **{k: v for k, v in given.items() if v is not None})
     if args.json:
         json.dump(rec.to_dict(series=args.series), sys.stdout, allow_nan=False)
         sys.stdout.write("\n")

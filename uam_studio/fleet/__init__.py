@@ -28,6 +28,7 @@ _LAZY = {
     "PACK_LAWS": "uam_studio.fleet.day",
     "simulate_day": "uam_studio.fleet.day",
     "simulate_life": "uam_studio.fleet.day",
+    "fly_day_of_life": "uam_studio.fleet.day",
     "poisson_demand": "uam_studio.fleet.demand",
     "load_demand": "uam_studio.fleet.demand",
     "DISPATCHERS": "uam_studio.fleet.dispatch",
@@ -37,8 +38,8 @@ _LAZY = {
 
 __all__ = ["AGING_LAW", "CapacityBelief", "DISPATCHERS", "DayResult", "END_OF_LIFE_FRACTION", "AgingLaw", "Fleet",
            "LifePoints", "NASA_AGING_LAW", "PACK_LAWS", "PackHealth", "fit_aging_law", "fleet_study",
-           "leave_one_cell_out", "life_points", "load_demand", "poisson_demand", "simulate_day", "simulate_life",
-           "summarize"]
+           "fly_day_of_life", "leave_one_cell_out", "life_points", "load_demand", "poisson_demand", "simulate_day",
+           "simulate_life", "summarize"]
 
 
 __getattr__ = lazy_getattr(__name__, _LAZY)

@@ -55,7 +55,7 @@ from uam_studio.fleet.hindsight import Job, day_bound
 from uam_studio.fleet.nasa_aging import NASA_AGING_LAW
 
 __all__ = ["AGE_SPREAD_LIFE", "DayResult", "END_S", "Fleet", "FIT_WINDOW_S", "PACK_LAWS", "day_of_life_seed",
-           "default_age_spread", "hindsight_bound", "pack_law", "simulate_day", "simulate_life"]
+           "default_age_spread", "fly_day_of_life", "hindsight_bound", "pack_law", "simulate_day", "simulate_life"]
 
 FIT_WINDOW_S = 600  # s of each flight's readings fitted for its pack's health
 FORECAST_SIGMA_KT = 8.0  # kt: the actual wind is the forecast plus N(0, this)
@@ -362,6 +362,16 @@ def _fit(current: np.ndarray, voltage: np.ndarray, dt_s: float) -> tuple[float, 
     return float(est.q_max), float(q_sd), float(est.r0), float(r_sd)
 
 
+def fly_day_of_life(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int, day: int,
+                    chargers: int | Sequence[int] = 2, renew: bool = True) -> tuple[DayResult, list[int]]:
+    """Day ``day`` (0-based) of the life seeded ``seed``: :func:`simulate_day` with the day's seed
+    (:func:`day_of_life_seed`), then, with ``renew``, each pack that retired replaced overnight
+    (:meth:`Fleet.renew_retired`). The one way a life's day is flown (:func:`simulate_life`, the CLI's
+    ``--demand`` days, the app's Fleet tab). Returns the day and the aircraft renewed after it."""
+    result = simulate_day(fleet, demand, dispatcher, day_of_life_seed(seed, day), chargers)
+    return result, (fleet.renew_retired(seed, day + 1) if renew else [])
+
+
 def simulate_life(aircraft: int, days: int, seed: int, dispatcher: str, rate_per_h: float = DEFAULT_RATE_PER_H,
                   chargers: int = 2, age_spread_efc: float | None = None,
                   progress: Callable[[int], None] | None = None, max_km: float = DEFAULT_MAX_KM,
@@ -386,14 +396,14 @@ def simulate_life(aircraft: int, days: int, seed: int, dispatcher: str, rate_per
     results = []
     for d in range(days):
         demand = poisson_demand(day_of_life_seed(seed, d), rate_per_h, max_km=max_km, vertiports=vertiports)
-        results.append(simulate_day(fleet, demand, dispatcher, day_of_life_seed(seed, d), chargers))
-        for i, s in enumerate(fleet.in_service):
-            if not s and not counted[i]:
+        result, renewed = fly_day_of_life(fleet, demand, dispatcher, seed, d, chargers, renew)
+        results.append(result)
+        for i in renewed if renew else [i for i, s in enumerate(fleet.in_service) if not s]:  # retired by tonight
+            if not counted[i]:
                 retired.append(d + 1)
                 counted[i] = True
-        if renew:
-            for i in fleet.renew_retired(seed, d + 1):
-                counted[i] = False
+        for i in renewed:
+            counted[i] = False
         if progress is not None:
             progress(d + 1)
     retired += [None] * sum(fleet.in_service)
