@@ -93,9 +93,9 @@ def bench_latency(n: int, n_oracle: int, compares: list[str]) -> list[str]:
     import torch
     from bokeh.document import Document
 
-    from uam_studio.app.comparison import COMPARE_DELAY_S, comparison_runner
-    from uam_studio.app.planner import PlannerView
-    from uam_studio.app.planner_state import PlannerState
+    from uam_studio.app.planner.comparison import COMPARE_DELAY_S, comparison_runner
+    from uam_studio.app.planner.state import PlannerState
+    from uam_studio.app.planner.view import PlannerView
     from uam_studio.app.services import predictor
     from uam_studio.app.session import configure_server_threads
     from uam_studio.bundled import bundled_path
@@ -369,8 +369,8 @@ def bench_concurrency(k: int, steps: int, runner: str) -> list[str]:
 def bench_flytick(n: int) -> list[str]:
     from bokeh.document import Document
 
-    from uam_studio.app.fly import TICK_MS, FlyView
-    from uam_studio.app.fly_state import FlyState
+    from uam_studio.app.fly.state import FlyState
+    from uam_studio.app.fly.view import TICK_MS, FlyView
     from uam_studio.app.session import configure_server_threads
     from uam_studio.planning import load_mission
 

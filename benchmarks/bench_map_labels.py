@@ -1,9 +1,9 @@
 """How often the Planner map's leg labels cover another label, a place's marker or its name.
 
 On random maps (``random_mission``, seeds ``[777, n, k]``) of 1-20 destinations planned by the greedy
-rule, at the map's default zoom (the text sizes of :mod:`uam_studio.app.map_geometry`), it counts the maps
+rule, at the map's default zoom (the text sizes of :mod:`uam_studio.app.planner.map_geometry`), it counts the maps
 where any leg label overlaps another label or a place (marker or name), for the app's placement
-(:func:`~uam_studio.app.map_geometry.altitude_labels`) and, in the same run, for a naive reference: every
+(:func:`~uam_studio.app.planner.map_geometry.altitude_labels`) and, in the same run, for a naive reference: every
 label at its leg's midpoint, on the leg's left.
 
     python benchmarks/bench_map_labels.py [--maps 40]
@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from uam_studio.app.map_geometry import altitude_labels, label_overlaps, route_legs
+from uam_studio.app.planner.map_geometry import altitude_labels, label_overlaps, route_legs
 from uam_studio.planning.missions.generate import random_mission
 from uam_studio.planning.solvers.greedy import greedy_plan
 

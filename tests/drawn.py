@@ -16,11 +16,11 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from uam_studio.app.battery_lab import EOD_COLOR, FAMILY_COLORS
-from uam_studio.app.battery_lab_nasa import NASA_COLORS
-from uam_studio.app.fleet import COLORS
-from uam_studio.app.fly import EVENT_COLOR
-from uam_studio.app.map_geometry import FAILED_COLOR
+from uam_studio.app.battery_lab.nasa import NASA_COLORS
+from uam_studio.app.battery_lab.view import EOD_COLOR, FAMILY_COLORS
+from uam_studio.app.fleet.view import COLORS
+from uam_studio.app.fly.view import EVENT_COLOR
+from uam_studio.app.planner.map_geometry import FAILED_COLOR
 from uam_studio.app.style import MEASURED_COLOR, PHYSICS_COLOR, PREDICTED_COLOR
 
 BLACK = ("#000000", 1.0)

@@ -6,8 +6,8 @@ from __future__ import annotations
 import holoviews as hv
 from bokeh.document import Document
 
-from uam_studio.app.fleet import FleetView
-from uam_studio.app.fleet_state import FleetState
+from uam_studio.app.fleet.state import FleetState
+from uam_studio.app.fleet.view import FleetView
 from uam_studio.fleet.day import simulate_life
 
 

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from uam_studio.app.fly import FlyView
-from uam_studio.app.fly_state import FlyState
+from uam_studio.app.fly.state import FlyState
+from uam_studio.app.fly.view import FlyView
 from uam_studio.errors import InputError
 from uam_studio.planning import load_mission
 
@@ -90,7 +90,7 @@ def test_the_record_and_the_plan_save_as_csv(state):
 
 
 def test_flown_legs_are_numbered_with_their_altitude_on_the_map(state):
-    from uam_studio.app.fly import _leg_labels
+    from uam_studio.app.fly.view import _leg_labels
 
     view = FlyView(state)
     state.fly()
@@ -103,7 +103,7 @@ def test_flown_legs_are_numbered_with_their_altitude_on_the_map(state):
     one = _leg_labels([(0.0, 0.0), (10.0, 0.0), (10.0, 0.0)], [500.0, 1000.0], state.mission_flown)
     assert one["text"] == ["#1 500 m"] and 0.0 <= one["x"][0] <= 10.0 and one["y"][0] != 0.0  # beside the leg
     # placed as the Planner's labels: clear of the places, their names and each other
-    from uam_studio.app.map_geometry import label_overlaps
+    from uam_studio.app.planner.map_geometry import label_overlaps
 
     m = state.mission_flown
     assert label_overlaps(labels, [(m.vertiport.x_km, m.vertiport.y_km), *[(d.x_km, d.y_km) for d in m.destinations]],

@@ -93,7 +93,7 @@ def test_fly_tab_flies_plays_and_takes_a_wind_change(browser, app_url):
     # The operator noticed the change: the log shows what each leg measured against the forecast, the
     # same as the library's flight with the event, and at least one leg after the change flew over 20 kt
     # more headwind against the forecast than the same flight without it.
-    from uam_studio.app.planner_state import PlannerState
+    from uam_studio.app.planner.state import PlannerState
     from uam_studio.planning.operations import WindEvent, fly_mission
 
     mission = PlannerState().mission

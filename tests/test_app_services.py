@@ -8,7 +8,7 @@ import threading
 import time
 from pathlib import Path
 
-from uam_studio.app.fly_state import FlyState
+from uam_studio.app.fly.state import FlyState
 from uam_studio.app.services import LatestWorker, one_line
 from uam_studio.errors import InputError
 from uam_studio.planning import load_mission
@@ -141,7 +141,7 @@ def test_fly_in_the_background_shows_the_newest_flight():
 
 
 def test_battery_lab_in_the_background_waits_for_the_newest_inputs():
-    from uam_studio.app.battery_lab_state import BatteryLabState
+    from uam_studio.app.battery_lab.state import BatteryLabState
 
     lab = BatteryLabState(background=True)
     lab.param.update(r0=0.2, q_max=6000.0)

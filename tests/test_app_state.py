@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from uam_studio.app.battery_lab_state import BatteryLabState
-from uam_studio.app.planner_mission import EXAMPLE_MISSION
-from uam_studio.app.planner_state import PlannerState
-from uam_studio.app.retrain_state import RetrainState
+from uam_studio.app.battery_lab.state import BatteryLabState
+from uam_studio.app.planner.mission import EXAMPLE_MISSION
+from uam_studio.app.planner.state import PlannerState
+from uam_studio.app.retrain.state import RetrainState
 from uam_studio.app.services import population, registry
 from uam_studio.planning import load_mission, mission_from_dict
 from uam_studio.planning.agents.retrain import (
@@ -227,7 +227,7 @@ def test_missing_bundled_agent_is_a_visible_error(monkeypatch, tmp_path):
 
 
 def test_the_attention_planner_is_the_first_and_default_policy():
-    from uam_studio.app.planner_summary import summary_html
+    from uam_studio.app.planner.summary import summary_html
 
     s = PlannerState()
     assert s.policy == "attention" and s.plan_error == ""
@@ -246,7 +246,7 @@ def _spread_rows(n: int) -> list[dict]:
 
 
 def test_twenty_destinations_plan_safely_with_the_default_policy():
-    from uam_studio.app.planner_summary import summary_html
+    from uam_studio.app.planner.summary import summary_html
 
     s = PlannerState()
     assert s.set_destinations(_spread_rows(20)), s.error
@@ -262,7 +262,7 @@ def test_twenty_destinations_plan_safely_with_the_default_policy():
 
 
 def test_dqn_past_eight_destinations_is_a_one_line_error_naming_8():
-    from uam_studio.app.planner_summary import summary_html
+    from uam_studio.app.planner.summary import summary_html
 
     s = PlannerState(policy="dqn")
     assert s.plan_error == "" and s.plan["policy"] == "dqn"
@@ -275,7 +275,7 @@ def test_dqn_past_eight_destinations_is_a_one_line_error_naming_8():
 
 
 def test_the_oracle_says_whether_its_plan_is_exact_or_the_reference_solvers():
-    from uam_studio.app.planner_summary import summary_html
+    from uam_studio.app.planner.summary import summary_html
 
     s = PlannerState(policy="oracle")
     assert s.plan["exact"] is True and s.plan_label() == "Oracle (exact optimum)"
@@ -376,7 +376,7 @@ def test_retrain_state_trains_saves_and_the_planner_can_use_it(home):
     assert value in planner.policy_objects.values()
     assert planner.apply(policy=value), planner.error
     assert planner.plan_error == "" and planner.plan["policy"] == "dqn" and planner.plan["route"]
-    from uam_studio.app.planner_summary import summary_html
+    from uam_studio.app.planner.summary import summary_html
 
     label = planner.policy_label(value)
     assert label.startswith("Retrained: ") and path.stem in label and str(path) not in label
@@ -520,7 +520,7 @@ def test_health_population_is_cached_and_pc1_tracks_r0():
 
 
 def test_plans_are_cached_across_sessions_and_copies_are_independent():
-    from uam_studio.app.plans import PlanRequest, compute_plan
+    from uam_studio.app.planner.plans import PlanRequest, compute_plan
 
     req = PlanRequest(mission_from_dict({**EXAMPLE_MISSION, "name": "Cache check"}), "greedy")
     first = compute_plan(req)
@@ -535,7 +535,7 @@ def test_plans_are_cached_across_sessions_and_copies_are_independent():
 
 def test_cached_dqn_plan_is_not_reused_for_another_agent_file(monkeypatch, tmp_path):
     import uam_studio.bundled as bundled
-    from uam_studio.app.plans import PlanRequest, compute_plan
+    from uam_studio.app.planner.plans import PlanRequest, compute_plan
 
     req = PlanRequest(mission_from_dict({**EXAMPLE_MISSION, "name": "Agent stamp"}), "dqn")
     assert compute_plan(req)["plan"]["route"]
@@ -570,7 +570,7 @@ def test_planning_activity_keeps_training_paused_for_a_grace_period():
 
 
 def test_warm_up_plans_what_a_new_session_shows_first():
-    from uam_studio.app.plans import compute_plan
+    from uam_studio.app.planner.plans import compute_plan
     from uam_studio.app.serve import warm_up
 
     warm_up(compare="off")
@@ -636,7 +636,7 @@ def test_failed_takeoff_has_its_voltage_trace_and_an_unsafe_verdict():
 
 
 def test_comparison_inline_names_the_planners_and_the_gap_to_the_oracle():
-    from uam_studio.app.comparison import comparison_table
+    from uam_studio.app.planner.comparison import comparison_table
 
     s = PlannerState(compare="inline")  # the attention planner, as the served app starts
     rows = {r["key"]: r for r in comparison_table(s.comparison)}
@@ -660,7 +660,7 @@ def test_comparison_inline_names_the_planners_and_the_gap_to_the_oracle():
     assert rows["agent"]["status"] == "error" and "at most 8" in rows["agent"]["error"]
     assert rows["oracle"]["label"] == "Oracle (reference)" and rows["oracle"]["exact"] is False
     assert rows["oracle"]["gap"] == "reference"
-    from uam_studio.app.planner_summary import comparison_html
+    from uam_studio.app.planner.summary import comparison_html
 
     assert "oracle: the reference solver's plan, not proven optimal" in comparison_html(s)
     assert rows["greedy"]["status"] == "done" and rows["greedy"]["gap"]
@@ -668,8 +668,8 @@ def test_comparison_inline_names_the_planners_and_the_gap_to_the_oracle():
 
 
 def test_comparison_marks_where_the_papers_dqn_cannot_run():
-    from uam_studio.app.comparison import comparison_table
-    from uam_studio.app.planner_summary import comparison_html
+    from uam_studio.app.planner.comparison import comparison_table
+    from uam_studio.app.planner.summary import comparison_html
 
     s = PlannerState(compare="inline")
     assert s.set_destinations(_spread_rows(9)), s.error
@@ -689,7 +689,7 @@ def test_comparison_marks_where_the_papers_dqn_cannot_run():
 ])
 def test_comparison_always_shows_the_default_planner_and_the_papers_dqn(policy, keys):
     """Choosing the paper's DQN keeps the default attention planner's row: the two side by side."""
-    from uam_studio.app.comparison import comparison_table
+    from uam_studio.app.planner.comparison import comparison_table
 
     s = PlannerState(compare="inline", policy=policy)
     rows = comparison_table(s.comparison)
@@ -701,7 +701,7 @@ def test_comparison_always_shows_the_default_planner_and_the_papers_dqn(policy, 
 
 
 def test_comparison_in_a_thread_waits_for_the_plan_to_settle_and_keeps_the_newest():
-    from uam_studio.app.comparison import comparison_runner
+    from uam_studio.app.planner.comparison import comparison_runner
 
     s = PlannerState(compare="thread", policy="greedy")
     for r0 in (0.15, 0.16, 0.17):
@@ -717,8 +717,8 @@ def test_comparison_in_a_thread_waits_for_the_plan_to_settle_and_keeps_the_newes
 
 
 def test_comparison_in_a_child_process():
-    from uam_studio.app.comparison import ComparisonRunner, compare_row
-    from uam_studio.app.plans import PlanRequest
+    from uam_studio.app.planner.comparison import ComparisonRunner, compare_row
+    from uam_studio.app.planner.plans import PlanRequest
 
     runner = ComparisonRunner("process")
     mission = mission_from_dict({**EXAMPLE_MISSION, "name": "Child"})
@@ -738,8 +738,8 @@ def test_a_closed_comparison_runner_starts_no_process():
     not kept for other sessions, and no comparison process is started while the server exits."""
     import multiprocessing
 
-    from uam_studio.app.comparison import ComparisonRunner, cached_row
-    from uam_studio.app.plans import PlanRequest
+    from uam_studio.app.planner.comparison import ComparisonRunner, cached_row
+    from uam_studio.app.planner.plans import PlanRequest
 
     before = {p.pid for p in multiprocessing.active_children()}  # an earlier test's child may be ending
     runner = ComparisonRunner("process")

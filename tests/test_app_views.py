@@ -12,10 +12,10 @@ import pytest
 from bokeh.document import Document
 
 from uam_studio.app import create_app
-from uam_studio.app.map_geometry import route_legs
-from uam_studio.app.planner import PlannerView
-from uam_studio.app.planner_state import PlannerState
-from uam_studio.app.planner_summary import request_digest, summary_html
+from uam_studio.app.planner.map_geometry import route_legs
+from uam_studio.app.planner.state import PlannerState
+from uam_studio.app.planner.summary import request_digest, summary_html
+from uam_studio.app.planner.view import PlannerView
 from uam_studio.app.services import registry
 from uam_studio.cli import main
 
@@ -108,8 +108,8 @@ def test_serve_argument_errors(capsys, argv, needle):
 
 
 def test_retrain_view_start_from_widget_drives_the_state():
-    from uam_studio.app.retrain import RetrainView
-    from uam_studio.app.retrain_state import RetrainState
+    from uam_studio.app.retrain.state import RetrainState
+    from uam_studio.app.retrain.view import RetrainView
 
     planner = PlannerState(policy="greedy")
     state = RetrainState(runner="thread")
@@ -126,8 +126,8 @@ def test_retrain_view_planner_choice_shows_its_settings_and_curves():
     on the map with the oracle's line, loss) in place of the DQN's; a run locks the choice."""
     import pandas as pd
 
-    from uam_studio.app.retrain import RetrainView
-    from uam_studio.app.retrain_state import EPOCH_COLUMNS, RetrainState
+    from uam_studio.app.retrain.state import EPOCH_COLUMNS, RetrainState
+    from uam_studio.app.retrain.view import RetrainView
 
     planner = PlannerState(policy="greedy")
     state = RetrainState(runner="thread", compare="inline")
@@ -217,7 +217,7 @@ def test_verdict_is_amber_where_the_models_disagree():
 
 
 def test_comparison_panel_names_the_three_planners_with_their_numbers():
-    from uam_studio.app.planner_summary import comparison_html
+    from uam_studio.app.planner.summary import comparison_html
 
     state = PlannerState(compare="inline")
     view = PlannerView(state)
@@ -249,7 +249,7 @@ def test_policy_select_starts_on_the_attention_planner():
 
 
 def test_map_route_has_a_cycle_legend_and_out_and_back_labels_do_not_overlap():
-    from uam_studio.app.map_geometry import NAME_CHAR_KM, altitude_labels, leg_arrows
+    from uam_studio.app.planner.map_geometry import NAME_CHAR_KM, altitude_labels, leg_arrows
 
     state = PlannerState(policy="greedy")
     view = PlannerView(state)
@@ -279,7 +279,7 @@ def test_map_route_has_a_cycle_legend_and_out_and_back_labels_do_not_overlap():
 
 def _label_overlaps(mission, plan: dict) -> list[tuple[str, str]]:
     """Pairs (leg label, what it covers) on the Planner's map of ``plan`` at its default zoom."""
-    from uam_studio.app.map_geometry import altitude_labels, label_overlaps
+    from uam_studio.app.planner.map_geometry import altitude_labels, label_overlaps
 
     rows = [{"name": d.name, "x_km": d.x_km, "y_km": d.y_km} for d in mission.destinations]
     legs = route_legs(plan, rows, (mission.vertiport.x_km, mission.vertiport.y_km))
@@ -312,8 +312,8 @@ def test_map_names_stay_on_their_places_at_any_zoom():
     """Names are drawn at their place's own coordinates, moved by a fixed number of screen pixels
     (not km): zooming in cannot drift them away from their points (an offset in km grows with the zoom)."""
 
-    from uam_studio.app.fly import FlyView
-    from uam_studio.app.fly_state import FlyState
+    from uam_studio.app.fly.state import FlyState
+    from uam_studio.app.fly.view import FlyView
     from uam_studio.app.style import NAME_OFFSET_PX
 
     state = PlannerState(policy="greedy")
@@ -335,8 +335,8 @@ def test_map_names_stay_on_their_places_at_any_zoom():
 
 
 def test_battery_lab_plots_share_time_and_sort_the_legend_by_value():
-    from uam_studio.app.battery_lab import BatteryLabView, eod_text
-    from uam_studio.app.battery_lab_state import BatteryLabState
+    from uam_studio.app.battery_lab.state import BatteryLabState
+    from uam_studio.app.battery_lab.view import BatteryLabView, eod_text
 
     view = BatteryLabView(BatteryLabState())
     view.__panel__().get_root(Document())
@@ -357,8 +357,8 @@ def test_battery_lab_plots_share_time_and_sort_the_legend_by_value():
 def test_battery_lab_loads_the_vtc6_cell():
     """The identified real cell: its nominal health and ranges reach the sliders, its own health family
     the legend, and it flies the same per-cell current further than the paper's cell."""
-    from uam_studio.app.battery_lab import BatteryLabView
-    from uam_studio.app.battery_lab_state import NASA_NAME, VTC6_NAME, BatteryLabState
+    from uam_studio.app.battery_lab.state import NASA_NAME, VTC6_NAME, BatteryLabState
+    from uam_studio.app.battery_lab.view import BatteryLabView
     from uam_studio.battery.parameters import VTC6
 
     view = BatteryLabView(BatteryLabState())
@@ -389,8 +389,8 @@ def test_battery_lab_loads_the_vtc6_cell():
 
 
 def test_retrain_view_shows_progress_numbers_and_the_oracle_line():
-    from uam_studio.app.retrain import RetrainView
-    from uam_studio.app.retrain_state import RetrainState
+    from uam_studio.app.retrain.state import RetrainState
+    from uam_studio.app.retrain.view import RetrainView
 
     planner = PlannerState(policy="greedy")
     view = RetrainView(RetrainState(runner="thread", compare="inline"), planner)
@@ -405,8 +405,8 @@ def test_retrain_view_shows_progress_numbers_and_the_oracle_line():
 
 
 def test_inputs_are_handled_without_panel_s_50_ms_wait_and_the_page_has_no_global_spinner():
-    from uam_studio.app.battery_lab import BatteryLabView
-    from uam_studio.app.battery_lab_state import BatteryLabState
+    from uam_studio.app.battery_lab.state import BatteryLabState
+    from uam_studio.app.battery_lab.view import BatteryLabView
     from uam_studio.app.session import value_property
 
     view = PlannerView(PlannerState(policy="greedy"))

@@ -200,7 +200,7 @@ def test_unknown_field_with_escape_is_quoted(tmp_path):
 
 
 def test_app_loader_reports_hostile_json_and_keeps_the_mission():
-    from uam_studio.app.planner_state import PlannerState
+    from uam_studio.app.planner.state import PlannerState
 
     s = PlannerState()
     before = s.mission

@@ -172,7 +172,7 @@ def test_train_dqn_init_from_refuses_the_payload(tmp_path, capsys):
 
 
 def test_app_agent_folder_payload_is_an_error_not_a_run(tmp_path, monkeypatch):
-    from uam_studio.app.planner_state import PlannerState
+    from uam_studio.app.planner.state import PlannerState
     from uam_studio.app.services import registry
 
     monkeypatch.setenv("UAM_STUDIO_HOME", str(tmp_path / "home"))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from nasa_synthetic import synthetic_rows, write_cell
 
-from uam_studio.app.battery_lab_nasa import NasaLabState, NasaLabView, nasa_figure
+from uam_studio.app.battery_lab.nasa import NasaLabState, NasaLabView, nasa_figure
 from uam_studio.battery.real.nasa_data import load_nasa_cell
 from uam_studio.battery.real.nasa_eval import fit_nasa_model
 from uam_studio.battery.real.nasa_replay import replay_discharge

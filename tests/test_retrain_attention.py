@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from uam_studio.app.planner_state import PlannerState
-from uam_studio.app.retrain_state import EPOCH_COLUMNS, RetrainState
+from uam_studio.app.planner.state import PlannerState
+from uam_studio.app.retrain.state import EPOCH_COLUMNS, RetrainState
 from uam_studio.app.services import agent_policy, registry
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.attention.retrain import attention_setup

@@ -18,9 +18,9 @@ from typing import Any
 
 import panel as pn
 
-from uam_studio.app.comparison import compare_mode
 from uam_studio.app.panel_compat import keep_stylesheets_local
-from uam_studio.app.planner_state import PlannerState
+from uam_studio.app.planner.comparison import compare_mode
+from uam_studio.app.planner.state import PlannerState
 from uam_studio.app.session import configure_server_threads, in_server_session, session_dispatcher
 from uam_studio.app.style import draw_on_canvas
 
@@ -35,7 +35,7 @@ class AppSession:
     :param planner: the Planner's state (the mission every tab works on).
     :param served: built for a server session (not Jupyter).
     :param dispatch: hands a worker thread's result to the session's thread (None outside a server).
-    :param compare: where plan comparisons run (:func:`~uam_studio.app.comparison.compare_mode`).
+    :param compare: where plan comparisons run (:func:`~uam_studio.app.planner.comparison.compare_mode`).
     :param cleanups: called when the session ends (tabs add their own).
     """
 
@@ -47,21 +47,21 @@ class AppSession:
 
 
 def _planner_tab(session: AppSession) -> Any:
-    from uam_studio.app.planner import PlannerView
+    from uam_studio.app.planner.view import PlannerView
 
     return PlannerView(session.planner)
 
 
 def _battery_lab_tab(session: AppSession) -> Any:
-    from uam_studio.app.battery_lab import BatteryLabView
-    from uam_studio.app.battery_lab_state import BatteryLabState
+    from uam_studio.app.battery_lab.state import BatteryLabState
+    from uam_studio.app.battery_lab.view import BatteryLabView
 
     return BatteryLabView(BatteryLabState(background=session.served, dispatch=session.dispatch))
 
 
 def _retrain_tab(session: AppSession) -> Any:
-    from uam_studio.app.retrain import RetrainView
-    from uam_studio.app.retrain_state import RetrainState
+    from uam_studio.app.retrain.state import RetrainState
+    from uam_studio.app.retrain.view import RetrainView
 
     view = RetrainView(RetrainState(dispatch=session.dispatch, compare=session.compare), session.planner)
     session.cleanups.append(view.close)
@@ -69,8 +69,8 @@ def _retrain_tab(session: AppSession) -> Any:
 
 
 def _fly_tab(session: AppSession) -> Any:
-    from uam_studio.app.fly import FlyView
-    from uam_studio.app.fly_state import FlyState
+    from uam_studio.app.fly.state import FlyState
+    from uam_studio.app.fly.view import FlyView
 
     planner = session.planner
     view = FlyView(FlyState(lambda: planner.mission, background=session.served, dispatch=session.dispatch))
@@ -79,8 +79,8 @@ def _fly_tab(session: AppSession) -> Any:
 
 
 def _fleet_tab(session: AppSession) -> Any:
-    from uam_studio.app.fleet import FleetView
-    from uam_studio.app.fleet_state import FleetState
+    from uam_studio.app.fleet.state import FleetState
+    from uam_studio.app.fleet.view import FleetView
 
     return FleetView(FleetState(background=session.served, dispatch=session.dispatch))
 

@@ -205,7 +205,7 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
         server.start()
         server.io_loop.start()  # until Ctrl-C (panel's SIGINT handler stops the loop)
     finally:
-        from uam_studio.app.comparison import close_comparisons
+        from uam_studio.app.planner.comparison import close_comparisons
 
         close_comparisons()  # no comparison process started again while this one exits
         warm.join()  # a daemon thread still inside torch at interpreter exit aborts the process
@@ -250,12 +250,12 @@ def check_can_listen(address: str, port: int) -> None:
 def warm_up(compare: str | None = None) -> None:
     """Load the Dynaformer and the health population, and plan the example mission with the default
     policy, now (server start), so the first session shows its first plan at once. With a
-    comparison runner (``compare``: default :func:`~uam_studio.app.comparison.compare_mode` of a
+    comparison runner (``compare``: default :func:`~uam_studio.app.planner.comparison.compare_mode` of a
     server), also start it and compare the example's planners, so the first session's comparison is
     ready too."""
-    from uam_studio.app.comparison import cached_row, compare_mode, comparison_runner
-    from uam_studio.app.planner_mission import EXAMPLE_MISSION
-    from uam_studio.app.plans import PlanRequest, compute_plan
+    from uam_studio.app.planner.comparison import cached_row, compare_mode, comparison_runner
+    from uam_studio.app.planner.mission import EXAMPLE_MISSION
+    from uam_studio.app.planner.plans import PlanRequest, compute_plan
     from uam_studio.app.services import LEARNED_POLICIES, default_policy, population
     from uam_studio.planning.missions.mission import mission_from_dict
 

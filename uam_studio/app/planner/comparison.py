@@ -2,7 +2,7 @@
 
 - :func:`compare_row`: one planner's row (:func:`~uam_studio.planning.planner.plan_mission`, the
   CLI's call); :func:`cached_row` / :func:`store_row`: rows kept for all sessions, also read from
-  the sessions' plan cache (:func:`~uam_studio.app.plans.compute_plan`).
+  the sessions' plan cache (:func:`~uam_studio.app.planner.plans.compute_plan`).
 - :class:`ComparisonRunner` (:func:`comparison_runner`, one per mode and process): computes rows
   one at a time for all sessions, in a child process (the served app) or a thread.
 - :func:`comparison_table`: the rows in display order with the gap to the oracle.
@@ -22,7 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from uam_studio.app.plans import PlanRequest, cached_plan, request_key
+from uam_studio.app.planner.plans import PlanRequest, cached_plan, request_key
 from uam_studio.app.services import agent_policy, one_line, predictor
 from uam_studio.errors import InputError
 from uam_studio.planning.missions.mission import Mission
@@ -126,7 +126,7 @@ _COMPARE_CACHE_LOCK = threading.Lock()
 
 def cached_row(req: PlanRequest) -> dict[str, Any] | None:
     """The comparison row of ``req`` if this process has it: computed for a comparison before, or
-    from a plan the sessions computed (:func:`~uam_studio.app.plans.compute_plan`'s cache; the same
+    from a plan the sessions computed (:func:`~uam_studio.app.planner.plans.compute_plan`'s cache; the same
     library call)."""
     key = request_key(req)
     with _COMPARE_CACHE_LOCK:

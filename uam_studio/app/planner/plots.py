@@ -1,6 +1,6 @@
 """The Planner tab's plots as holoviews elements: the map's places and route, the altitude per leg, the
 voltage against EOD and the health estimate, each built from its data (km, m, minutes, V) by
-:class:`PlannerPlots`, which :class:`~uam_studio.app.planner.PlannerView` extends.
+:class:`PlannerPlots`, which :class:`~uam_studio.app.planner.view.PlannerView` extends.
 """
 
 from __future__ import annotations
@@ -23,7 +23,13 @@ from bokeh.models import (
 from bokeh.palettes import Viridis256
 from bokeh.transform import linear_cmap
 
-from uam_studio.app.map_geometry import FAILED_COLOR, altitude_labels, leg_arrows, place_label, route_legs
+from uam_studio.app.planner.map_geometry import (
+    FAILED_COLOR,
+    altitude_labels,
+    leg_arrows,
+    place_label,
+    route_legs,
+)
 from uam_studio.app.services import population
 from uam_studio.app.style import (
     NAME_OFFSET_PX,
@@ -51,8 +57,8 @@ def _display_index(values: np.ndarray, limit: int) -> np.ndarray:
 
 
 class PlannerPlots:
-    """The plots of :class:`~uam_studio.app.planner.PlannerView`: each plot's data from the view's
-    ``state`` (a :class:`~uam_studio.app.planner_state.PlannerState`), and each plot a Bokeh figure
+    """The plots of :class:`~uam_studio.app.planner.view.PlannerView`: each plot's data from the view's
+    ``state`` (a :class:`~uam_studio.app.planner.state.PlannerState`), and each plot a Bokeh figure
     built once (``_*_figure``) whose sources its ``_draw_*`` method replaces with that data."""
 
     def _route_data(self) -> dict[str, list]:

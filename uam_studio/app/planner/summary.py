@@ -8,10 +8,10 @@ from __future__ import annotations
 import html
 from typing import Any
 
-from uam_studio.app.comparison import comparison_table
-from uam_studio.app.map_geometry import cycle_color
-from uam_studio.app.planner_mission import mission_digest
-from uam_studio.app.planner_state import PlannerState
+from uam_studio.app.planner.comparison import comparison_table
+from uam_studio.app.planner.map_geometry import cycle_color
+from uam_studio.app.planner.mission import mission_digest
+from uam_studio.app.planner.state import PlannerState
 from uam_studio.planning.missions.mission import VERTIPORT
 
 
@@ -96,7 +96,7 @@ def comparison_html(state: PlannerState) -> str:
     greedy and the oracle (exact up to 8 destinations, the reference solver's plan
     beyond, which the heading then says), each planned by ``plan_mission``: priority reached, places
     reached, charging cycles, lowest physics voltage and the gap to the oracle
-    (:func:`~uam_studio.app.comparison.comparison_table`). The row of the selected policy is bold.
+    (:func:`~uam_studio.app.planner.comparison.comparison_table`). The row of the selected policy is bold.
 
     Attributes: ``data-pending`` ("true" while a row is being computed) and ``data-inputs`` (the
     mission it compares, as in the summary's ``data-inputs`` without the policy)."""

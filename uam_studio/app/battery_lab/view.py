@@ -3,8 +3,8 @@
 One leg (distance, altitude, wind) flown by one cell (q_max, R0), ``legs`` times back to back, and a
 family of curves varying one factor (altitude, wind, R0 or q_max): per-cell current and voltage
 (physics model) with the EOD line, on one time axis. Below, a real NASA discharge predicted before its
-end (:mod:`uam_studio.app.battery_lab_nasa`). The numbers come from
-:class:`~uam_studio.app.battery_lab_state.BatteryLabState`; this view only draws its ``result``. The plots are
+end (:mod:`uam_studio.app.battery_lab.nasa`). The numbers come from
+:class:`~uam_studio.app.battery_lab.state.BatteryLabState`; this view only draws its ``result``. The plots are
 built once per factor (their legend names the factor's values in ascending order) and a slider move
 only sends new data to them.
 """
@@ -20,8 +20,8 @@ import numpy as np
 import panel as pn
 import param
 
-from uam_studio.app.battery_lab_nasa import NasaLabState, NasaLabView
-from uam_studio.app.battery_lab_state import CELLS, VARY, BatteryLabState
+from uam_studio.app.battery_lab.nasa import NasaLabState, NasaLabView
+from uam_studio.app.battery_lab.state import CELLS, VARY, BatteryLabState
 from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE
 from uam_studio.app.session import ensure_bokeh_backend, respond_at_once, session_dispatcher
 from uam_studio.app.style import heading, intro, no_scroll_zoom, window_height

@@ -4,7 +4,7 @@ The aircraft moves along the flown route on the map; the voltage plot shows the 
 to the playback time against the operator's prediction, the world's hidden truth and the EOD line,
 with every decision marked; the log lists the decisions made so far with their reasons. Controls:
 world seed, forecast error, sensor noise, playback speed, and a wind change injected at the playback
-time. Everything comes from :class:`~uam_studio.app.fly_state.FlyState`; this view only draws it.
+time. Everything comes from :class:`~uam_studio.app.fly.state.FlyState`; this view only draws it.
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ import panel as pn
 import param
 from bokeh.models import ColumnDataSource, HoverTool, Range1d, Span
 
-from uam_studio.app.fly_state import SPEEDS, FlyState
-from uam_studio.app.map_geometry import altitude_labels, place_label
+from uam_studio.app.fly.state import SPEEDS, FlyState
+from uam_studio.app.planner.map_geometry import altitude_labels, place_label
 from uam_studio.app.style import (
     MEASURED_COLOR,
     NAME_OFFSET_PX,
@@ -49,7 +49,7 @@ VOLTAGE_SERIES = (
 def _leg_labels(path: list[tuple[float, float]], altitudes_m: list[float], mission: Mission) -> dict[str, list]:
     """A label ``"#k altitude m"`` beside each leg of ``path`` (km; the last point is the aircraft, so
     the leg it flies is labelled from its take-off on), placed as the Planner's map places them
-    (:func:`~uam_studio.app.map_geometry.altitude_labels`: clear of the places, their names and each
+    (:func:`~uam_studio.app.planner.map_geometry.altitude_labels`: clear of the places, their names and each
     other)."""
     legs: dict[str, list] = {c: [] for c in ("from", "to", "altitude_m", "x0", "y0", "x1", "y1")}
     for k, ((x0, y0), (x1, y1)) in enumerate(zip(path, path[1:])):

@@ -5,15 +5,15 @@ sets :attr:`PlannerState.error` (one line naming the field and the allowed range
 mission as it was. Accepted edits replan, either at once (:meth:`PlannerState.replan`; tests,
 notebooks) or in the shared thread pool with only the latest request kept (``background=True``; the
 served app; :class:`~uam_studio.app.services.LatestWorker`), so a slow planner never blocks the
-session. Each plan comes from :func:`~uam_studio.app.plans.compute_plan` (the library's
+session. Each plan comes from :func:`~uam_studio.app.planner.plans.compute_plan` (the library's
 :func:`~uam_studio.planning.planner.plan_mission` with the Dynaformer's voltage band and the failed
 take-off of a cell that cannot take off); :meth:`PlannerState.verdict` is the library's
 :func:`~uam_studio.planning.safety.safety_verdict` of it, and :attr:`PlannerState.comparison` the
-agent / greedy / oracle comparison of its mission (:mod:`uam_studio.app.comparison`, kept by
-:class:`~uam_studio.app.planner_comparison.PlannerComparison`).
+agent / greedy / oracle comparison of its mission (:mod:`uam_studio.app.planner.comparison`, kept by
+:class:`~uam_studio.app.planner.comparison_state.PlannerComparison`).
 
 The starting mission, the digest of what a plan depends on and the rows-to-destinations rules are in
-:mod:`~uam_studio.app.planner_mission`.
+:mod:`~uam_studio.app.planner.mission`.
 """
 
 from __future__ import annotations
@@ -26,10 +26,10 @@ from typing import Any
 
 import param
 
-from uam_studio.app.comparison import COMPARE_MODES
-from uam_studio.app.planner_comparison import PlannerComparison
-from uam_studio.app.planner_mission import EXAMPLE_MISSION, rows_to_destinations
-from uam_studio.app.plans import PlanRequest, compute_plan
+from uam_studio.app.planner.comparison import COMPARE_MODES
+from uam_studio.app.planner.comparison_state import PlannerComparison
+from uam_studio.app.planner.mission import EXAMPLE_MISSION, rows_to_destinations
+from uam_studio.app.planner.plans import PlanRequest, compute_plan
 from uam_studio.app.services import (
     ACTIVITY,
     APP_EOD_RANGE,
@@ -119,8 +119,8 @@ class PlannerState(PlannerComparison, param.Parameterized):
             (default: applied in the worker thread; the served app passes a next-tick dispatcher).
         :param auto: replan on every accepted change (False: call :meth:`replan` yourself).
         :param compare: where the plan comparison (:attr:`comparison`) is computed: ``"process"`` or
-            ``"thread"`` (:func:`~uam_studio.app.comparison.comparison_runner`,
-            :data:`~uam_studio.app.comparison.COMPARE_DELAY_S` after the shown plan
+            ``"thread"`` (:func:`~uam_studio.app.planner.comparison.comparison_runner`,
+            :data:`~uam_studio.app.planner.comparison.COMPARE_DELAY_S` after the shown plan
             settles), ``"inline"`` (at once, in the thread that applies the plan) or ``"off"``.
         """
         super().__init__(**params)

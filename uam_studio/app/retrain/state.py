@@ -5,7 +5,7 @@ and its learning curves' reference.
 (:mod:`uam_studio.planning.agents.retrain`, :mod:`uam_studio.planning.agents.attention.retrain`) in a
 child process or a thread with a stop flag; episode (epoch) stats go through a queue that the view
 drains on its own (periodic) callback; progress comes with elapsed time and time left; the exact
-oracle's plan of the map (a comparison row, :mod:`uam_studio.app.comparison`) is the curves' reference.
+oracle's plan of the map (a comparison row, :mod:`uam_studio.app.planner.comparison`) is the curves' reference.
 """
 
 from __future__ import annotations
@@ -22,8 +22,14 @@ from typing import Any
 import numpy as np
 import param
 
-from uam_studio.app.comparison import COMPARE_MODES, cached_row, compare_row, comparison_runner, store_row
-from uam_studio.app.plans import PlanRequest
+from uam_studio.app.planner.comparison import (
+    COMPARE_MODES,
+    cached_row,
+    compare_row,
+    comparison_runner,
+    store_row,
+)
+from uam_studio.app.planner.plans import PlanRequest
 from uam_studio.app.services import ACTIVITY, one_line
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.attention.retrain import (

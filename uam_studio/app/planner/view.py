@@ -1,11 +1,11 @@
 """The Planner tab: edit a mission on a map and in a table, and see the plan update live.
 
-View only: everything it shows comes from a :class:`~uam_studio.app.planner_state.PlannerState`. The plots are
+View only: everything it shows comes from a :class:`~uam_studio.app.planner.state.PlannerState`. The plots are
 plain Bokeh figures built once per view, whose sources each new state replaces; the map's destinations
 are a Bokeh ``PointDrawTool`` on their own source. Map and table are linked both ways through the state (an edit in
 either goes to :meth:`PlannerState.set_destinations`; an accepted or rejected edit re-sends the
-state's destinations to both). Its plots come from :class:`~uam_studio.app.planner_plots.PlannerPlots`,
-its summary and comparison panes from :mod:`~uam_studio.app.planner_summary`.
+state's destinations to both). Its plots come from :class:`~uam_studio.app.planner.plots.PlannerPlots`,
+its summary and comparison panes from :mod:`~uam_studio.app.planner.summary`.
 """
 
 from __future__ import annotations
@@ -22,9 +22,9 @@ import param
 from bokeh.core.validation import silence
 from bokeh.core.validation.warnings import FIXED_SIZING_MODE
 
-from uam_studio.app.planner_plots import WIDE_MIN_PX, PlannerPlots
-from uam_studio.app.planner_state import PlannerState
-from uam_studio.app.planner_summary import comparison_html, summary_html
+from uam_studio.app.planner.plots import WIDE_MIN_PX, PlannerPlots
+from uam_studio.app.planner.state import PlannerState
+from uam_studio.app.planner.summary import comparison_html, summary_html
 from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE
 from uam_studio.app.session import (
     in_server_session,

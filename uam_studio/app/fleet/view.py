@@ -3,7 +3,7 @@
 Controls: aircraft, vertiports, demand (requests per hour), the packs' age spread, seed, and *Run the next day*.
 Figures: the last day's flights per aircraft (health-aware), each pack's belief band against its
 truth, and the served priority per day for the three dispatchers. The numbers come from
-:class:`~uam_studio.app.fleet_state.FleetState`, which calls the library's
+:class:`~uam_studio.app.fleet.state.FleetState`, which calls the library's
 :func:`~uam_studio.fleet.day.simulate_day`.
 """
 
@@ -17,7 +17,7 @@ import pandas as pd
 import panel as pn
 import param
 
-from uam_studio.app.fleet_state import LABELS, FleetState
+from uam_studio.app.fleet.state import LABELS, FleetState
 from uam_studio.app.session import ensure_bokeh_backend
 from uam_studio.app.style import NOTE_STYLE, PHYSICS_COLOR, PREDICTED_COLOR, heading, intro, no_scroll_zoom
 from uam_studio.fleet.dispatch import DISPATCHERS

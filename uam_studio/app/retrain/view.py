@@ -1,6 +1,6 @@
 """The Retrain tab: retrain the paper's DQN agent or the attention planner, live.
 
-Training runs in a child process or a thread (:class:`~uam_studio.app.retrain_state.RetrainState`). This
+Training runs in a child process or a thread (:class:`~uam_studio.app.retrain.state.RetrainState`). This
 view drains its episode (epoch) queue on a periodic callback of the session (so every widget and plot
 update happens on the session's own thread) and streams the rows into a
 :class:`holoviews.streams.Buffer` behind the learning curves, which show the exact oracle's plan of the
@@ -20,8 +20,8 @@ import pandas as pd
 import panel as pn
 import param
 
-from uam_studio.app.planner_state import PlannerState
-from uam_studio.app.retrain_state import CURVE_COLUMNS, EPOCH_COLUMNS, MODELS, RetrainState
+from uam_studio.app.planner.state import PlannerState
+from uam_studio.app.retrain.state import CURVE_COLUMNS, EPOCH_COLUMNS, MODELS, RetrainState
 from uam_studio.app.services import registry
 from uam_studio.app.session import ensure_bokeh_backend
 from uam_studio.app.style import NOTE_STYLE, heading, intro, no_scroll_zoom

@@ -8,7 +8,7 @@ import functools
 import threading
 from typing import Any
 
-from uam_studio.app.comparison import (
+from uam_studio.app.planner.comparison import (
     COMPARE_DELAY_S,
     COMPARE_LABELS,
     DEFAULT_POLICY,
@@ -20,14 +20,14 @@ from uam_studio.app.comparison import (
     comparison_runner,
     store_row,
 )
-from uam_studio.app.planner_mission import mission_digest
-from uam_studio.app.plans import PlanRequest
+from uam_studio.app.planner.mission import mission_digest
+from uam_studio.app.planner.plans import PlanRequest
 from uam_studio.app.services import AGENT_PREFIX, LEARNED_POLICIES, agent_policy, default_policy
 from uam_studio.planning.legs import N_MAX
 
 
 class PlannerComparison:
-    """The planner comparison of :class:`~uam_studio.app.planner_state.PlannerState` (its
+    """The planner comparison of :class:`~uam_studio.app.planner.state.PlannerState` (its
     ``comparison``), mixed into the state: it reads the state's ``compare`` mode, ``dispatch``,
     ``plan_request`` and :meth:`policy_label`, and keeps ``_compare_key`` and ``_compare_timer``."""
 
