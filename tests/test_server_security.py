@@ -322,11 +322,15 @@ def test_child_pids_lists_the_processes_this_one_started():
     assert child.pid not in child_pids(os.getpid())
 
 
-def test_num_procs_auto_is_one_process_per_core(monkeypatch):
+def test_num_procs_auto_is_one_process_per_core_and_warns_that_a_page_may_be_built_twice(monkeypatch, capsys):
     import uam_studio.app.serve as served
     from uam_studio.cli import main
 
     seen = {}
     monkeypatch.setattr(served, "serve", lambda **kw: seen.update(kw))
     assert main(["serve", "--no-show", "--num-procs", "auto"]) == 0 and seen["num_procs"] == 0
+    assert "builds the page again" in capsys.readouterr().err
     assert main(["serve", "--no-show", "--num-procs", "3"]) == 0 and seen["num_procs"] == 3
+    assert "builds the page again" in capsys.readouterr().err
+    assert main(["serve", "--no-show"]) == 0 and seen["num_procs"] == 1
+    assert "warning" not in capsys.readouterr().err  # one process: nothing to warn of
