@@ -11,16 +11,12 @@ and imported when first used, so that importing this package (and :mod:`.retrain
 
 from uam_studio.lazy_exports import lazy_getattr
 
+_DQN = ("DQNTrainConfig", "train_dqn", "bundled_agent_path", "rollout_agent", "episode_columns", "moving_average",
+        "EpisodeRecorder")  # where each comes from: uam_studio.planning.agents.dqn's own exports
 _LAZY = {
-    "DQNTrainConfig": "uam_studio.planning.agents.dqn.training",
-    "train_dqn": "uam_studio.planning.agents.dqn.training",
+    **{name: "uam_studio.planning.agents.dqn" for name in _DQN},
     "retrain_dqn": "uam_studio.planning.agents.retrain",
     "training_setup": "uam_studio.planning.agents.retrain",
-    "bundled_agent_path": "uam_studio.planning.agents.dqn.rollout",
-    "rollout_agent": "uam_studio.planning.agents.dqn.rollout",
-    "episode_columns": "uam_studio.planning.agents.dqn.learning_curves",
-    "moving_average": "uam_studio.planning.agents.dqn.learning_curves",
-    "EpisodeRecorder": "uam_studio.planning.agents.dqn.learning_curves",
 }
 
 __all__ = sorted(_LAZY)

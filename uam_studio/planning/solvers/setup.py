@@ -122,8 +122,8 @@ def prepare_mission(mission: Any, scenario: str | None, policy: str) -> PlanSetu
         msgs.append(f"the planner handles at most {limit} destinations; not planned: {extra}")
         mission = Mission(mission.name, mission.vertiport, dests[:limit], mission.scenario, mission.battery,
                           mission.eod_v)
-    fixed = policy in PLANNERS and PLANNERS[policy].fixed_slots
-    slots = N_MAX if fixed else max(N_MAX, len(mission.destinations))
+    info = PLANNERS.get(policy)
+    slots = N_MAX if info is not None and info.fixed_slots else max(N_MAX, len(mission.destinations))
     episode = Episode.of(LegTable(mission, slots=slots), scenario)
     setup = PlanSetup(mission, full_mission, scenario, msgs, stats, episode=episode)
     fail = takeoff_failure(episode.cell)
