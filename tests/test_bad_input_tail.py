@@ -243,3 +243,24 @@ def test_mismatched_scenario_note_is_not_doubled(tmp_path, capsys):
     assert main(["plan", str(p), "--policy", "dqn", "--agent", str(agent)]) == 0
     out = capsys.readouterr().out
     assert "note: note:" not in out and "note: the agent was trained for scenario" in out
+
+
+def test_every_input_error_crosses_a_process_pool_whole(tmp_path):
+    """An InputError raised in a worker process reaches the caller as itself: its class, field and one line."""
+    import pickle
+    from concurrent.futures import ProcessPoolExecutor
+
+    from uam_studio.battery.real.cmu_data import CellDataError
+    from uam_studio.battery.real.nasa_data import NasaDataError
+    from uam_studio.dynaformer.artifact import WeightsError
+    from uam_studio.flight.profile import InfeasibleLegError
+
+    errors = [InputError("wind_kts", "99 is out of range; allowed [-39, 39] kt"), WeightsError(tmp_path / "w.pt", "gone"),
+              InfeasibleLegError("distance_km", "too short"), CellDataError(tmp_path / "a.csv", "time_s", "empty"),
+              NasaDataError(tmp_path / "b.csv", "voltage_v", "missing")]
+    for err in errors:
+        back = pickle.loads(pickle.dumps(err))
+        assert (type(back), str(back), back.field, back.__dict__) == (type(err), str(err), err.field, err.__dict__)
+    with ProcessPoolExecutor(1) as pool, pytest.raises(InputError, match=r"^wind_kts: 99.0 is out of range") as caught:
+        pool.submit(leg_profile, 50.0, 1000.0, 99.0).result()
+    assert caught.value.field == "wind_kts"

@@ -1,21 +1,24 @@
-"""A session's document is built once, also when ``uam-studio serve --num-procs`` runs several processes.
+"""A session's document is built once, also when ``uam-studio serve --num-procs`` runs several processes
+behind its front (uam_studio/app/front.py).
 
 Each first load does what a browser does to the server (benchmarks/bench_classroom.py's client: GET the
-page, open its websocket with the page's token, pull the document). A hook loaded into the server's
-processes (tests/server_hooks/sitecustomize.py) logs every document the app builds with its process
-and session id.
+page, open its websocket with the page's token, pull the document), or is a real page in Chromium. A hook
+loaded into the server's processes (tests/server_hooks/sitecustomize.py) logs every document the app
+builds with its process and session id.
 """
 
 from __future__ import annotations
 
 import asyncio
 import collections
+import shutil
 import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
 
+from uam_studio.app.front import AppProcesses, session_of_token
 from uam_studio.app.serve import ServedApp
 
 HERE = Path(__file__).resolve().parent
@@ -25,12 +28,21 @@ from bench_classroom import first_load  # noqa: E402
 LOADS = 4
 
 
+def _built(log: Path, skip: int) -> dict[str, list[str]]:
+    """Session id -> the processes that built its document, from the hook's log after its first ``skip`` lines."""
+    built = collections.defaultdict(list)
+    for line in log.read_text().splitlines()[skip:]:
+        pid, session = line.split()
+        built[session].append(pid)
+    return dict(built)
+
+
 def _builds(tmp_path: Path, num_procs: int) -> dict[str, list[str]]:
     """Session id -> the processes that built its document, over :data:`LOADS` first loads."""
     log = tmp_path / "builds.log"
     with ServedApp(tmp_path, args=["--num-procs", str(num_procs)], PYTHONPATH=str(HERE / "server_hooks"),
                    UAM_TEST_BUILD_LOG=str(log)) as app:
-        warm = len(log.read_text().splitlines()) if log.exists() else 0  # the liveness check's build
+        warm = len(log.read_text().splitlines()) if log.exists() else 0  # the liveness checks' builds
 
         async def loads() -> None:
             with ThreadPoolExecutor(2) as pool:
@@ -40,23 +52,73 @@ def _builds(tmp_path: Path, num_procs: int) -> dict[str, list[str]]:
 
         with ThreadPoolExecutor(1) as runner:  # its own event loop: another test may leave one running here
             runner.submit(asyncio.run, loads()).result()
-        lines = log.read_text().splitlines()[warm:]
-    built = collections.defaultdict(list)
-    for line in lines:
-        pid, session = line.split()
-        built[session].append(pid)
-    return dict(built)
+        return _built(log, warm)
 
 
-@pytest.mark.parametrize("num_procs", [
-    1,
-    pytest.param(2, marks=pytest.mark.xfail(strict=True, reason=(
-        "Bokeh's forked processes share the port and a page's websocket reaches whichever process accepts "
-        "it: the other process builds the session's document again (measured: every one of 6 loads built "
-        "twice; in a browser such a page draws unstyled, asking the CDN for its stylesheets). "
-        "Sticky routing is not built."))),
-])
+@pytest.mark.parametrize("num_procs", [1, 2])
 def test_each_session_is_built_once(tmp_path, num_procs):
     built = _builds(tmp_path, num_procs)
     assert len(built) == LOADS, built
     assert all(len(pids) == 1 for pids in built.values()), built
+    # behind the front, the pages go to the app processes in turn
+    assert len({pids[0] for pids in built.values()}) == num_procs, built
+
+
+def test_the_front_remembers_which_process_built_a_session_and_skips_an_ended_one():
+    procs = AppProcesses([7001, 7002, 7003])
+    assert [procs.next() for _ in range(4)] == [0, 1, 2, 0]
+    procs.remember("abc", 2)
+    assert procs.of_session("abc") == 2 and procs.of_session("xyz") is None and procs.of_session(None) is None
+    procs.alive[1] = False
+    assert [procs.next() for _ in range(4)] == [2, 0, 2, 0]
+    assert procs.sessions_per_process() == [0, 0, 1]
+    with pytest.raises(ValueError):
+        AppProcesses([])
+
+
+def test_a_session_token_names_its_session_and_anything_else_names_none():
+    from bokeh.util.token import generate_jwt_token
+
+    token = generate_jwt_token("session-123", signed=False)
+    assert session_of_token(token) == "session-123" and session_of_token(token.encode()) == "session-123"
+    for junk in (None, "", "not a token", "e30", b"\xff\xfe"):
+        assert session_of_token(junk) is None
+
+
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+
+
+@pytest.mark.skipif(not Path(CHROMIUM).exists(), reason="chromium is not installed")
+def test_pages_behind_a_two_process_front_are_built_once_and_draw_styled(tmp_path):
+    """Three pages in Chromium through ``--num-procs 2``: each session is built once, in the process the front
+    sent its page to (both processes serve pages), every request stays on the server, and each page draws its
+    plan, its destinations table and its voltage figure."""
+    pytest.importorskip("playwright")
+    from drawn import PLANNER_VOLTAGE, assert_drawn
+    from playwright.sync_api import sync_playwright
+
+    log = tmp_path / "builds.log"
+    with ServedApp(tmp_path, args=["--num-procs", "2"], PYTHONPATH=str(HERE / "server_hooks"),
+                   UAM_TEST_BUILD_LOG=str(log)) as app, sync_playwright() as pw:
+        warm = len(log.read_text().splitlines())
+        browser = pw.chromium.launch(executable_path=CHROMIUM)
+        try:
+            for _ in range(3):
+                page = browser.new_page(viewport={"width": 1500, "height": 1100})
+                page.set_default_timeout(60_000)
+                outside: list[str] = []
+                page.on("request", lambda r, out=outside: out.append(r.url) if not r.url.startswith(
+                    ("http://127.0.0.1", "ws://127.0.0.1", "data:", "blob:")) else None)
+                failed: list[str] = []
+                page.on("requestfailed", lambda r, out=failed: out.append(f"{r.url}: {r.failure}"))
+                page.goto(app.url)
+                page.locator(".uam-plan-summary").get_by_text("Route:").wait_for()
+                page.locator(".tabulator-row").first.wait_for()
+                assert_drawn(page, "Voltage: physics", PLANNER_VOLTAGE)
+                assert not outside and not failed, (outside, failed)
+                page.close()
+        finally:
+            browser.close()
+        built = _built(log, warm)
+    assert len(built) == 3 and all(len(pids) == 1 for pids in built.values()), built
+    assert len({pids[0] for pids in built.values()}) == 2, built

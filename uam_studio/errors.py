@@ -12,12 +12,24 @@ from typing import Any
 MAX_SEED = 2**32 - 1  # seeds are integers in [0, MAX_SEED]: what numpy's and gymnasium's seeding accept
 
 
+def _rebuilt(cls: type, args: tuple, state: dict) -> Exception:
+    err = cls.__new__(cls)
+    err.args = args
+    err.__dict__.update(state)
+    return err
+
+
 class InputError(ValueError):
-    """Bad user input. ``str(err)`` is one line: the field, what was given, what is allowed."""
+    """Bad user input. ``str(err)`` is one line: the field, what was given, what is allowed.
+
+    It (and every subclass) pickles whole, so it crosses a process pool unchanged."""
 
     def __init__(self, field: str, message: str) -> None:
         self.field = field
         super().__init__(f"{field}: {message}")
+
+    def __reduce__(self) -> tuple:
+        return _rebuilt, (type(self), self.args, dict(self.__dict__))
 
 
 class DataFileError(InputError):

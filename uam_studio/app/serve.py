@@ -2,10 +2,9 @@
 the process for the first session) and :class:`ServedApp` (the same server in a subprocess, for the
 browser tests and benchmarks).
 
-The server answers only requests addressed to it by a name in its allow-list (:func:`allowed_hosts`):
-every request (page, static files, ``/ws`` websocket, ``/liveness``) whose ``Host`` header, or whose
-``Origin`` header when it has one, is not in the list gets 403. A web page on another site therefore
-cannot drive the app, not even through DNS rebinding (a name of its own that resolves to this machine).
+The server answers only requests addressed to it by a name in its allow-list
+(:mod:`uam_studio.app.host_guard`). With several app processes (``num_procs``), a front process holds the
+port and routes each page's websocket to the process that built the page (:mod:`uam_studio.app.front`).
 """
 
 from __future__ import annotations
@@ -20,119 +19,23 @@ import subprocess
 import sys
 import threading
 import time
+import traceback
 import urllib.request
-from collections.abc import Iterable, Sequence
+import webbrowser
+from collections.abc import Sequence
+from multiprocessing import util as mp_util
 from pathlib import Path
 from typing import Any
-from urllib.parse import urlsplit
 
-from tornado.httputil import HTTPServerRequest
-from tornado.routing import Matcher, Rule
-from tornado.web import RequestHandler
+from uam_studio.app.host_guard import allowed_hosts, install_host_guard, split_host
 
-DEFAULT_PORT = 5006
-DEFAULT_ADDRESS = "127.0.0.1"
-LOOPBACK_NAMES = ("127.0.0.1", "localhost", "[::1]")
+__all__ = ["DEFAULT_ADDRESS", "DEFAULT_PORT", "ServedApp", "allowed_hosts", "check_can_listen", "child_pids",
+           "serve", "serve_app", "serve_front", "split_host", "warm_up"]
 
 log = logging.getLogger(__name__)
 
-
-def split_host(value: str) -> tuple[str, int | None]:
-    """``HOST[:PORT]`` (an IPv6 address in brackets: ``[::1]:5006``) as ``(host, port or None)``, the
-    host in lower case. :class:`ValueError` if it is not of that form (a URL, an empty host, a bad port).
-    """
-    text = value.strip().lower()
-    if "/" in text or "@" in text or not text:
-        raise ValueError(f"{value!r} is not HOST[:PORT]")
-    if text.startswith("["):
-        end = text.find("]")
-        host, rest = text[:end + 1], text[end + 1:]
-        if end < 2:
-            raise ValueError(f"{value!r} is not HOST[:PORT]")
-    else:
-        host, sep, port = text.partition(":")
-        rest = sep + port
-        if ":" in port:
-            raise ValueError(f"{value!r} is not HOST[:PORT] (write an IPv6 address in brackets: [::1]:5006)")
-    if not host:
-        raise ValueError(f"{value!r} has no host")
-    if not rest:
-        return host, None
-    if not rest.startswith(":") or not rest[1:].isdigit() or not 0 < int(rest[1:]) <= 65535:
-        raise ValueError(f"{value!r} has no valid port; allowed [1, 65535]")
-    return host, int(rest[1:])
-
-
-def _host_literal(address: str) -> str:
-    """``address`` as it appears in a Host header: an IPv6 address in brackets."""
-    return f"[{address}]" if ":" in address and not address.startswith("[") else address
-
-
-def allowed_hosts(port: int, address: str | None = None, allow_origin: Iterable[str] = ()) -> list[str]:
-    """The ``host:port`` values that requests to the server may name in ``Host`` and ``Origin``.
-
-    Always the loopback names (``127.0.0.1``, ``localhost``, ``[::1]``) on ``port``; the listening
-    ``address`` if one is given; and each ``HOST[:PORT]`` of ``allow_origin`` (``port`` when it has none).
-    """
-    hosts = [f"{name}:{port}" for name in LOOPBACK_NAMES]
-    extra = [f"{_host_literal(address)}:{port}"] if address else []
-    for value in allow_origin:
-        host, host_port = split_host(value)
-        extra.append(f"{host}:{host_port or port}")
-    return hosts + [h for h in dict.fromkeys(h.lower() for h in extra) if h not in hosts]
-
-
-class _ForeignRequest(Matcher):
-    """Matches a request whose ``Host``, or ``Origin`` when present, is not in ``allowed``."""
-
-    def __init__(self, allowed: Iterable[str]) -> None:
-        self.allowed = frozenset(allowed)
-
-    def _is_allowed(self, netloc: str, default_port: int) -> bool:
-        try:
-            host, port = split_host(netloc)
-        except ValueError:
-            return False
-        return f"{host}:{port or default_port}" in self.allowed
-
-    def match(self, request: HTTPServerRequest) -> dict[str, Any] | None:
-        if not self._is_allowed(request.headers.get("Host", ""), 80):
-            return {}
-        origin = request.headers.get("Origin")
-        if origin is not None:
-            parts = urlsplit(origin)
-            if parts.scheme not in ("http", "https") or not self._is_allowed(
-                    parts.netloc, 443 if parts.scheme == "https" else 80):
-                return {}
-        return None
-
-
-class _Forbidden(RequestHandler):
-    """Answers 403 with one line naming the allow-list, for every method (websocket upgrades too)."""
-
-    def initialize(self, allowed: Sequence[str]) -> None:
-        self.allowed = allowed
-
-    def prepare(self) -> None:
-        host, origin = self.request.headers.get("Host"), self.request.headers.get("Origin")
-        log.warning("refused %s %s: Host %r, Origin %r not in %s", self.request.method, self.request.path,
-                    host, origin, ", ".join(self.allowed))
-        self.set_status(403)
-        self.set_header("Content-Type", "text/plain; charset=utf-8")
-        self.finish(f"403 Forbidden: this server answers only to {', '.join(self.allowed)} "
-                    "(uam-studio serve --allow-origin HOST[:PORT] adds a name)\n")
-
-
-def install_host_guard(server: Any, allowed: Sequence[str]) -> None:
-    """Make the bokeh ``server`` answer 403 to every request whose ``Host``, or ``Origin`` when present,
-    is not in ``allowed``: a route ahead of all others in its tornado Application. Its own websocket
-    Origin check gets the same list."""
-    app = server._tornado  # bokeh's Server keeps its tornado Application there (panel reads it too)
-    app.default_router.rules.insert(0, Rule(_ForeignRequest(allowed), _Forbidden, {"allowed": list(allowed)}))
-    app.websocket_origins.clear()  # the live set bokeh's /ws handler checks Origin against
-    app.websocket_origins.update(allowed)
-
-
+DEFAULT_PORT = 5006
+DEFAULT_ADDRESS = "127.0.0.1"
 def quiet_closed_connections(loop: Any, context: dict[str, Any]) -> None:
     """The server loop's asyncio exception handler: a page that closed while messages were on their way
     (tornado's ``WebSocketClosedError`` / ``StreamClosedError`` in a task nobody awaited) is one log
@@ -173,6 +76,10 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
     naming a host of :func:`allowed_hosts` (``allow_origin`` adds names); others get 403. ``/liveness``
     answers once the server is up; ``/liveness?endpoint=/`` builds the app once first.
 
+    ``num_procs`` app processes (0: one per core). With more than one, a front process holds the port and
+    routes each page's websocket to the process that built the page (:mod:`uam_studio.app.front`); the
+    processes are forked after the models are loaded, so they share them.
+
     The port is bound first (:class:`OSError` if it cannot be, within a second: :func:`check_can_listen`
     runs before the app's imports; :class:`ValueError` for a bad ``allow_origin`` before that), then the
     Dynaformer and the health population are loaded in a background thread, so the first session does
@@ -181,7 +88,20 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
     address = address or DEFAULT_ADDRESS
     allowed_hosts(port, address, allow_origin)  # ValueError for a bad allow_origin, before binding
     check_can_listen(address, port)
+    procs = num_procs if num_procs > 0 else (os.cpu_count() or 1)
+    if procs > 1:
+        serve_front(port, show, address, allow_origin, procs)
+        return
+    serve_app(port, show, address, hosts=None, allow_origin=allow_origin)
 
+
+def serve_app(port: int, show: bool, address: str, hosts: Sequence[str] | None = None,
+              allow_origin: Sequence[str] = ()) -> None:
+    """One app process: a Panel server of the app on ``address``:``port`` until Ctrl-C or SIGTERM.
+
+    :param hosts: the ``Host`` / ``Origin`` names it answers (an app process behind a front: the
+        front's names); None: :func:`allowed_hosts` of its own port, address and ``allow_origin``.
+    """
     import panel as pn
 
     from uam_studio.app.main import EXTENSIONS, TITLE, create_app
@@ -189,18 +109,17 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
 
     configure_server_threads()
     pn.extension(*EXTENSIONS)
-    if num_procs != 1:  # this process forks the workers (in pn.serve) and then only waits for them
-        signal.signal(signal.SIGTERM, _forward_to_workers)
     server = pn.serve({"/": create_app}, port=port, address=address, show=show, title=TITLE, start=False,
-                      threaded=False, liveness=True, num_procs=num_procs)
-    install_host_guard(server, allowed_hosts(server.port, address, allow_origin))
+                      threaded=False, liveness=True)
+    install_host_guard(server, hosts if hosts is not None
+                       else allowed_hosts(server.port, address, allow_origin))
     warm = threading.Thread(target=warm_up, daemon=True, name="uam-warm-up")
     warm.start()
     server.io_loop.asyncio_loop.set_exception_handler(quiet_closed_connections)
     logging.getLogger("tornado.application").addFilter(OneLineRefusedWebsockets())
     # SIGTERM (a service manager, ``kill``) stops the server as Ctrl-C does: panel's SIGINT handler ends the
     # loop, the sessions and the comparison process close (a plain SIGTERM left semaphores behind)
-    signal.signal(signal.SIGTERM, signal.getsignal(signal.SIGINT))
+    signal.signal(signal.SIGTERM, _stop_once(signal.getsignal(signal.SIGINT)))
     try:
         server.start()
         server.io_loop.start()  # until Ctrl-C (panel's SIGINT handler stops the loop)
@@ -211,6 +130,146 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
         warm.join()  # a daemon thread still inside torch at interpreter exit aborts the process
 
 
+def _stop_once(stop: Any) -> Any:
+    """A SIGTERM handler that calls ``stop`` (the SIGINT handler) and then ignores further SIGTERMs: a
+    front that signals its app processes after their process group was signalled does not cut their
+    shutdown short."""
+    def on_term(signum: int, frame: Any) -> None:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        if callable(stop):
+            stop(signum, frame)
+        else:
+            raise KeyboardInterrupt
+
+    return on_term
+
+
+def _free_loopback_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _wait_listening(port: int, pid: int, timeout_s: float = 300.0) -> bool:
+    """Wait until 127.0.0.1:``port`` accepts connections; False if process ``pid`` ended first or time ran out."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), timeout=1.0):
+            return True
+        done, _ = os.waitpid(pid, os.WNOHANG)
+        if done:
+            return False
+        time.sleep(0.1)
+    return False
+
+
+def _stop(pids: Sequence[int], timeout_s: float = 20.0) -> None:
+    """SIGTERM each app process, wait up to ``timeout_s`` for all of them, then SIGKILL the rest."""
+    for pid in pids:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGTERM)
+    deadline = time.monotonic() + timeout_s
+    left = set(pids)
+    while left and time.monotonic() < deadline:
+        for pid in list(left):
+            with contextlib.suppress(ChildProcessError):
+                if os.waitpid(pid, os.WNOHANG)[0] == 0:
+                    continue
+            left.discard(pid)
+        time.sleep(0.1)
+    for pid in left:
+        with contextlib.suppress(ProcessLookupError, ChildProcessError):
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+
+
+def serve_front(port: int, show: bool, address: str, allow_origin: Sequence[str], n: int) -> None:
+    """``n`` app processes behind a front on ``address``:``port`` (module docstring), until Ctrl-C or SIGTERM.
+
+    Before forking, this process loads what every session reads (panel's extensions, the Dynaformer and
+    the health population), so the app processes share those pages (copy on write) instead of loading
+    them ``n`` times. Each app process then listens on a free loopback port and warms up as a single
+    server does. An app process that ends is logged and gets no new pages; when none is left, the front
+    stops too.
+    """
+    import panel as pn
+    from tornado.httpserver import HTTPServer
+    from tornado.ioloop import IOLoop, PeriodicCallback
+    from tornado.netutil import bind_sockets
+
+    from uam_studio.app.front import MAX_MESSAGE_BYTES, AppProcesses, front_application
+    from uam_studio.app.main import EXTENSIONS
+    from uam_studio.app.services import population
+    from uam_studio.app.session import configure_server_threads
+
+    configure_server_threads()
+    pn.extension(*EXTENSIONS)
+    population()  # the Dynaformer and the health population, loaded once before the fork
+    sockets = bind_sockets(port, address)
+    public_port = int(sockets[0].getsockname()[1])
+    allowed = allowed_hosts(public_port, address, allow_origin)
+    ports = [_free_loopback_port() for _ in range(n)]
+    pids: list[int] = []
+    for p in ports:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        pid = os.fork()
+        if pid == 0:  # an app process
+            code = 0
+            try:
+                for s in sockets:
+                    s.close()
+                serve_app(p, False, "127.0.0.1", hosts=allowed)
+            except BaseException:  # noqa: BLE001 - reported, then this process ends with 1
+                traceback.print_exc()
+                code = 1
+            finally:
+                # as multiprocessing's own forked children end: its finalizers of this process (the comparison
+                # process's queues and semaphores) run; those the front made before the fork are skipped
+                mp_util._exit_function()  # type: ignore[attr-defined]
+                sys.stdout.flush()
+                sys.stderr.flush()
+                os._exit(code)
+        pids.append(pid)
+    try:
+        procs = AppProcesses(ports)
+        for k, (p, pid) in enumerate(zip(ports, pids)):
+            if not _wait_listening(p, pid):
+                procs.alive[k] = False
+                log.error("app process %d (pid %d) did not start", k, pid)
+        if not any(procs.alive):
+            raise RuntimeError("no app process started (see the log above)")
+        server = HTTPServer(front_application(procs, allowed), xheaders=False, max_body_size=MAX_MESSAGE_BYTES)
+        server.add_sockets(sockets)
+        loop = IOLoop.current()
+
+        def check() -> None:
+            for k, pid in enumerate(pids):
+                if procs.alive[k]:
+                    with contextlib.suppress(ChildProcessError):
+                        done, status = os.waitpid(pid, os.WNOHANG)
+                        if done:
+                            procs.alive[k] = False
+                            log.error("app process %d (pid %d) ended (status %d); it gets no new pages", k, pid,
+                                      status)
+            if not any(procs.alive):
+                loop.stop()
+
+        watch = PeriodicCallback(check, 1000)
+        watch.start()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, lambda *_: loop.add_callback_from_signal(loop.stop))
+        url = f"http://{'localhost' if address in ('127.0.0.1', '0.0.0.0', '::') else address}:{public_port}/"
+        print(f"uam-studio: {n} app processes behind {url} (pids {', '.join(map(str, pids))})", flush=True)
+        if show:
+            webbrowser.open(url)
+        loop.start()
+        watch.stop()
+        server.stop()
+    finally:
+        _stop(pids)
+
+
 def child_pids(pid: int) -> list[int]:
     """The processes ``pid`` started (Linux ``/proc``; empty elsewhere)."""
     out: list[int] = []
@@ -218,14 +277,6 @@ def child_pids(pid: int) -> list[int]:
         for task in Path(f"/proc/{pid}/task").iterdir():
             out += [int(c) for c in (task / "children").read_text().split()]
     return out
-
-
-def _forward_to_workers(signum: int, frame: Any) -> None:
-    """SIGTERM in the process that forked ``--num-procs`` workers: pass it on to each. They stop as on
-    Ctrl-C and exit 0, and Tornado's forking process then exits 0 (a worker that fails is restarted)."""
-    for pid in child_pids(os.getpid()):
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(pid, signal.SIGTERM)
 
 
 def check_can_listen(address: str, port: int) -> None:

@@ -19,9 +19,8 @@ def _add_serve_arguments(p: argparse.ArgumentParser) -> None:
                    help="also answer requests addressed to HOST[:PORT] (the name or IP other machines use "
                         "to reach this one; PORT defaults to --port); repeatable. Other names get 403")
     p.add_argument("--num-procs", default="1", metavar="N",
-                   help="server processes sharing the port (auto or 0: one per core; default 1). Not for a class "
-                        "yet: a page's websocket may reach another process than the one that built the page, which "
-                        "then builds it again, and such a page can draw without its styles")
+                   help="app processes (auto or 0: one per core; default 1). With more than one, a front process "
+                        "holds the port and sends each page's websocket to the process that built the page")
     p.add_argument("--show", action=argparse.BooleanOptionalAction, default=True,
                    help="open the app in a browser (default: yes)")
 
@@ -47,10 +46,6 @@ def _run_serve(args: argparse.Namespace) -> int:
     if address in ("0.0.0.0", "::") and not args.allow_origin:
         print(f"note: --address {address}: other machines get 403 unless the name or IP they use for this "
               "one is allowed with --allow-origin HOST[:PORT]", file=sys.stderr)
-    if args.num_procs != 1:
-        print("warning: --num-procs: a page's websocket may reach another process than the one that built the "
-              "page; that process builds the page again, and such a page can draw without its styles "
-              "(tests/test_server_sessions.py). One process (the default) has neither problem.", file=sys.stderr)
     try:
         serve(port=args.port, show=args.show, address=address, allow_origin=args.allow_origin,
               num_procs=args.num_procs)
