@@ -83,7 +83,7 @@ def events(n: int) -> None:
             winds = {node: world.wind(node, float("inf")) for node in mission.node_names}
             old = oracle_plan(actual_winds_mission(mission, winds), mission.scenario)
             old_priority = sum(mission.node(x).priority for x in old.route if x != VERTIPORT)
-            rows.append((text, rec.reached_priority, rec.breached, rec.hindsight_priority, old_priority))
+            rows.append((text, rec.reached_priority, rec.breached, rec.hindsight.priority, old_priority))
     for text in ("wind+25@600", "wind-20@900"):
         sub = [r for r in rows if r[0] == text]
         flown = sum(r[1] for r in sub)

@@ -47,7 +47,7 @@ def _fly(job: tuple) -> tuple:
         if err.field != "event":
             raise
         return None
-    return label, reserve, rec.reached_priority, rec.hindsight_priority, rec.breached, rec.breach_cause
+    return label, reserve, rec.reached_priority, rec.hindsight.priority, rec.breached, rec.breach_cause
 
 
 def _table(rows: list[tuple], labels: list[str], skipped: dict[str, int], goals: dict[str, float]) -> None:

@@ -51,8 +51,11 @@ def test_record_holds_both_sides(example):
     rec = fly_mission(example, seed=3)
     d = rec.to_dict()
     for key in ("route", "altitudes_m", "actual_winds_kts", "events", "breached", "reached_priority",
-                "static_route", "static_priority", "static_breached", "hindsight_priority"):
+                "static", "hindsight"):
         assert key in d
+    for ref in ("static", "hindsight"):
+        assert set(d[ref]) == {"route", "altitudes_m", "priority", "breached", "exact"}, d[ref]
+    assert d["hindsight"]["exact"] and not d["static"]["exact"]  # no scripted event: the exact oracle's plan
     json.dumps(d, allow_nan=False)  # finite numbers only
     assert len(rec.route) == len(rec.altitudes_m) == len(rec.actual_winds_kts) >= 2
     assert rec.route[-1] == VERTIPORT
@@ -296,13 +299,13 @@ def test_hindsight_with_an_event_flies_the_winds_of_each_legs_time_and_never_tra
     change at the event's time), so it never reports less than a safe flight reached."""
     mission = load_mission(EXAMPLE)
     rec = fly_mission(mission, seed=1, forecast_sigma_kt=0.0, events=[parse_event(event)])
-    assert not rec.hindsight_exact
-    assert rec.breached or rec.hindsight_priority >= rec.reached_priority
-    assert rec.hindsight_priority >= (0 if rec.static_breached else rec.static_priority)
+    assert not rec.hindsight.exact
+    assert rec.breached or rec.hindsight.priority >= rec.reached_priority
+    assert rec.hindsight.priority >= (0 if rec.static.breached else rec.static.priority)
     # the reported plan scores what it is said to score, flown blind in a fresh world with the same seed
     world = World(mission, 0.0, rec.sensor_noise_mv, rec.sensor_noise_ma, [parse_event(event)], 1)
-    breached, reached = _fly_fixed(world, rec.hindsight_route, rec.hindsight_altitudes_m, takeoff_current())
-    assert not breached and sum(mission.node(n).priority for n in reached) == rec.hindsight_priority
+    breached, reached = _fly_fixed(world, rec.hindsight.route, rec.hindsight.altitudes_m, takeoff_current())
+    assert not breached and sum(mission.node(n).priority for n in reached) == rec.hindsight.priority
 
 
 def test_each_decision_says_what_its_leg_measured_and_a_wind_change_shows_up_as_it_happened(example):

@@ -68,11 +68,11 @@ def _run_fly(args: argparse.Namespace) -> int:
     reached = ", ".join(rec.reached) or "none"
     verdict = f"BREACHED the cut-off ({rec.breach_cause}): priority 0" if rec.breached else f"priority {rec.reached_priority}"
     print(f"flown: reached {reached}; {verdict}; {charging_cycles_text(rec.charging_cycles)}; min {rec.min_voltage_v:.3f} V")
-    print(f"blind pre-flight plan: {' -> '.join(rec.static_route) or 'nothing'}: "
-          f"{'BREACHED, priority 0' if rec.static_breached else f'priority {rec.static_priority}'}")
-    exact = "" if rec.hindsight_exact else (" at each leg's time; the best of the exact plans for each period of "
+    print(f"blind pre-flight plan: {' -> '.join(rec.static.route) or 'nothing'}: "
+          f"{'BREACHED, priority 0' if rec.static.breached else f'priority {rec.static.priority}'}")
+    exact = "" if rec.hindsight.exact else (" at each leg's time; the best of the exact plans for each period of "
                                             "constant winds and the route flown")
-    print(f"hindsight oracle (true cell, actual winds{exact}): priority {rec.hindsight_priority}")
+    print(f"hindsight oracle (true cell, actual winds{exact}): priority {rec.hindsight.priority}")
     return EXIT_OK
 
 

@@ -64,19 +64,19 @@ def fly_many(missions: Sequence[Mission], first_seed: int = 0, **kwargs: Any) ->
 def summarize(records: Iterable[FlightRecord]) -> FlightSummary:
     """Totals of a set of flights (see :class:`FlightSummary`)."""
     recs = list(records)
-    hind = sum(r.hindsight_priority for r in recs)
+    hind = sum(r.hindsight.priority for r in recs)
     replans = np.array([s for r in recs for s in r.replan_s] or [0.0])
-    hind_cycles = [sum(1 for n in r.hindsight_route if n == "vertiport") for r in recs]
+    hind_cycles = [sum(1 for n in r.hindsight.route if n == "vertiport") for r in recs]
     return FlightSummary(
         n=len(recs),
         priority=sum(r.reached_priority for r in recs),
-        blind_priority=sum(r.static_priority for r in recs),
+        blind_priority=sum(r.static.priority for r in recs),
         hindsight_priority=hind,
         ratio=sum(r.reached_priority for r in recs) / hind if hind else float("nan"),
-        blind_ratio=sum(r.static_priority for r in recs) / hind if hind else float("nan"),
+        blind_ratio=sum(r.static.priority for r in recs) / hind if hind else float("nan"),
         breaches=sum(r.breached for r in recs),
-        blind_breaches=sum(r.static_breached for r in recs),
-        not_worse_than_blind=sum(r.reached_priority >= r.static_priority for r in recs),
+        blind_breaches=sum(r.static.breached for r in recs),
+        not_worse_than_blind=sum(r.reached_priority >= r.static.priority for r in recs),
         extra_cycles=int(sum(max(0, r.charging_cycles - c) for r, c in zip(recs, hind_cycles) if not r.breached)),
         replan_s_p50=float(np.percentile(replans, 50)),
         replan_s_p95=float(np.percentile(replans, 95)),

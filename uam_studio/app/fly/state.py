@@ -221,10 +221,10 @@ class FlyState(param.Parameterized):
             return (f"flying: {self.t_s / 60:.1f} of {self.end_s / 60:.1f} min · reached so far: "
                     f"{', '.join(reached) or 'none'} · the results show at the landing")
         own = f"BREACHED the cut-off (priority 0; {r.breach_cause})" if r.breached else f"priority {r.reached_priority}"
-        blind = "breached" if r.static_breached else f"priority {r.static_priority}"
+        blind = "breached" if r.static.breached else f"priority {r.static.priority}"
         return (f"flown: {own}, {charging_cycles_text(r.charging_cycles)}, min {r.min_voltage_v:.3f} V · blind pre-flight "
-                f"plan: {blind} · hindsight oracle{'' if r.hindsight_exact else ' (best known plan)'}: "
-                f"priority {r.hindsight_priority}")
+                f"plan: {blind} · hindsight oracle{'' if r.hindsight.exact else ' (best known plan)'}: "
+                f"priority {r.hindsight.priority}")
 
 
 __all__ = ["SPEEDS", "FlyState"]

@@ -54,6 +54,21 @@ from uam_studio.planning.solvers.oracle import oracle_plan
 
 
 @dataclass
+class ReferenceFlight:
+    """A reference flown in the same world as the operator (:class:`FlightRecord`'s ``static`` and
+    ``hindsight``): ``route`` (nodes in order; ``"vertiport"`` is a recharge), ``altitudes_m`` (m) of each
+    leg, ``priority`` (the priority it served; 0 when it breached), ``breached`` (the cell fell below the
+    cut-off), ``exact`` (the exact oracle's plan of the true cell and the actual winds; False for the
+    pre-flight plan, and for hindsight when scripted events make it the best of several candidate plans)."""
+
+    route: list[str] = field(default_factory=list)
+    altitudes_m: list[float] = field(default_factory=list)
+    priority: int = 0
+    breached: bool = False
+    exact: bool = False
+
+
+@dataclass
 class FlightRecord:
     """One flight, both sides.
 
@@ -67,9 +82,9 @@ class FlightRecord:
     ``measured_current_a`` (the sensors), ``true_voltage_v`` and ``true_current_a`` (the world), and
     ``predicted_voltage_v`` (the operator's prediction for each leg at the decision that chose it,
     from its health estimate and predicted wind; NaN-free: the take-off check holds the measurement).
-    References: ``static_*`` (the pre-flight plan flown blind) and ``hindsight_*`` (the best plan
-    knowing the true cell and the actual winds at each leg's time; ``hindsight_exact``: False when
-    scripted events make it the best of several candidate plans rather than the exact oracle's).
+    References (:class:`ReferenceFlight`, each flown in the same world): ``static`` (the pre-flight plan
+    flown blind) and ``hindsight`` (the best plan knowing the true cell and the actual winds at each leg's
+    time).
     """
 
     mission: str
@@ -98,14 +113,8 @@ class FlightRecord:
     true_voltage_v: np.ndarray = field(default_factory=lambda: np.zeros(0))
     true_current_a: np.ndarray = field(default_factory=lambda: np.zeros(0))
     predicted_voltage_v: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    static_route: list[str] = field(default_factory=list)
-    static_altitudes_m: list[float] = field(default_factory=list)
-    static_priority: int = 0
-    static_breached: bool = False
-    hindsight_route: list[str] = field(default_factory=list)
-    hindsight_altitudes_m: list[float] = field(default_factory=list)
-    hindsight_priority: int = 0
-    hindsight_exact: bool = True
+    static: ReferenceFlight = field(default_factory=ReferenceFlight)
+    hindsight: ReferenceFlight = field(default_factory=ReferenceFlight)
     true_q_max: float = 0.0
     true_r0: float = 0.0
     wall_s: float = 0.0
@@ -126,6 +135,8 @@ class FlightRecord:
                 v = [round(float(x), 5) for x in v]
             elif f.name == "events":
                 v = [d.to_dict() for d in v]
+            elif isinstance(v, ReferenceFlight):
+                v = dataclasses.asdict(v)
             elif isinstance(v, float):
                 v = round(v, 6)
             out[f.name] = v
@@ -306,16 +317,15 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
     end_s = world.time_s
     if references:
         first_plan = next((e for e in rec.events if e.kind == "plan"), None)
-        rec.static_route = list(first_plan.route) if first_plan else []
-        rec.static_altitudes_m = list(first_plan.altitudes_m) if first_plan else []
+        static_route = list(first_plan.route) if first_plan else []
+        static_alts = list(first_plan.altitudes_m) if first_plan else []
         blind = new_world()
-        rec.static_breached, static_reached = _fly_fixed(blind, rec.static_route, rec.static_altitudes_m, takeoff)
-        rec.static_priority = 0 if rec.static_breached else _priority(mission, static_reached)
+        static_breached, static_reached = _fly_fixed(blind, static_route, static_alts, takeoff)
+        rec.static = ReferenceFlight(static_route, static_alts, 0 if static_breached else _priority(mission, static_reached),
+                                     static_breached)
         end_s = max(end_s, blind.time_s)
-        route, alts, rec.hindsight_priority = _hindsight(
-            mission, scenario, new_world, takeoff, (rec.route, rec.altitudes_m))
-        rec.hindsight_route, rec.hindsight_altitudes_m = route, alts
-        rec.hindsight_exact = not world.events
+        route, alts, priority = _hindsight(mission, scenario, new_world, takeoff, (rec.route, rec.altitudes_m))
+        rec.hindsight = ReferenceFlight(route, alts, priority, exact=not world.events)
     late = [e for e in world.events if e.start_s > end_s]
     if late:
         raise InputError("event", f"{late[0].text} starts at {late[0].start_s:g} s, after the flight ended "
