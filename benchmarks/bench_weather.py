@@ -3,6 +3,7 @@ that changes"), against the hindsight reference and against the same flights wit
 
     OMP_NUM_THREADS=1 python benchmarks/bench_weather.py demo            # the README's Fly demo: 15 flights
     OMP_NUM_THREADS=1 python benchmarks/bench_weather.py fresh [--n 45]  # fresh missions, 4 weathers
+    OMP_NUM_THREADS=1 python benchmarks/bench_weather.py ceiling [--n 45]  # what the reserve allows at best
 
 ``demo``: the example mission (``assets/example_mission.json``), +25 kt injected at 60, 300 and 900 s,
 world seeds 0-4. Goal: 0 breaches with the default reserve (25 kt).
@@ -17,6 +18,13 @@ Each condition is also flown without a reserve (``reserve_kt=0``, the belief unc
 the reserve on the same flights.
 
 Runs on two processes (one per core of the project's machine).
+
+``ceiling``: on the same fresh missions with no change, upper bounds on what any operator that keeps the
+reserve can serve, from the exact oracle (:func:`~uam_studio.planning.solvers.oracle.oracle_plan`) on the
+true cell and the actual winds, but with the reserve's headwind where the rule puts it: the home leg at
+forecast + 1.64 std (13 kt) + the reserve, and (the take-off check to the last destination) that leg at its
+actual wind + the reserve, maximised over which destination is last. A bound knows every destination's wind,
+which no operator does; it shows what the reserve rule itself costs, beside the hindsight reference.
 """
 
 from __future__ import annotations
@@ -30,8 +38,19 @@ import numpy as np
 
 from uam_studio.classroom import asset_path
 from uam_studio.errors import InputError
+from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning import load_mission
-from uam_studio.planning.operations import WEATHER_RESERVE_KT, fly_mission, parse_event
+from uam_studio.planning.missions.mission import VERTIPORT
+from uam_studio.planning.operations import (
+    DEFAULT_FORECAST_SIGMA_KT,
+    WEATHER_RESERVE_KT,
+    World,
+    fly_mission,
+    parse_event,
+)
+from uam_studio.planning.operations.operator import WIND_Z
+from uam_studio.planning.operations.world import actual_winds_mission
+from uam_studio.planning.solvers.oracle import oracle_plan
 from uam_studio.studies.flying import study_missions
 
 WEATHERS = ("none", "wind+25", "wind-20", "wind+35")
@@ -108,6 +127,37 @@ def fresh(n: int, workers: int) -> None:
     print(f"({time.perf_counter() - t0:.0f} s, {workers} processes)")
 
 
+def _ceiling(job: tuple) -> tuple[int, int, int]:
+    """(hindsight, home-leg bound, last-leg-and-home bound) priorities of one fresh mission (module docstring)."""
+    k, mission, reserve = job
+    world = World(mission, DEFAULT_FORECAST_SIGMA_KT, seed=56100 + k)
+    actual = {n: world.wind(n, 0.0) for n in mission.node_names}
+
+    def served(winds: dict[str, float]) -> int:
+        return oracle_plan(actual_winds_mission(mission, {n: float(np.clip(w, *WIND_RANGE_KTS))
+                                                          for n, w in winds.items()}), mission.scenario).reached_priority
+
+    home = mission.node(VERTIPORT).wind_kts + WIND_Z * DEFAULT_FORECAST_SIGMA_KT + reserve
+    hindsight = served(actual)
+    home_only = served({**actual, VERTIPORT: home})
+    last_leg = max(served({**actual, d.name: actual[d.name] + reserve, VERTIPORT: home}) for d in mission.destinations)
+    return hindsight, home_only, last_leg
+
+
+def ceiling(n: int, workers: int) -> None:
+    missions = study_missions(n, 56000, "single_charge")
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(workers) as pool:
+        rows = list(pool.map(_ceiling, [(k, m, WEATHER_RESERVE_KT) for k, m in enumerate(missions)]))
+    h = sum(r[0] for r in rows)
+    print(f"{n} fresh single-charge missions, no change, reserve {WEATHER_RESERVE_KT:g} kt; hindsight priority {h}")
+    for label, col in (("bound: home leg at forecast + 1.64 std + reserve", 1),
+                       ("bound: also the last destination leg at actual + reserve", 2)):
+        total = sum(r[col] for r in rows)
+        print(f"{label}: {total} ({total / h:.3f} of hindsight)")
+    print(f"({time.perf_counter() - t0:.0f} s, {workers} processes)")
+
+
 def _fly_end(job: tuple) -> float:
     """The end (s) of a mission's no-change flight (no references): where a change may be drawn."""
     mission, seed = job
@@ -117,12 +167,14 @@ def _fly_end(job: tuple) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("what", choices=["demo", "fresh"])
+    p.add_argument("what", choices=["demo", "fresh", "ceiling"])
     p.add_argument("--n", type=int, default=45)
     p.add_argument("--workers", type=int, default=2)
     args = p.parse_args(argv)
     if args.what == "demo":
         demo(args.workers)
+    elif args.what == "ceiling":
+        ceiling(args.n, args.workers)
     else:
         fresh(args.n, args.workers)
     return 0
