@@ -122,3 +122,35 @@ def test_pages_behind_a_two_process_front_are_built_once_and_draw_styled(tmp_pat
         built = _built(log, warm)
     assert len(built) == 3 and all(len(pids) == 1 for pids in built.values()), built
     assert len({pids[0] for pids in built.values()}) == 2, built
+
+
+def test_the_front_keeps_serving_when_an_app_process_ends(tmp_path):
+    """One of two app processes is killed: the front notices within its check (1 s), logs it, and sends
+    every new page to the process left; the front itself keeps running."""
+    import os
+    import signal
+    import time
+
+    from uam_studio.app.serve import child_pids
+
+    with ServedApp(tmp_path, args=["--num-procs", "2"]) as app:
+        workers = child_pids(app.proc.pid)
+        assert len(workers) == 2, workers
+        os.kill(workers[0], signal.SIGKILL)
+        time.sleep(3.0)
+
+        async def loads() -> list[float]:
+            out = []
+            with ThreadPoolExecutor(2) as pool:
+                for _ in range(3):
+                    seconds, conn = await first_load(app.url, pool)
+                    conn.close()
+                    out.append(seconds)
+            return out
+
+        with ThreadPoolExecutor(1) as runner:
+            times = runner.submit(asyncio.run, loads()).result()
+        assert app.proc.poll() is None
+    assert len(times) == 3
+    log = app.log_path.read_text()
+    assert f"(pid {workers[0]}) ended" in log and "gets no new pages" in log, log[-2000:]
