@@ -12,7 +12,7 @@ from typing import Any
 MAX_SEED = 2**32 - 1  # seeds are integers in [0, MAX_SEED]: what numpy's and gymnasium's seeding accept
 
 
-def _rebuilt(cls: type, args: tuple, state: dict) -> Exception:
+def _rebuilt(cls: type[InputError], args: tuple, state: dict) -> InputError:
     err = cls.__new__(cls)
     err.args = args
     err.__dict__.update(state)
