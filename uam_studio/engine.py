@@ -40,12 +40,12 @@ def run_tasks(fn: Callable[..., Any], tasks: Sequence[tuple], *, workers: int | 
     if address is not None and not str(address).strip():
         raise InputError("address", "blank: give a Dask scheduler's address such as tcp://host:8786")
     if address is None and workers == 0:
-        out = []
+        inline = []
         for k, t in enumerate(tasks):
-            out.append(fn(*t))
+            inline.append(fn(*t))
             if progress is not None:
                 progress(k + 1, len(tasks))
-        return out
+        return inline
     from dask.distributed import Client, LocalCluster, as_completed
 
     cluster = None

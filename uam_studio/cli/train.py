@@ -176,6 +176,7 @@ def _run_train_dqn(args: argparse.Namespace) -> int:
     _check_out_folder(agent.parent)
     card_path = agent.with_name("card.json") if agent.name == "agent.zip" else agent.with_suffix(".card.json")
     res = retrain_dqn(cfg, env_fn, agent, mission=mission, progress_bar=True, source="cli", card_path=card_path)
+    assert res is not None  # None only for a run stopped through its stop event, which the CLI never sets
     card, final = res.card, res.card["final_stats"]
     summary = (f"{final['episodes']} episodes; last {final['last_episodes']}: mean reward "
                f"{final['mean_reward']:.2f}, EOD rate {final['eod_rate']:.0%}" if final["last_episodes"]

@@ -121,6 +121,7 @@ def check_plan(
         return PlanCheck(True, v_min, margin, None, None, None, msg, sim)
     k = next(i for i, leg in enumerate(sim.legs) if not leg.reached)
     to = sim.legs[k].to
+    assert sim.eod_s is not None  # a leg not reached: the cut-off was crossed
     msg = f"unsafe: voltage falls below {sim.eod_v:.2f} V at {sim.eod_s:.0f} s on leg {k + 1} to {to}"
     return PlanCheck(False, v_min, margin, k, to, float(sim.eod_s), msg, sim)
 

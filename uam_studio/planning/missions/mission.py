@@ -183,7 +183,7 @@ class Destination:
             raise InputError("name", f"{name!r} is reserved for the vertiport node")
         if "," in name:
             raise InputError("name", f"{name!r} contains a comma; route entries are comma-separated")
-        p = self.priority
+        p: object = self.priority
         if isinstance(p, float) and p.is_integer():
             p = int(p)
         if isinstance(p, bool) or not isinstance(p, int):
