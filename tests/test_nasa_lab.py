@@ -63,3 +63,18 @@ def test_a_replay_reads_no_voltage_after_the_context_and_refuses_a_bad_position(
     assert a.fit == "given" and np.isfinite([a.prediction.median_s, a.prediction.bound95_s]).all()
     with pytest.raises(InputError, match="discharge: 12 is out of range; allowed \\[0, 11\\]"):
         replay_discharge(cell, 12, model=model)
+
+
+def test_views_build_after_the_bokeh_backend_was_only_imported():
+    """``import holoviews.plotting.bokeh`` (the classroom's plots do it) makes bokeh HoloViews' current backend
+    without building ``hv.opts``' builders; a view built after that still gets them (a fresh interpreter:
+    the state is global)."""
+    import subprocess
+    import sys
+
+    code = ("import holoviews.plotting.bokeh, holoviews as hv\n"
+            "from uam_studio.app.session import ensure_bokeh_backend\n"
+            "ensure_bokeh_backend()\n"
+            "print(type(hv.opts.Overlay(responsive=True)).__name__)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0 and out.stdout.strip() == "Options", out.stderr[-2000:]

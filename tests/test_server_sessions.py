@@ -97,28 +97,33 @@ def test_pages_behind_a_two_process_front_are_built_once_and_draw_styled(tmp_pat
     from drawn import PLANNER_VOLTAGE, assert_drawn
     from playwright.sync_api import sync_playwright
 
+    def pages(url: str) -> None:  # Playwright's sync API in a thread of its own: no event loop running there
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=CHROMIUM)
+            try:
+                for _ in range(3):
+                    page = browser.new_page(viewport={"width": 1500, "height": 1100})
+                    page.set_default_timeout(60_000)
+                    outside: list[str] = []
+                    page.on("request", lambda r, out=outside: out.append(r.url) if not r.url.startswith(
+                        ("http://127.0.0.1", "ws://127.0.0.1", "data:", "blob:")) else None)
+                    failed: list[str] = []
+                    page.on("requestfailed", lambda r, out=failed: out.append(f"{r.url}: {r.failure}"))
+                    page.goto(url)
+                    page.locator(".uam-plan-summary").get_by_text("Route:").wait_for()
+                    page.locator(".tabulator-row").first.wait_for()
+                    assert_drawn(page, "Voltage: physics", PLANNER_VOLTAGE)
+                    assert not outside and not failed, (outside, failed)
+                    page.close()
+            finally:
+                browser.close()
+
     log = tmp_path / "builds.log"
     with ServedApp(tmp_path, args=["--num-procs", "2"], PYTHONPATH=str(HERE / "server_hooks"),
-                   UAM_TEST_BUILD_LOG=str(log)) as app, sync_playwright() as pw:
+                   UAM_TEST_BUILD_LOG=str(log)) as app:
         warm = len(log.read_text().splitlines())
-        browser = pw.chromium.launch(executable_path=CHROMIUM)
-        try:
-            for _ in range(3):
-                page = browser.new_page(viewport={"width": 1500, "height": 1100})
-                page.set_default_timeout(60_000)
-                outside: list[str] = []
-                page.on("request", lambda r, out=outside: out.append(r.url) if not r.url.startswith(
-                    ("http://127.0.0.1", "ws://127.0.0.1", "data:", "blob:")) else None)
-                failed: list[str] = []
-                page.on("requestfailed", lambda r, out=failed: out.append(f"{r.url}: {r.failure}"))
-                page.goto(app.url)
-                page.locator(".uam-plan-summary").get_by_text("Route:").wait_for()
-                page.locator(".tabulator-row").first.wait_for()
-                assert_drawn(page, "Voltage: physics", PLANNER_VOLTAGE)
-                assert not outside and not failed, (outside, failed)
-                page.close()
-        finally:
-            browser.close()
+        with ThreadPoolExecutor(1) as runner:
+            runner.submit(pages, app.url).result()
         built = _built(log, warm)
     assert len(built) == 3 and all(len(pids) == 1 for pids in built.values()), built
     assert len({pids[0] for pids in built.values()}) == 2, built

@@ -20,7 +20,9 @@ def ensure_bokeh_backend() -> None:
 
     if "bokeh" not in hv.Store.renderers:
         hv.renderer("bokeh")
-    if hv.Store.current_backend != "bokeh":
+    # importing holoviews.plotting.bokeh alone makes bokeh the current backend without building the
+    # ``hv.opts`` builders (hv.opts.Overlay...); switching to it again builds them
+    if hv.Store.current_backend != "bokeh" or not hasattr(hv.opts, "Overlay"):
         hv.Store.set_current_backend("bokeh")
 
 
