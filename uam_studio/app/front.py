@@ -131,10 +131,14 @@ class _HttpRelay(web.RequestHandler):
                                      body=self.request.body if self.request.method == "POST" else None,
                                      follow_redirects=False, decompress_response=False,
                                      connect_timeout=TIMEOUT_S, request_timeout=TIMEOUT_S)
-        resp = await httpclient.AsyncHTTPClient().fetch(req, raise_error=False)
-        if resp.code == 599:  # no answer at all: the process is gone or did not answer in time
+        try:  # raise_error=False still raises when nothing answers (a refused connection)
+            resp = await httpclient.AsyncHTTPClient().fetch(req, raise_error=False)
+            error = resp.error if resp.code == 599 else None
+        except OSError as err:
+            error = err
+        if error is not None:  # no answer at all: the process is gone or did not answer in time
             log.warning("app process %d (port %d) did not answer %s: %s", k, self.procs.ports[k], self.request.uri,
-                        resp.error)
+                        error)
             self.set_status(502)
             self.set_header("Content-Type", "text/plain; charset=utf-8")
             self.finish(f"502 Bad Gateway: app process {k} did not answer\n")
@@ -234,9 +238,12 @@ class _Liveness(web.RequestHandler):
         client = httpclient.AsyncHTTPClient()
 
         async def ask(port: int) -> int:
-            resp = await client.fetch(f"http://127.0.0.1:{port}{self.request.uri}", raise_error=False,
-                                      headers={"Host": self.request.headers.get("Host", "")},
-                                      request_timeout=TIMEOUT_S)
+            try:
+                resp = await client.fetch(f"http://127.0.0.1:{port}{self.request.uri}", raise_error=False,
+                                          headers={"Host": self.request.headers.get("Host", "")},
+                                          request_timeout=TIMEOUT_S)
+            except OSError:  # nothing listens there
+                return 599
             return resp.code
 
         codes = await asyncio.gather(*(ask(p) for p, up in zip(self.procs.ports, self.procs.alive) if up))
