@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import socket
 from concurrent.futures import ThreadPoolExecutor
 
 from bokeh.util.token import generate_jwt_token
@@ -14,12 +13,7 @@ from tornado import httpclient, web, websocket
 from tornado.httpserver import HTTPServer
 
 from uam_studio.app.front import AppProcesses, front_application
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+from uam_studio.app.serve import free_loopback_port
 
 
 class _Page(web.RequestHandler):
@@ -68,10 +62,10 @@ async def _serve(app: web.Application, port: int) -> HTTPServer:
 
 def test_pages_go_in_turn_and_each_websocket_reaches_the_process_that_built_its_page():
     async def scenario() -> dict:
-        ports = [_free_port(), _free_port()]
+        ports = [free_loopback_port(), free_loopback_port()]
         backs = [await _serve(_app(n), p) for n, p in zip("ab", ports)]
         procs = AppProcesses(ports)
-        front_port = _free_port()
+        front_port = free_loopback_port()
         front = await _serve(front_application(procs, [f"127.0.0.1:{front_port}"]), front_port)
         client = httpclient.AsyncHTTPClient()
         base = f"http://127.0.0.1:{front_port}"
@@ -113,8 +107,8 @@ def test_pages_go_in_turn_and_each_websocket_reaches_the_process_that_built_its_
 
 def test_a_websocket_whose_process_is_gone_is_closed_with_the_reason():
     async def scenario() -> tuple:
-        procs = AppProcesses([_free_port()])  # nothing listens there
-        front_port = _free_port()
+        procs = AppProcesses([free_loopback_port()])  # nothing listens there
+        front_port = free_loopback_port()
         front = await _serve(front_application(procs, [f"127.0.0.1:{front_port}"]), front_port)
         conn = await websocket.websocket_connect(f"ws://127.0.0.1:{front_port}/ws", subprotocols=["bokeh", "x"])
         msg = await conn.read_message()

@@ -32,12 +32,6 @@ ROOT = Path(__file__).resolve().parents[1]
 EVIL = "evil.example"
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "uam_studio.cli", *args]
 

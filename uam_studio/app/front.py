@@ -14,7 +14,7 @@ build documents, and each app process listens on a loopback port of its own. The
 - ``/liveness``: answered 200 only when every app process answers its own ``/liveness`` (with the same
   query, so ``?endpoint=/`` builds the app once in each).
 
-The front applies the same host guard as a single server (:func:`~uam_studio.app.serve.install_host_guard`)
+The front applies the same host guard as a single server (:mod:`uam_studio.app.host_guard`)
 before any routing; requests go on to the app processes with their ``Host`` and ``Origin`` unchanged,
 and the app processes allow the front's names.
 """
@@ -34,7 +34,7 @@ from tornado.routing import Matcher, PathMatches, Rule
 
 from uam_studio.app.host_guard import host_guard_rule
 
-log = logging.getLogger("uam_studio.front")
+log = logging.getLogger(__name__)
 
 TOKEN = re.compile(rb'"token":\s*"([^"]+)"')
 MAX_MESSAGE_BYTES = 1 << 28  # a websocket message (B) relayed either way; Bokeh's own default is 20 MiB
@@ -101,6 +101,16 @@ def session_of_token(token: str | bytes | None) -> str | None:
         return None
 
 
+async def _fetch(request: httpclient.HTTPRequest) -> tuple[httpclient.HTTPResponse | None, BaseException | None]:
+    """An app process's answer to ``request`` (any HTTP status), or ``(None, why)`` when nothing answered:
+    a timeout (tornado's 599) or a refused connection (which tornado raises even with ``raise_error=False``)."""
+    try:
+        resp = await httpclient.AsyncHTTPClient().fetch(request, raise_error=False)
+    except OSError as err:
+        return None, err
+    return (None, resp.error) if resp.code == 599 else (resp, None)
+
+
 def _forwarded_headers(headers: httputil.HTTPHeaders, drop: frozenset[str] = frozenset()) -> httputil.HTTPHeaders:
     out = httputil.HTTPHeaders()
     for name, value in headers.get_all():
@@ -131,12 +141,8 @@ class _HttpRelay(web.RequestHandler):
                                      body=self.request.body if self.request.method == "POST" else None,
                                      follow_redirects=False, decompress_response=False,
                                      connect_timeout=TIMEOUT_S, request_timeout=TIMEOUT_S)
-        try:  # raise_error=False still raises when nothing answers (a refused connection)
-            resp = await httpclient.AsyncHTTPClient().fetch(req, raise_error=False)
-            error = resp.error if resp.code == 599 else None
-        except OSError as err:
-            error = err
-        if error is not None:  # no answer at all: the process is gone or did not answer in time
+        resp, error = await _fetch(req)
+        if resp is None:  # no answer at all: the process is gone or did not answer in time
             log.warning("app process %d (port %d) did not answer %s: %s", k, self.procs.ports[k], self.request.uri,
                         error)
             self.set_status(502)
@@ -169,6 +175,7 @@ class _WebSocketRelay(websocket.WebSocketHandler):
     def initialize(self, procs: AppProcesses) -> None:
         self.procs = procs
         self.upstream: websocket.WebSocketClientConnection | None = None
+        self._pump: asyncio.Task | None = None  # the app process -> page relay (asyncio holds tasks weakly)
         self._closed = False
 
     def check_origin(self, origin: str) -> bool:
@@ -199,7 +206,7 @@ class _WebSocketRelay(websocket.WebSocketHandler):
         if self._closed:  # the page went away while connecting
             self.upstream.close()
             return
-        asyncio.get_running_loop().create_task(self._downstream(self.upstream))
+        self._pump = asyncio.get_running_loop().create_task(self._downstream(self.upstream))
 
     async def _downstream(self, upstream: websocket.WebSocketClientConnection) -> None:
         while True:
@@ -235,16 +242,11 @@ class _Liveness(web.RequestHandler):
         self.procs = procs
 
     async def get(self) -> None:
-        client = httpclient.AsyncHTTPClient()
-
         async def ask(port: int) -> int:
-            try:
-                resp = await client.fetch(f"http://127.0.0.1:{port}{self.request.uri}", raise_error=False,
-                                          headers={"Host": self.request.headers.get("Host", "")},
-                                          request_timeout=TIMEOUT_S)
-            except OSError:  # nothing listens there
-                return 599
-            return resp.code
+            resp, _ = await _fetch(httpclient.HTTPRequest(f"http://127.0.0.1:{port}{self.request.uri}",
+                                                          headers={"Host": self.request.headers.get("Host", "")},
+                                                          request_timeout=TIMEOUT_S))
+            return resp.code if resp is not None else 599
 
         codes = await asyncio.gather(*(ask(p) for p, up in zip(self.procs.ports, self.procs.alive) if up))
         ok = bool(codes) and all(c == 200 for c in codes)

@@ -30,12 +30,14 @@ from typing import Any
 from uam_studio.app.host_guard import allowed_hosts, install_host_guard, split_host
 
 __all__ = ["DEFAULT_ADDRESS", "DEFAULT_PORT", "ServedApp", "allowed_hosts", "check_can_listen", "child_pids",
-           "serve", "serve_app", "serve_front", "split_host", "warm_up"]
+           "free_loopback_port", "serve", "serve_app", "serve_front", "split_host", "warm_up"]
 
 log = logging.getLogger(__name__)
 
 DEFAULT_PORT = 5006
 DEFAULT_ADDRESS = "127.0.0.1"
+
+
 def quiet_closed_connections(loop: Any, context: dict[str, Any]) -> None:
     """The server loop's asyncio exception handler: a page that closed while messages were on their way
     (tornado's ``WebSocketClosedError`` / ``StreamClosedError`` in a task nobody awaited) is one log
@@ -144,7 +146,8 @@ def _stop_once(stop: Any) -> Any:
     return on_term
 
 
-def _free_loopback_port() -> int:
+def free_loopback_port() -> int:
+    """A port free on 127.0.0.1 now (the system's choice; another program may take it before it is bound)."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
@@ -208,7 +211,7 @@ def serve_front(port: int, show: bool, address: str, allow_origin: Sequence[str]
     sockets = bind_sockets(port, address)
     public_port = int(sockets[0].getsockname()[1])
     allowed = allowed_hosts(public_port, address, allow_origin)
-    ports = [_free_loopback_port() for _ in range(n)]
+    ports = [free_loopback_port() for _ in range(n)]
     pids: list[int] = []
     for p in ports:
         sys.stdout.flush()
@@ -353,9 +356,7 @@ class ServedApp:
         self.log_path = self.home / "serve.log"
 
     def __enter__(self) -> ServedApp:
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", 0))
-            self.port = s.getsockname()[1]
+        self.port = free_loopback_port()
         self.home.mkdir(parents=True, exist_ok=True)
         self._log = open(self.log_path, "w")  # noqa: SIM115 - closed in __exit__
         env = {**os.environ, "UAM_STUDIO_HOME": str(self.home), **self.extra_env}
