@@ -21,7 +21,11 @@ take-off check and at every arrival) it
    ``health_z`` std to the weak side, and the two legs' winds at a joint one-sided ``wind_z`` bound
    plus the weather reserve (``reserve_kt`` more headwind on the next leg and on the way home: a change
    of the weather since the last leg, or before the next, of up to that much never breaches)
-   (:meth:`Operator._safe_moves`);
+   (:meth:`Operator._safe_moves`). The search asks every later move of the plan to pass the same
+   check at its own take-off, on the expected cell, with each leg's wind at its share of the joint
+   bound for two like legs (``wind_z`` / sqrt 2 std) plus the reserve: a plan that the next take-offs
+   would cut short is not chosen. The take-off's own plan is searched without it: its cell is still
+   the fleet prior (20 s of readings say little of q_max), not the cell the later checks will fly;
 4. flies that first leg only, and re-plans on arrival.
 
 The margins come from its own uncertainty and from the declared weather reserve.
@@ -174,8 +178,10 @@ class Operator:
         return self.health_belief.health()
 
     # ------------------------------------------------------------------ planning
-    def _belief(self, health: BelievedHealth, health_z: float, wind_z: float) -> tuple[Mission, float, float]:
-        """The mission as believed, ``z`` std to the cautious side: less q_max, more R0, more headwind."""
+    def _belief(self, health: BelievedHealth, health_z: float, wind_z: float, extra_kt: float = 0.0
+                ) -> tuple[Mission, float, float]:
+        """The mission as believed, ``z`` std to the cautious side: less q_max, more R0, more headwind
+        (and ``extra_kt`` more headwind on every leg)."""
         q_plan = float(np.clip(health.cautious_q_max_c(health_z), *Q_PLAN_RANGE))
         r_plan = float(np.clip(health.cautious_r0_ohm(health_z), *R0_PLAN_RANGE))
         lo, hi = WIND_RANGE_KTS
@@ -183,7 +189,7 @@ class Operator:
 
         def w(node: str) -> float:
             mean, sd = self.winds.predict(node)
-            return float(np.clip(mean + wind_z * sd, lo, hi))
+            return float(np.clip(mean + wind_z * sd + extra_kt, lo, hi))
 
         dests = tuple(dataclasses.replace(d, wind_kts=w(d.name)) for d in m.destinations)
         vp = dataclasses.replace(m.vertiport, wind_kts=w(VERTIPORT))
@@ -294,7 +300,11 @@ class Operator:
         state = self._state(q_exp, r_exp).as_array()[0]
         plan = self._plan_learned if PLANNERS[self.planner].learned else self._plan
         believed = self._episode(expected)
-        route, alts, why = plan(believed, here, state, visited, moves)
+        later = None  # every later take-off of the plan must pass the check its first one does: the same
+        if self.decisions:  # winds (each leg's share of the joint bound as for two like legs), the expected cell
+            checked, _, _ = self._belief(health, 0.0, self.wind_z / math.sqrt(2.0), self.reserve_kt)
+            later = self._episode(checked)  # (not at take-off: the cell is still the fleet prior)
+        route, alts, why = plan(believed, here, state, visited, moves, later)
         if route is None:
             route, alts, why = self._best_effort_home(believed, here, state)
         shift, shift_sd = self.winds.shift()
@@ -340,10 +350,11 @@ class Operator:
         """The clock (s) at which the leg just decided took off (the first leg: 0, before the check)."""
         self._leg_start_s = float(time_s)
 
-    def _plan(self, episode: Episode, here: int, state: np.ndarray, visited: int, moves: np.ndarray
-              ) -> tuple[list[str] | None, list[float], str]:
-        """The best plan of ``episode`` (the expected belief) whose first leg is in ``moves``; None: only
-        the way home is left and it is not safe on the cautious belief."""
+    def _plan(self, episode: Episode, here: int, state: np.ndarray, visited: int, moves: np.ndarray,
+              checked: Episode | None = None) -> tuple[list[str] | None, list[float], str]:
+        """The best plan of ``episode`` (the expected belief) whose first leg is in ``moves`` and whose
+        every later move to a destination passes the take-off check on ``checked`` (the legs under the
+        check's winds); None: only the way home is left and it is not safe on the cautious belief."""
         n = len(self.names)
         legs, rules = episode.legs, episode.rules
 
@@ -367,7 +378,7 @@ class Operator:
             start = None
         else:
             start = (here, state, visited)
-        cont = feasible_sorties(episode, allowed=unvisited_ok, start=start, first_moves=moves)
+        cont = feasible_sorties(episode, allowed=unvisited_ok, start=start, first_moves=moves, reserve=checked)
         if here == VERTIPORT_SLOT:
             cont = {m: s for m, s in cont.items() if m}
             if not cont:
@@ -379,7 +390,7 @@ class Operator:
             route, alts = names(best)
             return route, alts, f"expected priority {mask_priority(legs, best.mask)} this charge"
         # multi charge: this sortie's rest, then the fewest fresh sorties for what is left
-        fresh = feasible_sorties(episode, allowed=unvisited_ok)
+        fresh = feasible_sorties(episode, allowed=unvisited_ok, reserve=checked)
         fresh = {m: s for m, s in fresh.items() if m}
         universe = 0
         for m in list(fresh) + [m & ~visited for m in cont]:
@@ -406,17 +417,17 @@ class Operator:
             rest ^= later.mask
         return route, alts, f"expected {best_key[0]} more charges after this one"
 
-    def _plan_learned(self, episode: Episode, here: int, state: np.ndarray, visited: int, moves: np.ndarray
-                      ) -> tuple[list[str] | None, list[float], str]:
+    def _plan_learned(self, episode: Episode, here: int, state: np.ndarray, visited: int, moves: np.ndarray,
+                      checked: Episode | None = None) -> tuple[list[str] | None, list[float], str]:
         """:meth:`_plan` with the attention planner continued from here (the same contract)."""
         from uam_studio.planning.agents.attention.decode import continue_route  # torch, at first use
 
         n = len(self.names)
         legs, rules = episode.legs, episode.rules
         if rules.one_leg or (here == VERTIPORT_SLOT and rules.one_sortie and self.sorties >= 1):
-            return self._plan(episode, here, state, visited, moves)
+            return self._plan(episode, here, state, visited, moves, checked)
         done = np.array([bool(visited >> k & 1) for k in range(n)])
-        res = continue_route(episode, here, state, done, self.sorties, moves)
+        res = continue_route(episode, here, state, done, self.sorties, moves, reserve=checked)
         if res is None:
             if here == VERTIPORT_SLOT:
                 return [], [], "no unvisited destination can be reached safely"

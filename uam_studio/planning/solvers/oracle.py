@@ -137,6 +137,28 @@ def _dominated(keys: np.ndarray, good: np.ndarray) -> np.ndarray:
     return out
 
 
+def _reserve_ok(reserve: Episode, frm: np.ndarray, to: np.ndarray, level: np.ndarray, state: np.ndarray
+                ) -> np.ndarray:
+    """bool [B]: the move ``frm -> to`` at ``level`` (a move home always passes), then home at the
+    cheapest level, flown from ``state`` [B, 8] on ``reserve``'s legs, ends above the cut-off."""
+    legs, home = reserve.legs, reserve.legs.home
+    out = np.ones(frm.size, dtype=bool)
+    rows, idx = [], []
+    for k, (i, j, a) in enumerate(zip(frm, to, level)):
+        if j == home:
+            continue
+        back = legs.cheapest_level(int(j), home)
+        if back is None or not legs.feasible[int(i), int(j), int(a)]:
+            out[k] = False
+            continue
+        rows.append(np.concatenate([legs.current(int(i), int(j), int(a)), legs.current(int(j), home, back)]))
+        idx.append(k)
+    if rows:
+        ok, _, _ = reserve.fly_currents(rows, state[idx])
+        out[idx] = ok
+    return out
+
+
 def feasible_sorties(
     episode: Episode,
     alt_indices: Iterable[int] = range(N_ALTITUDES),
@@ -145,6 +167,7 @@ def feasible_sorties(
     stats: dict[str, Any] | None = None,
     start: tuple[int, np.ndarray, int] | None = None,
     first_moves: np.ndarray | None = None,
+    reserve: Episode | None = None,
 ) -> dict[int, Sortie]:
     """Every set of destinations one charge can visit and bring the aircraft home, with its best sortie.
 
@@ -163,6 +186,9 @@ def feasible_sorties(
         the start.
     :param first_moves: bool [slots + 1, N_ALTITUDES], the (target, level) pairs the first leg
         may take (default: all; target ``episode.home`` is the vertiport).
+    :param reserve: the same mission under the winds of a take-off check (same nodes, same cell): a
+        move to a destination is searched only if, from the state it starts in, that leg and then the
+        way home (its cheapest level) end above the cut-off on this episode's legs; default: no check.
     :return: ``{mask: Sortie}``, bit k of ``mask`` for slot k.
     """
     if episode.rules.one_leg:
@@ -197,6 +223,9 @@ def feasible_sorties(
             cand &= np.asarray(first_moves, dtype=bool)[None, :, alts]
         first_leg = False
         li, ti, ai = np.nonzero(cand)
+        if reserve is not None and li.size:
+            keep = _reserve_ok(reserve, node[li], ti, alts[ai], state[li])
+            li, ti, ai = li[keep], ti[keep], ai[keep]
         if li.size == 0:
             break
         levels = alts[ai]

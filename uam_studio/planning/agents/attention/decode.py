@@ -142,8 +142,10 @@ class DecodeSearch:
     """One decode of one mission (see the module docstring)."""
 
     def __init__(self, net: AttentionPolicy, tok: MissionTokens, episode: Episode,
-                 beam_width: int, safety_filter: bool, expand: int | None = None) -> None:
+                 beam_width: int, safety_filter: bool, expand: int | None = None,
+                 reserve: Episode | None = None) -> None:
         self.net, self.tok, self.episode, self.legs = net, tok, episode, episode.legs
+        self.reserve = reserve  # legs under the take-off check's winds: each move must also pass there
         self.multi = episode.rules.recharges
         self.width = beam_width
         self.filter = safety_filter
@@ -161,6 +163,27 @@ class DecodeSearch:
 
     def current(self, a: int, b: int) -> np.ndarray:
         return self.legs.current(int(self.tok.leg_index[a]), int(self.tok.leg_index[b]), self.level(a, b))
+
+    def reserve_check(self, moves: list[tuple[int, int]], x0: np.ndarray) -> np.ndarray:
+        """bool [len(moves)]: each move ``(from token, to token)``, then home, flown from ``x0`` [B, 8] on
+        the :attr:`reserve` episode's legs (the take-off check's winds) ends above the cut-off."""
+        assert self.reserve is not None
+        legs, n, ix = self.reserve.legs, self.tok.n, self.tok.leg_index
+        rows = []
+        for a, t in moves:
+            i, j, h = int(ix[a]), int(ix[t]), int(ix[n])
+            go_lv, home_lv = legs.cheapest_level(i, j), legs.cheapest_level(j, h)
+            if go_lv is None or home_lv is None:
+                rows.append(None)
+                continue
+            rows.append(np.concatenate([legs.current(i, j, go_lv), legs.current(j, h, home_lv)]))
+        fly = [k for k, r in enumerate(rows) if r is not None]
+        out = np.zeros(len(moves), dtype=bool)
+        if fly:
+            ok, _, _ = self.reserve.fly_currents([rows[k] for k in fly], x0[fly], chunk_s=256)
+            out[fly] = ok
+            self.legs_flown += 2 * len(fly)
+        return out
 
     def log_probs(self, beams: list[_Beam]) -> tuple[np.ndarray, np.ndarray]:
         feats = [step_features(self.tok, b.at, b.visited, b.used_c, b.sorties) for b in beams]
@@ -222,6 +245,8 @@ class DecodeSearch:
                 break
             ok, _, _, x_there = self.episode.fly_currents(rows, np.stack(x0), split=np.array(split), chunk_s=256)
             self.legs_flown += 2 * len(rows)
+            if self.reserve is not None:
+                ok &= self.reserve_check([(beams[i].at, t) for i, t in keys], np.stack(x0))
             for k, (i, t) in enumerate(keys):
                 if beams[i].x is self.fresh:
                     self.from_home[t] = x_there[k] if ok[k] else None
@@ -407,8 +432,8 @@ def attention_plan(mission: Mission | dict, net: AttentionPolicy | None = None, 
 
 
 def continue_route(episode: Episode, here: int, state: np.ndarray, visited: np.ndarray,
-                   sorties: int, first_moves: np.ndarray | None = None, net: AttentionPolicy | None = None
-                   ) -> tuple[list[int], list[int]] | None:
+                   sorties: int, first_moves: np.ndarray | None = None, net: AttentionPolicy | None = None,
+                   reserve: Episode | None = None) -> tuple[list[int], list[int]] | None:
     """The rest of a route under way, planned as :func:`attention_plan` plans (default search, filter
     on the episode's cell): from node ``here`` of the episode's legs (``legs.home`` for the vertiport)
     with battery state ``state`` [8], the destinations ``visited`` (bool [legs.n]) done and ``sorties``
@@ -416,6 +441,9 @@ def continue_route(episode: Episode, here: int, state: np.ndarray, visited: np.n
 
     :param first_moves: bool [legs.slots + 1, N_ALTITUDES], the (node, level) pairs the first leg may
         take (its lowest-charge level must be one); default all.
+    :param reserve: the same mission under the winds of the take-off check (same nodes, same cell):
+        every destination move of the route must also get there and home on its legs, as the check at
+        that take-off will ask; default: no such check.
     :return: ``(nodes, levels)``: the nodes flown to in order (``legs.home`` for the vertiport) and each
         leg's level index; None if no first move is allowed and safe.
     """
@@ -437,7 +465,7 @@ def continue_route(episode: Episode, here: int, state: np.ndarray, visited: np.n
             lv = legs.cheapest_level(int(tok.leg_index[token]), int(tok.leg_index[t]))
             allowed[t] = lv is not None and bool(first_moves[int(tok.leg_index[t]), lv])
     with _one_thread():
-        search = DecodeSearch(net, tok, episode, width, True, per_beam)
+        search = DecodeSearch(net, tok, episode, width, True, per_beam, reserve)
         start = _Beam(token, np.asarray(visited, dtype=bool)[:n].copy(), x, used, int(sorties))
         best, _ = search.run(start, allowed)
     if best is None or not best.tokens:
