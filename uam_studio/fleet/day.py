@@ -16,7 +16,7 @@ cell, the law fitted to the NASA PCoE lives, :data:`~uam_studio.fleet.nasa_aging
 law (a model the operator holds, not the pack's truth). Over a life, a pack that retired is replaced
 overnight by a new one from the factory (:meth:`Fleet.renew_retired`), as an operator would.
 
-Public API: :func:`simulate_day`, :func:`simulate_life`, :class:`DayResult`, :class:`Fleet`,
+Public API: :func:`simulate_day` (an :class:`OperatingDay` run), :func:`simulate_life`, :class:`DayResult`, :class:`Fleet`,
 :data:`PACK_LAWS`, :func:`default_age_spread`.
 """
 
@@ -54,7 +54,7 @@ from uam_studio.fleet.dispatch import (
 from uam_studio.fleet.hindsight import Job, day_bound
 from uam_studio.fleet.nasa_aging import NASA_AGING_LAW
 
-__all__ = ["AGE_SPREAD_LIFE", "DayResult", "END_S", "Fleet", "FIT_WINDOW_S", "PACK_LAWS", "day_of_life_seed",
+__all__ = ["AGE_SPREAD_LIFE", "DayResult", "END_S", "Fleet", "FIT_WINDOW_S", "OperatingDay", "PACK_LAWS", "day_of_life_seed",
            "default_age_spread", "fly_day_of_life", "hindsight_bound", "pack_law", "simulate_day", "simulate_life"]
 
 FIT_WINDOW_S = 600  # s of each flight's readings fitted for its pack's health
@@ -242,112 +242,131 @@ def _bound(fleet: Fleet, demand: list[Request], winds: dict[str, tuple[float, fl
     return day_bound(jobs, counts, per_port, END_S)
 
 
-def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int,
-                 chargers: int | Sequence[int] = 2) -> DayResult:
-    """Fly one day of ``demand`` with ``fleet`` under ``dispatcher`` (:data:`DISPATCHERS`); the fleet's
-    truth and beliefs are updated in place (packs age, beliefs learn). ``chargers``: per vertiport (one
-    count for all, or one each, 1-50). Each request is served by an aircraft based at its vertiport.
-    Seeded: the same inputs give the same day."""
-    if dispatcher not in DISPATCHERS:
-        raise InputError("dispatcher", f"{dispatcher!r}: allowed {', '.join(DISPATCHERS)}")
-    counts = _charger_counts(fleet, demand, chargers)
-    ports = fleet.vertiports
-    seed = day_seed(seed)
-    winds = _world_winds(demand, seed)
-    bound = _bound(fleet, demand, winds, counts) if dispatcher == "hindsight" else None
-    env = simpy.Environment()
-    plugs = [simpy.Resource(env, capacity=c) for c in counts]
-    noise = np.random.default_rng([seed, 11])
-    n = len(fleet.truth)
-    free = list(fleet.in_service)  # an aircraft is free when in service and not flying or charging
-    version = [0] * n
-    waiting: list[Request] = []
-    cache: dict[tuple[str, int, int], float] = {}
-    stats = {"priority": 0, "served": 0, "breaches": 0, "flights": 0, "charge_c": 0.0, "wait_s": 0.0}
-    log: list[tuple[float, int, str, float, float]] = []
+class OperatingDay:
+    """One day of a fleet as SimPy processes on one object (see :func:`simulate_day`, which runs it).
 
-    def margin(req: Request, a: AircraftView) -> float:
+    Processes: :meth:`arrivals` (requests arrive, and the last wait until their windows close) and one
+    :meth:`fly` per dispatched request (the round trip, the health fit, the charger queue). The world's
+    winds and the packs' truth are read only by :meth:`fly` and, for the hindsight dispatcher, by
+    :meth:`margin`; the other dispatchers' margins read the aircraft's beliefs.
+    """
+
+    def __init__(self, fleet: Fleet, demand: list[Request], dispatcher: str, seed: int, counts: list[int]) -> None:
+        self.fleet, self.demand, self.dispatcher = fleet, demand, dispatcher
+        self.winds = _world_winds(demand, seed)
+        self.bound = _bound(fleet, demand, self.winds, counts) if dispatcher == "hindsight" else None
+        self.env = simpy.Environment()
+        self.plugs = [simpy.Resource(self.env, capacity=c) for c in counts]
+        self.noise = np.random.default_rng([seed, 11])
+        self.n = len(fleet.truth)
+        self.free = list(fleet.in_service)  # an aircraft is free when in service and not flying or charging
+        self.version = [0] * self.n
+        self.waiting: list[Request] = []
+        self.cache: dict[tuple[str, int, int], float] = {}
+        self.stats = {"priority": 0, "served": 0, "breaches": 0, "flights": 0, "charge_c": 0.0, "wait_s": 0.0}
+        self.log: list[tuple[float, int, str, float, float]] = []
+        self.required = BLIND_RESERVE_V if dispatcher == "blind" else 0.0
+
+    def margin(self, req: Request, a: AircraftView) -> float:
+        """The voltage margin (V) over the cut-off that the dispatcher expects of ``a`` flying ``req``."""
         i = int(a.name)
         key = (req.name, i, a.key)
-        if key not in cache:
-            if dispatcher == "aware":
+        if key not in self.cache:
+            if self.dispatcher == "aware":
                 b = a.belief
-                cache[key] = round_trip_margin(req, b.q_max - HEALTH_Z * b.q_max_sd, b.r0 + HEALTH_Z * b.r0_sd,
-                                               req.wind_kts + WIND_Z * FORECAST_SIGMA_KT,
-                                               -req.wind_kts + WIND_Z * FORECAST_SIGMA_KT)
-            elif dispatcher == "blind":
-                cache[key] = round_trip_margin(req, *NOMINAL, req.wind_kts, -req.wind_kts)
+                self.cache[key] = round_trip_margin(req, b.q_max - HEALTH_Z * b.q_max_sd, b.r0 + HEALTH_Z * b.r0_sd,
+                                                    req.wind_kts + WIND_Z * FORECAST_SIGMA_KT,
+                                                    -req.wind_kts + WIND_Z * FORECAST_SIGMA_KT)
+            elif self.dispatcher == "blind":
+                self.cache[key] = round_trip_margin(req, *NOMINAL, req.wind_kts, -req.wind_kts)
             else:  # hindsight: the truth (the world's), never the aircraft's view
-                t = fleet.truth[i]
-                cache[key] = round_trip_margin(req, t.q_max, t.r0, *winds[req.name])
-        return cache[key]
+                t = self.fleet.truth[i]
+                self.cache[key] = round_trip_margin(req, t.q_max, t.r0, *self.winds[req.name])
+        return self.cache[key]
 
-    required = BLIND_RESERVE_V if dispatcher == "blind" else 0.0
-
-    def dispatch() -> None:
-        now = env.now
-        waiting[:] = [r for r in waiting if r.t_s + r.window_s >= now]
-        for port in range(ports):
-            views = [AircraftView(str(i), fleet.belief[i], version[i]) for i in range(n)
-                     if free[i] and fleet.base[i] == port]
-            asks = [r for r in waiting if r.vertiport == port]
-            for req, view in assign(asks, views, margin, required):
+    def dispatch(self) -> None:
+        """Drop the requests whose windows closed; assign the rest to free aircraft, port by port."""
+        fleet, now = self.fleet, self.env.now
+        self.waiting[:] = [r for r in self.waiting if r.t_s + r.window_s >= now]
+        for port in range(fleet.vertiports):
+            views = [AircraftView(str(i), fleet.belief[i], self.version[i]) for i in range(self.n)
+                     if self.free[i] and fleet.base[i] == port]
+            asks = [r for r in self.waiting if r.vertiport == port]
+            for req, view in assign(asks, views, self.margin, self.required):
                 i = int(view.name)
-                waiting.remove(req)
-                free[i] = False
-                env.process(fly(i, req))
+                self.waiting.remove(req)
+                self.free[i] = False
+                self.env.process(self.fly(i, req))
 
-    def fly(i: int, req: Request):
+    def fly(self, i: int, req: Request):
+        """Aircraft ``i`` flies ``req`` on its true pack in the actual winds, learns, then charges."""
+        fleet, env, stats = self.fleet, self.env, self.stats
         truth = fleet.truth[i]
-        sim = round_trip(req, truth.q_max, truth.r0, *winds[req.name])
+        sim = round_trip(req, truth.q_max, truth.r0, *self.winds[req.name])
         cur, charge, flight_s = _delivered(sim)
         k = len(cur)
         breached = not bool(sim.safe)
         stats["flights"] += 1
         stats["charge_c"] += charge
-        log.append((float(env.now), i, req.name, float(sim.min_voltage_v) - sim.eod_v, flight_s))
+        self.log.append((float(env.now), i, req.name, float(sim.min_voltage_v) - sim.eod_v, flight_s))
         yield env.timeout(flight_s)
         fleet.truth[i] = truth.after(charge)
         belief = fleet.belief[i].aged(charge, fleet.aging_law)
         m = min(FIT_WINDOW_S, k)
         if m >= 30:
-            est = _fit(cur[:m] + noise.normal(0.0, NOISE_A, m),
-                       np.asarray(sim.voltage_v[:m]) + noise.normal(0.0, NOISE_V, m), sim.dt_s)
+            est = _fit(cur[:m] + self.noise.normal(0.0, NOISE_A, m),
+                       np.asarray(sim.voltage_v[:m]) + self.noise.normal(0.0, NOISE_V, m), sim.dt_s)
             if est is not None:
                 belief = belief.update(*est)
         fleet.belief[i] = belief
-        version[i] += 1
+        self.version[i] += 1
         if breached:
             stats["breaches"] += 1
             return  # grounded for the day
         stats["priority"] += req.priority
         stats["served"] += 1
         t0 = env.now
-        with plugs[fleet.base[i]].request() as plug:
+        with self.plugs[fleet.base[i]].request() as plug:
             yield plug
             stats["wait_s"] += env.now - t0
             yield env.timeout(_recharge_s(charge, fleet.truth[i].q_max))
         if fleet.truth[i].retired:
             fleet.in_service[i] = False
             return
-        free[i] = True
-        dispatch()
+        self.free[i] = True
+        self.dispatch()
 
-    def arrivals():
-        for req in demand:
+    def arrivals(self):
+        """Requests arrive at their times; the last wait until their windows close or an aircraft is free."""
+        env = self.env
+        for req in self.demand:
             yield env.timeout(max(0.0, req.t_s - env.now))
-            waiting.append(req)
-            dispatch()
-        while env.now < DAY_S:  # the last requests wait until their windows close or an aircraft is free
+            self.waiting.append(req)
+            self.dispatch()
+        while env.now < DAY_S:
             yield env.timeout(min(600.0, DAY_S - env.now))
-            dispatch()
+            self.dispatch()
 
-    env.process(arrivals())
-    env.run(until=END_S)  # flights in the air at the day's end land
-    flown = {entry[2] for entry in log}
-    return DayResult(priority=stats["priority"], served=stats["served"], refused=len(demand) - len(flown),
-                     breaches=stats["breaches"], flights=stats["flights"], charge_ah=stats["charge_c"] / 3600.0,
-                     charger_wait_s=stats["wait_s"], log=tuple(log), bound=bound)
+    def run(self) -> DayResult:
+        """Run the day to :data:`END_S` (flights in the air at the day's end land) and total it."""
+        self.env.process(self.arrivals())
+        self.env.run(until=END_S)
+        stats, flown = self.stats, {entry[2] for entry in self.log}
+        return DayResult(priority=stats["priority"], served=stats["served"], refused=len(self.demand) - len(flown),
+                         breaches=stats["breaches"], flights=stats["flights"], charge_ah=stats["charge_c"] / 3600.0,
+                         charger_wait_s=stats["wait_s"], log=tuple(self.log), bound=self.bound)
+
+
+def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int,
+                 chargers: int | Sequence[int] = 2) -> DayResult:
+    """Fly one day of ``demand`` with ``fleet`` under ``dispatcher`` (:data:`DISPATCHERS`); the fleet's
+    truth and beliefs are updated in place (packs age, beliefs learn). ``chargers``: per vertiport (one
+    count for all, or one each, 1-50). Each request is served by an aircraft based at its vertiport.
+    Seeded: the same inputs give the same day (:class:`OperatingDay`)."""
+    if dispatcher not in DISPATCHERS:
+        raise InputError("dispatcher", f"{dispatcher!r}: allowed {', '.join(DISPATCHERS)}")
+    counts = _charger_counts(fleet, demand, chargers)
+    return OperatingDay(fleet, demand, dispatcher, day_seed(seed), counts).run()
 
 
 def _fit(current: np.ndarray, voltage: np.ndarray, dt_s: float) -> tuple[float, float, float, float] | None:
