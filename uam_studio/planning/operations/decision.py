@@ -1,4 +1,4 @@
-"""One decision of the operator, as the flight record keeps it."""
+"""One decision of the operator, as the flight record keeps it, and what a flown leg told it."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["Decision"]
+__all__ = ["Decision", "LegObservation"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -81,3 +81,15 @@ class Decision:
         d["route"], d["altitudes_m"] = list(self.route), list(self.altitudes_m)
         d["health_flags"] = list(self.health_flags)
         return {k: (round(v, 6) if isinstance(v, float) else v) for k, v in d.items()}
+
+
+@dataclass(frozen=True)
+class LegObservation:
+    """What the last leg flown told the operator about the wind, until its next decision reads it:
+    the wind the leg's duration implies (kt, + headwind), its residual against the forecast (kt),
+    whether the belief came to hold a change of the weather with it, and the same as one line of text."""
+
+    wind_kt: float
+    residual_kt: float
+    surprise: bool
+    note: str

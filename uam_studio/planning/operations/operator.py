@@ -53,7 +53,7 @@ from uam_studio.planning.missions.mission import (
     check_destination_count,
 )
 from uam_studio.planning.missions.scenario import check_scenario
-from uam_studio.planning.operations.decision import Decision
+from uam_studio.planning.operations.decision import Decision, LegObservation
 from uam_studio.planning.operations.defaults import DEFAULT_FORECAST_SIGMA_KT, WEATHER_RESERVE_KT
 from uam_studio.planning.operations.health_belief import BelievedHealth, HealthBelief
 from uam_studio.planning.operations.wind_belief import WindBelief, wind_from_duration
@@ -75,20 +75,6 @@ Q_PLAN_RANGE = (2000.0, 12000.0)  # C, belief cell bounds
 R0_PLAN_RANGE = (0.005, 1.5)  # ohm
 
 
-
-
-@dataclasses.dataclass(frozen=True)
-class LegObservation:
-    """What the last leg flown told the operator about the wind, until its next decision reads it:
-    the wind the leg's duration implies (kt, + headwind), its residual against the forecast (kt),
-    whether the belief came to hold a change of the weather with it, and the same as one line of text."""
-
-    wind_kt: float
-    residual_kt: float
-    surprise: bool
-    note: str
-
-
 class Operator:
     """Decides the flight from the forecast and the readings (see the module docstring).
 
@@ -105,7 +91,8 @@ class Operator:
         safe under the cautious belief plus this much more headwind on each.
     """
 
-    def __init__(self, mission: Mission, scenario: str | None = None, forecast_sigma_kt: float = DEFAULT_FORECAST_SIGMA_KT,
+    def __init__(self, mission: Mission, scenario: str | None = None,
+                 forecast_sigma_kt: float = DEFAULT_FORECAST_SIGMA_KT,
                  sensor_noise_mv: float | None = None, health_z: float = HEALTH_Z, wind_z: float = WIND_Z,
                  plan_wind_z: float = PLAN_WIND_Z, planner: str = "attention",
                  reserve_kt: float = WEATHER_RESERVE_KT) -> None:
@@ -115,7 +102,8 @@ class Operator:
         self.planner = planner
         scenario = scenario or mission.scenario
         check_scenario(scenario)
-        check_destination_count(len(mission.destinations), N_MAX, "fly")  # the exact search of planner "oracle": 8 at most
+        # the exact search of planner "oracle": 8 at most
+        check_destination_count(len(mission.destinations), N_MAX, "fly")
         self.forecast_mission = mission
         self.scenario = scenario
         self.eod_v = mission.eod_v

@@ -13,9 +13,9 @@
 - **Search** (:func:`default_search`): beam search. Each beam proposes its ``expand`` best safe
   moves by the network; children in the same situation (same visited set, node and sorties) are
   merged into the one with the most charge left; the ``beam_width`` best children go on, ranked by
-  the network's log-probability (multi_charge: fewer sorties first, then log-probability). Every finished route is kept and the best by the
-  scenario's objective is returned: single_charge the most priority (ties: less flight time); multi_charge
-  the most destinations, then the fewest sorties, then less time. No hand-written rule proposes moves.
+  the network's log-probability (multi_charge: fewer sorties first, then log-probability). Every finished route is kept
+  and the best by the scenario's objective is returned: single_charge the most priority (ties: less flight time);
+  multi_charge the most destinations, then the fewest sorties, then less time. No hand-written rule proposes moves.
 - **Raw agent** (``safety_filter=False, beam_width=1``): the network's first choice at each step,
   nothing flown while planning (the caller checks the plan; an unsafe plan scores 0).
 
@@ -25,23 +25,25 @@ single_flight chooses only its leg's level: filtered, the highest minimum voltag
 from __future__ import annotations
 
 import contextlib
-import functools
 import os
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
-from uam_studio.atomic_io import check_digest
-from uam_studio.bundled import bundled_path
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.attention import WEIGHTS_NAME
 from uam_studio.planning.agents.attention.features import MissionTokens, mission_tokens, step_features
-from uam_studio.planning.agents.attention.model import AttentionConfig, AttentionPolicy
+from uam_studio.planning.agents.attention.model import AttentionPolicy
+from uam_studio.planning.agents.attention.weights import (
+    FORMAT,
+    bundled_weights_path,
+    load_policy,
+    load_policy_cached,
+)
 from uam_studio.planning.episode import Episode
 from uam_studio.planning.legs import ALTITUDES_M
 from uam_studio.planning.missions.check import Plan, make_plan
@@ -53,9 +55,7 @@ from uam_studio.planning.solvers.setup import (
     single_flight_note,
     too_close,
 )
-from uam_studio.tensor_files import TensorFileError, load_tensors
 
-FORMAT = "uam_studio.attention/1"
 MAX_BEAM = 64
 MULTI_WIDE_MAX_DEST = 10  # multi_charge maps up to this size get the wide search
 
@@ -71,53 +71,6 @@ def default_search(scenario: str, n_dest: int) -> tuple[int, int]:
 
 __all__ = ["FORMAT", "WEIGHTS_NAME", "attention_plan", "bundled_weights_path", "continue_route", "default_search",
            "load_policy", "load_policy_cached", "plan_with_weights"]
-
-
-def bundled_weights_path() -> Path:
-    """The bundled attention planner, ``attention_planner.pt`` (:func:`uam_studio.bundled.bundled_path`)."""
-    return bundled_path(WEIGHTS_NAME)
-
-
-def load_policy(path: str | os.PathLike[str] | None = None) -> tuple[AttentionPolicy, dict[str, Any]]:
-    """The network and its model card from a weights file (default: the bundled one).
-
-    The file is read with ``torch.load(weights_only=True)`` (:func:`uam_studio.tensor_files.load_tensors`):
-    nothing in it runs. :raises InputError: (field ``agent``) a missing, refused or malformed file.
-    """
-    p = Path(path) if path is not None else bundled_weights_path()
-    if not p.is_file():
-        raise InputError("agent", f"{p}: no such file (the attention planner's weights)")
-    check_digest(p, "agent")  # the SHA-256 written with it, where there is one
-    try:
-        data = load_tensors(p)
-    except TensorFileError as err:
-        raise InputError("agent", f"{p}: {err}") from None
-    if not isinstance(data, dict) or data.get("format") != FORMAT:
-        raise InputError("agent", f"{p}: not an attention planner file (format {FORMAT!r} expected)")
-    try:
-        config = AttentionConfig(**{k: int(v) for k, v in data["config"].items()})
-        net = AttentionPolicy(config)
-        net.load_state_dict(data["state_dict"])
-    except (KeyError, TypeError, ValueError, RuntimeError) as err:
-        raise InputError("agent", f"{p}: weights do not fit the network ({' '.join(str(err).split())[:120]})") from None
-    net.eval()
-    card = data.get("card") if isinstance(data.get("card"), dict) else {}
-    return net, card
-
-
-@functools.lru_cache(maxsize=4)
-def _cached(path: str, mtime_ns: int) -> tuple[AttentionPolicy, dict[str, Any]]:
-    return load_policy(path)
-
-
-def load_policy_cached(path: str | os.PathLike[str] | None = None) -> AttentionPolicy:
-    """:func:`load_policy`, cached by path and modification time (the app and the CLI plan often)."""
-    p = Path(path) if path is not None else bundled_weights_path()
-    try:
-        mtime = p.stat().st_mtime_ns
-    except OSError:
-        mtime = -1
-    return _cached(str(p), mtime)[0]
 
 
 # ----------------------------------------------------------------------------- search
@@ -197,7 +150,8 @@ class DecodeSearch:
             lp = torch.log_softmax(logits, dim=-1).numpy()
         return lp, mask
 
-    def safe_children(self, beams: list[_Beam], lp: np.ndarray, mask: np.ndarray) -> list[list[tuple[int, np.ndarray, float]]]:
+    def safe_children(self, beams: list[_Beam], lp: np.ndarray,
+                      mask: np.ndarray) -> list[list[tuple[int, np.ndarray, float]]]:
         """For each beam, its safe destination moves ``(token, state after the leg, leg charge)``, checked
         in the network's order: the best ``expand``, then the rest only if none of those is safe (and
         none was left to another beam's equivalent move)."""
@@ -392,7 +346,8 @@ def attention_plan(mission: Mission | dict, net: AttentionPolicy | None = None, 
     setup = prepare_mission(mission, scenario, "attention")
     if setup.early is not None:
         return setup.early
-    mission, full, scenario, msgs, stats = setup.mission, setup.full_mission, setup.scenario, setup.messages, setup.stats
+    mission, full, scenario, msgs, stats = (setup.mission, setup.full_mission, setup.scenario, setup.messages,
+                                            setup.stats)
     assert mission is not None and scenario is not None
     n = len(mission.destinations)
     episode = setup.episode
