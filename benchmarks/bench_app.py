@@ -400,8 +400,8 @@ def bench_flytick(n: int) -> list[str]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=["latency", "pageload", "replan", "lab", "concurrency", "flytick", "all"], nargs="?",
-                    default="all")
+    ap.add_argument("what", choices=["latency", "pageload", "replan", "lab", "concurrency", "flytick", "all"],
+                    nargs="?", default="all")
     ap.add_argument("--n", type=int, default=40, help="slider changes per policy (latency)")
     ap.add_argument("--n-oracle", type=int, default=8, help="slider changes for the oracle (seconds each)")
     ap.add_argument("--loads", type=int, default=5, help="page loads (pageload)")

@@ -11,8 +11,9 @@ websocket, the whole document), N clients at once:
 - ``app``: ``uam-studio serve`` (:class:`uam_studio.app.serve.ServedApp`), the app as a class opens it.
 
 Printed per server and N: p50 / p95 of the load times (s) and the server's CPU seconds per session
-(``/proc/PID/stat``, user + system, over the N loads; the app's comparison process not counted). With every page built on one event loop, p95 at N
-concurrent loads is about N x the CPU per session: a p95 of 5 s for 30 sessions needs <= ~0.17 s each.
+(``/proc/PID/stat``, user + system, over the N loads; the app's comparison process not counted). With every
+page built on one event loop, p95 at N concurrent loads is about N x the CPU per session: a p95 of 5 s for 30
+sessions needs <= ~0.17 s each.
 """
 
 from __future__ import annotations
@@ -70,8 +71,8 @@ def measure(name: str, url: str, pid: int, sessions: list[int]) -> None:
         before = cpu_s(pid)
         times = np.array(asyncio.run(_loads(url, n)))
         per = (cpu_s(pid) - before) / n
-        print(f"{name:8s} {n:3d} sessions: p50 {np.percentile(times, 50):6.2f} s, p95 {np.percentile(times, 95):6.2f} s, "
-              f"server CPU {per:5.3f} s/session", flush=True)
+        print(f"{name:8s} {n:3d} sessions: p50 {np.percentile(times, 50):6.2f} s, "
+              f"p95 {np.percentile(times, 95):6.2f} s, server CPU {per:5.3f} s/session", flush=True)
         time.sleep(2.0)
 
 

@@ -7,7 +7,8 @@ each decoded by both bundled weights given the exact health (q_max, R0), so only
 is measured: voltage RMSE before the 2.5 V floor and the 3.0 V EOD time's relative error. The NASA
 weights are the reference in the same run (what the VTC6 would get without fine-tuning); the ratio is
 printed. ``--cell vtc6_landing_held_out`` / ``vtc6_cell_held_out``: the same for the weights fine-tuned
-on a held-out VTC6 set, on discharges of that set. Goal (the card's): RMSE <= 20 mV and median EOD error <= 1% on the missions.
+on a held-out VTC6 set, on discharges of that set. Goal (the card's): RMSE <= 20 mV and median EOD error <= 1%
+on the missions.
 """
 
 from __future__ import annotations

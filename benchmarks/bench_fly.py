@@ -98,7 +98,8 @@ def events(n: int) -> None:
 
 
 def _report(label: str, s) -> None:
-    print(f"{label}: {s.n} flights, operator/hindsight {s.ratio:.3f} (priority {s.priority} of {s.hindsight_priority}), "
+    print(f"{label}: {s.n} flights, operator/hindsight {s.ratio:.3f} "
+          f"(priority {s.priority} of {s.hindsight_priority}), "
           f"blind/hindsight {s.blind_ratio:.3f}, operator breaches {s.breaches}, blind breaches {s.blind_breaches}, "
           f"operator >= blind on {s.not_worse_than_blind}/{s.n}, extra recharges {s.extra_cycles}, re-plan p95 "
           f"{1000 * s.replan_s_p95:.0f} ms")

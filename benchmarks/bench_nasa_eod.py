@@ -96,9 +96,9 @@ def main() -> None:
             verdicts.append(f"{g}: no worse than persistence (median {st['median_pct']:.2f} vs {pm:.2f}, p95 "
                             f"{st['p95_pct']:.2f} vs {pp:.2f}) {_ok(st['median_pct'] <= pm and st['p95_pct'] <= pp)}")
     first = _stats([r for r in rows if r.method == "prior"])
-    print(f"{'no history at the condition (prior)':36s} {first['n']:5d} {first['median_pct']:6.2f} {first['p95_pct']:7.2f} "
-          f"{first['bias_pct']:+6.2f} {first['coverage90']:6.3f} {first['miss95']:7.3f} {first['miss99']:7.3f} "
-          f"{first['width_pct']:7.2f}")
+    print(f"{'no history at the condition (prior)':36s} {first['n']:5d} {first['median_pct']:6.2f} "
+          f"{first['p95_pct']:7.2f} {first['bias_pct']:+6.2f} {first['coverage90']:6.3f} {first['miss95']:7.3f} "
+          f"{first['miss99']:7.3f} {first['width_pct']:7.2f}")
     verdicts.append(f"prior predictions (first discharges, new conditions): coverage {first['coverage90']:.3f} "
                     f"{_ok(0.85 <= first['coverage90'] <= 0.95)}")
     firsts = _stats([r for r in rows if r.discharge == 0])
@@ -106,9 +106,10 @@ def main() -> None:
                     f"{_ok(0.85 <= firsts['coverage90'] <= 0.95)}, median width {firsts['width_pct']:.0f}%")
     st = _stats(rows)
     print(f"{'all':36s} {st['n']:5d} {st['median_pct']:6.2f} {st['p95_pct']:7.2f} {st['bias_pct']:+6.2f} "
-          f"{st['coverage90']:6.3f} {st['miss95']:7.3f} {st['miss99']:7.3f} {st['width_pct']:7.2f} {st['flagged']:5d} | "
-          f"{st['persistence_median_pct'] or 0:8.2f} {st['persistence_p95_pct'] or 0:8.2f} "
-          f"{st['median_pct'] / (st['persistence_median_pct'] or float('nan')):9.2f} | {st['progpy_median_pct'] or 0:10.2f}")
+          f"{st['coverage90']:6.3f} {st['miss95']:7.3f} {st['miss99']:7.3f} {st['width_pct']:7.2f} "
+          f"{st['flagged']:5d} | {st['persistence_median_pct'] or 0:8.2f} {st['persistence_p95_pct'] or 0:8.2f} "
+          f"{st['median_pct'] / (st['persistence_median_pct'] or float('nan')):9.2f} | "
+          f"{st['progpy_median_pct'] or 0:10.2f}")
     print("\n".join(verdicts))
 
 

@@ -136,11 +136,13 @@ def throughput(seconds: float, workers: int = 2, repeats: int = 3, group: int = 
           f"({res['physics_subproc'] / res['physics']:.2f}x one env; SB3, one env per process)")
     print(f"  physics, grouped {workers}x{group}   {res['physics_grouped']:8.0f}   "
           f"({workers} processes of {group} envs, both cores; median of "
-          f"{', '.join(f'{r:.0f}' for r in grouped)}; {res['physics_grouped'] / res['physics']:.2f}x one env; goal >= 1000)")
+          f"{', '.join(f'{r:.0f}' for r in grouped)}; "
+          f"{res['physics_grouped'] / res['physics']:.2f}x one env; goal >= 1000)")
     print(f"  dynaformer backend  {res['dynaformer']:8.0f}   (one env, one process; goal >= 200)")
     print(f"  dynaformer, grouped {workers}x{group} {res['dynaformer_grouped']:6.0f}   "
           f"({workers} processes of {group} envs, one torch thread each; goal >= 200)")
-    print(f"  naive Euler loop    {res['naive_loop']:8.1f}   -> physics is {res['physics'] / res['naive_loop']:.0f}x faster")
+    print(f"  naive Euler loop    {res['naive_loop']:8.1f}   "
+          f"-> physics is {res['physics'] / res['naive_loop']:.0f}x faster")
     return res
 
 
@@ -160,7 +162,8 @@ def gap(n: int, seed: int, agents: dict[str, str | None]) -> dict:
         out[scenario] = {"summary": s, "wall_s": time.perf_counter() - t0, "agent": agent,
                          "scores": [x.to_dict() for x in scores]}
         print(f"\n{scenario}: {n} held-out missions (seed {seed}, 6-8 destinations), agent {agent}")
-        print(f"  {'policy':17s} mean prio  mean gap  p90 gap  worst  same cycles  mean cycles  EOD breach  median plan")
+        print(f"  {'policy':17s} mean prio  mean gap  p90 gap  worst  same cycles  mean cycles  EOD breach  "
+              "median plan")
         for p, r in s.items():
             print(f"  {p:17s} {r['mean_priority']:9.2f} {100 * r['mean_gap']:8.1f}% {100 * r['p90_gap']:7.1f}% "
                   f"{100 * r['worst_gap']:5.0f}% {100 * r['same_cycles']:10.1f}% {r['mean_cycles']:11.2f} "

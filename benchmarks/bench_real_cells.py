@@ -47,7 +47,8 @@ def main() -> None:
     nasa = next(r for r in report.physics if r["model"].startswith("NASA 18650"))
     vtc6 = report.physics[0]
     print(f"  reference: the NASA default cell's RMSE {nasa['rmse_mv_power']:.0f} mV before its cut-off at "
-          f"{nasa['cutoff_s_power']:.0f} s; ratio to the bundled VTC6 set {nasa['rmse_mv_power'] / vtc6['rmse_mv_power']:.0f}x")
+          f"{nasa['cutoff_s_power']:.0f} s; ratio to the bundled VTC6 set "
+          f"{nasa['rmse_mv_power'] / vtc6['rmse_mv_power']:.0f}x")
     summary = held_out_summary(report)
     held_sets = [SET_LANDING, SET_CELL]
     missed = sum(summary[k]["missed_breaches"] for k in held_sets)

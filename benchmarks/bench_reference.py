@@ -61,7 +61,8 @@ def small(n: int, seed: int) -> None:
         if scenario == "single_charge":
             gap = np.where(o_prio > 0, 1.0 - r_prio / np.maximum(o_prio, 1), 0.0)
             print(f"  priority: exact {o_prio.sum():.0f}, reference {r_prio.sum():.0f}; gap per mission mean "
-                  f"{100 * gap.mean():.2f}%, worst {100 * gap.max():.2f}%; equal on {int((r_prio == o_prio).sum())}/{n}")
+                  f"{100 * gap.mean():.2f}%, worst {100 * gap.max():.2f}%; "
+                  f"equal on {int((r_prio == o_prio).sum())}/{n}")
         else:
             print(f"  sorties: exact {o_cyc.sum():.0f}, reference {r_cyc.sum():.0f}; the exact number on "
                   f"{int((r_cyc == o_cyc).sum())}/{n} (worst +{(r_cyc - o_cyc).max():.0f}); destinations reached "

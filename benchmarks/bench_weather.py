@@ -135,7 +135,8 @@ def _ceiling(job: tuple) -> tuple[int, int, int]:
 
     def served(winds: dict[str, float]) -> int:
         return oracle_plan(actual_winds_mission(mission, {n: float(np.clip(w, *WIND_RANGE_KTS))
-                                                          for n, w in winds.items()}), mission.scenario).reached_priority
+                                                          for n, w in winds.items()}),
+                           mission.scenario).reached_priority
 
     home = mission.node(VERTIPORT).wind_kts + WIND_Z * DEFAULT_FORECAST_SIGMA_KT + reserve
     hindsight = served(actual)

@@ -66,7 +66,8 @@ JS_FRAME_AND_LEGENDS = """(title) => {
     const legends = [];
     for (const rv of v.renderer_views.values())
       if (rv.model.type === 'Legend' && rv.bbox)
-        legends.push({left: r.left + rv.bbox.left, top: r.top + rv.bbox.top, width: rv.bbox.width, height: rv.bbox.height});
+        legends.push({left: r.left + rv.bbox.left, top: r.top + rv.bbox.top,
+                      width: rv.bbox.width, height: rv.bbox.height});
     return {left: r.left + f.left, top: r.top + f.top, width: f.width, height: f.height, legends,
             webgl: m.output_backend === 'webgl'};
   }

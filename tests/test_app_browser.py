@@ -93,8 +93,10 @@ JS_OVERFLOW = """() => {
     for (const el of root.querySelectorAll('*')) {
       const r = el.getBoundingClientRect();
       const empty_renderer = el.classList.contains('bk-GlyphRenderer') && !el.childElementCount && !el.textContent;
-      if (r.width > 0 && r.height > 0 && r.right > limit && !empty_renderer && getComputedStyle(el).visibility !== 'hidden') {
-        out.push(`${el.tagName.toLowerCase()}.${[...el.classList].join('.')}: right ${Math.round(r.right)} > ${Math.round(limit)}`);
+      if (r.width > 0 && r.height > 0 && r.right > limit && !empty_renderer &&
+          getComputedStyle(el).visibility !== 'hidden') {
+        out.push(`${el.tagName.toLowerCase()}.${[...el.classList].join('.')}: right ${Math.round(r.right)} > ` +
+                 `${Math.round(limit)}`);
       }
       if (el.shadowRoot) walk(el.shadowRoot);
     }
@@ -112,7 +114,8 @@ JS_SLIDER_VALUES = """() => { const out = [];
         const t = el.getBoundingClientRect(), v = el.querySelector('.bk-slider-value');
         const r = v ? v.getBoundingClientRect() : null;
         if (t.width > 0) out.push({text: el.textContent, visible: !!r && r.width > 0 && r.left >= t.left - 0.5 &&
-          r.right <= t.right + 0.5 && r.top >= t.top - 0.5 && r.bottom <= t.bottom + 0.5 && el.scrollHeight <= el.clientHeight + 1});
+          r.right <= t.right + 0.5 && r.top >= t.top - 0.5 && r.bottom <= t.bottom + 0.5 &&
+          el.scrollHeight <= el.clientHeight + 1});
       }
       if (el.shadowRoot) walk(el.shadowRoot); } };
   walk(document); return out; }"""
@@ -327,7 +330,8 @@ def test_retraining_curve_grows_another_session_replans_and_the_agent_is_selecta
         assert done and 0 < int(done.group(1)) < 1_000_000, progress
         # the bar is drawn whole: the <progress> inside its widget's box, above the text below it
         boxes = trainer.evaluate("""() => { const find = (root) => { for (const el of root.querySelectorAll('*')) {
-            if (el.tagName === 'PROGRESS') return el; if (el.shadowRoot) { const f = find(el.shadowRoot); if (f) return f; } }
+            if (el.tagName === 'PROGRESS') return el;
+            if (el.shadowRoot) { const f = find(el.shadowRoot); if (f) return f; } }
             return null; };
           const bar = find(document).getBoundingClientRect();
           return {bar: [bar.top, bar.bottom], height: bar.height}; }""")
@@ -452,8 +456,9 @@ def _check_layout(page, summary, size) -> None:
 
 
 # The bottom (px) of the Battery lab's voltage figure.
-JS_LAB_VOLTAGE_BOTTOM = """() => Math.max(...[...window.Bokeh.index.all_views()].filter(v => v.model.type === 'Figure' &&
-  v.model.title && v.model.title.text.startsWith('Voltage (physics')).map(v => v.el.getBoundingClientRect().bottom))"""
+JS_LAB_VOLTAGE_BOTTOM = """() => Math.max(...[...window.Bokeh.index.all_views()].filter(v =>
+  v.model.type === 'Figure' && v.model.title &&
+  v.model.title.text.startsWith('Voltage (physics')).map(v => v.el.getBoundingClientRect().bottom))"""
 
 
 # The x ranges of the Battery lab's two figures and the legend labels of its voltage figure.

@@ -26,7 +26,8 @@ def test_a_day_at_a_time_matches_the_library_life_and_the_view_draws_it():
     assert stars["aware"] == ([1, 2], [d["priority"] for d in life["days"]])
     hindsight = simulate_life(3, 2, 4, "hindsight", rate_per_h=2.0)  # the dotted line: hindsight's bounds
     assert stars["bound"] == ([1, 2], [d["bound"] for d in hindsight["days"]])
-    assert all(b >= max(stars[d][1][k] for d in ("aware", "blind", "hindsight")) for k, b in enumerate(stars["bound"][1]))
+    assert all(b >= max(stars[d][1][k] for d in ("aware", "blind", "hindsight"))
+               for k, b in enumerate(stars["bound"][1]))
     flights = s.timeline("aware")
     assert flights and all(0 <= f["start_h"] < f["end_h"] <= 18 for f in flights)
     assert len(flights) == s.last["aware"].flights

@@ -52,7 +52,8 @@ def test_injected_wind_change_reflies_from_the_playback_time(state):
     assert state.t_s == 1000.0 and state.events[-1].start_s == 1000
     after = state.record
     assert after is not before and after.wind_events == ["wind+30@1000"]
-    assert state.series_until()["changes"] == [(1000 / 60, "wind +30 kt from the next take-off")]  # marked where injected
+    # marked where injected
+    assert state.series_until()["changes"] == [(1000 / 60, "wind +30 kt from the next take-off")]
     # the flight up to the change is the same flight
     k = int((after.time_s <= 1000.0).sum())
     assert (after.measured_voltage_v[:k] == before.measured_voltage_v[:k]).all()

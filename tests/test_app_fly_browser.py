@@ -1,7 +1,7 @@
 """Browser test of the Fly tab (pytest-playwright, Debian's chromium): fly, play back, inject a wind change.
 
-Its own ``uam-studio serve`` subprocess (``app_url`` in tests/conftest.py); the screenshot goes to ``assets/screenshots/fly_tab.png``
-when ``UAM_SCREENSHOTS=1``.
+Its own ``uam-studio serve`` subprocess (``app_url`` in tests/conftest.py); the screenshot goes to
+``assets/screenshots/fly_tab.png`` when ``UAM_SCREENSHOTS=1``.
 """
 
 from __future__ import annotations
@@ -34,7 +34,8 @@ JS_VOLTAGE = """() => { const out = {now_min: null, curve_max_min: 0, last_decis
       if (r.glyph.type === 'Scatter' && t.length) out.last_decision_min = Math.max(...t);
       if (r.glyph.type === 'Text' && d.text) out.changes = [...d.text];
     }
-    for (const c of [...m.renderers, ...m.center]) if (c.type === 'Span' && c.dimension === 'height') out.now_min = c.location;
+    for (const c of [...m.renderers, ...m.center])
+      if (c.type === 'Span' && c.dimension === 'height') out.now_min = c.location;
   }
   return out; }"""
 

@@ -255,7 +255,8 @@ def test_every_input_error_crosses_a_process_pool_whole(tmp_path):
     from uam_studio.dynaformer.artifact import WeightsError
     from uam_studio.flight.profile import InfeasibleLegError
 
-    errors = [InputError("wind_kts", "99 is out of range; allowed [-39, 39] kt"), WeightsError(tmp_path / "w.pt", "gone"),
+    errors = [InputError("wind_kts", "99 is out of range; allowed [-39, 39] kt"),
+              WeightsError(tmp_path / "w.pt", "gone"),
               InfeasibleLegError("distance_km", "too short"), CellDataError(tmp_path / "a.csv", "time_s", "empty"),
               NasaDataError(tmp_path / "b.csv", "voltage_v", "missing")]
     for err in errors:

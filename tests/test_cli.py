@@ -210,7 +210,8 @@ def test_the_cli_states_the_librarys_defaults_and_choices_and_keeps_no_copy_of_t
     from uam_studio.planning.planners import IN_FLIGHT_PLANNERS
 
     fly = _subparser("fly")
-    stated = {"--forecast-sigma": defaults.DEFAULT_FORECAST_SIGMA_KT, "--sensor-noise-mv": defaults.DEFAULT_SENSOR_NOISE_MV,
+    stated = {"--forecast-sigma": defaults.DEFAULT_FORECAST_SIGMA_KT,
+              "--sensor-noise-mv": defaults.DEFAULT_SENSOR_NOISE_MV,
               "--sensor-noise-ma": defaults.DEFAULT_SENSOR_NOISE_MA, "--reserve": defaults.WEATHER_RESERVE_KT}
     for flag, value in stated.items():
         action = _option(fly, flag)

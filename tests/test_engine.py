@@ -46,7 +46,8 @@ def test_the_paper_findings_on_a_running_scheduler_equal_the_same_run_here():
                       silence_logs=40) as cluster:
         there = paper_findings(address=cluster.scheduler_address, **small)
     assert there == here
-    assert [r["gamma"] for r in here["gamma"]] == [0.0, 5.0, 50.0] and [r["beta"] for r in here["beta"]] == [0.0, 1.0, 5.0]
+    assert ([r["gamma"] for r in here["gamma"]] == [0.0, 5.0, 50.0]
+            and [r["beta"] for r in here["beta"]] == [0.0, 1.0, 5.0])
     assert all(r["episodes"] > 0 and 0.0 <= r["eod_breach_rate"] <= 1.0 for r in here["gamma"] + here["beta"])
     assert len(here["headwind"]["rows"]) == 2 and len(here["altitude"]) == 15
     text = format_findings(here)

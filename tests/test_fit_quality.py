@@ -269,8 +269,8 @@ def test_operator_belief_holds_a_flagged_fit_with_caution():
     assert health.inverse_capacity_sd > np.sqrt(trusting[0, 0])  # and wider than trusting the fit over the fleet
 
 
-@given(lik=st.tuples(st.floats(0.2, 2.0), st.floats(0.0, 0.6)), sd=st.tuples(st.floats(1e-4, 0.2), st.floats(1e-4, 0.1)),
-       corr=st.floats(-0.9, 0.9))
+@given(lik=st.tuples(st.floats(0.2, 2.0), st.floats(0.0, 0.6)),
+       sd=st.tuples(st.floats(1e-4, 0.2), st.floats(1e-4, 0.1)), corr=st.floats(-0.9, 0.9))
 def test_hold_to_fleet_is_never_more_optimistic_than_the_fleets_best_and_holds_the_readings(lik, sd, corr):
     prior = fleet_prior(DEFAULT_CELL)
     cov = np.array([[sd[0] ** 2, corr * sd[0] * sd[1]], [corr * sd[0] * sd[1], sd[1] ** 2]])

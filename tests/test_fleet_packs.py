@@ -37,7 +37,8 @@ def test_an_unknown_cell_type_is_refused_in_one_line_naming_the_law():
 
 
 @settings(max_examples=4, deadline=None)
-@given(n=st.integers(1, 6), seed=st.integers(0, 2**31), night=st.integers(0, 1000), law=st.sampled_from(["nasa", "vtc6"]))
+@given(n=st.integers(1, 6), seed=st.integers(0, 2**31), night=st.integers(0, 1000),
+       law=st.sampled_from(["nasa", "vtc6"]))
 def test_renewal_replaces_exactly_the_retired_packs_with_new_ones(n, seed, night, law):
     fleet = Fleet.new(n, seed, age_spread_efc=1.5 * PACK_LAWS[law].cycles_to(END_OF_LIFE_FRACTION), law=law)
     before = list(fleet.truth)

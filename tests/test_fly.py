@@ -325,5 +325,6 @@ def test_each_decision_says_what_its_leg_measured_and_a_wind_change_shows_up_as_
     assert windy.route[0] == calm.route[0] and windy.leg_end_s[0] > 300  # the first leg was already in the air
     assert windy.events[1].leg_wind_kts == calm.events[1].leg_wind_kts
     if windy.route[1] == calm.route[1] and calm.actual_winds_kts[1] + 25 <= 39:
-        assert windy.events[2].leg_wind_vs_forecast_kts - calm.events[2].leg_wind_vs_forecast_kts == pytest.approx(25, abs=1.5)
+        assert (windy.events[2].leg_wind_vs_forecast_kts - calm.events[2].leg_wind_vs_forecast_kts
+                == pytest.approx(25, abs=1.5))
     assert any(d.leg_wind_vs_forecast_kts > 15 for d in windy.events[1:])

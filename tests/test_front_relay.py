@@ -37,7 +37,8 @@ class _Echo(websocket.WebSocketHandler):
         return subprotocols[0] if subprotocols else None
 
     def on_message(self, message: str | bytes) -> None:
-        self.write_message(f"{self.name}:{message!s}" if isinstance(message, str) else message, binary=isinstance(message, bytes))
+        self.write_message(f"{self.name}:{message!s}" if isinstance(message, str) else message,
+                           binary=isinstance(message, bytes))
 
 
 class _Liveness(web.RequestHandler):
@@ -46,7 +47,8 @@ class _Liveness(web.RequestHandler):
 
 
 def _app(name: str) -> web.Application:
-    return web.Application([(r"/ws", _Echo, {"name": name}), (r"/liveness", _Liveness), (r"/.*", _Page, {"name": name})])
+    return web.Application([(r"/ws", _Echo, {"name": name}), (r"/liveness", _Liveness),
+                            (r"/.*", _Page, {"name": name})])
 
 
 def _run(coro_fn) -> object:

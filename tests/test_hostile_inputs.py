@@ -162,7 +162,7 @@ def test_a_very_long_route_names_the_route(example):
         simulate_route(example, route, [500.0] * len(route))
 
 
-# --------------------------------------------------------------------------- health fit on readings that are not a cell's
+# --------------------------------------------------------------------- health fit on readings that are not a cell's
 @settings(max_examples=25, deadline=None, derandomize=True)
 @given(volt=st.floats(0.0, 1.5), n=st.integers(20, 200))
 def test_readings_no_cell_state_explains_are_refused(volt, n):

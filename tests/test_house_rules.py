@@ -87,8 +87,8 @@ def test_every_lazy_export_resolves_and_no_submodule_shadows_one():
     import pkgutil
 
     for name in ("uam_studio", "uam_studio.app", "uam_studio.battery", "uam_studio.dynaformer", "uam_studio.fleet",
-                 "uam_studio.flight", "uam_studio.planning", "uam_studio.planning.agents", "uam_studio.planning.agents.dqn",
-                 "uam_studio.studies"):
+                 "uam_studio.flight", "uam_studio.planning", "uam_studio.planning.agents",
+                 "uam_studio.planning.agents.dqn", "uam_studio.studies"):
         package = importlib.import_module(name)
         lazy = set(getattr(package, "_LAZY", None) or getattr(package, "_FRONT_DOOR", {}))
         assert lazy, name

@@ -141,9 +141,11 @@ def test_plain_names_are_kept(name):
 def test_destination_count_limits():
     assert check_destination_count(1) == 1
     assert check_destination_count(MAX_DESTINATIONS) == MAX_DESTINATIONS
-    with pytest.raises(InputError, match=rf"^destinations: a mission needs at least 1 destination \(allowed 1 to {MAX_DESTINATIONS}\)$"):
+    with pytest.raises(InputError, match=rf"^destinations: a mission needs at least 1 destination "
+                                         rf"\(allowed 1 to {MAX_DESTINATIONS}\)$"):
         check_destination_count(0)
-    with pytest.raises(InputError, match=rf"^destinations: {MAX_DESTINATIONS + 1} destinations; allowed 1 to {MAX_DESTINATIONS}$"):
+    with pytest.raises(InputError, match=rf"^destinations: {MAX_DESTINATIONS + 1} destinations; "
+                                         rf"allowed 1 to {MAX_DESTINATIONS}$"):
         check_destination_count(MAX_DESTINATIONS + 1)
     with pytest.raises(InputError, match=r"^destinations: 9 destinations; fly plans at most 8 \(allowed 1 to 8\)$"):
         check_destination_count(9, 8, "fly")

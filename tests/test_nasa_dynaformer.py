@@ -25,7 +25,8 @@ from uam_studio.dynaformer.predictor import load_pretrained
 
 
 def _data() -> Path | None:
-    for p in (os.environ.get("UAM_STUDIO_NASA_DATA"), Path(__file__).resolve().parents[2] / "shared" / "data" / "nasa_pcoe"):
+    for p in (os.environ.get("UAM_STUDIO_NASA_DATA"),
+              Path(__file__).resolve().parents[2] / "shared" / "data" / "nasa_pcoe"):
         if p and Path(p, "B0005.csv.gz").is_file():
             return Path(p)
     return None

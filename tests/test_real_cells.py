@@ -70,7 +70,8 @@ def test_synthetic_csv_round_trip(tmp_path):
 
 def test_dataset_column_names_are_read(tmp_path):
     rows, _ = _mission_rows((30, 60, 30, 10))
-    header = "time_s,Ecell_V,I_mA,EnergyCharge_W_h,QCharge_mA_h,EnergyDischarge_W_h,QDischarge_mA_h,Temperature__C,cycleNumber,Ns"
+    header = ("time_s,Ecell_V,I_mA,EnergyCharge_W_h,QCharge_mA_h,EnergyDischarge_W_h,QDischarge_mA_h,"
+              "Temperature__C,cycleNumber,Ns")
     log = load_cell_log(_write(tmp_path / "VAH98.csv", rows, header))
     assert len(log) == 130 and log.current_a.max() > 10
 
@@ -294,12 +295,14 @@ def test_identify_vtc6_reproduces_the_bundled_set(hold_out, name, capsys):
     # the Arrhenius factors over 0-60 C, and the rest loosely; the voltage below is the tight check.
     tb = np.linspace(273.15, 333.15, 61)
     for factor in ("r0_factor", "rate_factor"):
-        assert getattr(fitted.params, factor)(tb) == pytest.approx(getattr(bundled.params, factor)(tb), rel=5e-3), factor
+        assert getattr(fitted.params, factor)(tb) == pytest.approx(getattr(bundled.params, factor)(tb),
+                                                                   rel=5e-3), factor
     for f in fields(bundled.params):
         if f.name not in ("ap", "fleet_q_range", "fleet_r0_range", "r0_activation_k", "k_activation_k"):
             assert getattr(fitted.params, f.name) == pytest.approx(getattr(bundled.params, f.name), rel=0.1), f.name
     mission = mission_cycle(load_cell_log(Path(DATA) / "VAH01_20.csv"))
-    rmse = [np.sqrt(np.mean((replay_mission(mission, c).voltage_v - mission.log.voltage_v) ** 2)) for c in (fitted, bundled)]
+    rmse = [np.sqrt(np.mean((replay_mission(mission, c).voltage_v - mission.log.voltage_v) ** 2))
+            for c in (fitted, bundled)]
     assert rmse[0] == pytest.approx(rmse[1], abs=3e-4)
 
 

@@ -33,8 +33,10 @@ from uam_studio.studies.real_lives import (
     segments_without,
 )
 
-DATA = os.environ.get("UAM_STUDIO_CMU_DATA") or str(Path(__file__).resolve().parents[2] / "shared" / "data" / "cmu_evtol")
-real = pytest.mark.skipif(not Path(DATA, "VAH07.csv.mat").is_file(), reason="the CMU eVTOL dataset is not at ../shared/data/cmu_evtol or $UAM_STUDIO_CMU_DATA")
+DATA = os.environ.get("UAM_STUDIO_CMU_DATA") or str(Path(__file__).resolve().parents[2] / "shared" / "data" /
+                                                    "cmu_evtol")
+real = pytest.mark.skipif(not Path(DATA, "VAH07.csv.mat").is_file(),
+                          reason="the CMU eVTOL dataset is not at ../shared/data/cmu_evtol or $UAM_STUDIO_CMU_DATA")
 
 
 @given(scores=st.lists(st.floats(-1.0, 1.0), max_size=60), level=st.floats(0.5, 0.99))

@@ -304,7 +304,8 @@ def test_a_refused_websocket_is_one_warning_line():
         "websocket refused: Token is expired.", "WARNING", None)
     other = record(ValueError("a bug"))
     assert OneLineRefusedWebsockets().filter(other)
-    assert other.levelname == "ERROR" and other.exc_info is not None and other.getMessage() == "Uncaught exception GET /ws"
+    assert (other.levelname == "ERROR" and other.exc_info is not None
+            and other.getMessage() == "Uncaught exception GET /ws")
 
 
 def test_child_pids_lists_the_processes_this_one_started():

@@ -24,7 +24,8 @@ def _random_actions(obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 
 def test_same_transitions_as_dummy_vec_env():
-    fns = [make_env(scenario=s) for s in ("single_charge", "multi_charge", "single_flight", "single_charge", "multi_charge")]
+    fns = [make_env(scenario=s)
+           for s in ("single_charge", "multi_charge", "single_flight", "single_charge", "multi_charge")]
     dummy = DummyVecEnv(fns)
     grouped = GroupedSubprocVecEnv(fns, n_workers=2)
     try:

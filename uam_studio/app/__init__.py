@@ -10,9 +10,9 @@ Each tab but the Glossary has a state model, a plain ``param.Parameterized`` cla
 :mod:`~uam_studio.app.fleet.state`), separate from its view (:mod:`~uam_studio.app.planner.view`,
 :mod:`~uam_studio.app.fly.view`, :mod:`~uam_studio.app.battery_lab.view`, :mod:`~uam_studio.app.retrain.view`,
 :mod:`~uam_studio.app.fleet.view`), a ``pn.viewable.Viewer`` component. HoloViews figures draw on the
-canvas (:func:`~uam_studio.app.style.draw_on_canvas`), so they draw without a GPU. What the sessions of a process share: :mod:`~uam_studio.app.services`
-(thread pool, Dynaformer, agent registry), :mod:`~uam_studio.app.planner.plans` (the plan cache) and
-:mod:`~uam_studio.app.planner.comparison` (the plan comparison and its runner).
+canvas (:func:`~uam_studio.app.style.draw_on_canvas`), so they draw without a GPU. What the sessions of a process share:
+:mod:`~uam_studio.app.services` (thread pool, Dynaformer, agent registry), :mod:`~uam_studio.app.planner.plans` (the
+plan cache) and :mod:`~uam_studio.app.planner.comparison` (the plan comparison and its runner).
 """
 
 from uam_studio.lazy_exports import lazy_getattr

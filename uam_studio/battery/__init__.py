@@ -33,9 +33,9 @@ from uam_studio.lazy_exports import lazy_getattr
 
 __all__ = [
     "BatteryState", "CellParameters", "DEFAULT_CELL", "DEFAULT_EOD_V", "DEFAULT_Q_MAX", "DEFAULT_R0",
-    "EOD_RANGE", "HealthEstimate", "PAPER_Q_RANGE", "PAPER_R0_RANGE", "Q_MAX_RANGE", "R0_RANGE", "STATE_NAMES", "SimulationResult",
-    "eod_interval_s", "eod_intervals", "fit_health", "fit_health_batch", "full_charge", "rest_voltage",
-    "simulate", "simulate_constant_power", "voltage_band",
+    "EOD_RANGE", "HealthEstimate", "PAPER_Q_RANGE", "PAPER_R0_RANGE", "Q_MAX_RANGE", "R0_RANGE", "STATE_NAMES",
+    "SimulationResult", "eod_interval_s", "eod_intervals", "fit_health", "fit_health_batch", "full_charge",
+    "rest_voltage", "simulate", "simulate_constant_power", "voltage_band",
 ]
 
 # sweeps over the model, real cells (CMU VTC6 and NASA PCoE): imported when first used

@@ -126,7 +126,8 @@ def integrate_current(current: np.ndarray, x0: BatteryState, q_total: np.ndarray
             # the voltage error is < tol * R/(F alpha) * asinh(...) ~ 1e-11 V.
             break
 
-    states = {"tb": tb[:, 1:], "vo": vo[:, 1:], "vsn": vsn[:, 1:], "vsp": vsp[:, 1:], "qnb": qnb, "qns": qns, "qpb": qpb, "qps": qps}
+    states = {"tb": tb[:, 1:], "vo": vo[:, 1:], "vsn": vsn[:, 1:], "vsp": vsp[:, 1:], "qnb": qnb, "qns": qns,
+              "qpb": qpb, "qps": qps}
     voltage = output_voltage(states, q_total[:, None], cell)
     return voltage, states
 

@@ -5,8 +5,8 @@ command's module adds its arguments to its own sub-parser and handles the parsed
 an exit code. Bad input of any kind (an :class:`~uam_studio.errors.InputError`, or a value argparse
 rejects) prints one line ``error: ...`` to stderr and exits with code 2.
 
-Commands: ``serve`` (start the Panel app), ``simulate`` (fly a route of a mission file and report voltage and EOD), ``plan`` (plan
-a mission with the attention planner (default), the DQN agent, the oracle or the greedy baseline;
+Commands: ``serve`` (start the Panel app), ``simulate`` (fly a route of a mission file and report voltage and EOD),
+``plan`` (plan a mission with the attention planner (default), the DQN agent, the oracle or the greedy baseline;
 physics-checked), ``fly`` (fly it in
 a world the operator cannot see, re-planning from its sensors), ``fleet`` (a fleet's day or life under
 three dispatchers), ``findings`` (the paper's four findings, agents trained on the Dask engine), ``train``

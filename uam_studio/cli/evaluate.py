@@ -59,7 +59,8 @@ def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
 
 # Each option but --json, and the models that read it: any other model refuses it in one line.
 OPTION_MODELS = {"data": ("real", "lives", "nasa"), "quick": ("real",), "refit": ("real",), "cell": ("lives", "nasa"),
-                 "every": ("lives", "nasa"), "context_s": ("nasa",), "cutoff_v": ("nasa",), "max_nfev": ("lives",), "weights": ("dynaformer",), "table": ("dynaformer",),
+                 "every": ("lives", "nasa"), "context_s": ("nasa",), "cutoff_v": ("nasa",), "max_nfev": ("lives",),
+                 "weights": ("dynaformer",), "table": ("dynaformer",),
                  "n": ("dynaformer",), "compare": ("dynaformer",), "seed": ("dynaformer", "lives")}
 
 
@@ -69,8 +70,8 @@ def _check_options(args: argparse.Namespace) -> None:
              if getattr(args, k) not in (None, False) and args.model not in models]
     if given:
         flags = ", ".join("--" + k.replace("_", "-") for k in given)
-        only = "; ".join(f"--{k.replace('_', '-')} only with " + " or ".join(f"'evaluate {m}'" for m in OPTION_MODELS[k])
-                         for k in given)
+        only = "; ".join(f"--{k.replace('_', '-')} only with "
+                         + " or ".join(f"'evaluate {m}'" for m in OPTION_MODELS[k]) for k in given)
         raise CliExit(f"{flags}: not read by 'evaluate {args.model}' ({only})", EXIT_INPUT)
 
 

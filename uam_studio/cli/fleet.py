@@ -107,14 +107,15 @@ def _run_fleet(args: argparse.Namespace) -> int:
                                vertiports=args.vertiports, law=args.law, renew=not args.keep_retired)
         if args.csv is not None:
             _write_csv(args.csv, [{"dispatcher": r["dispatcher"], "seed": r["seed"], "day": d + 1,
-                                   **{k: r[k][d] for k in DAY_FIELDS}} for r in rows for d in range(len(r["priority"]))])
+                                   **{k: r[k][d] for k in DAY_FIELDS}}
+                                  for r in rows for d in range(len(r["priority"]))])
         if args.json:
             json.dump({"lives": rows, "summary": summarize(rows)}, sys.stdout, allow_nan=False)
             sys.stdout.write("\n")
             return EXIT_OK
         print(f"{args.aircraft} aircraft at {args.vertiports} vertiport(s), {args.days} day(s) x {len(seeds)} seed(s) "
-              f"from {args.seed}, Poisson {args.rate:g} requests/h up to {args.max_km:g} km, {args.chargers} charger(s) "
-              f"per vertiport, {args.law} packs aged U(0, {args.age_spread:.0f}) cycles, "
+              f"from {args.seed}, Poisson {args.rate:g} requests/h up to {args.max_km:g} km, "
+              f"{args.chargers} charger(s) per vertiport, {args.law} packs aged U(0, {args.age_spread:.0f}) cycles, "
               f"{'retired packs grounded' if args.keep_retired else 'a retired pack replaced overnight'}")
         print(f"{'dispatcher':10} {'priority/day':>12} {'5-95%':>9} {'served':>7} {'refused':>8} {'breaches':>9} "
               f"{'packs retired':>13} {'mean day':>8} {'bound/day':>9}")
@@ -145,7 +146,8 @@ def _run_fleet(args: argparse.Namespace) -> int:
         print(f"{d:10} {sum(x['priority'] for x in days) / n:12.1f} {sum(x['served'] for x in days):7d} "
               f"{sum(x['refused'] for x in days):8d} {sum(x['breaches'] for x in days):9d} "
               f"{sum(x['flights'] for x in days):8d} {sum(x['charge_ah'] for x in days) / n:13.1f} "
-              f"{len(retired):13d} {_per_day(None if days[0]['bound'] is None else sum(x['bound'] for x in days) / n):>9}")
+              f"{len(retired):13d} "
+              f"{_per_day(None if days[0]['bound'] is None else sum(x['bound'] for x in days) / n):>9}")
     return EXIT_OK
 
 

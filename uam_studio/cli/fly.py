@@ -59,15 +59,18 @@ def _run_fly(args: argparse.Namespace) -> int:
         print(f"t={d.time_s:>6.0f} s at {d.node}: {d.kind}: {d.reason}")
         print(f"           knows q_max {d.q_max_c:.0f} +- {d.q_max_sd_c:.0f} C, R0 {d.r0_ohm:.3f} +- "
               f"{d.r0_sd_ohm:.3f} ohm" + (f" (fit flagged: {', '.join(d.health_flags)})" if d.health_flags else "")
-              + f", wind shift {d.wind_shift_kts:+.1f} kt ({d.wind_change or f'no change believed, p {d.wind_change_p:.2f}'})"
+              + f", wind shift {d.wind_shift_kts:+.1f} kt "
+                f"({d.wind_change or f'no change believed, p {d.wind_change_p:.2f}'})"
               + f"; plans {' -> '.join(d.route) or 'nothing more'}")
         if d.next_to is not None:
             to, alt, wind, forecast, end = next(legs)
             print(f"           flies to {to} at {alt:g} m: wind {wind:+.0f} kt (forecast {forecast:+.0f}), "
                   f"lands at {end:.0f} s")
     reached = ", ".join(rec.reached) or "none"
-    verdict = f"BREACHED the cut-off ({rec.breach_cause}): priority 0" if rec.breached else f"priority {rec.reached_priority}"
-    print(f"flown: reached {reached}; {verdict}; {charging_cycles_text(rec.charging_cycles)}; min {rec.min_voltage_v:.3f} V")
+    verdict = (f"BREACHED the cut-off ({rec.breach_cause}): priority 0" if rec.breached
+               else f"priority {rec.reached_priority}")
+    print(f"flown: reached {reached}; {verdict}; {charging_cycles_text(rec.charging_cycles)}; "
+          f"min {rec.min_voltage_v:.3f} V")
     print(f"blind pre-flight plan: {' -> '.join(rec.static.route) or 'nothing'}: "
           f"{'BREACHED, priority 0' if rec.static.breached else f'priority {rec.static.priority}'}")
     exact = "" if rec.hindsight.exact else (" at each leg's time; the best of the exact plans for each period of "

@@ -13,11 +13,11 @@ def _add_identify_arguments(p: argparse.ArgumentParser) -> None:
                         "end-of-discharge predictor's cross-cell numbers (battery/real/nasa_model.py), from every cell "
                         "file in --data")
     p.add_argument("--data", default=None, metavar="PATH",
-                   help="vtc6: the CMU eVTOL dataset's folder (default: $UAM_STUDIO_CMU_DATA; DOI 10.1184/R1/14226830); "
-                        "nasa: a NASA PCoE folder (default: $UAM_STUDIO_NASA_DATA)")
+                   help="vtc6: the CMU eVTOL dataset's folder (default: $UAM_STUDIO_CMU_DATA; "
+                        "DOI 10.1184/R1/14226830); nasa: a NASA PCoE folder (default: $UAM_STUDIO_NASA_DATA)")
     p.add_argument("--hold-out", choices=["none", "landing", "cell"], default="none",
-                   help="none: the bundled set (VTC6); landing: without VAH01's landing and rest (VTC6_LANDING_HELD_OUT); "
-                        "cell: without VAH01 (VTC6_CELL_HELD_OUT)")
+                   help="none: the bundled set (VTC6); landing: without VAH01's landing and rest "
+                        "(VTC6_LANDING_HELD_OUT); cell: without VAH01 (VTC6_CELL_HELD_OUT)")
 
 
 def _run_identify(args: argparse.Namespace) -> int:

@@ -155,7 +155,8 @@ def format_report(m: dict) -> str:
         if h["abs_r_r0"] is None:
             lines.append(f"{head}   too few discharges last the context")
             continue
-        lines.append(f"{head}   r0~PC{h['r0_pc']}: {h['abs_r_r0']:.3f}   q_max~PC{h['q_max_pc']}: {h['abs_r_q_max']:.3f}")
+        lines.append(f"{head}   r0~PC{h['r0_pc']}: {h['abs_r_r0']:.3f}   "
+                     f"q_max~PC{h['q_max_pc']}: {h['abs_r_q_max']:.3f}")
     return "\n".join(lines)
 
 
@@ -234,8 +235,8 @@ def noise_table(pred: DynaformerPredictor, n: int = 200, seed: int = 12345,
     context L s, noise N mV): the flights whose true EOD falls after the context; the context's
     voltage gets Gaussian noise of N mV and its current ``CURRENT_NOISE_A_PER_V`` x N mA (20 mA at
     10 mV); both go to the health estimates, and the planned profile (the whole flight plan's
-    current from the log's start) is predicted. "aligned": the log starts at the take-off, the context is its first L s. "rest": the
-    log starts 5-30 s (uniform, per flight) before the take-off, at rest (0 A, the full cell's rest
+    current from the log's start) is predicted. "aligned": the log starts at the take-off, the context is its first L s.
+    "rest": the log starts 5-30 s (uniform, per flight) before the take-off, at rest (0 A, the full cell's rest
     voltage); the context is that rest plus the same L s of flight, and all times count from the
     log's start. Columns:
 

@@ -365,8 +365,8 @@ class DynaformerPredictor:
         ends = interval_ends(ests, np.ascontiguousarray(cur), dt, lv, eod, cell=self.cell)  # [b, 2, 2] (q_max, r0)
         pts = np.concatenate([np.array([[e.q_max, e.r0] for e in ests])[:, None], ends], axis=1)  # [b, 3, 2]
         grid = to_grid(cur, dt, hold=True)
-        v = self._decode(None, np.repeat(grid, 3, axis=0), skip_rest=True, estimates=[e for e in ests for _ in range(3)],
-                         points=pts.reshape(-1, 2)).reshape(b, 3, -1)
+        v = self._decode(None, np.repeat(grid, 3, axis=0), skip_rest=True,
+                         estimates=[e for e in ests for _ in range(3)], points=pts.reshape(-1, 2)).reshape(b, 3, -1)
         h_v, h_t = self.decoder_error(lv)
         curves = np.concatenate([v, (v[:, 0] - h_v)[:, None], (v[:, 0] + h_v)[:, None]], axis=1)  # [b, 5, n]
         curves = np.stack([self._finish(curves[:, k], cur, dt, grid.shape[1], obs) for k in range(5)], axis=1)
@@ -401,8 +401,8 @@ class DynaformerPredictor:
         b = cur.shape[0]
         pts = np.stack([e.sigma_points() for e in ests])  # [b, 5, 2]
         grid = to_grid(cur, dt, hold=True)
-        v = self._decode(None, np.repeat(grid, 5, axis=0), skip_rest=True, estimates=[e for e in ests for _ in range(5)],
-                         points=pts.reshape(-1, 2)).reshape(b, 5, -1)
+        v = self._decode(None, np.repeat(grid, 5, axis=0), skip_rest=True,
+                         estimates=[e for e in ests for _ in range(5)], points=pts.reshape(-1, 2)).reshape(b, 5, -1)
         h_v, h_t = self.decoder_error(lv)
         z = two_sided_z(lv)
         low, med, high = (np.empty((b, v.shape[2])) for _ in range(3))

@@ -352,7 +352,8 @@ def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerC
     opt = torch.optim.AdamW(decoder_params, lr=cfg.lr, weight_decay=1e-4)
     warm = 300
     sched = torch.optim.lr_scheduler.LambdaLR(
-        opt, lambda s: min(1.0, (s + 1) / warm) * (0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * min(s, cfg.steps) / cfg.steps))))
+        opt, lambda s: (min(1.0, (s + 1) / warm)
+                        * (0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * min(s, cfg.steps) / cfg.steps)))))
     step, elapsed_before = 0, 0.0
     rng = np.random.default_rng(cfg.seed + 1)
     if ck is not None:
@@ -398,8 +399,8 @@ def train(cfg: TrainConfig, out_dir, resume: bool = True, model_cfg: DynaformerC
     train_s = elapsed_before + time.perf_counter() - t0
     pca = fit_pca(model, ds, device)
     meta = {"train_config": asdict(cfg), "train_seconds": round(train_s, 1), "data_seconds": round(t_data, 1),
-            "device": str(device), "torch_threads": torch.get_num_threads(), "final_rmse_mv_ema": 1000 * math.sqrt(ema or 0),
-            "encoder_stage_health_mse": encoder_mse}
+            "device": str(device), "torch_threads": torch.get_num_threads(),
+            "final_rmse_mv_ema": 1000 * math.sqrt(ema or 0), "encoder_stage_health_mse": encoder_mse}
     weights = out / "dynaformer.pt"
     save_artifact(weights, model.cpu(), pca, meta, sidecars={out / "train_meta.json": json.dumps(meta, indent=2)})
     return weights

@@ -229,8 +229,8 @@ def _main() -> None:  # pragma: no cover - the fitting command, printed numbers 
     print(f"AgingLaw(a={law.a:.6g}, b={law.b:.6g}, ea_k={law.ea_k:.6g}, k_r={law.k_r:.6g})  (fitted on all four lives)")
     print(f"cycles to {END_OF_LIFE_FRACTION:.0%} at 25 C: {law.cycles_to():.0f} equivalent full cycles")
     print("leave-one-cell-out (law fitted on the other three; capacity error, Ah):")
-    print(f"{'cell':6} {'T C':>5} {'tests':>5} {'missions':>8} {'efc':>6} {'first':>6} {'last':>6} {'rms':>6} {'worst':>6} "
-          f"{'last err':>8}")
+    print(f"{'cell':6} {'T C':>5} {'tests':>5} {'missions':>8} {'efc':>6} {'first':>6} {'last':>6} {'rms':>6} "
+          f"{'worst':>6} {'last err':>8}")
     for r in leave_one_cell_out(lives):
         print(f"{r['cell']:6} {r['temperature_c']:5.1f} {r['tests']:5d} {r['missions']:8d} {r['efc']:6.0f} "
               f"{r['first_ah']:6.3f} {r['last_ah']:6.3f} {r['rms_ah']:6.3f} {r['worst_ah']:6.3f} "

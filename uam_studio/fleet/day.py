@@ -16,8 +16,8 @@ cell, the law fitted to the NASA PCoE lives, :data:`~uam_studio.fleet.nasa_aging
 law (a model the operator holds, not the pack's truth). Over a life, a pack that retired is replaced
 overnight by a new one from the factory (:meth:`Fleet.renew_retired`), as an operator would.
 
-Public API: :func:`simulate_day` (an :class:`OperatingDay` run), :func:`simulate_life`, :class:`DayResult`, :class:`Fleet`,
-:data:`PACK_LAWS`, :func:`default_age_spread`.
+Public API: :func:`simulate_day` (an :class:`OperatingDay` run), :func:`simulate_life`, :class:`DayResult`,
+:class:`Fleet`, :data:`PACK_LAWS`, :func:`default_age_spread`.
 """
 
 from __future__ import annotations
@@ -54,8 +54,9 @@ from uam_studio.fleet.dispatch import (
 from uam_studio.fleet.hindsight import Job, day_bound
 from uam_studio.fleet.nasa_aging import NASA_AGING_LAW
 
-__all__ = ["AGE_SPREAD_LIFE", "DayResult", "END_S", "Fleet", "FIT_WINDOW_S", "OperatingDay", "PACK_LAWS", "day_of_life_seed",
-           "default_age_spread", "fly_day_of_life", "hindsight_bound", "pack_law", "simulate_day", "simulate_life"]
+__all__ = ["AGE_SPREAD_LIFE", "DayResult", "END_S", "Fleet", "FIT_WINDOW_S", "OperatingDay", "PACK_LAWS",
+           "day_of_life_seed", "default_age_spread", "fly_day_of_life", "hindsight_bound", "pack_law", "simulate_day",
+           "simulate_life"]
 
 FIT_WINDOW_S = 600  # s of each flight's readings fitted for its pack's health
 FORECAST_SIGMA_KT = 8.0  # kt: the actual wind is the forecast plus N(0, this)

@@ -18,7 +18,8 @@ import numpy as np
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight.tables import WIND_RANGE_KTS
 
-__all__ = ["DAY_S", "MAX_REQUESTS", "MAX_VERTIPORTS", "RADIUS_KM", "Request", "day_seed", "load_demand", "poisson_demand"]
+__all__ = ["DAY_S", "MAX_REQUESTS", "MAX_VERTIPORTS", "RADIUS_KM", "Request", "day_seed", "load_demand",
+           "poisson_demand"]
 
 DAY_S = 12 * 3600.0  # s: the operating day (06:00-18:00)
 RADIUS_KM = (8.0, 100.0)  # km: how far a request may be from the vertiport (500 m cruise needs over 6.2 km)
@@ -119,7 +120,8 @@ def _request(row: dict, where: str) -> Request:
     try:
         return Request(float(row["t_s"]), str(row.get("name") or where), float(row["x_km"]), float(row["y_km"]),
                        _ascii_digits(row["priority"]), float(row.get("wind_kts") or 0.0),
-                       float(row.get("window_s") or DEFAULT_WINDOW_S), vertiport=_ascii_digits(row.get("vertiport") or 0))
+                       float(row.get("window_s") or DEFAULT_WINDOW_S),
+                       vertiport=_ascii_digits(row.get("vertiport") or 0))
     except InputError as err:
         raise InputError(err.field, f"{where}: {str(err)[len(err.field) + 2:]}") from None
     except (TypeError, ValueError) as err:

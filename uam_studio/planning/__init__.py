@@ -24,8 +24,8 @@ Planning: the action space (:mod:`~uam_studio.planning.legs`: ``N_MAX``, ``ALTIT
 (:func:`attention_plan`, the learned default, 1-20 destinations; :func:`oracle_plan`, exact up to 8,
 :func:`reference_plan` beyond; :func:`greedy_plan`, baseline), the physics check
 :func:`check_plan` (-> :class:`PlanCheck`) and the one entry point of the CLI and the app,
-:func:`plan_mission` (any of :data:`POLICIES`, each described in :data:`PLANNERS`, checked on physics, with the Dynaformer's prediction and
-its voltage band; -> :class:`PlanResult`), its :func:`safety_verdict` by source,
+:func:`plan_mission` (any of :data:`POLICIES`, each described in :data:`PLANNERS`, checked on physics, with the
+Dynaformer's prediction and its voltage band; -> :class:`PlanResult`), its :func:`safety_verdict` by source,
 and flying a mission with surprises, :func:`fly_mission`.
 
 ``env``, ``solvers``, ``agents``, ``planner``, ``safety`` and ``operations`` are imported lazily (attribute access), so

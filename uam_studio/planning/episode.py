@@ -52,8 +52,8 @@ def fly_batch(
         passes for a few long rows).
     :return: ``(ok [B], x_end [B, 8], v_min [B])``: no sample below the cut-off; state after the
         last sample (the start state where not ok); lowest voltage (V) up to the first sample below
-        the cut-off, that sample included (0 where it is NaN). Same numbers as :func:`uam_studio.battery.simulate` leg by leg (same solver).
-        With ``split``, a fourth array ``x_split [B, 8]``: the state after ``split`` samples (the
+        the cut-off, that sample included (0 where it is NaN). Same numbers as :func:`uam_studio.battery.simulate` leg
+        by leg (same solver). With ``split``, a fourth array ``x_split [B, 8]``: the state after ``split`` samples (the
         start state where the row failed before them).
     """
     b = len(currents)
@@ -128,7 +128,8 @@ class Episode:
         """The episode of ``legs.mission`` under ``scenario`` (default: the mission's) with ``cell``
         (default: the mission's own, :attr:`~uam_studio.planning.missions.mission.Mission.cell`)."""
         m = legs.mission
-        return cls(legs, m.cell if cell is None else cell, scenario_rules(scenario if scenario is not None else m.scenario))
+        return cls(legs, m.cell if cell is None else cell,
+                   scenario_rules(scenario if scenario is not None else m.scenario))
 
     @property
     def home(self) -> int:

@@ -69,11 +69,11 @@ class LegTable:
 
     Node index ``k < slots`` is ``mission.destinations[k]``, ``slots`` (:attr:`home`) the vertiport;
     ``slots`` defaults to ``N_MAX``, the discrete action space's slots, and may be up to
-    :data:`MAX_DESTINATIONS` for planners that are not tied to it. ``feasible[i, j, a]`` is True if the leg i -> j exists (both nodes present, i != j) and
-    its length fits altitude ``ALTITUDES_M[a]`` (:func:`uam_studio.flight.min_leg_distance_km`,
-    at most 500 km). :meth:`current` is the leg's per-cell current (A, 1 s samples) exactly as
-    :func:`uam_studio.planning.missions.route.simulate_route` flies it: the wind and dwell of the node
-    flown to. Profiles are computed on first use and cached.
+    :data:`MAX_DESTINATIONS` for planners that are not tied to it. ``feasible[i, j, a]`` is True if the leg i -> j
+    exists (both nodes present, i != j) and its length fits altitude ``ALTITUDES_M[a]``
+    (:func:`uam_studio.flight.min_leg_distance_km`, at most 500 km). :meth:`current` is the leg's per-cell current
+    (A, 1 s samples) exactly as :func:`uam_studio.planning.missions.route.simulate_route` flies it: the wind and dwell
+    of the node flown to. Profiles are computed on first use and cached.
     """
 
     def __init__(self, mission: Mission, slots: int = N_MAX) -> None:

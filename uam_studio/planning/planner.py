@@ -4,8 +4,9 @@ The CLI (``uam-studio plan``) and the Panel app call only this function. It
 
 1. runs the chosen planner: ``"attention"`` (the default: the bundled attention network with beam
    search behind the physics safety filter, any map of 1-20 destinations,
-   :func:`~uam_studio.planning.agents.attention.decode.attention_plan`), ``"oracle"`` (:func:`~uam_studio.planning.solvers.oracle.oracle_plan`: exact up to
-   8 destinations, an OR-Tools reference plan for 9-20, ``exact`` in the result says which),
+   :func:`~uam_studio.planning.agents.attention.decode.attention_plan`), ``"oracle"``
+   (:func:`~uam_studio.planning.solvers.oracle.oracle_plan`: exact up to 8 destinations, an OR-Tools reference plan for
+   9-20, ``exact`` in the result says which),
    ``"greedy"`` (baseline, :func:`~uam_studio.planning.solvers.greedy.greedy_plan`) or ``"dqn"`` (a trained
    masked DQN agent rolled out greedily in a :class:`~uam_studio.planning.env.UAMPlanningEnv` built
    on this mission with the physics battery);
@@ -21,7 +22,8 @@ than 20, unreachable destinations, a cell that cannot finish the take-off) and a
 give messages, never exceptions; bad input (an invalid mission, an unknown policy, out-of-range
 ``q_max``/``r0``, an explicit ``agent_path`` that cannot be loaded, more than 8 destinations for
 ``dqn``) and a missing bundled agent
-(``dqn`` without ``agent_path``, :func:`~uam_studio.planning.agents.dqn.rollout.bundled_agent_path`) raise :class:`~uam_studio.errors.InputError`.
+(``dqn`` without ``agent_path``, :func:`~uam_studio.planning.agents.dqn.rollout.bundled_agent_path`) raise
+:class:`~uam_studio.errors.InputError`.
 """
 
 from __future__ import annotations

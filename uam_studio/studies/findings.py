@@ -249,7 +249,8 @@ BETAS = (0.0, 1.0, 5.0)  # finding 4
 
 
 def paper_findings(quick: bool = False, workers: int | None = None, address: str | None = None,
-                   steps: int | None = None, n_eval: int | None = None, n_missions: int | None = None) -> dict[str, Any]:
+                   steps: int | None = None, n_eval: int | None = None,
+                   n_missions: int | None = None) -> dict[str, Any]:
     """The paper's four findings measured on our physics (module docstring), every independent part a
     Dask task (:func:`uam_studio.engine.run_tasks`): finding 2's missions and findings 3 and 4's agents.
 

@@ -388,5 +388,6 @@ def format_scores(scores: list[LifeScore]) -> str:
         width = s.median_width_mv
         width = width if width is not None else float("nan")
         out.append(f"{s.cell:6s} {s.missions:8d} {s.samples:15d} {s.coverage:7.3f} ({s.raw_coverage:.3f}) "
-                   f"{width:15.0f} {s.breaches:8d} {s.missed:4d} ({s.raw_missed:4d}) {s.strict_missed:17d} {s.unfit:5d} {s.grounded:8d}")
+                   f"{width:15.0f} {s.breaches:8d} {s.missed:4d} ({s.raw_missed:4d}) {s.strict_missed:17d} "
+                   f"{s.unfit:5d} {s.grounded:8d}")
     return "\n".join(out)

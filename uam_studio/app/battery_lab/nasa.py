@@ -208,4 +208,5 @@ class NasaLabView(pn.viewable.Viewer):
                  + ("fitted without this cell" if r.fit == "loco" else "bundled, never read this cell") + "."]
         if p.flag:
             lines.append(f"<span class='uam-nasa-flag'>&#9888; {html.escape(p.flag)}</span>")
-        self.text.object = "<div class='uam-nasa-summary'>" + "".join(f"<p style='margin:4px 0'>{x}</p>" for x in lines) + "</div>"
+        self.text.object = ("<div class='uam-nasa-summary'>"
+                            + "".join(f"<p style='margin:4px 0'>{x}</p>" for x in lines) + "</div>")

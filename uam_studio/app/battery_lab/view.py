@@ -161,7 +161,8 @@ class BatteryLabView(pn.viewable.Viewer):
                 self._current_pipe.send(data)
                 self._voltage_pipe.send(data)
             me = c["setting"][0]
-            rows = "".join(f"<tr><td style='padding-right:12px'>{html.escape(cv['label'])}</td><td>{eod_text(cv)}</td></tr>"
+            rows = "".join(f"<tr><td style='padding-right:12px'>{html.escape(cv['label'])}</td>"
+                           f"<td>{eod_text(cv)}</td></tr>"
                            for cv in [me, *c["family"]])
             skipped = "".join(f"<li>not drawn: {html.escape(m)}</li>" for m in c["skipped"])
             self.eod_table.object = ("<div class='uam-lab-summary'><table><tr><th style='text-align:left'>curve</th>"

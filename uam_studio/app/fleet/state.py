@@ -5,9 +5,9 @@
 so far. The packs are the paper's NASA cell, aging by the law fitted to the NASA lives.
 :meth:`FleetState.next_day` flies the next day of Poisson demand for the three dispatchers
 (:func:`~uam_studio.fleet.day.fly_day_of_life`, the call ``uam-studio fleet`` makes) in the flights' thread
-pool, the newest request winning; a pack that retired is replaced overnight. The tables the view draws come from here: the last day's flights
-per aircraft (:meth:`timeline`), each pack's belief against its truth (:meth:`packs`) and the served
-priority per day (:meth:`per_day`).
+pool, the newest request winning; a pack that retired is replaced overnight. The tables the view draws come from here:
+the last day's flights per aircraft (:meth:`timeline`), each pack's belief against its truth (:meth:`packs`) and the
+served priority per day (:meth:`per_day`).
 """
 
 from __future__ import annotations
@@ -29,7 +29,8 @@ LABELS = {"aware": "health-aware", "blind": "health-blind", "hindsight": "hindsi
 def _fly_day(job: tuple[dict[str, Fleet], int, float, int, int]) -> tuple[int, dict[str, DayResult], str]:
     fleets, day, rate, seed, vertiports = job
     try:
-        demand = poisson_demand(day_of_life_seed(seed, day), rate, vertiports=vertiports)  # the days of `uam-studio fleet`
+        # the days of `uam-studio fleet`
+        demand = poisson_demand(day_of_life_seed(seed, day), rate, vertiports=vertiports)
         results = {d: fly_day_of_life(f, demand, d, seed, day)[0] for d, f in fleets.items()}  # renewed overnight
         return day, results, ""
     except InputError as err:
@@ -45,8 +46,8 @@ class FleetState(param.Parameterized):
 
     Inputs: ``aircraft``, ``vertiports`` (the aircraft spread over them, each with its own requests and
     two chargers; at most one per aircraft), ``rate_per_h`` (requests per hour, all vertiports),
-    ``age_spread_efc`` (equivalent full cycles), ``seed``. Outputs: ``days`` (one dict per day: the day and each dispatcher's
-    :meth:`DayResult.to_dict`), ``last`` (the last day's :class:`DayResult` per dispatcher), ``running``,
+    ``age_spread_efc`` (equivalent full cycles), ``seed``. Outputs: ``days`` (one dict per day: the day and each
+    dispatcher's :meth:`DayResult.to_dict`), ``last`` (the last day's :class:`DayResult` per dispatcher), ``running``,
     ``status``, ``error`` (one line).
     """
 
@@ -82,7 +83,8 @@ class FleetState(param.Parameterized):
             return
         where = f" at {self.vertiports} vertiports" if self.vertiports > 1 else ""
         self.param.update(days=[], last={}, error="",
-                          status=f"{self.aircraft} aircraft{where} ready; run a day to see the dispatchers side by side")
+                          status=f"{self.aircraft} aircraft{where} ready; "
+                                 "run a day to see the dispatchers side by side")
 
     def next_day(self) -> None:
         """Fly the next day for the three dispatchers (in the pool when ``background``)."""

@@ -95,7 +95,8 @@ class FleetView(pn.viewable.Viewer):
                           ["start (h)", "aircraft", "end (h)", "aircraft_end"], ["request", "color"]).opts(
             color="color", line_width=8, tools=["hover"])
         return seg.opts(title="Last day, health-aware: each aircraft's flights (red: breached)", height=260,
-                        responsive=True, xlim=(0, 13), ylim=(0.5, n + 0.5), yticks=[(k, f"#{k}") for k in range(1, n + 1)],
+                        responsive=True, xlim=(0, 13), ylim=(0.5, n + 0.5),
+                        yticks=[(k, f"#{k}") for k in range(1, n + 1)],
                         xlabel="hour of the day", ylabel="aircraft", hooks=[no_scroll_zoom], show_grid=True)
 
     def _packs(self) -> hv.Overlay:

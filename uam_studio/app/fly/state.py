@@ -93,7 +93,8 @@ class FlyState(param.Parameterized):
     def __init__(self, mission: Callable[[], Mission], background: bool = False,
                  dispatch: Callable[[Callable[[], None]], None] | None = None, **params: Any) -> None:
         """:param mission: returns the mission to fly (the Planner's current one).
-        :param background: fly in the flights' thread pool (:data:`~uam_studio.app.services.FLIGHT_POOL`; served app) instead of in place.
+        :param background: fly in the flights' thread pool (:data:`~uam_studio.app.services.FLIGHT_POOL`; served app)
+            instead of in place.
         :param dispatch: hands a flight computed in the pool back to the session's thread."""
         super().__init__(**params)
         self._mission = mission
@@ -222,9 +223,9 @@ class FlyState(param.Parameterized):
                     f"{', '.join(reached) or 'none'} · the results show at the landing")
         own = f"BREACHED the cut-off (priority 0; {r.breach_cause})" if r.breached else f"priority {r.reached_priority}"
         blind = "breached" if r.static.breached else f"priority {r.static.priority}"
-        return (f"flown: {own}, {charging_cycles_text(r.charging_cycles)}, min {r.min_voltage_v:.3f} V · blind pre-flight "
-                f"plan: {blind} · hindsight oracle{'' if r.hindsight.exact else ' (best known plan)'}: "
-                f"priority {r.hindsight.priority}")
+        return (f"flown: {own}, {charging_cycles_text(r.charging_cycles)}, min {r.min_voltage_v:.3f} V · "
+                f"blind pre-flight plan: {blind} · "
+                f"hindsight oracle{'' if r.hindsight.exact else ' (best known plan)'}: priority {r.hindsight.priority}")
 
 
 __all__ = ["SPEEDS", "FlyState"]

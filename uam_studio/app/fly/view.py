@@ -128,7 +128,8 @@ class FlyView(pn.viewable.Viewer):
             pn.Column(self.fly_button, self.play, self.speed, self.clock, pn.Spacer(height=10),
                       self.inject_kts, self.inject_button, self.clear_button, pn.Spacer(height=10),
                       self.seed, self.sigma, self.noise, self.reserve, pn.Spacer(height=10), self.download, width=230),
-            pn.Column(self.error, pn.Row(self.progress, self.status, sizing_mode="stretch_width"), pn.Row(self.map_pane, self.volt_pane, sizing_mode="stretch_width"),
+            pn.Column(self.error, pn.Row(self.progress, self.status, sizing_mode="stretch_width"),
+                      pn.Row(self.map_pane, self.volt_pane, sizing_mode="stretch_width"),
                       window_height(self.log, LOG_HEIGHT_CSS),
                       sizing_mode="stretch_width"),
             sizing_mode="stretch_width", css_classes=["uam-fly"])
@@ -206,7 +207,8 @@ class FlyView(pn.viewable.Viewer):
             end_min, lo, title = 1.0, eod - 0.1, "voltage: fly the mission to see it"
         else:
             end_min = float(r.time_s[-1]) / 60.0 * 1.02
-            lo, title = min(eod, float(r.true_voltage_v.min())) - 0.08, "voltage: measured vs predicted, and the cut-off"
+            lo, title = (min(eod, float(r.true_voltage_v.min())) - 0.08,
+                         "voltage: measured vs predicted, and the cut-off")
         self.volt_fig.title.text = title
         self.volt_fig.x_range.update(start=0.0, end=end_min)
         self.volt_fig.y_range.update(start=lo, end=4.25)

@@ -157,7 +157,8 @@ def altitude_labels(legs: dict[str, list], nodes: list[tuple[float, float]] = ()
     return out
 
 
-def label_overlaps(labels: dict[str, list], nodes: list[tuple[float, float]], names: list[str]) -> list[tuple[str, str]]:
+def label_overlaps(labels: dict[str, list], nodes: list[tuple[float, float]],
+                   names: list[str]) -> list[tuple[str, str]]:
     """Where leg labels (:func:`altitude_labels`' columns) cover another label, or a place's marker or
     name (``nodes``, ``names`` as there), at the map's default zoom: ``(label, what it covers)`` pairs
     (``"a place or its name"`` for the latter); empty when nothing overlaps."""

@@ -224,8 +224,8 @@ class PlannerState(PlannerComparison, param.Parameterized):
 
         """Replace the destinations from table or map rows (``name``, ``x_km``, ``y_km``, ``priority``,
         ``wind_kts``, ``dwell_s``). Rows fresh from the map may lack values: a missing name becomes
-        the first free ``D<k>``, a missing or 0 priority 1 (the map's point-drawing tool's empty value), wind and dwell 0.
-        Coordinates are rounded to 0.1 km. Returns True if accepted (see :meth:`apply`)."""
+        the first free ``D<k>``, a missing or 0 priority 1 (the map's point-drawing tool's empty value), wind and
+        dwell 0. Coordinates are rounded to 0.1 km. Returns True if accepted (see :meth:`apply`)."""
         try:
             dests = rows_to_destinations(rows)
         except InputError as err:

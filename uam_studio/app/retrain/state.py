@@ -67,7 +67,8 @@ class RetrainState(param.Parameterized):
     each epoch's network scored on the current map).
 
     :meth:`start` validates the settings (:func:`uam_studio.planning.agents.retrain.training_setup`,
-    :func:`uam_studio.planning.agents.attention.retrain.attention_setup`) and starts the run: in a child process (``runner="process"``, the served app's default:
+    :func:`uam_studio.planning.agents.attention.retrain.attention_setup`) and starts the run: in a child process
+    (``runner="process"``, the served app's default:
     :class:`~uam_studio.planning.agents.retrain.RetrainProcess`, lower CPU priority, no GIL shared with
     the sessions) or in a thread of this process (``runner="thread"``). :meth:`stop` sets the stop
     flag (the agent trained so far is still saved). Neither touches the param values: :meth:`poll`,
@@ -312,7 +313,8 @@ class RetrainState(param.Parameterized):
         if self.running:
             eta = self.elapsed_s * (1 - p) / p if p > 0 else None
             first = "epochs" if self._kind == "attention" else "episodes"
-            text += f" \u00b7 about {_clock(eta)} left" if eta is not None else f" \u00b7 time left: after the first {first}"
+            text += (f" \u00b7 about {_clock(eta)} left" if eta is not None
+                     else f" \u00b7 time left: after the first {first}")
         return text
 
     def request_reference(self, mission: Mission | None) -> None:
@@ -386,15 +388,16 @@ class RetrainState(param.Parameterized):
                 if self._kind == "attention":
                     changes.update(timesteps=self._target_steps if not r.stopped else self.timesteps,
                                    agent_path=str(r.path), error="",
-                                   status=f"{end}: {r.episodes} epoch{'s' * (r.episodes != 1)}; saved {r.path.parent.name} (now in the "
-                                          "Planner's policy list)")
+                                   status=f"{end}: {r.episodes} epoch{'s' * (r.episodes != 1)}; "
+                                          f"saved {r.path.parent.name} (now in the Planner's policy list)")
                 else:
                     changes.update(timesteps=r.timesteps, agent_path=str(r.path), error="",
                                    status=f"{end}: {r.episodes} episodes, {r.timesteps} steps; saved "
                                           f"{r.path.name} (now in the Planner's policy list)")
             else:  # stopped before the first episode (DQN) or epoch (attention: the oracle was solving its missions)
                 first = "epoch" if self._kind == "attention" else "episode"
-                changes.update(error="", status=f"stopped before the first {first} ended: nothing learned, nothing saved")
+                changes.update(error="",
+                               status=f"stopped before the first {first} ended: nothing learned, nothing saved")
         if changes:
             self.param.update(**changes)
         return rows

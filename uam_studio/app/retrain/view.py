@@ -4,9 +4,8 @@ Training runs in a child process or a thread (:class:`~uam_studio.app.retrain.st
 view drains its episode (epoch) queue on a periodic callback of the session (so every widget and plot
 update happens on the session's own thread) and streams the rows into a
 :class:`holoviews.streams.Buffer` behind the learning curves, which show the exact oracle's plan of the
-map as a reference line (:attr:`RetrainState.reference`). The progress bar comes with steps, elapsed time and the time left.
-A finished (or stopped) agent is saved in the user folder and appears in every session's Planner
-policy list.
+map as a reference line (:attr:`RetrainState.reference`). The progress bar comes with steps, elapsed time and the time
+left. A finished (or stopped) agent is saved in the user folder and appears in every session's Planner policy list.
 """
 
 from __future__ import annotations

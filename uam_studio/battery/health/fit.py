@@ -25,8 +25,8 @@ integral, both small against the voltage noise at tens of mA (errors-in-variable
 
 The fit. Levenberg-Marquardt over (w, R0) with w = 6500 C / q_max, in which the voltage is close to
 linear. Each iteration simulates the trial point and its finite-difference neighbours in one
-batched call, over the whole context (the state depends on all of it; every sample is a residual). A coarse start (5 values
-of w, R0 solved in closed form for each: the voltage is linear in R0 up to the weak thermal
+batched call, over the whole context (the state depends on all of it; every sample is a residual). A coarse start
+(5 values of w, R0 solved in closed form for each: the voltage is linear in R0 up to the weak thermal
 coupling) keeps it out of local minima. The estimate is bounded to the box
 :data:`~uam_studio.battery.health.estimate.FIT_Q_RANGE` x
 :data:`~uam_studio.battery.health.estimate.FIT_R0_RANGE`.
@@ -102,7 +102,8 @@ def fit_health_batch(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | N
     net = cur.sum(axis=-1) * dt
     if initial_state is None and np.any(net < 0.0):  # from a full cell, a net charge is impossible
         k = int(np.argmax(net < 0.0))
-        raise InputError("current_a", f"the context charges the cell (net {net[k]:.3g} C{f' in row {k}' if len(net) > 1 else ''}); "
+        raise InputError("current_a", "the context charges the cell "
+                         f"(net {net[k]:.3g} C{f' in row {k}' if len(net) > 1 else ''}); "
                          "the fit reads a discharge from a full cell (+ = discharge)")
     if initial_state is not None and not isinstance(initial_state, BatteryState):
         raise InputError("initial_state", "expected a BatteryState (e.g. a result's final_state)")
@@ -130,7 +131,8 @@ def fit_health_batch(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | N
                 alt = under[steps > 0]
                 if alt.size:  # fit (w, r0, pre-roll) for those rows; keep it where it fits significantly better
                     start3 = np.column_stack([wr_s[steps > 0], steps[steps > 0] * dt])
-                    p3, c3, j3, m3, it3, r3 = levenberg_marquardt(cur[alt], volt[alt], dt, None, cell, start3, i0=cur[alt, 0])
+                    p3, c3, j3, m3, it3, r3 = levenberg_marquardt(cur[alt], volt[alt], dt, None, cell, start3,
+                                                                  i0=cur[alt, 0])
                     sig2 = np.maximum(c3 / np.maximum(m3.sum(-1) - 3, 1), NOISE_FLOOR_V ** 2)
                     win = (cost[alt] - c3) / sig2 > PREROLL_CHI2
                     for k, row in enumerate(alt):

@@ -36,8 +36,8 @@ from uam_studio.battery.simulate import CURRENT_LIMIT_A, DT_RANGE, EOD_RANGE, si
 from uam_studio.battery.state import BatteryState
 from uam_studio.errors import InputError, check_range
 
-__all__ = ["EodInterval", "band_from_sigma_points", "crossing_times", "eod_interval_s", "eod_intervals", "interval_ends",
-           "interval_points", "two_sided_z", "voltage_band", "with_preroll"]
+__all__ = ["EodInterval", "band_from_sigma_points", "crossing_times", "eod_interval_s", "eod_intervals",
+           "interval_ends", "interval_points", "two_sided_z", "voltage_band", "with_preroll"]
 
 
 def _check_profile(current_a, dt_s: float, level: float) -> tuple[np.ndarray, float, float]:
@@ -231,7 +231,8 @@ def eod_interval_s(estimate: HealthEstimate, current_a, dt_s: float = 1.0, level
     :param n_draws: None: the first-order reduction (:func:`interval_ends`: 5 sigma-point
         trajectories, then the two ends and the estimate, 8 in all); an int in [10, 10000]: quantiles
         over that many random draws (:meth:`HealthEstimate.sample`).
-    :param initial_state: the state at the log's first sample, as given to :func:`~uam_studio.battery.health.fit.fit_health`.
+    :param initial_state: the state at the log's first sample, as given to
+        :func:`~uam_studio.battery.health.fit.fit_health`.
     :param seed: seed of the draws.
     :return: an :class:`EodInterval` (low, median, high): time (s) from the log's first sample to the
         first sample below ``eod_v``, on ``current_a``'s grid; ``median`` at the fitted health; an end

@@ -36,7 +36,8 @@ MAX_ITER = 30
 _H = np.array([1e-4, 1e-4, 1e-2])  # finite-difference steps in (w, R0 ohm, pre-roll s)
 _START_W = (0.65, 0.8, 1.0, 1.2, 1.45)  # q_max 10000, 8125, 6500, 5417, 4483 C (the NASA cell's fleet)
 _START_R0 = (0.1, 0.3)  # ohm (the NASA cell's fleet, R0 up to 0.45 ohm)
-_START_FLEET = (sum(PAPER_Q_RANGE) / 2, PAPER_R0_RANGE[1])  # C, ohm: the fleet the start grid is written for (the paper's box: its centre, top)
+# C, ohm: the fleet the start grid is written for (the paper's box: its centre, top)
+_START_FLEET = (sum(PAPER_Q_RANGE) / 2, PAPER_R0_RANGE[1])
 PREROLL_CANDIDATES_S = (0, 1, 2, 3, 4, 6, 8, 10, 13, 16, 20, 25, 30, 40, 50, 60)  # s: the pre-roll's start
 PREROLL_WINDOW_S = 60.0  # s of the context that the pre-roll search reads
 

@@ -191,8 +191,8 @@ def load_mat(path: str | os.PathLike) -> CellLog:
     except OSError as exc:
         raise _fail(p, "path", f"cannot read ({exc.strerror or exc})") from None
     except (MatReadError, ValueError, TypeError, EOFError, IndexError) as exc:
-        raise _fail(p, "path", f"not a readable MATLAB file ({str(exc).splitlines()[0][:80] if str(exc) else 'truncated?'})") \
-            from None
+        raise _fail(p, "path", "not a readable MATLAB file "
+                    f"({str(exc).splitlines()[0][:80] if str(exc) else 'truncated?'})") from None
     data = mat.get("batteryData")
     if data is None or not hasattr(data, "_fieldnames"):
         raise _fail(p, "batteryData", "no batteryData struct (another dataset?)")

@@ -11,9 +11,9 @@ A with + = discharge, cell temperature C, ambient C), a cell as a :class:`NasaCe
 scored (too short, never under load, already under load at the first sample, never below the cut-off)
 (or below it at the first sample under load) are listed in ``NasaCell.skipped`` with their reason,
 never raised. :func:`persistence_s` is the baseline
-any health-aware prediction must beat where the load repeats: the same cell's previous discharge. A file that is not in this format
-(missing, a folder, a truncated gzip, a missing column, NaN, time that does not increase within a
-discharge, no discharge at all) raises :class:`NasaDataError`: one line naming the file and the field.
+any health-aware prediction must beat where the load repeats: the same cell's previous discharge. A file that is not in
+this format (missing, a folder, a truncated gzip, a missing column, NaN, time that does not increase within a discharge,
+no discharge at all) raises :class:`NasaDataError`: one line naming the file and the field.
 """
 
 from __future__ import annotations

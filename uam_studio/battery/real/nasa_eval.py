@@ -96,7 +96,8 @@ def progpy_default_curve(d: NasaDischarge, cutoff_v: float = 2.5) -> tuple[np.nd
     r = simulate(cur, 1.0, DEFAULT_Q_MAX, DEFAULT_R0, cutoff_v)
     keep = np.asarray(r.valid)
     eod = None if math.isnan(float(r.eod_s)) else float(r.eod_s) - 1.0
-    return np.r_[0.0, np.asarray(r.time_s)[keep]], np.r_[float(np.asarray(r.voltage_v)[0]), np.asarray(r.voltage_v)[keep]], eod
+    return (np.r_[0.0, np.asarray(r.time_s)[keep]],
+            np.r_[float(np.asarray(r.voltage_v)[0]), np.asarray(r.voltage_v)[keep]], eod)
 
 
 def progpy_default_s(d: NasaDischarge, cutoff_v: float) -> float | None:

@@ -39,8 +39,8 @@ import numpy as np
 
 from uam_studio.battery.real.nasa_data import LOADED_A, NasaDischarge, same_conditions
 
-__all__ = ["EARLY_ERRORS", "RISKS", "UNSEEN_WIDEN", "CellBelief", "charge_to_cutoff_ah", "EodPrediction", "KnownDischarge", "NasaEodModel",
-           "ambient_band", "known_before", "voltage_shift_v"]
+__all__ = ["EARLY_ERRORS", "RISKS", "UNSEEN_WIDEN", "CellBelief", "charge_to_cutoff_ah", "EodPrediction",
+           "KnownDischarge", "NasaEodModel", "ambient_band", "known_before", "voltage_shift_v"]
 
 RISKS = (0.01, 0.05, 0.5, 0.95)  # the quantiles every prediction carries: bound99, bound95/low, median, high
 Z_LEVELS = (0.001, 0.0025, 0.005, 0.01, 0.02, 0.035, 0.05, 0.075, 0.1, 0.15, 0.25, 0.5, 0.75, 0.85, 0.9, 0.925,

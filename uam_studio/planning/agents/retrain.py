@@ -179,7 +179,8 @@ def training_setup(
     :param safe_return: train with the environment's ``safe_return`` rule (a leg that would leave
         no way home ends the episode with ``-gamma``); off is the paper's setting.
     :param init_agent: fine-tune this agent (zip) instead of starting from random weights: its
-        network is copied in and exploration starts at :data:`~uam_studio.planning.agents.dqn.training.FINE_TUNE` settings (epsilon 0.2, not 1).
+        network is copied in and exploration starts at :data:`~uam_studio.planning.agents.dqn.training.FINE_TUNE`
+        settings (epsilon 0.2, not 1).
     :raises InputError: bad settings, or a map the environment cannot use (no destinations, more
         than 8, none far enough from the vertiport).
     """

@@ -203,7 +203,8 @@ class UAMPlanningEnv(EpisodeQueries, gym.Env):
         self.render_mode = render_mode
         if mission is not None and not isinstance(mission, Mission):
             raise InputError("mission", f"expected a Mission or None, got {type(mission).__name__}")
-        self.scenario = scenario = check_scenario(scenario or (mission.scenario if mission is not None else DEFAULT_SCENARIO))
+        self.scenario = scenario = check_scenario(scenario or (mission.scenario if mission is not None
+                                                               else DEFAULT_SCENARIO))
         if isinstance(backend, BatteryBackend):
             self.backend = backend
         elif backend == "physics":

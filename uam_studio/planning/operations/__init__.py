@@ -1,8 +1,9 @@
 """Flying a mission in real time: the hidden world, the operator that sees only the forecast and its
 sensors, and the flight loop that records both sides.
 
-Public API: :func:`fly_mission` -> :class:`FlightRecord` (its references: :class:`ReferenceFlight`), :class:`World`, :class:`Operator`,
-:func:`parse_event` (``"wind+30@1200"``), :class:`WindEvent`, :func:`record_csv` (the record's series as CSV).
+Public API: :func:`fly_mission` -> :class:`FlightRecord` (its references: :class:`ReferenceFlight`), :class:`World`,
+:class:`Operator`, :func:`parse_event` (``"wind+30@1200"``), :class:`WindEvent`, :func:`record_csv` (the record's series
+as CSV).
 """
 
 from uam_studio.planning.operations.decision import Decision
@@ -27,6 +28,6 @@ from uam_studio.planning.operations.world import (
 
 __all__ = [
     "DEFAULT_FORECAST_SIGMA_KT", "DEFAULT_SENSOR_NOISE_MA", "DEFAULT_SENSOR_NOISE_MV", "Decision",
-    "FlightRecord", "Operator", "Readings", "ReferenceFlight", "WEATHER_RESERVE_KT", "WindEvent", "World", "fly_mission", "parse_event",
-    "breach_cause", "position_at", "record_csv",
+    "FlightRecord", "Operator", "Readings", "ReferenceFlight", "WEATHER_RESERVE_KT", "WindEvent", "World",
+    "fly_mission", "parse_event", "breach_cause", "position_at", "record_csv",
 ]

@@ -7,4 +7,5 @@ __all__ = ["DEFAULT_FORECAST_SIGMA_KT", "DEFAULT_SENSOR_NOISE_MA", "DEFAULT_SENS
 DEFAULT_FORECAST_SIGMA_KT = 13.0  # kt, std of the forecast error of each destination's wind
 DEFAULT_SENSOR_NOISE_MV = 5.0  # mV, std of the voltage sensor's Gaussian noise
 DEFAULT_SENSOR_NOISE_MA = 20.0  # mA, std of the current sensor's Gaussian noise
-WEATHER_RESERVE_KT = 25.0  # kt of headwind beyond the belief every take-off keeps the next leg and the way home safe under
+# kt of headwind beyond the belief every take-off keeps the next leg and the way home safe under
+WEATHER_RESERVE_KT = 25.0

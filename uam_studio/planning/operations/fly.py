@@ -162,7 +162,8 @@ def _priority(mission: Mission, reached: Sequence[str]) -> int:
     return int(sum(mission.node(n).priority for n in reached if n != VERTIPORT))
 
 
-def _fly_fixed(world: World, route: Sequence[str], alts: Sequence[float], takeoff: np.ndarray) -> tuple[bool, list[str]]:
+def _fly_fixed(world: World, route: Sequence[str], alts: Sequence[float],
+               takeoff: np.ndarray) -> tuple[bool, list[str]]:
     """Fly ``route`` blind in ``world``; returns (breached, destinations reached)."""
     reached: list[str] = []
     if not route:
@@ -249,7 +250,8 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
     t_wall = time.perf_counter()
     if policy not in IN_FLIGHT_PLANNERS:
         raise InputError("policy", f"{policy!r} is not an in-flight policy; allowed: {', '.join(IN_FLIGHT_PLANNERS)}")
-    check_destination_count(len(mission.destinations), N_MAX, "fly")  # the hindsight oracle and policy "oracle": exact, 8 at most
+    # the hindsight oracle and policy "oracle": exact, 8 at most
+    check_destination_count(len(mission.destinations), N_MAX, "fly")
     scenario = scenario or mission.scenario
     def new_world() -> World:  # the same hidden truth for the operator, the blind plan and hindsight
         return World(mission, forecast_sigma_kt, sensor_noise_mv, sensor_noise_ma, events, seed)
@@ -321,8 +323,8 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
         static_alts = list(first_plan.altitudes_m) if first_plan else []
         blind = new_world()
         static_breached, static_reached = _fly_fixed(blind, static_route, static_alts, takeoff)
-        rec.static = ReferenceFlight(static_route, static_alts, 0 if static_breached else _priority(mission, static_reached),
-                                     static_breached)
+        rec.static = ReferenceFlight(static_route, static_alts,
+                                     0 if static_breached else _priority(mission, static_reached), static_breached)
         end_s = max(end_s, blind.time_s)
         route, alts, priority = _hindsight(mission, scenario, new_world, takeoff, (rec.route, rec.altitudes_m))
         rec.hindsight = ReferenceFlight(route, alts, priority, exact=not world.events)

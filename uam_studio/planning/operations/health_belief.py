@@ -112,9 +112,9 @@ class HealthBelief:
         return fit_health(cur, volt, DT_S, noise_v=self.noise_v, eod_v=self.eod_v, prior=False)
 
     def health(self) -> BelievedHealth:
-        """The belief from all readings so far and the prior. Readings that put the cell beyond its prior's box on the optimistic side are held with caution
-        (:func:`~uam_studio.battery.health.prior.hold_to_fleet`: a cell better than any of its fleet is
-        planned as the fleet's best, with the difference in its std).
+        """The belief from all readings so far and the prior. Readings that put the cell beyond its prior's box on the
+        optimistic side are held with caution (:func:`~uam_studio.battery.health.prior.hold_to_fleet`: a cell better
+        than any of its fleet is planned as the fleet's best, with the difference in its std).
 
         :raises InputError: fewer than :data:`MIN_FIT_SAMPLES` readings in all.
         """
@@ -126,7 +126,8 @@ class HealthBelief:
         parts = [(self.prior.mean, self.prior.cov)] + [(np.array([e.w, e.r0]), e.cov_w) for e in fits]
         mean, cov = combine(parts)
         # readings that put the cell beyond the optimistic edge of its prior's box are held with caution
-        lik_mean, lik_cov = combine([(np.array([e.w, e.r0]), e.cov_w / e.discrepancy_factor) for e in fits])  # face value
+        lik_mean, lik_cov = combine([(np.array([e.w, e.r0]), e.cov_w / e.discrepancy_factor)
+                                     for e in fits])  # face value
         mean, cov = hold_to_fleet(mean, cov, lik_mean, lik_cov, self.prior, FLEET_Z)
         # the Gaussian combination can put the mean a little outside the fit's box (a cell at its edge,
         # R0 = 0 say): the estimate the operator plans with stays inside it

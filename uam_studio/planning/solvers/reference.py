@@ -33,11 +33,10 @@ the budgets grow, else they shrink (and the unsafe answer is repaired: a destina
 sortie split, wherever the physics says it becomes safe). Every other solve starts from the best
 safe plan so far, the first one being the greedy baseline's plan (:func:`.greedy.greedy_plan`
 flies the same legs; so the reference never plans worse than greedy). The best safe plan over all
-budgets is kept (most priority, or fewest sorties, then least flight time), then polished on the physics model (single_charge: add a destination or
-swap one in for a lower priority; multi_charge: empty a sortie into the others) while the route
-stays safe. Every solve has a time limit (``REFERENCE_TIME_S`` over ``BISECTION_STEPS`` solves for
-20 destinations, proportionally less for fewer), so that a 20-destination mission plans in a few
-seconds.
+budgets is kept (most priority, or fewest sorties, then least flight time), then polished on the physics model
+(single_charge: add a destination or swap one in for a lower priority; multi_charge: empty a sortie into the others)
+while the route stays safe. Every solve has a time limit (``REFERENCE_TIME_S`` over ``BISECTION_STEPS`` solves for 20
+destinations, proportionally less for fewer), so that a 20-destination mission plans in a few seconds.
 """
 
 from __future__ import annotations

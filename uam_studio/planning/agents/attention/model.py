@@ -37,7 +37,8 @@ class AttentionConfig:
 
 
 class AttentionPolicy(nn.Module):
-    """Encoder-decoder policy over the tokens of :func:`~uam_studio.planning.agents.attention.features.mission_tokens`."""
+    """Encoder-decoder policy over the tokens of
+    :func:`~uam_studio.planning.agents.attention.features.mission_tokens`."""
 
     def __init__(self, config: AttentionConfig | None = None) -> None:
         super().__init__()

@@ -232,7 +232,8 @@ def _spaces(p: Path, obs: Any, act: Any) -> tuple[gym.spaces.Box, gym.spaces.Dis
 
 # The policy's module as SB3 records it: today's, and uam_studio.planning.dqn (agents saved before the
 # planning package was split into rooms, the bundled ones among them).
-_OWN_POLICY_MODULES = (MaskedDQNPolicy.__module__, "uam_studio.planning.agents.dqn", "uam_studio.planning.dqn")  # and its former homes
+_OWN_POLICY_MODULES = (MaskedDQNPolicy.__module__, "uam_studio.planning.agents.dqn",
+                       "uam_studio.planning.dqn")  # and its former homes
 
 
 def _policy_class_name(pc: Any) -> str:

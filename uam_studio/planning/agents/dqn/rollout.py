@@ -6,8 +6,9 @@ on the mission (physics battery), with the safety filter and optional policy rol
 :func:`bundled_agent_path` and :func:`load_agent_cached` find and load agent files.
 
 Torch and stable-baselines3 are imported inside the functions that need them
-(:mod:`~uam_studio.planning.agents.dqn.agent_file`, :mod:`~uam_studio.planning.agents.dqn.masked`), so that importing this module, and with it
-:mod:`uam_studio.planning.planner`, the CLI and the app, stays torch-free until an agent is loaded.
+(:mod:`~uam_studio.planning.agents.dqn.agent_file`, :mod:`~uam_studio.planning.agents.dqn.masked`), so that importing
+this module, and with it :mod:`uam_studio.planning.planner`, the CLI and the app, stays torch-free until an agent is
+loaded.
 """
 
 from __future__ import annotations
