@@ -191,6 +191,27 @@ class Episode:
             x0 = np.repeat(x0[None, :], len(currents), axis=0)
         return fly_batch(currents, x0, self.cell, split=split, chunk_s=chunk_s)
 
+    def there_and_home(self, moves: Sequence[tuple[int, int, int | None]], states: np.ndarray) -> np.ndarray:
+        """bool [B]: each move ``(from, to, level)`` (level None: the leg's cheapest), then the way home at
+        its cheapest level, flown as one row from ``states`` [B, 8] on this episode, ends above the
+        cut-off. A move to the vertiport passes; a leg with no feasible level fails."""
+        legs, home = self.legs, self.home
+        out = np.ones(len(moves), dtype=bool)
+        rows, idx = [], []
+        for k, (i, j, a) in enumerate(moves):
+            if j == home:
+                continue
+            go = legs.cheapest_level(int(i), int(j)) if a is None else int(a)
+            back = legs.cheapest_level(int(j), home)
+            if go is None or back is None or not legs.feasible[int(i), int(j), go]:
+                out[k] = False
+                continue
+            rows.append(np.concatenate([legs.current(int(i), int(j), go), legs.current(int(j), home, back)]))
+            idx.append(k)
+        if rows:
+            out[idx] = self.fly_currents(rows, np.asarray(states, dtype=float)[idx])[0]
+        return out
+
     def arrive(self, node: int, state: np.ndarray) -> np.ndarray:
         """The cell's state once landed at ``node``: a full charge at the vertiport where the scenario
         recharges (:meth:`fresh`), else ``state`` itself."""

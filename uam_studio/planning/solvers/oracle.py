@@ -137,28 +137,6 @@ def _dominated(keys: np.ndarray, good: np.ndarray) -> np.ndarray:
     return out
 
 
-def _reserve_ok(reserve: Episode, frm: np.ndarray, to: np.ndarray, level: np.ndarray, state: np.ndarray
-                ) -> np.ndarray:
-    """bool [B]: the move ``frm -> to`` at ``level`` (a move home always passes), then home at the
-    cheapest level, flown from ``state`` [B, 8] on ``reserve``'s legs, ends above the cut-off."""
-    legs, home = reserve.legs, reserve.legs.home
-    out = np.ones(frm.size, dtype=bool)
-    rows, idx = [], []
-    for k, (i, j, a) in enumerate(zip(frm, to, level)):
-        if j == home:
-            continue
-        back = legs.cheapest_level(int(j), home)
-        if back is None or not legs.feasible[int(i), int(j), int(a)]:
-            out[k] = False
-            continue
-        rows.append(np.concatenate([legs.current(int(i), int(j), int(a)), legs.current(int(j), home, back)]))
-        idx.append(k)
-    if rows:
-        ok, _, _ = reserve.fly_currents(rows, state[idx])
-        out[idx] = ok
-    return out
-
-
 def feasible_sorties(
     episode: Episode,
     alt_indices: Iterable[int] = range(N_ALTITUDES),
@@ -224,7 +202,7 @@ def feasible_sorties(
         first_leg = False
         li, ti, ai = np.nonzero(cand)
         if reserve is not None and li.size:
-            keep = _reserve_ok(reserve, node[li], ti, alts[ai], state[li])
+            keep = reserve.there_and_home(list(zip(node[li], ti, alts[ai])), state[li])
             li, ti, ai = li[keep], ti[keep], ai[keep]
         if li.size == 0:
             break

@@ -117,27 +117,6 @@ class DecodeSearch:
     def current(self, a: int, b: int) -> np.ndarray:
         return self.legs.current(int(self.tok.leg_index[a]), int(self.tok.leg_index[b]), self.level(a, b))
 
-    def reserve_check(self, moves: list[tuple[int, int]], x0: np.ndarray) -> np.ndarray:
-        """bool [len(moves)]: each move ``(from token, to token)``, then home, flown from ``x0`` [B, 8] on
-        the :attr:`reserve` episode's legs (the take-off check's winds) ends above the cut-off."""
-        assert self.reserve is not None
-        legs, n, ix = self.reserve.legs, self.tok.n, self.tok.leg_index
-        rows = []
-        for a, t in moves:
-            i, j, h = int(ix[a]), int(ix[t]), int(ix[n])
-            go_lv, home_lv = legs.cheapest_level(i, j), legs.cheapest_level(j, h)
-            if go_lv is None or home_lv is None:
-                rows.append(None)
-                continue
-            rows.append(np.concatenate([legs.current(i, j, go_lv), legs.current(j, h, home_lv)]))
-        fly = [k for k, r in enumerate(rows) if r is not None]
-        out = np.zeros(len(moves), dtype=bool)
-        if fly:
-            ok, _, _ = self.reserve.fly_currents([rows[k] for k in fly], x0[fly], chunk_s=256)
-            out[fly] = ok
-            self.legs_flown += 2 * len(fly)
-        return out
-
     def log_probs(self, beams: list[_Beam]) -> tuple[np.ndarray, np.ndarray]:
         feats = [step_features(self.tok, b.at, b.visited, b.used_c, b.sorties) for b in beams]
         ctx = torch.from_numpy(np.stack([f[0] for f in feats]))
@@ -199,8 +178,11 @@ class DecodeSearch:
                 break
             ok, _, _, x_there = self.episode.fly_currents(rows, np.stack(x0), split=np.array(split), chunk_s=256)
             self.legs_flown += 2 * len(rows)
-            if self.reserve is not None:
-                ok &= self.reserve_check([(beams[i].at, t) for i, t in keys], np.stack(x0))
+            if self.reserve is not None:  # the same move under the take-off check's winds, its cheapest level
+                ix = self.tok.leg_index
+                ok &= self.reserve.there_and_home([(int(ix[beams[i].at]), int(ix[t]), None) for i, t in keys],
+                                                  np.stack(x0))
+                self.legs_flown += 2 * len(keys)
             for k, (i, t) in enumerate(keys):
                 if beams[i].x is self.fresh:
                     self.from_home[t] = x_there[k] if ok[k] else None
