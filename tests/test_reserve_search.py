@@ -3,8 +3,6 @@ state it starts in, the check that the operator will ask at that take-off."""
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -14,6 +12,7 @@ from uam_studio.planning.episode import Episode
 from uam_studio.planning.legs import LegTable
 from uam_studio.planning.missions.generate import random_mission
 from uam_studio.planning.missions.mission import Mission
+from uam_studio.planning.operations.world import actual_winds_mission
 from uam_studio.planning.solvers.oracle import feasible_sorties
 
 
@@ -24,14 +23,8 @@ def _mission(seed: int, n: int) -> Mission:
 
 def _headwind(m: Mission, extra_kt: float) -> Mission:
     """``m`` with ``extra_kt`` more headwind at every node (clipped to the tables' range)."""
-    lo, hi = WIND_RANGE_KTS
-
-    def w(x: float) -> float:
-        return float(np.clip(x + extra_kt, lo, hi))
-
-    return dataclasses.replace(m, vertiport=dataclasses.replace(m.vertiport, wind_kts=w(m.vertiport.wind_kts)),
-                               destinations=tuple(dataclasses.replace(d, wind_kts=w(d.wind_kts))
-                                                  for d in m.destinations))
+    return actual_winds_mission(m, {n: float(np.clip(m.node(n).wind_kts + extra_kt, *WIND_RANGE_KTS))
+                                    for n in m.node_names})
 
 
 def _passes(reserve: Episode, i: int, j: int, a: int, state: np.ndarray) -> bool:
