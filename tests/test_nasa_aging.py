@@ -7,12 +7,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from uam_studio.fleet.aging import AGING_LAW, AgingLaw, LifePoints
 from uam_studio.fleet.nasa_aging import (
     NASA_AGING_LAW,
     CapacityBelief,
+    RestRecovery,
     fit_nasa_law,
+    fit_rest_recovery,
     forecast_score,
     nasa_leave_one_cell_out,
     nasa_life_points,
@@ -56,5 +60,57 @@ def test_on_the_2a_lives_the_nasa_law_beats_the_vtc6_law_held_out():
     for cell in ("B0005", "B0007", "B0018"):
         assert rows[cell]["rms_ah"] < 0.7 * rows[cell]["vtc6_rms_ah"], rows[cell]
     assert AGING_LAW != NASA_AGING_LAW
-    scores = forecast_score(lives, cells=["B0005"])
-    assert 0.85 <= scores[0]["coverage90"] <= 0.97 and scores[0]["rms_ah"] < 0.06, scores
+    with_rests = forecast_score(lives, cells=["B0005"])[0]
+    without = forecast_score(lives, cells=["B0005"], rests=False)[0]
+    assert 0.85 <= without["coverage90"] <= 0.97 and without["rms_ah"] < 0.06, without
+    # the rests before each discharge (the table's start_time) explain the recoveries: held out, the next-20
+    # error falls by a third (0.048 -> 0.030 Ah) and the band still holds
+    assert with_rests["rms_ah"] < 0.8 * without["rms_ah"] and with_rests["coverage90"] >= 0.85, with_rests
+    life = next(lf for lf in lives if lf.cell == "B0005")
+    assert life.rest_h is not None and np.isnan(life.rest_h[0]) and np.nanmax(life.rest_h) > 100.0
+
+
+def _rested_life(name: str, law: AgingLaw, rec: RestRecovery, c0: float, seed: int) -> LifePoints:
+    """150 discharges 4 h apart, a rest of 50-300 h before every 25th; capacity = the law's fade + what the
+    rests give back + 5 mAh noise."""
+    rng = np.random.default_rng(seed)
+    n = 150
+    rest = np.full(n, 4.0)
+    rest[25::25] = rng.uniform(50.0, 300.0, rest[25::25].size)
+    rest[0] = np.nan
+    efc = np.arange(n, dtype=float)
+    life = LifePoints(name, efc, np.zeros(n), np.arange(n), 24.0, efc[::10], 0.2 * (1 + 0.002 * efc[::10]), rest)
+    cap = c0 * law.capacity_fraction(efc, 24.0) + rec.series(life, c0) + rng.normal(0, 0.005, n)
+    return LifePoints(name, efc, cap, np.arange(n), 24.0, efc[::10], life.ir_ohm, rest)
+
+
+def test_the_rests_recovery_is_recovered_and_sharpens_the_forecasts():
+    truth, rec = AgingLaw(a=0.02, b=0.5, ea_k=0.0, k_r=0.002), RestRecovery(rho=0.85, beta=0.015)
+    lives = [_rested_life(f"R{i}", truth, rec, 1.8 + 0.05 * i, 10 + i) for i in range(4)]
+    fitted = fit_rest_recovery(truth, lives)
+    assert fitted.rho == pytest.approx(0.85, abs=0.04) and fitted.beta == pytest.approx(0.015, rel=0.25), fitted
+    assert fit_rest_recovery(truth, [_life("S", truth, 1.8, 50, 0)]) == RestRecovery()  # undated: nothing
+    life = lives[0]
+
+    def rms(recovery: RestRecovery) -> float:  # the next 20 forecast just after each rest, on the true law
+        b = CapacityBelief.start(truth, 1.8, 24.0, 0.005, recovery=recovery)
+        errs = []
+        for k in range(1, life.efc.size - 1):
+            if life.rest_h[k - 1] > 8.0:
+                errs += list(b.forecast(life.efc[k:k + 20])[0] - life.capacity_ah[k:k + 20])
+            b.observe(float(life.efc[k]), float(life.capacity_ah[k]), float(life.rest_h[k]))
+        return float(np.sqrt(np.mean(np.square(errs))))
+
+    assert rms(fitted) < 0.7 * rms(RestRecovery()), (rms(fitted), rms(RestRecovery()))
+
+
+@settings(max_examples=40, deadline=None)
+@given(rests=st.lists(st.one_of(st.floats(0.0, 2000.0), st.just(float("nan"))), min_size=1, max_size=30),
+       caps=st.lists(st.floats(0.05, 3.0), min_size=30, max_size=30),
+       rho=st.floats(0.0, 0.99), beta=st.floats(0.0, 0.1))
+def test_a_belief_with_rests_stays_finite_and_ordered(rests, caps, rho, beta):
+    b = CapacityBelief.start(NASA_AGING_LAW, 1.85, 24.0, 0.02, recovery=RestRecovery(rho, beta))
+    for k, h in enumerate(rests):
+        b.observe(float(k + 1), caps[k], h)
+    mean, lo, hi = b.forecast(np.arange(len(rests) + 1, len(rests) + 21, dtype=float))
+    assert np.all(np.isfinite(mean)) and np.all(lo < mean) and np.all(mean < hi)

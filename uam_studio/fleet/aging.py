@@ -92,7 +92,8 @@ AGING_LAW = AgingLaw(a=0.00365567, b=0.646114, ea_k=175.433, k_r=0.00204851)
 class LifePoints:
     """One CMU life's reference discharges: ``efc`` (equivalent full cycles delivered before each),
     ``capacity_ah`` (measured, Ah), ``missions`` (mission cycles flown before each), ``temperature_c``
-    (the life's median, C), and the resistance proxy ``ir_efc`` / ``ir_ohm`` (artefacts dropped)."""
+    (the life's median, C), and the resistance proxy ``ir_efc`` / ``ir_ohm`` (artefacts dropped).
+    ``rest_h`` (h), where the data date each discharge: the time since the one before (NaN for the first)."""
 
     cell: str
     efc: np.ndarray
@@ -101,6 +102,7 @@ class LifePoints:
     temperature_c: float
     ir_efc: np.ndarray
     ir_ohm: np.ndarray
+    rest_h: np.ndarray | None = None
 
     @property
     def fraction(self) -> np.ndarray:
