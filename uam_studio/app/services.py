@@ -28,7 +28,7 @@ import param
 
 from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.planning.agents.attention import WEIGHTS_NAME
-from uam_studio.planning.planners import LEARNED_POLICIES, PLANNERS
+from uam_studio.planning.planners import LEARNED_POLICIES, PLANNERS, POLICIES
 
 __all__ = [
     "ACTIVITY",
@@ -368,7 +368,7 @@ def policy_options(agents: list[Any]) -> dict[str, str]:
     ``agent:<path>`` per retrained DQN agent."""
     opts = dict(POLICY_LABELS)
     if not _attention_exists():  # an install without the weights: the label must not promise them
-        opts = {("Attention (not installed)" if v == "attention" else k): v for k, v in opts.items()}
+        opts = {(f"{k.split(' (')[0]} (not installed)" if v == POLICIES[0] else k): v for k, v in opts.items()}
     for a in agents:
         opts[f"Retrained: {a.label}"] = f"{AGENT_PREFIX}{a.path}"
     return opts

@@ -24,7 +24,7 @@ _OPTION_MODELS = {
 
 
 def _add_train_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", choices=["dynaformer", "dqn", "attention"], help="what to train")
+    p.add_argument("model", choices=list(_RUNS), help="what to train")
     p.add_argument("--out", default=None,
                    help="run folder; default runs/dynaformer (dynaformer), runs/dqn_<scenario> (dqn: writes "
                         "agent.zip and card.json; a path ending in .zip names the agent file itself)")
@@ -100,11 +100,7 @@ def _reject_options(args: argparse.Namespace) -> None:
 
 def _run_train(args: argparse.Namespace) -> int:
     _reject_options(args)
-    if args.model == "dqn":
-        return _run_train_dqn(args)
-    if args.model == "attention":
-        return _run_train_attention(args)
-    return _run_train_dynaformer(args)
+    return _RUNS[args.model](args)
 
 
 def _run_train_attention(args: argparse.Namespace) -> int:
@@ -185,4 +181,5 @@ def _run_train_dqn(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+_RUNS = {"dynaformer": _run_train_dynaformer, "dqn": _run_train_dqn, "attention": _run_train_attention}
 COMMAND = Command("train a model (writes to a run folder, never over pretrained/)", _add_train_arguments, _run_train)

@@ -7,7 +7,8 @@ function that plans with it (``"module:function"``, imported when first used, so
 imports no planner, and no planner's torch).
 
 Adding a planner: write its plan function (``(mission, *, agent_path, predictor, lookahead) -> Plan``,
-taking only the keywords its entry says it uses), then add its entry here.
+taking only the keywords its entry says it uses), then add its entry here; a learned one that can be
+retrained also names its :class:`~uam_studio.planning.agents.trainer.Trainer`.
 """
 
 from __future__ import annotations
@@ -20,7 +21,8 @@ from uam_studio.errors import InputError
 from uam_studio.planning.legs import N_MAX
 from uam_studio.planning.missions.mission import MAX_DESTINATIONS
 
-__all__ = ["IN_FLIGHT_PLANNERS", "LEARNED_POLICIES", "PLANNERS", "POLICIES", "PlannerInfo", "planner_info"]
+__all__ = ["IN_FLIGHT_PLANNERS", "LEARNED_POLICIES", "PLANNERS", "POLICIES", "REFERENCE_PLANNER", "PlannerInfo",
+           "planner_info"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -42,6 +44,9 @@ class PlannerInfo:
     :param reports_exact: its plan says whether it is proven optimal (``stats["exact"]``; the oracle: exact
         up to 8 destinations, a reference solver's plan past them).
     :param in_flight: the operator (:mod:`~uam_studio.planning.operations`) can re-plan with it in flight.
+    :param trainer: ``"module:Class"`` of its :class:`~uam_studio.planning.agents.trainer.Trainer` (retraining
+        it in the app and finding its retrained files), or None: it cannot be retrained.
+    :param train_label: as the Retrain tab's planner buttons show it.
     """
 
     name: str
@@ -54,6 +59,8 @@ class PlannerInfo:
     reads_predictor: bool = False
     reports_exact: bool = False
     in_flight: bool = False
+    trainer: str | None = None
+    train_label: str = ""
 
     @property
     def learned(self) -> bool:
@@ -72,10 +79,13 @@ class PlannerInfo:
 
 PLANNERS: dict[str, PlannerInfo] = {p.name: p for p in (
     PlannerInfo(name="attention", label="Attention (bundled, default)", agent_file="attention_planner.pt",
-                plan="uam_studio.planning.agents.attention.decode:plan_with_weights", in_flight=True),
+                plan="uam_studio.planning.agents.attention.decode:plan_with_weights", in_flight=True,
+                trainer="uam_studio.planning.agents.attention.retrain:AttentionTrainer",
+                train_label="Attention (default)"),
     PlannerInfo(name="dqn", label="DQN (paper, up to 8)", agent_file="dqn_{scenario}.zip",
                 plan="uam_studio.planning.agents.dqn.rollout:dqn_plan", max_destinations=N_MAX,
-                fixed_slots=True, lookahead=True, reads_predictor=True),
+                fixed_slots=True, lookahead=True, reads_predictor=True,
+                trainer="uam_studio.planning.agents.dqn.retrain:DQNTrainer", train_label="DQN (paper)"),
     PlannerInfo(name="oracle", label="Oracle (exact up to 8)", plan="uam_studio.planning.solvers.oracle:oracle_plan",
                 reports_exact=True, in_flight=True),
     PlannerInfo(name="greedy", label="Greedy", plan="uam_studio.planning.solvers.greedy:greedy_plan"),
@@ -83,6 +93,7 @@ PLANNERS: dict[str, PlannerInfo] = {p.name: p for p in (
 POLICIES = tuple(PLANNERS)  # the default first
 LEARNED_POLICIES = tuple(n for n, p in PLANNERS.items() if p.learned)
 IN_FLIGHT_PLANNERS = tuple(n for n, p in PLANNERS.items() if p.in_flight)  # the operator's (the first: its default)
+REFERENCE_PLANNER = next(n for n, p in PLANNERS.items() if p.reports_exact)  # what the others are compared to
 
 
 def planner_info(name: str, field: str = "policy", among: tuple[str, ...] | None = None) -> PlannerInfo:

@@ -26,7 +26,7 @@ from uam_studio.app.planner.plans import PlanRequest, cached_plan, request_key
 from uam_studio.app.services import agent_policy, one_line, predictor
 from uam_studio.errors import InputError
 from uam_studio.planning.missions.mission import Mission
-from uam_studio.planning.planners import PLANNERS
+from uam_studio.planning.planners import PLANNERS, REFERENCE_PLANNER
 
 if TYPE_CHECKING:
     from uam_studio.planning.planner import PlanResult
@@ -363,14 +363,14 @@ def comparison_table(comparison: dict[str, Any] | None) -> list[dict[str, Any]]:
     if not comparison:
         return []
     rows = [dict(comparison["rows"][k], key=k) for k in COMPARE_ROWS if k in comparison["rows"]]
-    oracle = comparison["rows"].get("oracle", {})
+    oracle = comparison["rows"].get(REFERENCE_PLANNER, {})
     for r in rows:
-        if r["key"] == "oracle" and r.get("exact") is False:
+        if r["key"] == REFERENCE_PLANNER and r.get("exact") is False:
             r["label"] = ORACLE_REFERENCE_LABEL
         r["gap"] = ""
         if r.get("status") != "done" or oracle.get("status") != "done":
             continue
-        if r["key"] == "oracle":
+        if r["key"] == REFERENCE_PLANNER:
             r["gap"] = "reference"
             continue
         dp, dc = r["priority"] - oracle["priority"], r["cycles"] - oracle["cycles"]

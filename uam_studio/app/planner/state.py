@@ -59,6 +59,7 @@ from uam_studio.planning.missions.mission import (
     mission_to_dict,
 )
 from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO
+from uam_studio.planning.planners import PLANNERS
 from uam_studio.planning.safety import safety_verdict
 
 __all__ = ["PlannerState"]
@@ -288,8 +289,10 @@ class PlannerState(PlannerComparison, param.Parameterized):
             if v == value:
                 return label
         policy, path = agent_policy(value)
-        if path is not None:  # an attention planner's weights are named by their folder
-            return f"Retrained: {Path(path).parent.name if policy == 'attention' else Path(path).stem}"
+        if path is not None:  # e.g. an attention planner's weights are named by their folder
+            from uam_studio.planning.agents.trainer import trainer
+
+            return f"Retrained: {trainer(policy).agent_name(Path(path))}"
         return value
 
     def plan_label(self) -> str:
@@ -300,7 +303,8 @@ class PlannerState(PlannerComparison, param.Parameterized):
         if req is None:
             return ""
         label = self.policy_label(req.policy)
-        if plan is not None and req.policy == "oracle" and plan.get("exact") is not None:
+        reports_exact = req.policy in PLANNERS and PLANNERS[req.policy].reports_exact
+        if plan is not None and reports_exact and plan.get("exact") is not None:
             label = ("Oracle (exact optimum)" if plan["exact"]
                      else "Oracle: the reference solver's plan (OR-Tools), not proven optimal")
         return label

@@ -13,6 +13,7 @@ from uam_studio.app.planner.map_geometry import cycle_color
 from uam_studio.app.planner.mission import mission_digest
 from uam_studio.app.planner.state import PlannerState
 from uam_studio.planning.missions.mission import VERTIPORT
+from uam_studio.planning.planners import REFERENCE_PLANNER
 
 
 def _fmt_v(x: float | None) -> str:
@@ -115,7 +116,7 @@ def comparison_html(state: PlannerState) -> str:
             ("Min V", "right"), ("Gap to oracle", "left")]
     rows = ["<tr>" + "".join(f"<th {th.format(al)}>{name}</th>" for name, al in cols) + "</tr>"]
     table = comparison_table(c)
-    reference = any(r["key"] == "oracle" and r.get("exact") is False for r in table)
+    reference = any(r["key"] == REFERENCE_PLANNER and r.get("exact") is False for r in table)
     for r in table:
         weight = "font-weight:bold;" if r["policy"] == shown else ""
         label = f"<td {td.format('left')}>{e(r['label'])}</td>"

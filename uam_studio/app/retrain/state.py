@@ -38,10 +38,12 @@ from uam_studio.planning.agents.attention.retrain import (
     EPOCHS_RANGE,
     MISSIONS_RANGE,
 )
+from uam_studio.planning.agents.trainer import TrainJob, trainer
 from uam_studio.planning.missions.mission import SCENARIOS, Mission
 from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO
+from uam_studio.planning.planners import PLANNERS
 
-__all__ = ["CURVE_COLUMNS", "EPOCH_COLUMNS", "MODELS", "RUNNER_ENV", "RetrainState"]
+__all__ = ["CURVE_COLUMNS", "DEFAULT_MODEL", "EPOCH_COLUMNS", "MODELS", "RUNNER_ENV", "RetrainState"]
 
 RUNNER_ENV = "UAM_STUDIO_RETRAIN_RUNNER"  # "process" (default) or "thread"
 
@@ -58,7 +60,9 @@ CURVE_COLUMNS = ["episode", *CURVE_SERIES, *(f"{k}_ma" for k in CURVE_SERIES)]
 """Columns of :meth:`RetrainState.poll`'s rows for a DQN run."""
 EPOCH_COLUMNS = ["epoch", "loss", "accuracy", "priority", "priority_net"]
 """Columns of :meth:`RetrainState.poll`'s rows for an attention run (priorities NaN without a map)."""
-MODELS = {"DQN (paper)": "dqn", "Attention (default)": "attention"}
+DEFAULT_MODEL = "dqn"  # the paper's agent: the Retrain tab's first planner
+MODELS = {PLANNERS[n].train_label: n for n in sorted((n for n, p in PLANNERS.items() if p.trainer is not None),
+                                                      key=lambda n: n != DEFAULT_MODEL)}
 
 
 class RetrainState(param.Parameterized):
@@ -76,7 +80,7 @@ class RetrainState(param.Parameterized):
     the values that views watch and returns the new ones.
     """
 
-    model = param.Selector(default="dqn", objects=list(MODELS.values()),
+    model = param.Selector(default=DEFAULT_MODEL, objects=list(MODELS.values()),
                            doc="the paper's DQN, or the attention planner (the app's default planner)")
     source = param.Selector(default="map", objects=["map", "random"],
                             doc="DQN: train on the current map or on random missions; attention: score each "
@@ -137,7 +141,7 @@ class RetrainState(param.Parameterized):
         self._finished = False
         self._target_steps = 0
         self._series: dict[str, list[float]] = {k: [] for k in CURVE_SERIES}
-        self._kind = "dqn"  # the model of the last run started
+        self._kind = DEFAULT_MODEL  # the model of the last run started
         self._last_timestep = 0
         self._run_epochs = 0
         self._stage: tuple[str, int, int] | None = None  # an attention run's examples: (stage, done, total)
@@ -163,10 +167,13 @@ class RetrainState(param.Parameterized):
         if self.source == "map" and mission is None:
             self.error = "training: no map to train on"
             return False
+        how = trainer(self.model, "model")
+        values = {k: getattr(self, k) for k in ("scenario", "seed", *how.settings)}
+        init_agent = how.bundled_init(self.scenario) if self.start_from == "bundled" else None
         try:
-            job = self._attention_job(m) if self.model == "attention" else self._dqn_job(m)
+            job = how.job(values, m, init_agent, "app")
         except InputError as err:
-            what = "current map" if m is not None and self.model == "dqn" else "settings"
+            what = "current map" if m is not None and how.trains_on_map else "settings"
             self.error = f"training ({what}): {one_line(err)}"
             return False
         self.error = ""
@@ -175,97 +182,36 @@ class RetrainState(param.Parameterized):
         self._result, self._failure, self._finished = None, None, False
         self._series = {k: [] for k in CURVE_SERIES}
         self._kind, self._stage = self.model, None
-        self._target_steps, self._run_epochs = job["target"], job.get("epochs", 0)
+        self._target_steps, self._run_epochs = job.target, job.epochs
         self._t_start, self._t_end = time.monotonic(), None
         self.request_reference(mission)
-        self.param.update(running=True, timesteps=0, episodes=0, agent_path="", status=job["status"])
+        self.param.update(running=True, timesteps=0, episodes=0, agent_path="", status=job.status)
         if self.runner == "process":
             from uam_studio.planning.agents.retrain import RetrainProcess
 
-            self._proc = RetrainProcess(job["path"], mission=job["mission"], source="app", pause_event=ACTIVITY.event,
-                                        kind=self.model, **job["setup"])
+            self._proc = RetrainProcess(job.path, mission=job.mission, source="app", pause_event=ACTIVITY.event,
+                                        kind=self.model, **job.setup)
             self._proc.start()
             return True
         self._proc = None
-        self._thread = threading.Thread(target=self._run, args=(job["run"],), daemon=True, name="uam-retrain")
+        self._thread = threading.Thread(target=self._run, args=(job,), daemon=True, name="uam-retrain")
         self._thread.start()
         return True
 
-    def _init_agent(self, model: str) -> str | None:
-        """The bundled agent a fine-tuning starts from (None: random weights)."""
-        if self.start_from != "bundled":
-            return None
-        if model == "attention":
-            from uam_studio.planning.agents.attention.decode import bundled_weights_path
-
-            return str(bundled_weights_path())
-        from uam_studio.planning.agents.dqn.rollout import bundled_agent_path
-
-        return str(bundled_agent_path(self.scenario))
-
-    def _dqn_job(self, m: Mission | None) -> dict[str, Any]:
-        """A DQN run: its agent path, the map it trains on, the child process's settings, the thread's call,
-        the step target."""
-        from uam_studio.planning.agents.retrain import new_agent_path, retrain_dqn, training_setup
-
-        init_agent = self._init_agent("dqn")
-        cfg, env_fn = training_setup(self.scenario, m, self.alpha, self.beta, self.gamma, self.steps, self.seed,
-                                     init_agent=init_agent)
-        path = new_agent_path(self.scenario, "map" if m is not None else "random")
-        verb = "fine-tuning the bundled agent" if init_agent else "training"
-
-        def run() -> Any:
-            return retrain_dqn(cfg, env_fn, path, mission=m, on_episode=self._queue.append, stop_event=self._stop,
-                               source="app")
-
-        return {"path": path, "run": run, "target": cfg.steps, "mission": m,
-                "setup": {"scenario": self.scenario, "alpha": self.alpha, "beta": self.beta, "gamma": self.gamma,
-                          "steps": self.steps, "seed": self.seed, "init_agent": init_agent},
-                "status": f"{verb} {cfg.steps} steps on {'the current map' if m else 'random missions'}"}
-
-    def _attention_job(self, m: Mission | None) -> dict[str, Any]:
-        """An attention run (see :meth:`_dqn_job`); its target counts missions solved and epochs."""
-        from uam_studio.planning.agents.attention import WEIGHTS_NAME
-        from uam_studio.planning.agents.attention.retrain import (
-            attention_setup,
-            new_attention_folder,
-            retrain_attention,
-        )
-
-        init_agent = self._init_agent("attention")
-        cfg = attention_setup(self.missions, self.epochs, self.seed)
-        if m is not None and m.scenario != self.scenario:  # scored as the reference line is: this run's scenario
-            m = dataclasses.replace(m, scenario=self.scenario)
-        folder = new_attention_folder("map" if m is not None else "random")
-        verb = "fine-tuning the bundled attention planner" if init_agent else "training the attention planner"
-
-        def progress(stage: str, done: int, total: int) -> None:
-            self._stage = (stage, done, total)
-
-        def run() -> Any:
-            return retrain_attention(cfg, folder, mission=m, on_epoch=self._queue.append, on_progress=progress,
-                                     stop_event=self._stop, source="app", init_weights=init_agent)
-
-        score = "scored on the current map after each epoch" if m is not None else "not scored on a map"
-        return {"path": folder / WEIGHTS_NAME, "run": run, "target": cfg.oracle_missions + cfg.epochs, "mission": m,
-                "epochs": cfg.epochs,
-                "setup": {"missions": self.missions, "epochs": self.epochs, "seed": self.seed,
-                          "init_agent": init_agent},
-                "status": f"{verb}: {cfg.epochs} epochs on {cfg.oracle_missions} random missions of "
-                          f"{cfg.oracle_dest[0]}-{cfg.oracle_dest[1]} destinations solved by the exact oracle, "
-                          f"{score}"}
-
-    def _run(self, run: Callable[[], Any]) -> None:
+    def _run(self, job: TrainJob) -> None:
         import torch
 
         torch.set_num_threads(1)  # leave the other core to the sessions
         try:
-            self._result = run()
+            self._result = job.run(self._queue.append, self._progress, self._stop)
         except Exception as err:
             traceback.print_exc()
             self._failure = f"training failed: {type(err).__name__}: {one_line(err)}"
         finally:
             self._finished = True
+
+    def _progress(self, stage: str, done: int, total: int) -> None:
+        self._stage = (stage, done, total)
 
     def stop(self) -> None:
         """Ask the run to stop at the next environment step (the agent so far is saved)."""
@@ -279,6 +225,11 @@ class RetrainState(param.Parameterized):
     def run_model(self) -> str:
         """The model of the last run started (``"dqn"`` before any run)."""
         return self._kind
+
+    @property
+    def _unit(self) -> str:
+        """What the last run's reports count (its trainer's ``unit``: ``"episode"`` or ``"epoch"``)."""
+        return trainer(self._kind).unit
 
     @property
     def progress(self) -> float:
@@ -299,11 +250,11 @@ class RetrainState(param.Parameterized):
         if not self._target_steps:
             return "not started"
         p = self.progress
-        if self.running and p == 0 and self._proc is not None and (self._kind != "attention" or self._stage is None):
+        if self.running and p == 0 and self._proc is not None and (self._unit != "epoch" or self._stage is None):
             return (f"starting the trainer: a new process loads torch · {_clock(self.elapsed_s)} elapsed "
                     "(Stop ends it at once; nothing is saved before the first "
-                    f"{'epoch' if self._kind == 'attention' else 'episode'})")
-        if self._kind == "attention":
+                    f"{self._unit})")
+        if self._unit == "epoch":
             total = self._target_steps - self._run_epochs
             solved = self._stage[1] if self._stage is not None else 0
             done = f"{solved} of {total} missions solved by the oracle, {self.episodes} of {self._run_epochs} epochs"
@@ -312,7 +263,7 @@ class RetrainState(param.Parameterized):
         text = f"{done} ({100 * p:.0f}%) \u00b7 {_clock(self.elapsed_s)} elapsed"
         if self.running:
             eta = self.elapsed_s * (1 - p) / p if p > 0 else None
-            first = "epochs" if self._kind == "attention" else "episodes"
+            first = f"{self._unit}s"
             text += (f" \u00b7 about {_clock(eta)} left" if eta is not None
                      else f" \u00b7 time left: after the first {first}")
         return text
@@ -368,9 +319,9 @@ class RetrainState(param.Parameterized):
                 self._result = self._proc.result
                 self._failure = f"training failed: {self._proc.error}" if self._proc.error else None
                 self._finished = True
-        rows = self._epoch_rows() if self._kind == "attention" else self._episode_rows()
+        rows = self._epoch_rows() if self._unit == "epoch" else self._episode_rows()
         changes: dict[str, Any] = {}
-        if self._kind == "attention":
+        if self._unit == "epoch":
             solved = self._stage[1] if self._stage is not None else 0
             epochs = self.episodes + len(rows)
             if (solved + epochs, epochs) != (self.timesteps, self.episodes):
@@ -385,7 +336,7 @@ class RetrainState(param.Parameterized):
             elif self._result is not None:
                 r = self._result
                 end = "stopped" if r.stopped else "done"
-                if self._kind == "attention":
+                if self._unit == "epoch":
                     changes.update(timesteps=self._target_steps if not r.stopped else self.timesteps,
                                    agent_path=str(r.path), error="",
                                    status=f"{end}: {r.episodes} epoch{'s' * (r.episodes != 1)}; "
@@ -395,7 +346,7 @@ class RetrainState(param.Parameterized):
                                    status=f"{end}: {r.episodes} episodes, {r.timesteps} steps; saved "
                                           f"{r.path.name} (now in the Planner's policy list)")
             else:  # stopped before the first episode (DQN) or epoch (attention: the oracle was solving its missions)
-                first = "epoch" if self._kind == "attention" else "episode"
+                first = self._unit
                 changes.update(error="",
                                status=f"stopped before the first {first} ended: nothing learned, nothing saved")
         if changes:

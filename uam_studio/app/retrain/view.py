@@ -25,6 +25,7 @@ from uam_studio.app.services import registry
 from uam_studio.app.session import ensure_bokeh_backend
 from uam_studio.app.style import NOTE_STYLE, heading, intro, no_scroll_zoom
 from uam_studio.planning.agents.retrain import agents_dir
+from uam_studio.planning.agents.trainer import trainer
 from uam_studio.planning.missions.mission import SCENARIOS
 
 POLL_MS = 1000  # curves and progress once a second: each update re-renders two plots
@@ -126,8 +127,12 @@ class RetrainView(pn.viewable.Viewer):
             sizing_mode="stretch_width")
         self.attention_curves = pn.Column(self.priority_plot, self.priority_note, self.loss_plot,
                                           sizing_mode="stretch_width", margin=0)
-        self.dqn_only = [self.alpha, self.beta, self.gamma, self.steps]
-        self.attention_only = [self.missions, self.epochs]
+        # each setting's widgets, shown for the planners whose trainer reads it
+        self.setting_widgets: dict[str, list[Any]] = {"alpha": [self.alpha], "beta": [self.beta],
+                                                       "gamma": [self.gamma], "steps": [self.steps],
+                                                       "missions": [self.missions], "epochs": [self.epochs]}
+        # each report unit's curves (a HoloViews pane's own `visible` fails in Panel 1.9: their columns)
+        self.unit_curves = {"episode": self.dqn_curves, "epoch": self.attention_curves}
         self._poller = None
         s.param.watch(self._on_status, ["running", "status", "error", "timesteps", "episodes", "agent_path"])
         s.param.watch(self._on_reference_inputs, ["source", "scenario"])
@@ -158,7 +163,8 @@ class RetrainView(pn.viewable.Viewer):
         self.rewards = pn.pane.HTML("alpha: reward per destination x priority; beta: penalty per charging stop; "
                                     "gamma: penalty for an end of discharge", width=w, styles=NOTE_STYLE,
                                     margin=(0, 10))
-        self.dqn_only.append(self.rewards)
+        for name in ("alpha", "beta", "gamma"):
+            self.setting_widgets[name].append(self.rewards)
         controls = pn.Column(heading("Settings"), pn.pane.HTML("Planner", margin=(4, 10, 0, 10)), self.model,
                              self.source, self.scenario,
                              pn.pane.HTML("Start from", margin=(4, 10, 0, 10)), self.start_from,
@@ -175,13 +181,12 @@ class RetrainView(pn.viewable.Viewer):
 
     def _on_model(self, *events: Any) -> None:
         """Show the chosen planner's settings and curves."""
-        attention = self.state.model == "attention"
-        for widget in self.dqn_only:
-            widget.visible = not attention
-        for widget in self.attention_only:
-            widget.visible = attention
-        self.dqn_curves.visible = not attention  # (a HoloViews pane's own `visible` fails in Panel 1.9)
-        self.attention_curves.visible = attention
+        how = trainer(self.state.model)
+        for name, widgets in self.setting_widgets.items():
+            for widget in widgets:
+                widget.visible = name in how.settings
+        for unit, curves in self.unit_curves.items():
+            curves.visible = unit == how.unit
 
     # ------------------------------------------------------------------ actions
 
@@ -210,7 +215,7 @@ class RetrainView(pn.viewable.Viewer):
 
     def _on_reference(self, *events: Any) -> None:
         ref = self.state.reference
-        attention = self.state.model == "attention"
+        attention = not trainer(self.state.model).trains_on_map  # it scores each epoch on the map
         if self.state.source != "map":
             text = ("Reference line: none (choose Current map to score each epoch on it)." if attention
                     else "Reference line: none for random missions (each episode is another map).")
@@ -235,7 +240,7 @@ class RetrainView(pn.viewable.Viewer):
         self.progress_text.object = f"<span class='uam-train-progress-text'>{html.escape(s.progress_text())}</span>"
         self.error.object = html.escape(s.error)
         self.error.visible = bool(s.error)
-        if (s.run_model if s.running or s.episodes else s.model) == "attention":
+        if trainer(s.run_model if s.running or s.episodes else s.model).unit == "epoch":
             episodes = f"epochs: <b class='uam-episodes'>{s.episodes}</b>"
         else:
             episodes = f"episodes: <b class='uam-episodes'>{s.episodes}</b>, steps: {s.timesteps}"

@@ -10,7 +10,9 @@ and by tests; ``uam-studio train attention`` runs the full recipe of
 - :func:`map_score`: the score of the network so far on one map (its plan, checked on the physics
   model; an unsafe plan scores 0), the run's learning curve;
 - :func:`new_attention_folder`: a fresh folder for a run's weights in the user's agents folder;
-- :func:`retrain_attention`: train, watch, save (never into the bundled ``pretrained/`` folder).
+- :func:`retrain_attention`: train, watch, save (never into the bundled ``pretrained/`` folder);
+- :class:`AttentionTrainer`: what :mod:`uam_studio.planning.agents.retrain` asks of the attention planner
+  (its :class:`~uam_studio.planning.agents.trainer.Trainer`).
 """
 
 from __future__ import annotations
@@ -27,9 +29,10 @@ from typing import Any
 from uam_studio.bundled import agents_dir, is_bundled
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.run_result import RetrainResult
+from uam_studio.planning.agents.trainer import AgentFile, TrainJob
 from uam_studio.planning.missions.mission import Mission, mission_to_dict
 
-__all__ = ["CLASS_DEST", "CLASS_EPOCHS", "CLASS_MISSIONS", "attention_setup", "map_score",
+__all__ = ["CLASS_DEST", "CLASS_EPOCHS", "CLASS_MISSIONS", "AttentionTrainer", "attention_setup", "map_score",
            "new_attention_folder", "retrain_attention"]
 
 CLASS_MISSIONS = 150  # training missions of a class run (each solved by the exact oracle: ~0.3 s on one core)
@@ -132,3 +135,88 @@ def retrain_attention(config: Any, folder: str | os.PathLike[str], mission: Miss
     card = json.loads((out / "card.json").read_text())
     done = int(card["stats"]["epochs_done"])
     return RetrainResult(weights, card, done, done, bool(card["stopped_early"]))
+
+
+class AttentionTrainer:
+    """The attention planner's :class:`~uam_studio.planning.agents.trainer.Trainer`: a folder per run holding
+    ``attention_planner.pt`` and its ``card.json``, one report per epoch. ``setup``: ``missions``,
+    ``epochs``, ``seed`` of :func:`attention_setup` and ``init_agent`` (a weights file to start from)."""
+
+    planner = "attention"
+    unit = "epoch"
+    settings = ("missions", "epochs")
+    trains_on_map = False
+
+    def _card(self, weights: Path) -> dict[str, Any] | None:
+        """The card (``card.json``) beside an attention planner's weights, or None if it is not one."""
+        try:
+            card = json.loads((weights.parent / "card.json").read_text())
+        except (OSError, ValueError):
+            return None
+        return card if isinstance(card, dict) and card.get("model") == self.planner else None
+
+    def find(self, folder: Path) -> list[AgentFile]:
+        """The attention planners (``*/attention_planner.pt`` with a ``card.json`` of model ``attention``
+        beside it) in ``folder``."""
+        from uam_studio.planning.agents.attention import WEIGHTS_NAME
+
+        out = []
+        for p in folder.glob(f"*/{WEIGHTS_NAME}"):
+            card = self._card(p)
+            try:
+                mtime = p.stat().st_mtime
+            except OSError:
+                continue
+            if card is not None:
+                out.append(AgentFile(p, p.parent.name, None, card, mtime))
+        return out
+
+    def describe(self, card: dict[str, Any], scenario: str | None) -> list[str | None]:
+        done = (card.get("stats") or {}).get("epochs_done")
+        return ["attention", f"{done} epoch{'' if done == 1 else 's'}" if isinstance(done, int) else None]
+
+    def owns(self, path: Path) -> bool:
+        return path.suffix == ".pt"
+
+    def agent_name(self, path: Path) -> str:
+        return path.parent.name
+
+    def bundled_init(self, scenario: str) -> str:
+        from uam_studio.planning.agents.attention.decode import bundled_weights_path
+
+        return str(bundled_weights_path())
+
+    def check(self, mission: Mission | None, setup: dict[str, Any]) -> Any:
+        return attention_setup(**{k: v for k, v in setup.items() if k != "init_agent"})
+
+    def job(self, values: dict[str, Any], mission: Mission | None, init_agent: str | None, source: str) -> TrainJob:
+        from uam_studio.planning.agents.attention import WEIGHTS_NAME
+
+        cfg = attention_setup(values["missions"], values["epochs"], values["seed"])
+        if mission is not None and mission.scenario != values["scenario"]:  # scored in this run's scenario
+            mission = replace(mission, scenario=values["scenario"])
+        folder = new_attention_folder("map" if mission is not None else "random")
+        verb = "fine-tuning the bundled attention planner" if init_agent else "training the attention planner"
+
+        def run(on_item: Callable[[Any], Any], on_progress: Callable[[str, int, int], Any],
+                stop_event: threading.Event) -> RetrainResult | None:
+            return retrain_attention(cfg, folder, mission=mission, on_epoch=on_item, on_progress=on_progress,
+                                     stop_event=stop_event, source=source, init_weights=init_agent)
+
+        score = "scored on the current map after each epoch" if mission is not None else "not scored on a map"
+        return TrainJob(path=folder / WEIGHTS_NAME, mission=mission, target=cfg.oracle_missions + cfg.epochs,
+                        epochs=cfg.epochs, run=run,
+                        setup={"missions": values["missions"], "epochs": values["epochs"], "seed": values["seed"],
+                               "init_agent": init_agent},
+                        status=f"{verb}: {cfg.epochs} epochs on {cfg.oracle_missions} random missions of "
+                               f"{cfg.oracle_dest[0]}-{cfg.oracle_dest[1]} destinations solved by the exact oracle, "
+                               f"{score}")
+
+    def run(self, setup: dict[str, Any], agent_path: Path, mission: Mission | None,
+            on_item: Callable[[Any], Any], on_progress: Callable[[str, int, int], Any],
+            stop_event: threading.Event | Any, source: str | None) -> RetrainResult | None:
+        setup = dict(setup)
+        init = setup.pop("init_agent", None)
+        return retrain_attention(attention_setup(**setup), Path(agent_path).parent, mission=mission,
+                                 on_epoch=on_item, on_progress=on_progress, stop_event=stop_event, source=source,
+                                 init_weights=init)
