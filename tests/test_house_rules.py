@@ -95,3 +95,17 @@ def test_every_lazy_export_resolves_and_no_submodule_shadows_one():
         assert lazy & {m.name for m in pkgutil.iter_modules(package.__path__)} == set(), name
         assert lazy <= set(package.__all__), name
         assert all(getattr(package, n) is not None for n in lazy), name
+
+
+def test_planner_names_are_compared_only_in_the_catalogue():
+    """Code asks :data:`~uam_studio.planning.planners.PLANNERS` (or a planner's trainer) what a planner does;
+    it does not compare its name. (``rollout.py``'s ``base == "greedy"`` names a rollout base, not a planner.)"""
+    from uam_studio.planning.planners import PLANNERS
+
+    names = "|".join(PLANNERS)
+    compare = re.compile(rf"""(==|!=)\s*['"]({names})['"]|['"]({names})['"]\s*(==|!=)|in \(['"]({names})['"]""")
+    found = [f"{p.relative_to(ROOT)}:{k}" for p in (ROOT / "uam_studio").rglob("*.py")
+             if p.name != "planners.py"
+             for k, line in enumerate(p.read_text().splitlines(), 1)
+             if compare.search(line) and 'base == "greedy"' not in line]
+    assert found == [], found
