@@ -93,6 +93,11 @@ def _fsync_dir(folder: Path) -> None:
             os.close(fd)
 
 
+def _writer(data: bytes) -> Callable[[BinaryIO], object]:
+    """``write(f)`` for :func:`_stage` that writes ``data``."""
+    return lambda f: f.write(data)
+
+
 def _stage(path: Path, write: Callable[[BinaryIO], object]) -> Path:
     """Write a complete, fsynced temp file for ``path`` with ``write(f)``; return its name.
 
@@ -202,7 +207,7 @@ def atomic_save(path: StrPath, write: Callable[[BinaryIO], object], *, sidecars:
         if digest:
             sides.append((digest_path(dest), f"{sha256_file(staged[0][1])}  {dest.name}\n".encode()))
         for side, data in sides:
-            staged.append((side, _stage(side, lambda f, data=data: f.write(data))))
+            staged.append((side, _stage(side, _writer(data))))
         folders = {d.parent for d, _ in staged}
         if sides:
             for side, _ in sides:

@@ -32,4 +32,4 @@ def keep_stylesheets_local() -> None:
         return original(self, doc if doc is not None else state.curdoc, *args, **kwargs)
 
     _get_properties._resolves_detached_models = True  # type: ignore[attr-defined]
-    Reactive._get_properties = _get_properties
+    Reactive._get_properties = _get_properties  # type: ignore[method-assign]  # the patch itself

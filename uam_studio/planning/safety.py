@@ -102,6 +102,7 @@ def safety_verdict(plan: Mapping[str, Any] | None, band: Mapping[str, Any] | Non
         if band_low_safe:
             out.update(level="safe", headline="Safe: physics and Dynaformer agree")
         else:
+            assert band is not None  # a band margin comes from a band
             out.update(level="uncertain", headline=f"Check: safe on both models, but the Dynaformer's "
                                                    f"{100 * band['level']:.0f}% band reaches EOD")
     elif not phys_safe and not pred_safe:

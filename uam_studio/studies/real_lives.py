@@ -251,7 +251,8 @@ def fit_mission(log: CellLog, mission: ResampledMission, cell: Cell, max_iter: i
     try:
         cov = s2 * np.linalg.inv(j.T @ j)
         rho = float(residual_autocorrelation(r[None])[0])
-        factor = excess_factor(cov, hac_covariance(j, r, np.ones(n, bool), rho)) if not_white(rho, n) else 1.0
+        white = not not_white(np.asarray(rho), np.asarray(n))
+        factor = 1.0 if white else excess_factor(cov, hac_covariance(j, r, np.ones(n, bool), rho))
         np.linalg.cholesky(cov * factor)
     except np.linalg.LinAlgError:
         return None

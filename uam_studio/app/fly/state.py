@@ -79,7 +79,7 @@ class FlyState(param.Parameterized):
     forecast_sigma_kt = param.Number(default=DEFAULT_FORECAST_SIGMA_KT, bounds=(0.0, MAX_SIGMA_KT))
     sensor_noise_mv = param.Number(default=DEFAULT_SENSOR_NOISE_MV, bounds=(0.0, MAX_NOISE_MV))
     reserve_kt = param.Number(default=WEATHER_RESERVE_KT, bounds=RESERVE_RANGE_KT)
-    speed = param.Selector(default=100, objects=list(SPEEDS))
+    speed: param.Selector = param.Selector(default=100, objects=list(SPEEDS))
     inject_kts = param.Number(default=25.0, bounds=(-60.0, 60.0))
     events = param.List(default=[], item_type=WindEvent)
     record = param.ClassSelector(class_=FlightRecord, default=None, allow_None=True)

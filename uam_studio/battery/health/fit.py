@@ -144,10 +144,10 @@ def fit_health_batch(current_a, voltage_v, dt_s: float = 1.0, noise_v: float | N
                             jac3[row] = j3[k]
         n_ok = np.maximum(mask.sum(-1), 4)
         rms = np.sqrt(cost / n_ok)
-        for k in np.flatnonzero(~(rms <= MAX_FIT_RMS_V)):
-            row = f" (row {k})" if b > 1 else ""
+        for bad in np.flatnonzero(~(rms <= MAX_FIT_RMS_V)):
+            row = f" (row {bad})" if b > 1 else ""
             raise InputError("voltage_v", f"the cell model cannot explain these readings{row}: RMS residual "
-                             f"{rms[k]:.3g} V, at most {MAX_FIT_RMS_V:g} V; check the units (V, A) and the cell type")
+                             f"{rms[bad]:.3g} V, at most {MAX_FIT_RMS_V:g} V; check the units (V, A) and the cell type")
         sig = np.sqrt(np.maximum(cost / (n_ok - n_par), NOISE_FLOOR_V ** 2)) if noise is None else \
             np.full(b, max(noise, NOISE_FLOOR_V))
         rho = residual_autocorrelation(resid, mask)

@@ -58,6 +58,7 @@ def _simulate_pts(current: np.ndarray, pts: np.ndarray, i0: np.ndarray | None, d
     q, r = Q_REF_C / pts[:, 0], np.clip(pts[:, 1], 0.0, None)
     state = initial_state
     if pts.shape[1] == 3:
+        assert i0 is not None, "a pre-roll point needs its pre-roll current i0"
         with np.errstate(all="ignore"):
             state = preroll_states(i0, pts[:, 2], q, r, dt, cell)
     res = simulate(np.broadcast_to(current, (pts.shape[0], current.shape[-1])), dt, q, r, eod_v=eod_v,

@@ -137,7 +137,7 @@ class GroupedSubprocVecEnv(VecEnv):
         self._where = {int(g): (w, k) for w, group in enumerate(self.groups) for k, g in enumerate(group)}
         if start_method is None:
             start_method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
-        ctx = mp.get_context(start_method)
+        ctx: Any = mp.get_context(start_method)  # its stubs lack Process
         self.remotes, self.processes = [], []
         for group in self.groups:
             remote, work_remote = ctx.Pipe()

@@ -208,6 +208,7 @@ def _search_job(args: tuple[int, int, tuple[int, int], str, int]) -> tuple[Missi
     episode = Episode.of(LegTable(m, max(N_MAX, len(m.destinations))), scenario)
     tok = mission_tokens(episode.legs, scenario)
     best, _ = DecodeSearch(_SEARCH_NET, tok, episode, beam, True, min(beam, 4)).run()
+    assert best is not None, "a search always ends with a beam (the way home is always a move)"
     sorties: list[list[int]] = [[]]
     for t in best.tokens:
         if t == tok.n:

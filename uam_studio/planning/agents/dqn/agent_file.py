@@ -106,7 +106,7 @@ def network_description(model: MaskedDQN) -> dict[str, Any]:
     return {
         "policy_class": type(model.policy).__name__,
         "net_arch": [int(w) for w in model.policy.net_arch],
-        "observation_space": {"type": "Box", "shape": list(obs.shape), "dtype": str(obs.dtype),
+        "observation_space": {"type": "Box", "shape": list(obs.shape or ()), "dtype": str(obs.dtype),
                               "low": obs.low.tolist(), "high": obs.high.tolist()},  # type: ignore[attr-defined]
         "action_space": {"type": "Discrete", "n": int(act.n), "start": int(act.start)},  # type: ignore[attr-defined]
     }

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -114,4 +114,4 @@ class EpisodeRecorder(gym.Wrapper):
 
     def action_masks(self) -> np.ndarray:
         """The wrapped env's boolean action mask."""
-        return self.env.unwrapped.action_masks()
+        return cast(Any, self.env.unwrapped).action_masks()
