@@ -16,6 +16,7 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from uam_studio.errors import InputError
 from uam_studio.planning.legs import N_MAX
@@ -73,8 +74,17 @@ class PlannerInfo:
 
     def plan_function(self) -> Callable[..., object]:
         """Its plan function (imported now)."""
-        module, _, attr = self.plan.partition(":")
-        return getattr(importlib.import_module(module), attr)
+        return _imported(self.plan)
+
+    def trainer_class(self) -> type | None:
+        """Its :class:`~uam_studio.planning.agents.trainer.Trainer` class (imported now), or None."""
+        return None if self.trainer is None else _imported(self.trainer)
+
+
+def _imported(ref: str) -> Any:
+    """The object a ``"module:name"`` reference names, its module imported now."""
+    module, _, attr = ref.partition(":")
+    return getattr(importlib.import_module(module), attr)
 
 
 PLANNERS: dict[str, PlannerInfo] = {p.name: p for p in (

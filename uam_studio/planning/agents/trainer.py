@@ -8,7 +8,6 @@ none of them names a planner.
 
 from __future__ import annotations
 
-import importlib
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -106,12 +105,7 @@ class Trainer(Protocol):
 
 def trainers() -> dict[str, Trainer]:
     """Every retrainable planner's trainer, by planner name, in :data:`PLANNERS`' order."""
-    out: dict[str, Trainer] = {}
-    for name, info in PLANNERS.items():
-        if info.trainer is not None:
-            module, _, attr = info.trainer.partition(":")
-            out[name] = getattr(importlib.import_module(module), attr)()
-    return out
+    return {name: cls() for name, info in PLANNERS.items() if (cls := info.trainer_class()) is not None}
 
 
 def trainer(name: str, field: str = "kind") -> Trainer:
