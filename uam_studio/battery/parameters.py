@@ -138,6 +138,32 @@ class Cell:
 
 NASA_18650 = Cell("NASA 18650 (Daigle & Kulkarni 2013)", DEFAULT_CELL, DEFAULT_Q_MAX, DEFAULT_R0)
 
+# The NASA 18650 identified on real discharges of that cell type (the PCoE data set's cell B0005, its first
+# three 2 A discharges at 24 C, ``python -m uam_studio.battery.real.nasa_physics DATA_DIR``, its output
+# pasted; card: pretrained/nasa_cell.md). A cell type beside progpy's set, which stays the
+# paper's default cell. No other cell of the data set was read: every other life is held out from it.
+NASA_IDENTIFIED_PARAMS = replace(
+    DEFAULT_CELL,
+    t_ohmic_s=3.19045578,
+    kn=314.929456,
+    kp=213543.498,
+    t_sn_s=180.02836,
+    t_sp_s=72.7192654,
+    r0_activation_k=3055.76334,
+    k_activation_k=949.640467,
+    thermal_mass=33.8437766,
+    thermal_tau_s=1037.03258,
+    t_diffusion_s=7001455.16,
+    vol_s_fraction=0.0638083893,
+    u0p=3.11722063,
+    t_ambient_k=297.15,
+    ap=(127783.809, -164796.077, 167915.529, -89296.8626, -129992.587, 168880.941,
+        524166.069, -1131148.5, 161469.837, 538079.744, 388377.55, -614218.192,
+        41464.5201),
+)
+NASA_IDENTIFIED = Cell("NASA 18650 (identified on B0005's first 3 discharges)", NASA_IDENTIFIED_PARAMS,
+                       6963.0368, 0.0100192114)
+
 # The Sony-Murata US18650VTC6 (3.0 Ah NMC/graphite) of the CMU eVTOL dataset, identified by
 # ``uam-studio identify vtc6 --data PATH`` (its output, pasted): the card is pretrained/vtc6_cell.md.
 # The fit is flat along its weakly identified terms (the activations, the fastest time constant), whose

@@ -1,0 +1,96 @@
+"""The NASA 18650 identified as a cell type of its own, and the physics method that predicts a life online
+(``uam_studio.battery.real.nasa_physics``)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from tests.nasa_synthetic import synthetic_cell
+from uam_studio.battery.parameters import NASA_18650, NASA_IDENTIFIED
+from uam_studio.battery.real import nasa_physics
+from uam_studio.battery.real.nasa_data import NasaDischarge, load_nasa_cell, nasa_folder
+from uam_studio.battery.real.nasa_physics import discharge_health, identify_nasa, predict_life
+from uam_studio.battery.simulate import simulate
+
+
+def _have_data() -> bool:
+    try:
+        return (nasa_folder() / "B0005.csv.gz").is_file()
+    except Exception:
+        return False
+
+
+needs_data = pytest.mark.skipif(not _have_data(), reason="the NASA PCoE data are not at ../shared/data/nasa_pcoe")
+
+
+def _discharge(q_max: float, r0: float, load_a: float, params) -> NasaDischarge:
+    """A discharge of ``params`` at (q_max C, R0 ohm) under ``load_a`` (A), sampled every 10 s to 2.7 V."""
+    res = simulate(np.full(12000, load_a), 1.0, q_max, r0, 2.7, cell=replace(params, t_ambient_k=297.15))
+    v = res.voltage_v[res.valid][9::10]
+    t = np.r_[0.0, 10.0 * np.arange(1, v.size + 1)]
+    return NasaDischarge("B9999", 0, 0, 24.0, t, np.r_[4.19, v], np.r_[0.0, np.full(v.size, load_a)],
+                         np.full(t.size, 24.0), 1)
+
+
+@settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(q=st.floats(4000.0, 7600.0), r0=st.floats(0.005, 0.05), load=st.sampled_from([1.0, 2.0, 4.0]))
+def test_a_finished_discharges_health_reaches_the_cutoff_when_the_cell_did(q, r0, load):
+    d = _discharge(q, r0, load, NASA_IDENTIFIED.params)
+    q_fit, r0_fit = discharge_health(d, NASA_IDENTIFIED.params, (NASA_IDENTIFIED.q_max, NASA_IDENTIFIED.r0))
+    assert q_fit == pytest.approx(q, rel=0.01)
+    assert np.isfinite(r0_fit) and r0_fit > 0
+
+
+def test_the_physics_method_predicts_a_synthetic_life_within_a_percent(tmp_path):
+    cell = synthetic_cell(tmp_path, 3, n=12)
+    preds = predict_life(cell, NASA_18650)
+    assert preds[0].median_s is None  # no history: the first discharge is not predicted
+    errs = [abs(p.median_s - p.true_s) / p.true_s for p in preds[1:]]
+    assert len(errs) == 11 and np.all(np.isfinite(errs))
+    assert np.median(errs) < 0.01
+    # the health it carries is the last finished discharge's: its q_max follows that discharge's length
+    q = [p.q_max for p in preds[1:]]
+    t = [p.true_s for p in preds[:-1]]
+    assert np.corrcoef(q, t)[0, 1] > 0.9
+
+
+def test_a_prediction_never_reads_its_discharges_voltage_after_the_context(tmp_path):
+    cell = synthetic_cell(tmp_path, 4, n=4)
+    last = cell.discharges[-1]
+    after = last.time_s - last.load_time_s > 300.0
+    changed = replace(last, voltage_v=np.where(after, last.voltage_v - 0.3, last.voltage_v))
+    other = replace(cell, discharges=(*cell.discharges[:-1], changed))
+    assert predict_life(other, NASA_18650)[-1].median_s == predict_life(cell, NASA_18650)[-1].median_s
+
+
+@needs_data
+def test_the_identification_reads_only_its_cell_and_reproduces_the_bundled_set(monkeypatch):
+    read = []
+
+    def recording(path, *a, **k):
+        read.append(path.name)
+        return load_nasa_cell(path, *a, **k)
+
+    monkeypatch.setattr(nasa_physics, "load_nasa_cell", recording)
+    cell = identify_nasa()
+    assert read == ["B0005.csv.gz"]
+    assert cell.q_max == pytest.approx(NASA_IDENTIFIED.q_max, rel=0.01)
+    assert cell.params.u0p == pytest.approx(NASA_IDENTIFIED.params.u0p, abs=0.01)
+
+
+@needs_data
+def test_on_a_held_out_life_the_identified_cell_beats_progpys_set():
+    d = load_nasa_cell(nasa_folder() / "B0007.csv.gz").discharges[0]
+    seg = nasa_physics.fit_segment(d)
+    rms = {}
+    for cell in (NASA_IDENTIFIED, NASA_18650):
+        q, r0 = discharge_health(d, cell.params, (cell.q_max, cell.r0))
+        v = simulate(seg.current_a, 1.0, q, r0, 2.5, cell=replace(cell.params, t_ambient_k=seg.t_ambient_k)).voltage_v
+        keep = seg.observed < v.size
+        rms[cell.name] = float(np.sqrt(np.mean((v[seg.observed[keep]] - seg.voltage_v[keep]) ** 2)))
+    assert rms[NASA_IDENTIFIED.name] < 0.5 * rms[NASA_18650.name]

@@ -1,0 +1,191 @@
+"""The NASA 18650 as a physics cell of its own, and a physics method that predicts a life's discharges.
+
+- :func:`identify_nasa`: the Daigle & Kulkarni model's parameters identified (``identify.identify_cell``)
+  on the first :data:`IDENTIFY_DISCHARGES` discharges of one cell (:data:`IDENTIFY_CELL`, B0005: 2 A, 24 C).
+  Nothing else is read, so every other cell of the data set is held out from it. The result is
+  ``NASA_IDENTIFIED`` in :mod:`uam_studio.battery.parameters`, beside progpy's set (the paper's default
+  cell, unchanged): ``python -m uam_studio.battery.real.nasa_physics DATA_DIR`` prints its literal.
+- :func:`discharge_health`: a finished discharge's health (q_max C, R0 ohm) on a parameter set: R0 and
+  q_max fitted to its voltage above the cut-off, then q_max moved so that the model reaches the cut-off
+  (V) when the cell did.
+- :func:`predict_life`: the physics method, online. Discharge k is predicted from discharges 0..k-1 whole
+  and discharge k's planned current only (a :class:`KnownDischarge` with no voltage after its context is
+  enough, and is all it is given): the model at the last finished discharge's health, run along the
+  planned current, divided by one plus the median of the method's own relative errors on that cell's last
+  :data:`BIAS_WINDOW` discharges (a cell's drift between discharges: fade and rest recovery).
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.optimize import brentq, least_squares
+
+from uam_studio.battery.parameters import DEFAULT_CELL, Cell, CellParameters
+from uam_studio.battery.real.identify import FitSegment, identify_cell
+from uam_studio.battery.real.nasa_data import LOADED_A, NasaCell, NasaDischarge, load_nasa_cell, nasa_folder
+from uam_studio.battery.real.nasa_predict import KnownDischarge, known_before
+from uam_studio.battery.simulate import simulate
+
+__all__ = ["BIAS_WINDOW", "IDENTIFY_CELL", "IDENTIFY_DISCHARGES", "LifePrediction", "discharge_health",
+           "fit_segment", "identify_nasa", "predict_life", "time_to_cutoff_s"]
+
+IDENTIFY_CELL = "B0005"
+IDENTIFY_DISCHARGES = (0, 1, 2)
+BIAS_WINDOW = 10  # discharges: the method's running bias is the median of this many last relative errors
+ZERO_C = 273.15
+DT_S = 1.0  # s: the model's step on a discharge's grid
+SIM_FLOOR_V = 2.5  # V: the lowest cut-off the model runs to
+FIT_ABOVE_V = 2.8  # V: a discharge's health is fitted to its samples above this
+Q_BOUNDS = (2000.0, 20000.0)  # C: the health fit's box
+R0_BOUNDS = (1e-3, 1.0)  # ohm
+
+
+def _grid_current(time_s: np.ndarray, current_a: np.ndarray, start: int, extend: bool) -> np.ndarray:
+    """The current (A) on a :data:`DT_S` grid from sample ``start``. ``extend``: the last loaded current
+    carries on past the profile's end for twice its loaded length (a plan does not know when it ends)."""
+    t = time_s[start:] - time_s[start]
+    grid = np.arange(0.0, t[-1], DT_S)
+    cur = np.interp(grid + DT_S / 2, t, current_a[start:])
+    if not extend:
+        return cur
+    on = np.flatnonzero(cur > LOADED_A)
+    if on.size == 0:
+        return cur
+    last = on[-1]
+    return np.r_[cur[:last + 1], np.full(2 * last + 600, cur[last])]
+
+
+def fit_segment(d: NasaDischarge, name: str | None = None) -> FitSegment:
+    """``d`` from its first loaded sample as a :class:`FitSegment` (1 s grid, the cell's surface
+    temperature at the load as its start and its measured temperatures fitted beside the voltage)."""
+    t = d.time_s[d.load_start:] - d.load_time_s
+    cur = _grid_current(d.time_s, d.current_a, d.load_start, extend=False)
+    obs = np.round(t / DT_S).astype(int) - 1
+    keep = (obs >= 0) & (obs < cur.size)
+    k = np.arange(d.load_start, d.time_s.size)[keep]
+    return FitSegment(name or f"{d.cell}:{d.index}", cur, DT_S, obs[keep], d.voltage_v[k],
+                      ZERO_C + float(d.temperature_c[d.load_start]), temperature_c=d.temperature_c[k])
+
+
+def _start() -> CellParameters:
+    """The identification's start: progpy's set with guessed heat and Arrhenius terms, at 24 C."""
+    return replace(DEFAULT_CELL, r0_activation_k=2000.0, k_activation_k=2000.0, thermal_mass=45.0,
+                   thermal_tau_s=300.0, t_ambient_k=ZERO_C + 24.0)
+
+
+def identify_nasa(folder=None, max_nfev: int = 300) -> Cell:
+    """Identify the NASA 18650 on :data:`IDENTIFY_CELL`'s first :data:`IDENTIFY_DISCHARGES` discharges in
+    ``folder`` (default: :func:`nasa_folder`); about a minute. Reads no other cell."""
+    cell = load_nasa_cell(nasa_folder(folder) / f"{IDENTIFY_CELL}.csv.gz")
+    segs = [fit_segment(cell.discharges[i]) for i in IDENTIFY_DISCHARGES]
+    fit = identify_cell(segs, _start(), 7000.0, 0.1, max_nfev=max_nfev)
+    name = f"NASA 18650 (identified on {IDENTIFY_CELL}'s first {len(IDENTIFY_DISCHARGES)} discharges)"
+    return Cell(name, fit.cell, fit.q_max, fit.r0)
+
+
+def _voltage(current_a: np.ndarray, q_max: float, r0: float, params: CellParameters, t0_k: float) -> np.ndarray:
+    return simulate(current_a, DT_S, q_max, r0, eod_v=SIM_FLOOR_V, cell=replace(params, t_ambient_k=t0_k)).voltage_v
+
+
+def time_to_cutoff_s(current_a: np.ndarray, q_max: float, r0: float, params: CellParameters, t0_k: float,
+                     cutoff_v: float) -> float:
+    """Time (s) the model takes along ``current_a`` (A, :data:`DT_S` grid) to fall below ``cutoff_v`` (V);
+    the profile's length if it never does."""
+    v = _voltage(current_a, q_max, r0, params, t0_k)
+    below = np.flatnonzero(v < cutoff_v)
+    return float((below[0] + 1) * DT_S) if below.size else float(current_a.size * DT_S)
+
+
+def discharge_health(d: NasaDischarge, params: CellParameters, start: tuple[float, float],
+                     cutoff_v: float = 3.0) -> tuple[float, float]:
+    """The health (q_max C, R0 ohm) of finished discharge ``d`` on ``params`` (module docstring), the fit
+    starting at ``start``. Where the model cannot reach the cut-off when the cell did, the curve fit's."""
+    seg = fit_segment(d)
+    m = seg.voltage_v > FIT_ABOVE_V
+    obs, v = seg.observed[m], seg.voltage_v[m]
+    t0 = seg.t_ambient_k
+
+    def res(theta: np.ndarray) -> np.ndarray:
+        sim = _voltage(seg.current_a, float(np.exp(theta[0])), float(np.exp(theta[1])), params, t0)
+        out = sim[np.minimum(obs, sim.size - 1)] - v
+        out[obs >= sim.size] = 0.5
+        return out
+
+    lo, hi = np.log([Q_BOUNDS[0], R0_BOUNDS[0]]), np.log([Q_BOUNDS[1], R0_BOUNDS[1]])
+    x0 = np.clip(np.log(start), lo + 1e-9, hi - 1e-9)
+    sol = least_squares(res, x0, bounds=(lo, hi), diff_step=1e-3, max_nfev=50, loss="soft_l1", f_scale=0.02)
+    q, r0 = (float(x) for x in np.exp(sol.x))
+    true = d.time_to_cutoff_s(cutoff_v)
+    if true is None:
+        return q, r0
+    ext = _grid_current(d.time_s, d.current_a, d.load_start, extend=True)
+
+    def gap(qq: float) -> float:
+        return time_to_cutoff_s(ext, qq, r0, params, t0, cutoff_v) - true
+
+    a, b = max(0.6 * q, Q_BOUNDS[0]), min(1.5 * q, Q_BOUNDS[1])
+    if gap(a) < 0 < gap(b):
+        q = float(brentq(gap, a, b, xtol=1.0))
+    return q, r0
+
+
+@dataclass(frozen=True)
+class LifePrediction:
+    """One discharge predicted by :func:`predict_life`: times (s from the first loaded sample) to the
+    cut-off, predicted (``median_s``, None for a cell's first discharge) and true (None if never reached);
+    the health it was predicted with (q_max C, R0 ohm)."""
+
+    index: int
+    median_s: float | None
+    true_s: float | None
+    q_max: float
+    r0: float
+
+
+def _predict(known: KnownDischarge, health: tuple[float, float], params: CellParameters, t0_k: float,
+             cutoff_v: float) -> float:
+    cur = _grid_current(known.time_s, known.current_a, known.load_start, extend=True)
+    return time_to_cutoff_s(cur, health[0], health[1], params, t0_k, cutoff_v)
+
+
+def predict_life(cell: NasaCell, cell_type: Cell, cutoff_v: float = 3.0,
+                 context_s: float = 300.0) -> list[LifePrediction]:
+    """Every discharge of ``cell`` predicted online by the physics method on ``cell_type`` (module
+    docstring). Each prediction reads the earlier discharges and a :func:`known_before` view of its own."""
+    out: list[LifePrediction] = []
+    health = (cell_type.q_max, cell_type.r0)
+    rel: list[float] = []
+    first = True
+    for d in cell.discharges:
+        known = known_before(d, context_s)
+        t0 = ZERO_C + float(d.ambient_c)
+        median = None
+        if not first:
+            raw = _predict(known, health, cell_type.params, t0, cutoff_v)
+            median = raw / (1.0 + float(np.median(rel[-BIAS_WINDOW:]))) if rel else raw
+        true = d.time_to_cutoff_s(cutoff_v)  # the discharge has finished: from here on it is history
+        out.append(LifePrediction(d.index, median, true, health[0], health[1]))
+        if median is not None and true is not None and true > 0:
+            rel.append(raw / true - 1.0)
+        health = discharge_health(d, cell_type.params, health, cutoff_v)
+        first = False
+    return out
+
+
+def _literal(cell: Cell) -> str:
+    """``cell`` as the literal in :mod:`uam_studio.battery.parameters` (9 significant digits)."""
+    p = cell.params
+    names = ("t_ohmic_s", "kn", "kp", "t_sn_s", "t_sp_s", "r0_activation_k", "k_activation_k", "thermal_mass",
+             "thermal_tau_s", "t_diffusion_s", "vol_s_fraction", "u0p", "t_ambient_k")
+    body = "".join(f"    {n}={float(getattr(p, n)):.9g},\n" for n in names)
+    ap = [f"{float(a):.9g}" for a in p.ap]
+    rows = ",\n        ".join(", ".join(ap[i:i + 6]) for i in range(0, len(ap), 6))
+    return (f"NASA_IDENTIFIED_PARAMS = replace(\n    DEFAULT_CELL,\n{body}    ap=({rows}),\n)\n"
+            f"NASA_IDENTIFIED = Cell({cell.name!r}, NASA_IDENTIFIED_PARAMS, {cell.q_max:.4f}, {cell.r0:.10f})\n")
+
+
+if __name__ == "__main__":  # pragma: no cover - prints the literal in parameters.py
+    print(_literal(identify_nasa(sys.argv[1] if len(sys.argv) > 1 else None)))
