@@ -94,3 +94,19 @@ def test_on_a_held_out_life_the_identified_cell_beats_progpys_set():
         keep = seg.observed < v.size
         rms[cell.name] = float(np.sqrt(np.mean((v[seg.observed[keep]] - seg.voltage_v[keep]) ** 2)))
     assert rms[NASA_IDENTIFIED.name] < 0.5 * rms[NASA_18650.name]
+
+
+def test_the_battery_lab_flies_the_identified_cell_inside_its_health_box():
+    from uam_studio.app.battery_lab.state import HEALTH_BOX, NASA_ID_NAME, BatteryLabState
+
+    lab = BatteryLabState(cell=NASA_ID_NAME)
+    lab.cell = NASA_ID_NAME
+    (q_lo, q_hi), (r_lo, r_hi) = HEALTH_BOX[NASA_ID_NAME]
+    assert (lab.q_max, lab.r0) == (NASA_IDENTIFIED.q_max, NASA_IDENTIFIED.r0)
+    assert q_lo <= lab.q_max <= q_hi and r_lo <= lab.r0 <= r_hi
+    for vary in ("q_max", "R0"):
+        lab.vary = vary
+        res = lab.result
+        assert res["error"] == "" and len(res["family"]) == 4
+        assert all(np.all(np.isfinite(m["voltage_v"])) for m in res["family"])
+        assert all(m["eod_s"] is not None for m in res["family"])  # every member of the family ends its legs

@@ -17,12 +17,12 @@ import param
 
 from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE, LatestWorker, one_line
 from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0
-from uam_studio.battery.parameters import NASA_18650, PAPER_Q_RANGE, PAPER_R0_RANGE, VTC6, Cell
+from uam_studio.battery.parameters import NASA_18650, NASA_IDENTIFIED, PAPER_Q_RANGE, PAPER_R0_RANGE, VTC6, Cell
 from uam_studio.errors import InputError
 from uam_studio.flight.tables import ALTITUDE_RANGE_M, WIND_RANGE_KTS
 from uam_studio.planning.legs import ALTITUDES_M
 
-__all__ = ["CELLS", "HEALTH_BOX", "VARY", "BatteryLabState", "family_values"]
+__all__ = ["CELLS", "HEALTH_BOX", "NASA_ID_NAME", "VARY", "BatteryLabState", "family_values"]
 
 VARY = {
     "altitude": ("altitude_m", ALTITUDES_M, "m"),  # the paper's four levels
@@ -31,12 +31,17 @@ VARY = {
     "q_max": ("q_max", (PAPER_Q_RANGE[0], 6000.0, 7000.0, PAPER_Q_RANGE[1]), "C"),
 }
 NASA_NAME, VTC6_NAME = "NASA 18650 (the paper's cell)", "Sony VTC6 (identified on real cells)"
-CELLS: dict[str, Cell] = {NASA_NAME: NASA_18650, VTC6_NAME: VTC6}
+NASA_ID_NAME = "NASA 18650 (identified on real discharges)"
+CELLS: dict[str, Cell] = {NASA_NAME: NASA_18650, NASA_ID_NAME: NASA_IDENTIFIED, VTC6_NAME: VTC6}
 # Per cell: the sliders' (q_max C, R0 ohm) ranges and the health family's values. The VTC6's box spans
-# the CMU cells' fade (3.16 to 2.43 Ah at C/5, about 77%) and resistances from new to well aged.
+# the CMU cells' fade (3.16 to 2.43 Ah at C/5, about 77%) and resistances from new to well aged. The
+# identified NASA cell's box spans the NASA lives' fade (1.86 to 1.3 Ah at 2 A, about 70%) and the R0 its
+# physics method fits over those lives (0.01 ohm new to 0.04-0.1 ohm at the end; RESULTS).
 HEALTH_BOX = {NASA_NAME: (APP_Q_RANGE, APP_R0_RANGE),
+              NASA_ID_NAME: ((4500.0, 7200.0), (0.005, 0.12)),
               VTC6_NAME: ((7000.0, 11500.0), (0.01, 0.1))}
-_HEALTH_FAMILY = {VTC6_NAME: {"q_max": (8000.0, 9000.0, 10000.0, 11000.0), "R0": (0.015, 0.02, 0.04, 0.08)}}
+_HEALTH_FAMILY = {VTC6_NAME: {"q_max": (8000.0, 9000.0, 10000.0, 11000.0), "R0": (0.015, 0.02, 0.04, 0.08)},
+                  NASA_ID_NAME: {"q_max": (5000.0, 5700.0, 6300.0, 6960.0), "R0": (0.01, 0.03, 0.06, 0.1)}}
 
 
 def family_values(vary: str, cell: str = NASA_NAME) -> tuple[str, tuple[float, ...], str]:
@@ -48,7 +53,8 @@ def family_values(vary: str, cell: str = NASA_NAME) -> tuple[str, tuple[float, .
 class BatteryLabState(param.Parameterized):
     """One leg flown by one cell, plus a family of curves that vary one factor (the paper's figures).
 
-    The cell is the paper's NASA 18650 or the VTC6 identified on the CMU eVTOL cells; both draw the same
+    The cell is the paper's NASA 18650, the NASA 18650 identified on real discharges of it (B0005), or
+    the VTC6 identified on the CMU eVTOL cells; both draw the same
     per-cell current (the pack's current shared by its cells). A new cell sets q_max and R0 to its
     nominal health and their ranges to its :data:`HEALTH_BOX`.
 
@@ -85,17 +91,24 @@ class BatteryLabState(param.Parameterized):
         self.dispatch = dispatch or (lambda cb: cb())
         self._worker: LatestWorker[None, dict[str, Any]] = LatestWorker(
             lambda _: self.curves(), self._apply, _lab_failed, dispatch=self.dispatch)
+        if self.cell != NASA_NAME:  # a cell given at construction: its box, and its health unless given too
+            self._set_cell(self.cell, params.get("q_max"), params.get("r0"))
         self.param.watch(self._on_cell, "cell")  # precedence 0: before refresh, the cell's bounds and health
         self.param.watch(lambda *_: self.refresh(), list(self.INPUTS), precedence=1)
         self.refresh()
 
     def _on_cell(self, event: param.parameterized.Event) -> None:
         """A new cell: its health box, and its nominal health (q_max C, R0 ohm)."""
-        (q_lo, q_hi), (r_lo, r_hi) = HEALTH_BOX[event.new]
+        self._set_cell(event.new)
+
+    def _set_cell(self, name: str, q_max: float | None = None, r0: float | None = None) -> None:
+        """Cell ``name``'s health box, and (q_max C, R0 ohm): as given, else its nominal health."""
+        (q_lo, q_hi), (r_lo, r_hi) = HEALTH_BOX[name]
         self.param.q_max.bounds, self.param.r0.bounds = (q_lo, q_hi), (r_lo, r_hi)
-        cell = CELLS[event.new]
+        cell = CELLS[name]
         with param.parameterized.discard_events(self):
-            self.q_max, self.r0 = cell.q_max, cell.r0
+            self.q_max = cell.q_max if q_max is None else q_max
+            self.r0 = cell.r0 if r0 is None else r0
 
     def refresh(self) -> None:
         """Recompute :attr:`result` for the current inputs."""
