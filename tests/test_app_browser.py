@@ -507,6 +507,16 @@ def test_battery_lab_loads_the_vtc6_cell(page, app_url):
     slider.get_by_text(f"{VTC6.q_max:.2f}").wait_for()  # its nominal q_max (C)
     table.locator("tr", has_text="this setting").get_by_text("not reached").wait_for()
     assert "nan" not in table.inner_text()
+    # the NASA 18650 identified on real discharges: its own nominal health, and its curves end their legs
+    from uam_studio.app.battery_lab.state import NASA_ID_NAME
+    from uam_studio.battery.parameters import NASA_IDENTIFIED
+
+    page.locator("select").filter(has_text="Sony VTC6").select_option(label=NASA_ID_NAME)
+    slider.get_by_text(f"{NASA_IDENTIFIED.q_max:.2f}").wait_for()
+    table.locator("tr", has_text="this setting").get_by_text(re.compile(r"[0-9.]+ min")).wait_for()
+    assert "nan" not in table.inner_text() and "not reached" not in table.inner_text()
+    if os.environ.get("UAM_SCREENSHOTS"):
+        page.screenshot(path=os.path.join(os.environ["UAM_SCREENSHOTS"], "battery_lab_nasa_identified.png"))
 
 
 def test_battery_lab_draws_every_curve_after_a_factor_change(page, app_url):

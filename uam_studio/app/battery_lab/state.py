@@ -31,7 +31,7 @@ VARY = {
     "q_max": ("q_max", (PAPER_Q_RANGE[0], 6000.0, 7000.0, PAPER_Q_RANGE[1]), "C"),
 }
 NASA_NAME, VTC6_NAME = "NASA 18650 (the paper's cell)", "Sony VTC6 (identified on real cells)"
-NASA_ID_NAME = "NASA 18650 (identified on real discharges)"
+NASA_ID_NAME = "NASA 18650 (identified on B0005)"
 CELLS: dict[str, Cell] = {NASA_NAME: NASA_18650, NASA_ID_NAME: NASA_IDENTIFIED, VTC6_NAME: VTC6}
 # Per cell: the sliders' (q_max C, R0 ohm) ranges and the health family's values. The VTC6's box spans
 # the CMU cells' fade (3.16 to 2.43 Ah at C/5, about 77%) and resistances from new to well aged. The

@@ -98,7 +98,8 @@ class BatteryLabView(pn.viewable.Viewer):
     def __panel__(self) -> pn.viewable.Viewable:
         text = intro(
             "One leg flown by one 18650 cell (the pack scaled to a cell), repeated without recharging: the "
-            "paper's NASA cell, or a Sony VTC6 identified on the CMU eVTOL dataset's real cells (same current). "
+            "paper's NASA cell (progpy's parameters), the same cell type identified on a real NASA cell's "
+            "discharges (B0005), or a Sony VTC6 identified on the CMU eVTOL dataset's cells (same current). "
             "Pick the factor to vary: the thin curves sweep it over its range, the black curve is the "
             "setting of the sliders.")
         controls = pn.Column(heading("Leg and cell"), *self.widgets.values(), width=270)
