@@ -14,7 +14,7 @@ from tests.nasa_synthetic import synthetic_cell
 from uam_studio.battery.parameters import NASA_18650, NASA_IDENTIFIED
 from uam_studio.battery.real import nasa_physics
 from uam_studio.battery.real.nasa_data import NasaDischarge, load_nasa_cell, nasa_folder
-from uam_studio.battery.real.nasa_physics import discharge_health, identify_nasa, predict_life
+from uam_studio.battery.real.nasa_physics import discharge_health, predict_life
 from uam_studio.battery.simulate import simulate
 
 
@@ -69,7 +69,11 @@ def test_a_prediction_never_reads_its_discharges_voltage_after_the_context(tmp_p
 
 
 @needs_data
-def test_the_identification_reads_only_its_cell_and_reproduces_the_bundled_set(monkeypatch):
+def test_the_identification_reads_only_its_cell_and_prints_the_bundled_set(monkeypatch, capsys):
+    """``uam-studio identify nasa-cell``: the printed source, run, gives the bundled set; only B0005 is read."""
+    from uam_studio.battery import parameters
+    from uam_studio.cli import main
+
     read = []
 
     def recording(path, *a, **k):
@@ -77,8 +81,11 @@ def test_the_identification_reads_only_its_cell_and_reproduces_the_bundled_set(m
         return load_nasa_cell(path, *a, **k)
 
     monkeypatch.setattr(nasa_physics, "load_nasa_cell", recording)
-    cell = identify_nasa()
+    assert main(["identify", "nasa-cell", "--data", str(nasa_folder())]) == 0
     assert read == ["B0005.csv.gz"]
+    scope = {"replace": replace, "DEFAULT_CELL": parameters.DEFAULT_CELL, "Cell": parameters.Cell}
+    exec(capsys.readouterr().out, scope)
+    cell = scope["NASA_IDENTIFIED"]
     assert cell.q_max == pytest.approx(NASA_IDENTIFIED.q_max, rel=0.01)
     assert cell.params.u0p == pytest.approx(NASA_IDENTIFIED.params.u0p, abs=0.01)
 

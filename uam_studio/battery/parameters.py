@@ -139,7 +139,7 @@ class Cell:
 NASA_18650 = Cell("NASA 18650 (Daigle & Kulkarni 2013)", DEFAULT_CELL, DEFAULT_Q_MAX, DEFAULT_R0)
 
 # The NASA 18650 identified on real discharges of that cell type (the PCoE data set's cell B0005, its first
-# three 2 A discharges at 24 C, ``python -m uam_studio.battery.real.nasa_physics DATA_DIR``, its output
+# three 2 A discharges at 24 C, ``uam-studio identify nasa-cell --data DIR``, its output
 # pasted; card: pretrained/nasa_cell.md). A cell type beside progpy's set, which stays the
 # paper's default cell. No other cell of the data set was read: every other life is held out from it.
 NASA_IDENTIFIED_PARAMS = replace(

@@ -4,7 +4,7 @@
   on the first :data:`IDENTIFY_DISCHARGES` discharges of one cell (:data:`IDENTIFY_CELL`, B0005: 2 A, 24 C).
   Nothing else is read, so every other cell of the data set is held out from it. The result is
   ``NASA_IDENTIFIED`` in :mod:`uam_studio.battery.parameters`, beside progpy's set (the paper's default
-  cell, unchanged): ``python -m uam_studio.battery.real.nasa_physics DATA_DIR`` prints its literal.
+  cell, unchanged): ``uam-studio identify nasa-cell --data DIR`` prints its literal.
 - :func:`discharge_health`: a finished discharge's health (q_max C, R0 ohm) on a parameter set: R0 and
   q_max fitted to its voltage above the cut-off, then q_max moved so that the model reaches the cut-off
   (V) when the cell did.
@@ -18,7 +18,6 @@
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -31,7 +30,7 @@ from uam_studio.battery.real.nasa_predict import KnownDischarge, known_before
 from uam_studio.battery.simulate import simulate
 
 __all__ = ["BIAS_WINDOW", "IDENTIFY_CELL", "IDENTIFY_DISCHARGES", "LifePrediction", "discharge_health",
-           "fit_segment", "identify_nasa", "predict_life", "time_to_cutoff_s"]
+           "fit_segment", "identify_nasa", "nasa_cell_literal", "predict_life", "time_to_cutoff_s"]
 
 IDENTIFY_CELL = "B0005"
 IDENTIFY_DISCHARGES = (0, 1, 2)
@@ -177,7 +176,7 @@ def predict_life(cell: NasaCell, cell_type: Cell, cutoff_v: float = 3.0,
     return out
 
 
-def _literal(cell: Cell) -> str:
+def nasa_cell_literal(cell: Cell) -> str:
     """``cell`` as the literal in :mod:`uam_studio.battery.parameters` (9 significant digits)."""
     p = cell.params
     names = ("t_ohmic_s", "kn", "kp", "t_sn_s", "t_sp_s", "r0_activation_k", "k_activation_k", "thermal_mass",
@@ -189,5 +188,3 @@ def _literal(cell: Cell) -> str:
             f"NASA_IDENTIFIED = Cell({cell.name!r}, NASA_IDENTIFIED_PARAMS, {cell.q_max:.4f}, {cell.r0:.10f})\n")
 
 
-if __name__ == "__main__":  # pragma: no cover - prints the literal in parameters.py
-    print(_literal(identify_nasa(sys.argv[1] if len(sys.argv) > 1 else None)))
