@@ -22,8 +22,8 @@ from uam_studio.errors import InputError
 from uam_studio.planning.legs import N_MAX
 from uam_studio.planning.missions.mission import MAX_DESTINATIONS
 
-__all__ = ["IN_FLIGHT_PLANNERS", "LEARNED_POLICIES", "PLANNERS", "POLICIES", "REFERENCE_PLANNER", "PlannerInfo",
-           "planner_info"]
+__all__ = ["IN_FLIGHT_PLANNERS", "LEARNED_POLICIES", "PAPER_PLANNER", "PLANNERS", "POLICIES", "REFERENCE_PLANNER",
+           "PlannerInfo", "planner_info"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -48,6 +48,7 @@ class PlannerInfo:
     :param trainer: ``"module:Class"`` of its :class:`~uam_studio.planning.agents.trainer.Trainer` (retraining
         it in the app and finding its retrained files), or None: it cannot be retrained.
     :param train_label: as the Retrain tab's planner buttons show it.
+    :param paper: it is the paper's agent (:data:`PAPER_PLANNER`: the Retrain tab's first planner).
     """
 
     name: str
@@ -62,6 +63,7 @@ class PlannerInfo:
     in_flight: bool = False
     trainer: str | None = None
     train_label: str = ""
+    paper: bool = False
 
     @property
     def learned(self) -> bool:
@@ -95,7 +97,8 @@ PLANNERS: dict[str, PlannerInfo] = {p.name: p for p in (
     PlannerInfo(name="dqn", label="DQN (paper, up to 8)", agent_file="dqn_{scenario}.zip",
                 plan="uam_studio.planning.agents.dqn.rollout:dqn_plan", max_destinations=N_MAX,
                 fixed_slots=True, lookahead=True, reads_predictor=True,
-                trainer="uam_studio.planning.agents.dqn.retrain:DQNTrainer", train_label="DQN (paper)"),
+                trainer="uam_studio.planning.agents.dqn.retrain:DQNTrainer", train_label="DQN (paper)",
+                paper=True),
     PlannerInfo(name="oracle", label="Oracle (exact up to 8)", plan="uam_studio.planning.solvers.oracle:oracle_plan",
                 reports_exact=True, in_flight=True),
     PlannerInfo(name="greedy", label="Greedy", plan="uam_studio.planning.solvers.greedy:greedy_plan"),
@@ -104,6 +107,7 @@ POLICIES = tuple(PLANNERS)  # the default first
 LEARNED_POLICIES = tuple(n for n, p in PLANNERS.items() if p.learned)
 IN_FLIGHT_PLANNERS = tuple(n for n, p in PLANNERS.items() if p.in_flight)  # the operator's (the first: its default)
 REFERENCE_PLANNER = next(n for n, p in PLANNERS.items() if p.reports_exact)  # what the others are compared to
+PAPER_PLANNER = next(n for n, p in PLANNERS.items() if p.paper)  # the paper's agent
 
 
 def planner_info(name: str, field: str = "policy", among: tuple[str, ...] | None = None) -> PlannerInfo:

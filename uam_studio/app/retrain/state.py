@@ -41,7 +41,7 @@ from uam_studio.planning.agents.attention.retrain import (
 from uam_studio.planning.agents.trainer import TrainJob, trainer
 from uam_studio.planning.missions.mission import SCENARIOS, Mission
 from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO
-from uam_studio.planning.planners import PLANNERS
+from uam_studio.planning.planners import PAPER_PLANNER, PLANNERS
 
 __all__ = ["CURVE_COLUMNS", "DEFAULT_MODEL", "EPOCH_COLUMNS", "MODELS", "RUNNER_ENV", "RetrainState"]
 
@@ -60,7 +60,7 @@ CURVE_COLUMNS = ["episode", *CURVE_SERIES, *(f"{k}_ma" for k in CURVE_SERIES)]
 """Columns of :meth:`RetrainState.poll`'s rows for a DQN run."""
 EPOCH_COLUMNS = ["epoch", "loss", "accuracy", "priority", "priority_net"]
 """Columns of :meth:`RetrainState.poll`'s rows for an attention run (priorities NaN without a map)."""
-DEFAULT_MODEL = "dqn"  # the paper's agent: the Retrain tab's first planner
+DEFAULT_MODEL = PAPER_PLANNER  # the paper's agent: the Retrain tab's first planner
 MODELS = {PLANNERS[n].train_label: n for n in sorted((n for n, p in PLANNERS.items() if p.trainer is not None),
                                                       key=lambda n: n != DEFAULT_MODEL)}
 
