@@ -83,11 +83,14 @@ def test_the_identification_reads_only_its_cell_and_prints_the_bundled_set(monke
     monkeypatch.setattr(nasa_physics, "load_nasa_cell", recording)
     assert main(["identify", "nasa-cell", "--data", str(nasa_folder())]) == 0
     assert read == ["B0005.csv.gz"]
-    scope = {"replace": replace, "DEFAULT_CELL": parameters.DEFAULT_CELL, "Cell": parameters.Cell}
+    scope = {"replace": replace, "DEFAULT_CELL": parameters.DEFAULT_CELL, "Cell": parameters.Cell,
+             "NASA_ID_FLEET_Q_RANGE": parameters.NASA_ID_FLEET_Q_RANGE,
+             "NASA_ID_FLEET_R0_RANGE": parameters.NASA_ID_FLEET_R0_RANGE}
     exec(capsys.readouterr().out, scope)
     cell = scope["NASA_IDENTIFIED"]
     assert cell.q_max == pytest.approx(NASA_IDENTIFIED.q_max, rel=0.01)
     assert cell.params.u0p == pytest.approx(NASA_IDENTIFIED.params.u0p, abs=0.01)
+    assert cell.params.fleet_q_range == NASA_IDENTIFIED.params.fleet_q_range
 
 
 @needs_data

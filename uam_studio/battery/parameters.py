@@ -142,6 +142,11 @@ NASA_18650 = Cell("NASA 18650 (Daigle & Kulkarni 2013)", DEFAULT_CELL, DEFAULT_Q
 # three 2 A discharges at 24 C, ``uam-studio identify nasa-cell --data DIR``, its output
 # pasted; card: pretrained/nasa_cell.md). A cell type beside progpy's set, which stays the
 # paper's default cell. No other cell of the data set was read: every other life is held out from it.
+# Its fleet range (a health fit's prior): the health `discharge_health` fits on every tenth discharge of
+# the 2 A lives at 24 C (B0005, B0007, B0018), q_max 4,920-7,154 C and R0 0.001-0.070 ohm (R0 is weakly
+# identified: the fit's floor), widened a little; read from those lives, so in-sample for them.
+NASA_ID_FLEET_Q_RANGE = (4800.0, 7300.0)  # C
+NASA_ID_FLEET_R0_RANGE = (0.005, 0.075)  # ohm
 NASA_IDENTIFIED_PARAMS = replace(
     DEFAULT_CELL,
     t_ohmic_s=3.19045578,
@@ -160,6 +165,8 @@ NASA_IDENTIFIED_PARAMS = replace(
     ap=(127783.809, -164796.077, 167915.529, -89296.8626, -129992.587, 168880.941,
         524166.069, -1131148.5, 161469.837, 538079.744, 388377.55, -614218.192,
         41464.5201),
+    fleet_q_range=NASA_ID_FLEET_Q_RANGE,
+    fleet_r0_range=NASA_ID_FLEET_R0_RANGE,
 )
 NASA_IDENTIFIED = Cell("NASA 18650 (identified on B0005's first 3 discharges)", NASA_IDENTIFIED_PARAMS,
                        6963.0368, 0.0100192114)

@@ -35,10 +35,10 @@ NASA_ID_NAME = "NASA 18650 (identified on B0005)"
 CELLS: dict[str, Cell] = {NASA_NAME: NASA_18650, NASA_ID_NAME: NASA_IDENTIFIED, VTC6_NAME: VTC6}
 # Per cell: the sliders' (q_max C, R0 ohm) ranges and the health family's values. The VTC6's box spans
 # the CMU cells' fade (3.16 to 2.43 Ah at C/5, about 77%) and resistances from new to well aged. The
-# identified NASA cell's box spans the NASA lives' fade (1.86 to 1.3 Ah at 2 A, about 70%) and the R0 its
-# physics method fits over those lives (0.01 ohm new to 0.04-0.1 ohm at the end; RESULTS).
+# identified NASA cell's box holds its fleet range (parameters.NASA_ID_FLEET_*: the 2 A lives' fade) and
+# resistances beyond it.
 HEALTH_BOX = {NASA_NAME: (APP_Q_RANGE, APP_R0_RANGE),
-              NASA_ID_NAME: ((4500.0, 7200.0), (0.005, 0.12)),
+              NASA_ID_NAME: ((4500.0, 7300.0), (0.005, 0.12)),
               VTC6_NAME: ((7000.0, 11500.0), (0.01, 0.1))}
 _HEALTH_FAMILY = {VTC6_NAME: {"q_max": (8000.0, 9000.0, 10000.0, 11000.0), "R0": (0.015, 0.02, 0.04, 0.08)},
                   NASA_ID_NAME: {"q_max": (5000.0, 5700.0, 6300.0, 6960.0), "R0": (0.01, 0.03, 0.06, 0.1)}}

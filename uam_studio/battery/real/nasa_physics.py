@@ -23,7 +23,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import brentq, least_squares
 
-from uam_studio.battery.parameters import DEFAULT_CELL, Cell, CellParameters
+from uam_studio.battery.parameters import (
+    DEFAULT_CELL,
+    NASA_ID_FLEET_Q_RANGE,
+    NASA_ID_FLEET_R0_RANGE,
+    Cell,
+    CellParameters,
+)
 from uam_studio.battery.real.identify import FitSegment, identify_cell
 from uam_studio.battery.real.nasa_data import LOADED_A, NasaCell, NasaDischarge, load_nasa_cell, nasa_folder
 from uam_studio.battery.real.nasa_predict import KnownDischarge, known_before
@@ -72,9 +78,11 @@ def fit_segment(d: NasaDischarge, name: str | None = None) -> FitSegment:
 
 
 def _start() -> CellParameters:
-    """The identification's start: progpy's set with guessed heat and Arrhenius terms, at 24 C."""
+    """The identification's start: progpy's set with guessed heat and Arrhenius terms, at 24 C, and the
+    identified cell's fleet ranges (``parameters.NASA_ID_FLEET_*``)."""
     return replace(DEFAULT_CELL, r0_activation_k=2000.0, k_activation_k=2000.0, thermal_mass=45.0,
-                   thermal_tau_s=300.0, t_ambient_k=ZERO_C + 24.0)
+                   thermal_tau_s=300.0, t_ambient_k=ZERO_C + 24.0, fleet_q_range=NASA_ID_FLEET_Q_RANGE,
+                   fleet_r0_range=NASA_ID_FLEET_R0_RANGE)
 
 
 def identify_nasa(folder=None, max_nfev: int = 300) -> Cell:
@@ -184,7 +192,9 @@ def nasa_cell_literal(cell: Cell) -> str:
     body = "".join(f"    {n}={float(getattr(p, n)):.9g},\n" for n in names)
     ap = [f"{float(a):.9g}" for a in p.ap]
     rows = ",\n        ".join(", ".join(ap[i:i + 6]) for i in range(0, len(ap), 6))
-    return (f"NASA_IDENTIFIED_PARAMS = replace(\n    DEFAULT_CELL,\n{body}    ap=({rows}),\n)\n"
+    assert (p.fleet_q_range, p.fleet_r0_range) == (NASA_ID_FLEET_Q_RANGE, NASA_ID_FLEET_R0_RANGE)
+    ranges = "    fleet_q_range=NASA_ID_FLEET_Q_RANGE,\n    fleet_r0_range=NASA_ID_FLEET_R0_RANGE,\n"
+    return (f"NASA_IDENTIFIED_PARAMS = replace(\n    DEFAULT_CELL,\n{body}    ap=({rows}),\n{ranges})\n"
             f"NASA_IDENTIFIED = Cell({cell.name!r}, NASA_IDENTIFIED_PARAMS, {cell.q_max:.4f}, {cell.r0:.10f})\n")
 
 
