@@ -19,6 +19,7 @@ import numpy as np
 
 GAS_CONSTANT = 8.3144621  # J/(mol K)
 FARADAY = 96487.0  # C/mol
+ZERO_C = 273.15  # K: 0 C (a temperature in C plus this is the model's K)
 THERMAL_MASS = 37.04  # lumped m*C of the cell used by the thermal state (J/K)
 THERMAL_TAU_S = 100.0  # cooling time constant towards ambient (s)
 

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 
+from uam_studio.battery.parameters import ZERO_C
 from uam_studio.battery.real.cmu_data import (
     data_folder,
     load_cell_log,
@@ -46,7 +47,6 @@ __all__ = ["AGING_LAW", "END_OF_LIFE_FRACTION", "LIFE_FILES", "AgingLaw", "LifeP
 LIFE_FILES = ("VAH07.csv.mat", "VAH09.csv.mat", "VAH27.csv.mat", "VAH30.csv.mat")
 END_OF_LIFE_FRACTION = 0.8  # a pack retires below 80% of its first capacity
 T_REF_C = 25.0
-ZERO_C_K = 273.15
 MAX_EFC = 1e5  # equivalent full cycles: far past any pack's life
 IR_ARTEFACT = 0.5  # resistance-proxy steps under this share of the cell's median are resampling artefacts
 
@@ -65,7 +65,7 @@ class AgingLaw:
 
     def _scale(self, temperature_c: float) -> float:
         t = check_range("temperature_c", float(temperature_c), -20.0, 60.0, " C")
-        return self.a * math.exp(self.ea_k * (1.0 / (T_REF_C + ZERO_C_K) - 1.0 / (t + ZERO_C_K)))
+        return self.a * math.exp(self.ea_k * (1.0 / (T_REF_C + ZERO_C) - 1.0 / (t + ZERO_C)))
 
     def capacity_fraction(self, efc: float | np.ndarray, temperature_c: float = T_REF_C) -> np.ndarray:
         """Capacity (fraction of the first) after ``efc`` equivalent full cycles at ``temperature_c`` (C),
@@ -142,7 +142,7 @@ def fit_aging_law(lives: list[LifePoints]) -> AgingLaw:
         raise InputError("lives", "no life to fit")
     e = np.concatenate([lf.efc[1:] for lf in lives])
     f = np.concatenate([lf.fraction[1:] for lf in lives])
-    inv_t = np.concatenate([np.full(lf.efc.size - 1, 1.0 / (T_REF_C + ZERO_C_K) - 1.0 / (lf.temperature_c + ZERO_C_K))
+    inv_t = np.concatenate([np.full(lf.efc.size - 1, 1.0 / (T_REF_C + ZERO_C) - 1.0 / (lf.temperature_c + ZERO_C))
                             for lf in lives])
     temps = {round(lf.temperature_c, 1) for lf in lives}
 

@@ -32,9 +32,10 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 
+from uam_studio.battery.parameters import ZERO_C
 from uam_studio.battery.real.nasa_data import NasaDataError, load_nasa_folder, nasa_folder
 from uam_studio.errors import InputError
-from uam_studio.fleet.aging import AGING_LAW, T_REF_C, ZERO_C_K, AgingLaw, LifePoints, fit_resistance_growth
+from uam_studio.fleet.aging import AGING_LAW, T_REF_C, AgingLaw, LifePoints, fit_resistance_growth
 
 __all__ = ["NASA_AGING_LAW", "NASA_REST_RECOVERY", "CapacityBelief", "RestRecovery", "fit_nasa_law",
            "fit_rest_recovery", "forecast_score", "nasa_leave_one_cell_out", "nasa_life_points"]
@@ -123,7 +124,7 @@ def fit_nasa_law(lives: list[LifePoints]) -> AgingLaw:
     (:func:`~uam_studio.fleet.aging.fit_resistance_growth`)."""
     if not lives:
         raise InputError("lives", "no life to fit")
-    inv = [1.0 / (T_REF_C + ZERO_C_K) - 1.0 / (lf.temperature_c + ZERO_C_K) for lf in lives]
+    inv = [1.0 / (T_REF_C + ZERO_C) - 1.0 / (lf.temperature_c + ZERO_C) for lf in lives]
     n = len(lives)
 
     def residual(p: np.ndarray) -> np.ndarray:

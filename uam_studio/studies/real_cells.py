@@ -38,7 +38,14 @@ from pathlib import Path
 import numpy as np
 
 from uam_studio.battery import fit_health, simulate, simulate_constant_power
-from uam_studio.battery.parameters import NASA_18650, VTC6, VTC6_CELL_HELD_OUT, VTC6_LANDING_HELD_OUT, Cell
+from uam_studio.battery.parameters import (
+    NASA_18650,
+    VTC6,
+    VTC6_CELL_HELD_OUT,
+    VTC6_LANDING_HELD_OUT,
+    ZERO_C,
+    Cell,
+)
 from uam_studio.battery.real.cmu_data import (
     LANDING,
     LIFE_FILES,
@@ -49,7 +56,7 @@ from uam_studio.battery.real.cmu_data import (
     mission_cycle,
     reference_discharges,
 )
-from uam_studio.battery.real.cmu_replay import ZERO_C, identify_vtc6, replay_mission
+from uam_studio.battery.real.cmu_replay import identify_vtc6, replay_mission
 from uam_studio.errors import InputError
 
 CONTEXTS_S = (20, 60, 120)

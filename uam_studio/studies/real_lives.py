@@ -41,7 +41,7 @@ from uam_studio.battery.health.quality import (
     not_white,
     residual_autocorrelation,
 )
-from uam_studio.battery.parameters import Cell, CellParameters
+from uam_studio.battery.parameters import ZERO_C, Cell, CellParameters
 from uam_studio.battery.real.cmu_data import (
     LANDING,
     LIFE_FILES,
@@ -54,7 +54,6 @@ from uam_studio.battery.real.cmu_data import resampled_missions as find_missions
 from uam_studio.battery.real.cmu_replay import (
     START_Q_MAX,
     START_R0,
-    ZERO_C,
     mission_current,
     mission_segment,
     reference_segment,

@@ -91,8 +91,7 @@ class BatteryLabState(param.Parameterized):
         self.dispatch = dispatch or (lambda cb: cb())
         self._worker: LatestWorker[None, dict[str, Any]] = LatestWorker(
             lambda _: self.curves(), self._apply, _lab_failed, dispatch=self.dispatch)
-        if self.cell != NASA_NAME:  # a cell given at construction: its box, and its health unless given too
-            self._set_cell(self.cell, params.get("q_max"), params.get("r0"))
+        self._set_cell(self.cell, params.get("q_max"), params.get("r0"))  # its box; its health unless given
         self.param.watch(self._on_cell, "cell")  # precedence 0: before refresh, the cell's bounds and health
         self.param.watch(lambda *_: self.refresh(), list(self.INPUTS), precedence=1)
         self.refresh()

@@ -23,6 +23,7 @@ from uam_studio.battery.parameters import (
     VTC6_FLEET_Q_RANGE,
     VTC6_FLEET_R0_RANGE,
     VTC6_PARAMS,
+    ZERO_C,
     Cell,
     CellParameters,
 )
@@ -49,7 +50,6 @@ from uam_studio.errors import InputError
 
 IDENTIFICATION_FILE = "VAH07.csv.mat"
 FINE_DT_S = 1.0  # s: largest step of the fit's simulations of resampled logs
-ZERO_C = 273.15
 HOLD_OUTS = ("none", "landing", "cell")
 
 

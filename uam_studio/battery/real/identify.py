@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from uam_studio.battery.electrochem import equilibrium_voltage, redlich_kister, surface_fractions
-from uam_studio.battery.parameters import CellParameters
+from uam_studio.battery.parameters import ZERO_C, CellParameters
 from uam_studio.battery.simulate import simulate
 from uam_studio.battery.solver import integrate_current
 from uam_studio.battery.state import rested_state
@@ -119,7 +119,7 @@ def _design(theta: np.ndarray, segments: list[FitSegment], base: CellParameters)
         rhs.append(np.asarray(seg.voltage_v, float) - fixed)
         weights.append(np.full(len(fixed), seg.weight / np.sqrt(len(fixed))))
         if seg.temperature_c is not None:
-            miss = states["tb"][0, seg.observed] - 273.15 - seg.temperature_c
+            miss = states["tb"][0, seg.observed] - ZERO_C - seg.temperature_c
             temps.append(miss * TEMPERATURE_WEIGHT_V_PER_K * seg.weight / np.sqrt(len(miss)))
     extra = np.concatenate(temps) if temps else np.zeros(0)
     return cell, q_max, r0, np.concatenate(rows), np.concatenate(rhs), np.concatenate(weights), extra

@@ -18,15 +18,18 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import brentq, least_squares
 
+from uam_studio.battery.eod import first_below
 from uam_studio.battery.parameters import (
     DEFAULT_CELL,
     NASA_ID_FLEET_Q_RANGE,
     NASA_ID_FLEET_R0_RANGE,
+    ZERO_C,
     Cell,
     CellParameters,
 )
@@ -42,7 +45,6 @@ IDENTIFY_CELL = "B0005"
 IDENTIFY_DISCHARGES = (0, 1, 2)
 BIAS_WINDOW = 10  # discharges: the method's running bias is the median of this many last relative errors
 SAME_LOAD_A, SAME_AMBIENT_C = 0.1, 3.0  # A, C: an earlier discharge this close in mean load and ambient is "the same"
-ZERO_C = 273.15
 DT_S = 1.0  # s: the model's step on a discharge's grid
 SIM_FLOOR_V = 2.5  # V: the lowest cut-off the model runs to
 FIT_ABOVE_V = 2.8  # V: a discharge's health is fitted to its samples above this
@@ -85,7 +87,7 @@ def _start() -> CellParameters:
                    fleet_r0_range=NASA_ID_FLEET_R0_RANGE)
 
 
-def identify_nasa(folder=None, max_nfev: int = 300) -> Cell:
+def identify_nasa(folder: str | os.PathLike | None = None, max_nfev: int = 300) -> Cell:
     """Identify the NASA 18650 on :data:`IDENTIFY_CELL`'s first :data:`IDENTIFY_DISCHARGES` discharges in
     ``folder`` (default: :func:`nasa_folder`); about a minute. Reads no other cell."""
     cell = load_nasa_cell(nasa_folder(folder) / f"{IDENTIFY_CELL}.csv.gz")
@@ -103,9 +105,8 @@ def time_to_cutoff_s(current_a: np.ndarray, q_max: float, r0: float, params: Cel
                      cutoff_v: float) -> float:
     """Time (s) the model takes along ``current_a`` (A, :data:`DT_S` grid) to fall below ``cutoff_v`` (V);
     the profile's length if it never does."""
-    v = _voltage(current_a, q_max, r0, params, t0_k)
-    below = np.flatnonzero(v < cutoff_v)
-    return float((below[0] + 1) * DT_S) if below.size else float(current_a.size * DT_S)
+    k = int(first_below(_voltage(current_a, q_max, r0, params, t0_k), cutoff_v))
+    return float((k + 1) * DT_S) if k >= 0 else float(current_a.size * DT_S)
 
 
 def discharge_health(d: NasaDischarge, params: CellParameters, start: tuple[float, float],
