@@ -68,6 +68,21 @@ def page_figure(**kwargs: Any) -> Any:
     return fig
 
 
+def derived_looks(fig: Any) -> Any:
+    """``fig`` with each glyph renderer's non-selected and muted looks left for BokehJS to derive from its
+    glyph (``"auto"``: the glyph with its fill at alpha 0.2, its line as it is), where
+    :mod:`bokeh.plotting`'s glyph methods build both as models of their own: two models fewer per
+    renderer for the server to build, track and send with every new page. Call it once the figure's
+    glyphs are drawn."""
+    from bokeh.models.renderers import GlyphRenderer
+
+    for r in fig.renderers:
+        if isinstance(r, GlyphRenderer):
+            r.nonselection_glyph = "auto"
+            r.muted_glyph = "auto"
+    return fig
+
+
 def legend_above(fig: Any) -> None:
     """Move the legend that ``fig``'s ``legend_label`` glyphs made above the plot, in one row, without
     the empty band Bokeh leaves around it."""

@@ -25,6 +25,7 @@ from uam_studio.app.style import (
     NAME_OFFSET_PX,
     PHYSICS_COLOR,
     PREDICTED_COLOR,
+    derived_looks,
     legend_above,
     page_figure,
     window_height,
@@ -158,7 +159,7 @@ class FlyView(pn.viewable.Viewer):
                  background_fill_alpha=0.85)
         fig.scatter("x_km", "y_km", source=self.pos, marker="triangle", size=16, color=EOD_COLOR)
         fig.add_tools(HoverTool(renderers=[dots], tooltips=[("", "@name"), ("x (km)", "@x_km"), ("y (km)", "@y_km")]))
-        self.map_fig = fig
+        self.map_fig = derived_looks(fig)
 
         self.curves = {key: ColumnDataSource({"time_min": [], "voltage_v": []}) for key, _, _ in VOLTAGE_SERIES}
         self.cutoff = ColumnDataSource({"x": [], "y": []})
@@ -182,7 +183,7 @@ class FlyView(pn.viewable.Viewer):
         self.now_line = Span(location=0.0, dimension="height", line_color="black", line_width=1)
         fig.add_layout(self.now_line)
         legend_above(fig)
-        self.volt_fig = fig
+        self.volt_fig = derived_looks(fig)
         self._draw_flight()
 
     def _draw_flight(self) -> None:

@@ -35,6 +35,7 @@ from uam_studio.app.style import (
     NAME_OFFSET_PX,
     PHYSICS_COLOR,
     PREDICTED_COLOR,
+    derived_looks,
     legend_above,
     page_figure,
 )
@@ -121,7 +122,7 @@ class PlannerPlots:
         fig.toolbar.active_tap = draw
         fig.toolbar.active_drag = draw
         self._points_src.on_change("data", self._on_points_edit)
-        return fig
+        return derived_looks(fig)
 
     def _draw_points(self, frame: pd.DataFrame) -> None:
         """The destinations (``frame``: the table's rows), their names and the vertiport on the map."""
@@ -164,7 +165,7 @@ class PlannerPlots:
         fig.add_tools(HoverTool(renderers=[bars], tooltips=[("leg", "@leg"), ("altitude (m)", "@altitude_m")]))
         fig.xaxis.ticker = FixedTicker(ticks=[1.0])
         fig.xaxis.major_label_orientation = np.radians(30)
-        return fig
+        return derived_looks(fig)
 
     def _draw_altitude(self, data: dict[str, list]) -> None:
         """Put :meth:`_route_data`'s legs in the altitude figure (or say that nothing is flown)."""
@@ -237,7 +238,7 @@ class PlannerPlots:
         fig.add_layout(Legend(items=list(items.values()), orientation="horizontal", label_text_font_size="8pt",
                               margin=0, padding=4), "above")
         self._voltage_src, self._voltage_items = src, items
-        return fig
+        return derived_looks(fig)
 
     def _draw_voltage(self, data: dict[str, Any]) -> None:
         """Put :meth:`_voltage_data`'s frame in the voltage figure: its series, the axes' ranges (which
@@ -295,7 +296,7 @@ class PlannerPlots:
         fig.add_tools(HoverTool(renderers=[dots], tooltips=[("PC1", "@PC1{0.00}"), ("PC2", "@PC2{0.00}"),
                                                              ("R0 (ohm)", "@r0{0.000}"), ("q_max (C)", "@q_max{0}")]))
         legend_above(fig)
-        return fig
+        return derived_looks(fig)
 
     def _draw_health(self, data: tuple[float, float] | None) -> None:
         """Put this cell's estimate (PC1, PC2) on the health figure (none: no star)."""
