@@ -138,9 +138,18 @@ def test_the_front_keeps_serving_when_an_app_process_ends(tmp_path):
 
     from uam_studio.app.serve import child_pids
 
+    def cmdline(pid: int) -> str:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+
     with ServedApp(tmp_path, args=["--num-procs", "2"]) as app:
-        workers = child_pids(app.proc.pid)
+        children = child_pids(app.proc.pid)
+        workers = [pid for pid in children if "uam_studio.cli" in cmdline(pid)]
         assert len(workers) == 2, workers
+        # the app processes share the front's one comparison worker and start no comparison process of
+        # their own (each did before, at its warm-up)
+        assert sum("multiprocessing.spawn" in cmdline(pid) for pid in children) == 1, children
+        time.sleep(3.0)
+        assert [pid for w in workers for pid in child_pids(w)] == []
         os.kill(workers[0], signal.SIGKILL)
         time.sleep(3.0)
 

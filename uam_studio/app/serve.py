@@ -192,8 +192,10 @@ def serve_front(port: int, show: bool, address: str, allow_origin: Sequence[str]
     Before forking, this process loads what every session reads (panel's extensions, the Dynaformer and
     the health population), so the app processes share those pages (copy on write) instead of loading
     them ``n`` times. Each app process then listens on a free loopback port and warms up as a single
-    server does. An app process that ends is logged and gets no new pages; when none is left, the front
-    stops too.
+    server does. The app processes share the front's comparison workers
+    (:class:`~uam_studio.app.planner.comparison_pool.SharedComparisons`: one per four app processes) instead
+    of one comparison process each. An app process that ends is logged and gets no new pages; when none is
+    left, the front stops too.
     """
     import panel as pn
     from tornado.httpserver import HTTPServer
@@ -202,6 +204,8 @@ def serve_front(port: int, show: bool, address: str, allow_origin: Sequence[str]
 
     from uam_studio.app.front import MAX_MESSAGE_BYTES, AppProcesses, front_application
     from uam_studio.app.main import EXTENSIONS
+    from uam_studio.app.planner.comparison import use_shared_workers
+    from uam_studio.app.planner.comparison_pool import SharedComparisons
     from uam_studio.app.services import population
     from uam_studio.app.session import configure_server_threads
 
@@ -212,8 +216,9 @@ def serve_front(port: int, show: bool, address: str, allow_origin: Sequence[str]
     public_port = int(sockets[0].getsockname()[1])
     allowed = allowed_hosts(public_port, address, allow_origin)
     ports = [free_loopback_port() for _ in range(n)]
+    comparisons = SharedComparisons(n)  # its queues before the fork, its workers after
     pids: list[int] = []
-    for p in ports:
+    for slot, p in enumerate(ports):
         sys.stdout.flush()
         sys.stderr.flush()
         pid = os.fork()
@@ -222,6 +227,7 @@ def serve_front(port: int, show: bool, address: str, allow_origin: Sequence[str]
             try:
                 for s in sockets:
                     s.close()
+                use_shared_workers(*comparisons.client(slot))
                 serve_app(p, False, "127.0.0.1", hosts=allowed)
             except BaseException:  # noqa: BLE001 - reported, then this process ends with 1
                 traceback.print_exc()
@@ -235,6 +241,7 @@ def serve_front(port: int, show: bool, address: str, allow_origin: Sequence[str]
                 os._exit(code)
         pids.append(pid)
     try:
+        comparisons.start()
         procs = AppProcesses(ports)
         for k, (p, pid) in enumerate(zip(ports, pids)):
             if not _wait_listening(p, pid):
@@ -257,6 +264,8 @@ def serve_front(port: int, show: bool, address: str, allow_origin: Sequence[str]
                                       status)
             if not any(procs.alive):
                 loop.stop()
+            for w in comparisons.check():
+                log.error("comparison worker %d ended; replaced", w)
 
         watch = PeriodicCallback(check, 1000)
         watch.start()

@@ -44,6 +44,7 @@ __all__ = [
     "comparison_runner",
     "comparison_table",
     "store_row",
+    "use_shared_workers",
 ]
 
 COMPARE_ENV = "UAM_STUDIO_COMPARE"  # where comparison plans run: "process", "thread", "inline" or "off"
@@ -183,6 +184,18 @@ def _runner_main(requests: Any, results: Any, parent_pid: int, nice: int) -> Non
         results.put(compare_row(*item))
 
 
+_SHARED: tuple[Any, Any, int] | None = None  # (requests, this process's rows, its slot): use_shared_workers
+
+
+def use_shared_workers(requests: Any, results: Any, slot: int) -> None:
+    """This app process computes its comparisons in the front's shared workers
+    (:class:`~uam_studio.app.planner.comparison_pool.SharedComparisons`): it sends ``(slot, mission,
+    policy)`` on the pipe end ``requests`` and reads its rows from the pipe end ``results``, and starts no
+    comparison process of its own."""
+    global _SHARED
+    _SHARED = (requests, results, slot)
+
+
 @dataclass
 class _Task:
     req: PlanRequest
@@ -254,7 +267,7 @@ class ComparisonRunner:
             self._cv.notify_all()
 
     def _ensure_process(self) -> None:
-        if self._closed or (self._proc is not None and self._proc.is_alive()):
+        if self._closed or _SHARED is not None or (self._proc is not None and self._proc.is_alive()):
             return
 
         ctx = multiprocessing.get_context("spawn")  # no fork of a threaded server
@@ -302,6 +315,8 @@ class ComparisonRunner:
                 return {"status": "error", "error": "comparison failed: the server is stopping"}
             self._ensure_process()
             proc, requests, results = self._proc, self._requests, self._results
+        if _SHARED is not None:
+            return self._run_shared(req, *_SHARED)
         requests.put((req.mission, req.policy))
         while True:
             try:
@@ -310,6 +325,18 @@ class ComparisonRunner:
                 if not proc.is_alive():
                     return {"status": "error", "error": f"comparison failed: the worker process exited "
                                                         f"(code {proc.exitcode})"}
+
+    @staticmethod
+    def _run_shared(req: PlanRequest, requests: Any, results: Any, slot: int) -> dict[str, Any]:
+        """One row from the front's shared workers (one request of this process in flight at a time, so
+        the next row on ``results`` is its row)."""
+        front = os.getppid()
+        requests.send((slot, req.mission, req.policy))
+        while not results.poll(1.0):
+            if os.getppid() != front:
+                return {"status": "error", "error": "comparison failed: the server is stopping"}
+        row: dict[str, Any] = results.recv()
+        return row
 
     def wait_idle(self, timeout: float = 60.0) -> bool:
         """Block until no task is waiting or running, at most ``timeout`` s (tests, benchmarks)."""
