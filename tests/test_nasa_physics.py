@@ -93,6 +93,14 @@ def test_the_identification_reads_only_its_cell_and_prints_the_bundled_set(monke
     assert cell.params.fleet_q_range == NASA_IDENTIFIED.params.fleet_q_range
 
 
+def test_identifying_from_a_folder_without_the_cell_is_one_line_naming_the_folder(tmp_path, capsys):
+    from uam_studio.cli import main
+
+    assert main(["identify", "nasa-cell", "--data", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "data" in err and str(tmp_path) in err and "B0005" in err, err
+
+
 @needs_data
 def test_on_a_held_out_life_the_identified_cell_beats_progpys_set():
     d = load_nasa_cell(nasa_folder() / "B0007.csv.gz").discharges[0]

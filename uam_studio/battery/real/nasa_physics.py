@@ -34,7 +34,14 @@ from uam_studio.battery.parameters import (
     CellParameters,
 )
 from uam_studio.battery.real.identify import FitSegment, identify_cell
-from uam_studio.battery.real.nasa_data import LOADED_A, NasaCell, NasaDischarge, load_nasa_cell, nasa_folder
+from uam_studio.battery.real.nasa_data import (
+    LOADED_A,
+    NasaCell,
+    NasaDataError,
+    NasaDischarge,
+    load_nasa_cell,
+    nasa_folder,
+)
 from uam_studio.battery.real.nasa_predict import KnownDischarge, known_before
 from uam_studio.battery.simulate import simulate
 
@@ -89,8 +96,15 @@ def _start() -> CellParameters:
 
 def identify_nasa(folder: str | os.PathLike | None = None, max_nfev: int = 300) -> Cell:
     """Identify the NASA 18650 on :data:`IDENTIFY_CELL`'s first :data:`IDENTIFY_DISCHARGES` discharges in
-    ``folder`` (default: :func:`nasa_folder`); about a minute. Reads no other cell."""
-    cell = load_nasa_cell(nasa_folder(folder) / f"{IDENTIFY_CELL}.csv.gz")
+    ``folder`` (default: :func:`nasa_folder`); about a minute. Reads no other cell.
+
+    :raises NasaDataError: (field ``data``) the folder holds no such cell file; or the file's own errors.
+    """
+    data = nasa_folder(folder)
+    path = data / f"{IDENTIFY_CELL}.csv.gz"
+    if not path.is_file():
+        raise NasaDataError(path, "data", f"no {path.name} in {data}")
+    cell = load_nasa_cell(path)
     segs = [fit_segment(cell.discharges[i]) for i in IDENTIFY_DISCHARGES]
     fit = identify_cell(segs, _start(), 7000.0, 0.1, max_nfev=max_nfev)
     name = f"NASA 18650 (identified on {IDENTIFY_CELL}'s first {len(IDENTIFY_DISCHARGES)} discharges)"
