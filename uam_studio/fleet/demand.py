@@ -12,6 +12,7 @@ import math
 import numbers
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -39,7 +40,7 @@ def _check_small_int(field: str, value: object, lo: int, hi: int, allowed: str) 
         raise InputError(field, f"{value!r}: allowed {allowed}")
 
 
-def _ascii_digits(value: object) -> object:
+def _ascii_digits(value: Any) -> Any:
     """A CSV cell of ASCII digits as an int; anything else unchanged (for the checks to refuse)."""
     return int(value) if isinstance(value, str) and value.strip().isdigit() and value.isascii() else value
 

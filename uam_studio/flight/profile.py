@@ -218,7 +218,7 @@ def leg_charges_c(distance_km: np.ndarray, altitudes_m, wind_kts: np.ndarray) ->
 def _phase_charge_terms(altitudes_m: tuple[float, ...]) -> tuple[np.ndarray | None, ...]:
     """Per phase, in ``PHASES`` order: power x duration (kW s) of a non-cruise phase at each
     altitude (m), None for the cruise (it depends on the leg)."""
-    terms = []
+    terms: list[np.ndarray | None] = []
     for name in PHASES:
         if name == "cruise":
             terms.append(None)

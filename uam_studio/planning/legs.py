@@ -21,7 +21,7 @@ import numpy as np
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_charges_c, leg_profile, min_leg_distance_km
 from uam_studio.flight.profile import MAX_DISTANCE_KM
-from uam_studio.planning.missions.mission import MAX_DESTINATIONS, PAPER_DESTINATIONS, Mission
+from uam_studio.planning.missions.mission import MAX_DESTINATIONS, PAPER_DESTINATIONS, Destination, Mission, Vertiport
 
 N_MAX = PAPER_DESTINATIONS  # destination slots of the discrete action space (the paper's DQN, the exact oracle)
 ALTITUDES_M = (500.0, 1000.0, 2000.0, 3000.0)  # the paper's cruise levels (m)
@@ -88,7 +88,7 @@ class LegTable:
         n_nodes = self.slots + 1
         self.n = len(dests)
         self.names = tuple(d.name for d in dests) + ("vertiport",)
-        nodes = [*dests, mission.vertiport]
+        nodes: list[Destination | Vertiport] = [*dests, mission.vertiport]
         idx = list(range(self.n)) + [self.home]
         self.index = idx  # node index of nodes[k]
         self.present = np.zeros(n_nodes, dtype=bool)

@@ -6,6 +6,7 @@ Distances and sizes are in km on the map (text sizes at the map's default zoom);
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -108,8 +109,8 @@ def label_box(x: float, y: float, text: str) -> Box:
     return x - half_w, y - half_h, x + half_w, y + half_h
 
 
-def altitude_labels(legs: dict[str, list], nodes: list[tuple[float, float]] = (),
-                    names: list[str] = ()) -> dict[str, list]:
+def altitude_labels(legs: dict[str, list], nodes: Sequence[tuple[float, float]] = (),
+                    names: Sequence[str] = ()) -> dict[str, list]:
     """One map label per pair of places the route flies between: the legs' numbers and altitudes in
     flying order (``"#1 500 m"``, or ``"#1/#2 1000/500 m"`` out and back), so out-and-back legs
     share one label.

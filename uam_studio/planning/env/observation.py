@@ -81,7 +81,7 @@ def observe(base: np.ndarray, rel_all: np.ndarray, legs: LegTable, node: int, vo
     f[_VP:_VP + 3] = rel[VERTIPORT_SLOT]
     vp = VERTIPORT_SLOT
     for k in np.flatnonzero(servable & ~visited):
-        trip = legs.cheapest_charge(node, k) + legs.cheapest_charge(k, vp) if k != node else 0.0
+        trip = legs.cheapest_charge(node, int(k)) + legs.cheapest_charge(int(k), vp) if k != node else 0.0
         f[_TRIP + k] = trip / CHARGE_SCALE_C if np.isfinite(trip) else FEATURE_BOUND
     f[_TRIP + N_MAX] = 0.0 if node == vp else legs.cheapest_charge(node, vp) / CHARGE_SCALE_C
     np.clip(f, -FEATURE_BOUND, FEATURE_BOUND, out=f)

@@ -186,10 +186,10 @@ class World:
         start = self.time_s - DT_S * self._checked_s
         wind = self.wind(to, start)
         m = self.mission
-        prof = leg_profile(m.distance_km(self.node, to), altitude_m, wind, DT_S, m.node(to).dwell_s
-                           if to != VERTIPORT else 0.0)
+        prof = leg_profile(m.distance_km(self.node, to), altitude_m, wind, DT_S,
+                           getattr(m.node(to), "dwell_s", 0.0))
         cur = np.asarray(prof.current_a, dtype=float)
-        if self._checked_s:
+        if self._checked_s and self._takeoff_current is not None:
             cur = np.concatenate([self._takeoff_current[: self._checked_s], cur[self._checked_s:]])
         rest = cur[self._checked_s:]
         t0 = self.time_s
