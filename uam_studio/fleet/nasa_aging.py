@@ -82,9 +82,9 @@ def nasa_life_points(data: str | Path | None = None) -> list[LifePoints]:
         for r in csv.DictReader(fh):
             rows.setdefault(r["battery_id"], []).append(r)
     condition = {}
-    for cell in load_nasa_folder(folder, [c for c in sorted(rows) if (folder / f"{c}.csv.gz").is_file()]):
-        for d in cell.discharges:
-            condition[(cell.name, d.uid)] = (round(d.mean_load_a() * 2) / 2, round(d.ambient_c / 5) * 5)
+    for nasa in load_nasa_folder(folder, [c for c in sorted(rows) if (folder / f"{c}.csv.gz").is_file()]):
+        for d in nasa.discharges:
+            condition[(nasa.name, d.uid)] = (round(d.mean_load_a() * 2) / 2, round(d.ambient_c / 5) * 5)
     out = []
     for cell, rs in sorted(rows.items()):
         rs.sort(key=lambda r: int(r["uid"]))

@@ -24,14 +24,15 @@ import os
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
 from uam_studio.battery.parameters import DEFAULT_EOD_V
 from uam_studio.errors import DataFileError
 
-__all__ = ["COLUMNS", "LOADED_A", "MIN_SAMPLES", "NasaCell", "NasaDataError", "NasaDischarge", "load_nasa_cell",
-           "load_nasa_folder", "nasa_cell_files", "nasa_folder", "persistence_s", "same_conditions"]
+__all__ = ["COLUMNS", "LOADED_A", "MIN_SAMPLES", "NasaCell", "NasaDataError", "NasaDischarge", "RunConditions",
+           "load_nasa_cell", "load_nasa_folder", "nasa_cell_files", "nasa_folder", "persistence_s", "same_conditions"]
 
 COLUMNS = ("discharge", "uid", "ambient_C", "time_s", "voltage_V", "current_A", "temperature_C",
            "current_load_A", "voltage_load_V")
@@ -218,7 +219,17 @@ def load_nasa_folder(folder: str | os.PathLike, cells: list[str] | None = None,
     return [load_nasa_cell(f, cutoff_v) for f in nasa_cell_files(folder, cells)]
 
 
-def same_conditions(a: NasaDischarge, b: NasaDischarge, load_tol_a: float = 0.1, ambient_tol_c: float = 3.0) -> bool:
+class RunConditions(Protocol):
+    """What :func:`same_conditions` reads of a discharge, finished or known only up to its context: its
+    ambient (C) and its mean load (A)."""
+
+    @property
+    def ambient_c(self) -> float: ...
+
+    def mean_load_a(self) -> float: ...
+
+
+def same_conditions(a: RunConditions, b: RunConditions, load_tol_a: float = 0.1, ambient_tol_c: float = 3.0) -> bool:
     """Whether two discharges ran at the same mean load (within ``load_tol_a``, A) and ambient (within
     ``ambient_tol_c``, C): where a previous discharge can stand for the next."""
     return abs(a.mean_load_a() - b.mean_load_a()) <= load_tol_a and abs(a.ambient_c - b.ambient_c) <= ambient_tol_c

@@ -137,7 +137,8 @@ def _pairs(cells: list[NasaCell], context_s: float, cutoff_v: float) -> tuple[np
                       and q.time_to_cutoff_s(cutoff_v) is not None), None)
             if p is None:
                 continue
-            t_p = float(p.time_to_cutoff_s(cutoff_v))
+            t_p = p.time_to_cutoff_s(cutoff_v)
+            assert t_p is not None  # p was picked for reaching it
             y.append((t - t_p) / t_p)
             dv.append(voltage_shift_v(known_before(d, context_s), p))
             band.append("early" if seen < EARLY else ambient_band(d.ambient_c))
@@ -227,7 +228,7 @@ def evaluate_nasa(cells: list[NasaCell], bundled: NasaEodModel, training: list[N
 
 def ended_in_context(cell: NasaCell, context_s: float) -> int:
     """How many of ``cell``'s discharges reach its cut-off within ``context_s`` (s): nothing to predict."""
-    return sum(1 for d in cell.discharges if float(d.time_to_cutoff_s(cell.cutoff_v)) <= context_s)
+    return sum(1 for d in cell.discharges if (t := d.time_to_cutoff_s(cell.cutoff_v)) is not None and t <= context_s)
 
 
 def _stats(rows: list[ScoredDischarge]) -> dict:

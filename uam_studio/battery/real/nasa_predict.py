@@ -244,7 +244,8 @@ class CellBelief:
         """The history prediction of ``known`` from ``p`` before the cell's own bias (s)."""
         key = (known.index, p.index, known.context_s)
         if key not in self._centres:
-            t_p = float(p.time_to_cutoff_s(self.model.cutoff_v))
+            t_p = p.time_to_cutoff_s(self.model.cutoff_v)
+            assert t_p is not None  # previous() returns only discharges that reached the cut-off
             self._centres[key] = t_p * max(1.0 + self.model.a + self.model.b * voltage_shift_v(known, p), 0.05)
         return self._centres[key]
 
@@ -262,7 +263,9 @@ class CellBelief:
         if last is None:
             charge = target
         else:
-            delivered = float(charge_to_cutoff_ah(last, cut))
+            reached = charge_to_cutoff_ah(last, cut)
+            assert reached is not None  # ``last`` reached the cut-off
+            delivered = float(reached)
             then, near_then = self.model.condition_charge_ah(last.mean_load_a(), last.ambient_c, young=False)
             charge = delivered * target / then
             near = near and near_then
