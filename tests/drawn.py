@@ -30,7 +30,7 @@ PLANNER_VOLTAGE = {"physics": (PHYSICS_COLOR, 1.0), "Dynaformer": (PREDICTED_COL
 
 def lab_voltage(labels: list[str]) -> dict[str, tuple[str, float]]:
     """The Battery lab's voltage figure: its family's curves in legend order (``None``: a curve not asked
-    for, e.g. one hidden under the black "this setting" curve), the black curve and the EOD line."""
+    for, e.g. one that ends under the others' first sample), the black "this setting" curve and the EOD line."""
     return {label: (FAMILY_COLORS[k], 0.8) for k, label in enumerate(labels) if label is not None} | {
         "this setting": BLACK, "EOD": (EOD_COLOR, 1.0)}
 

@@ -526,8 +526,9 @@ def test_battery_lab_draws_every_curve_after_a_factor_change(page, app_url):
     page.locator(".bk-tab", has_text="Battery lab").click()
     table = page.locator(".uam-lab-summary")
     table.get_by_text("altitude 500 m").wait_for()
-    # at 1000 m "this setting" (black) lies on the 1000 m curve; the others show
-    assert_drawn(page, "Voltage (physics", lab_voltage(["altitude 500 m", None, "altitude 2000 m", "altitude 3000 m"]))
+    # at 1000 m "this setting" (black, dashed) lies on the 1000 m curve, which shows in its gaps
+    assert_drawn(page, "Voltage (physics", lab_voltage(["altitude 500 m", "altitude 1000 m", "altitude 2000 m",
+                                                         "altitude 3000 m"]))
     page.locator(".bk-btn", has_text="R0").click()
     table.get_by_text("R0 0.45 ohm").wait_for()
     page.wait_for_function(f"() => ({JS_LAB})().legend.includes('R0 0.3 ohm')")

@@ -100,7 +100,7 @@ class BatteryLabView(pn.viewable.Viewer):
             "One leg flown by one 18650 cell (the pack scaled to a cell), repeated without recharging: the "
             "paper's NASA cell (progpy's parameters), the same cell type identified on a real NASA cell's "
             "discharges (B0005), or a Sony VTC6 identified on the CMU eVTOL dataset's cells (same current). "
-            "Pick the factor to vary: the thin curves sweep it over its range, the black curve is the "
+            "Pick the factor to vary: the thin curves sweep it over its range, the black dashed curve is the "
             "setting of the sliders.")
         controls = pn.Column(heading("Leg and cell"), *self.widgets.values(), width=270)
         plots = pn.Column(pn.Row(heading("Current and voltage"), self.busy),
@@ -190,7 +190,8 @@ class BatteryLabView(pn.viewable.Viewer):
     def _curves(series: dict[str, tuple], labels: list[str], ylabel: str) -> list[hv.Curve]:
         out = []
         for k, label in enumerate(labels):
-            style = dict(color="black", line_width=2.5) if label == SETTING else \
+            # the setting dashed, over the family: a family member equal to it shows in the gaps
+            style = dict(color="black", line_width=2.5, line_dash="dashed") if label == SETTING else \
                 dict(color=FAMILY_COLORS[k % len(FAMILY_COLORS)], line_width=1.2, alpha=0.8)
             out.append(hv.Curve(series[label], "time (min)", ylabel, label=label).opts(**style))
         return out
