@@ -7,5 +7,6 @@ Dynaformer predicts against the physics model.
 - :mod:`.view`: :class:`~uam_studio.app.planner.view.PlannerView`, with :mod:`.plots` (its figures),
   :mod:`.summary` (summary and comparison panes) and :mod:`.map_geometry` (the route's geometry, free of Panel);
 - shared by every session of a process: :mod:`.plans` (the plan cache) and :mod:`.comparison` (the
-  comparison's runner).
+  comparison's runner); by every app process behind a front: :mod:`.comparison_pool` (the comparison
+  workers).
 """

@@ -207,7 +207,8 @@ class ComparisonRunner:
 
     ``mode="process"`` (the served app): in one ``spawn`` child process at a lower CPU priority
     (``nice``), with one torch thread, so that an exact oracle taking seconds shares neither the GIL
-    nor a core's priority with the sessions' own replanning. ``mode="thread"``: in a thread of this
+    nor a core's priority with the sessions' own replanning; behind a front (:func:`use_shared_workers`), in
+    the front's shared workers instead of a child of its own. ``mode="thread"``: in a thread of this
     process. Each owner (a session) has a list of waiting tasks, replaced by :meth:`submit` and
     dropped by :meth:`cancel`; a task already running finishes. Owners take turns. Each result is
     stored (:func:`store_row`) and handed to the task's callback in the runner's thread.
