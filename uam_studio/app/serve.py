@@ -216,7 +216,7 @@ def serve_front(port: int, show: bool, address: str, allow_origin: Sequence[str]
     public_port = int(sockets[0].getsockname()[1])
     allowed = allowed_hosts(public_port, address, allow_origin)
     ports = [free_loopback_port() for _ in range(n)]
-    comparisons = SharedComparisons(n)  # its queues before the fork, its workers after
+    comparisons = SharedComparisons(n)  # its pipes before the fork, its workers after
     pids: list[int] = []
     for slot, p in enumerate(ports):
         sys.stdout.flush()
