@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import signal
+import struct
 import time
 
 from uam_studio.app.planner import comparison
@@ -60,6 +61,31 @@ def test_two_app_slots_share_one_worker_and_a_worker_that_ends_is_replaced(monke
         monkeypatch.setattr(comparison, "_SHARED", pool.client(0))
         row = ComparisonRunner("process")._run(PlanRequest(mission, "greedy"))
         assert row["status"] == "done" and {k: v for k, v in row.items() if k != "elapsed_s"} == want
+    finally:
+        for proc in pool.procs:
+            proc.kill()
+
+
+def test_an_app_process_that_ends_mid_request_leaves_the_worker_serving_the_others(monkeypatch):
+    """Slot 1's app writes half a request and ends (its pipe end closes): the worker drops the slot and
+    answers slot 0, both served by the one worker."""
+    pool = SharedComparisons(n_apps=2)
+    pool.start()
+    try:
+        monkeypatch.setattr(comparison, "_SHARED", pool.client(0))
+        mission = mission_from_dict({**EXAMPLE_MISSION, "name": "Half"})
+        runner = ComparisonRunner("process")
+        assert runner._run(PlanRequest(mission, "greedy"))["status"] == "done"  # the worker is up
+        worker = pool.procs[0]
+        half = struct.pack("!i", 4096) + b"x" * 10  # a length header and 10 of its 4,096 bytes
+        writer = pool.client(1)[0]
+        os.write(writer.fileno(), half)
+        writer.close()
+        time.sleep(1.0)
+        assert worker.is_alive() and pool.check() == []
+        row = runner._run(PlanRequest(mission, "oracle"))
+        assert row["status"] == "done", row
+        assert pool.procs[0] is worker and worker.is_alive()
     finally:
         for proc in pool.procs:
             proc.kill()

@@ -227,7 +227,7 @@ def serve_front(port: int, show: bool, address: str, allow_origin: Sequence[str]
             try:
                 for s in sockets:
                     s.close()
-                use_shared_workers(*comparisons.client(slot))
+                use_shared_workers(*comparisons.app_side(slot))
                 serve_app(p, False, "127.0.0.1", hosts=allowed)
             except BaseException:  # noqa: BLE001 - reported, then this process ends with 1
                 traceback.print_exc()
@@ -240,6 +240,7 @@ def serve_front(port: int, show: bool, address: str, allow_origin: Sequence[str]
                 sys.stderr.flush()
                 os._exit(code)
         pids.append(pid)
+    comparisons.front_side()
     try:
         comparisons.start()
         procs = AppProcesses(ports)

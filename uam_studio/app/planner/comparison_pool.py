@@ -6,7 +6,10 @@ A single server has one comparison process (:class:`~uam_studio.app.planner.comp
 of requests and a pipe of rows, and a few ``spawn`` worker processes (:func:`shared_worker_count`), each
 serving the app processes of its share of the slots (slot ``s``: worker ``s % n_workers``) at a lower CPU
 priority. Plain pipes, one writer and one reader each, hold no lock that a worker killed mid-wait could
-leave taken, so a replacement reads the same pipes.
+leave taken, so a replacement reads the same pipes. Each process closes the ends it does not use
+(:meth:`SharedComparisons.app_side`, :meth:`SharedComparisons.front_side`): only app process ``s`` writes
+slot ``s``'s requests, so when it ends, even in the middle of a request, its worker reads the end of the
+pipe and drops the slot instead of waiting.
 
 The front makes it before forking the app processes (they inherit the pipes), tells each app process its
 slot (:func:`~uam_studio.app.planner.comparison.use_shared_workers`), then starts the workers
@@ -54,7 +57,7 @@ def _worker_main(requests: dict[int, Any], results: dict[int, Any], busy: Any, w
             conn: Any = ready_conn
             try:
                 _, mission, policy = conn.recv()
-            except EOFError:  # every writer closed
+            except (EOFError, OSError):  # its app process ended (OSError: in the middle of a request)
                 conns.remove(conn)
                 continue
             slot = slot_of[id(conn)]
@@ -84,6 +87,24 @@ class SharedComparisons:
     def client(self, slot: int) -> tuple[Any, Any, int]:
         """What app process ``slot`` needs: (its requests' pipe end, its rows' pipe end, its slot)."""
         return self._requests[slot][1], self._results[slot][0], slot
+
+    def app_side(self, slot: int) -> tuple[Any, Any, int]:
+        """In app process ``slot`` (forked): close every pipe end but its own two, and return them
+        (:meth:`client`)."""
+        for s, ((w_read, a_write), (a_read, w_write)) in enumerate(zip(self._requests, self._results)):
+            w_read.close()
+            w_write.close()
+            if s != slot:
+                a_write.close()
+                a_read.close()
+        return self.client(slot)
+
+    def front_side(self) -> None:
+        """In the front, once every app process is forked: close the app processes' ends (it keeps the
+        workers' ends, to start a replacement and to send a row a worker that ended owed)."""
+        for (_, a_write), (a_read, _) in zip(self._requests, self._results):
+            a_write.close()
+            a_read.close()
 
     def _spawn(self, w: int) -> None:
         slots = range(w, len(self._requests), self.n_workers)
