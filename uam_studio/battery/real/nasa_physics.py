@@ -13,7 +13,8 @@
   enough, and is all it is given): the model at the health of the cell's last finished discharge at the
   same load and ambient (else its last discharge), run along the planned current, divided by one plus the
   median of the method's own relative errors on that cell's last :data:`BIAS_WINDOW` discharges at the
-  same load and ambient (a cell's drift between discharges: fade and rest recovery).
+  same load and ambient (``nasa_data.same_conditions``; a cell's drift between discharges: fade and rest
+  recovery).
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ from uam_studio.battery.real.nasa_data import (
     NasaDischarge,
     load_nasa_cell,
     nasa_folder,
+    same_conditions,
 )
 from uam_studio.battery.real.nasa_predict import KnownDischarge, known_before
 from uam_studio.battery.simulate import simulate
@@ -51,7 +53,6 @@ __all__ = ["BIAS_WINDOW", "IDENTIFY_CELL", "IDENTIFY_DISCHARGES", "LifePredictio
 IDENTIFY_CELL = "B0005"
 IDENTIFY_DISCHARGES = (0, 1, 2)
 BIAS_WINDOW = 10  # discharges: the method's running bias is the median of this many last relative errors
-SAME_LOAD_A, SAME_AMBIENT_C = 0.1, 3.0  # A, C: an earlier discharge this close in mean load and ambient is "the same"
 DT_S = 1.0  # s: the model's step on a discharge's grid
 SIM_FLOOR_V = 2.5  # V: the lowest cut-off the model runs to
 FIT_ABOVE_V = 2.8  # V: a discharge's health is fitted to its samples above this
@@ -180,22 +181,21 @@ def predict_life(cell: NasaCell, cell_type: Cell, cutoff_v: float = 3.0,
     """Every discharge of ``cell`` predicted online by the physics method on ``cell_type`` (module
     docstring). Each prediction reads the earlier discharges and a :func:`known_before` view of its own."""
     out: list[LifePrediction] = []
-    past: list[tuple[float, float, tuple[float, float], float | None]] = []  # load A, ambient C, health, rel
+    past: list[tuple[NasaDischarge, tuple[float, float], float | None]] = []  # discharge, health, rel error
     for d in cell.discharges:
         known = known_before(d, context_s)
-        load, ambient = known.mean_load_a(), float(known.ambient_c)
-        same = [p for p in past if abs(p[0] - load) <= SAME_LOAD_A and abs(p[1] - ambient) <= SAME_AMBIENT_C]
+        same = [p for p in past if same_conditions(p[0], known)]
         base = same or past
-        health = base[-1][2] if base else (cell_type.q_max, cell_type.r0)
+        health = base[-1][1] if base else (cell_type.q_max, cell_type.r0)
         median = raw = None
         if past:
-            raw = _predict(known, health, cell_type.params, ZERO_C + ambient, cutoff_v)
-            rel = [p[3] for p in same if p[3] is not None][-BIAS_WINDOW:]
+            raw = _predict(known, health, cell_type.params, ZERO_C + float(known.ambient_c), cutoff_v)
+            rel = [p[2] for p in same if p[2] is not None][-BIAS_WINDOW:]
             median = raw / (1.0 + float(np.median(rel))) if rel else raw
         true = d.time_to_cutoff_s(cutoff_v)  # the discharge has finished: from here on it is history
         out.append(LifePrediction(d.index, median, true, health[0], health[1]))
         err = raw / true - 1.0 if raw is not None and true else None
-        past.append((load, ambient, discharge_health(d, cell_type.params, health, cutoff_v), err))
+        past.append((d, discharge_health(d, cell_type.params, health, cutoff_v), err))
     return out
 
 
