@@ -54,7 +54,7 @@ class BatteryLabState(param.Parameterized):
     """One leg flown by one cell, plus a family of curves that vary one factor (the paper's figures).
 
     The cell is the paper's NASA 18650, the NASA 18650 identified on real discharges of it (B0005), or
-    the VTC6 identified on the CMU eVTOL cells; both draw the same
+    the VTC6 identified on the CMU eVTOL cells; all three draw the same
     per-cell current (the pack's current shared by its cells). A new cell sets q_max and R0 to its
     nominal health and their ranges to its :data:`HEALTH_BOX`.
 

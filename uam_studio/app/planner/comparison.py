@@ -26,7 +26,7 @@ from uam_studio.app.planner.plans import PlanRequest, cached_plan, request_key
 from uam_studio.app.services import agent_policy, one_line, predictor
 from uam_studio.errors import InputError
 from uam_studio.planning.missions.mission import Mission
-from uam_studio.planning.planners import PLANNERS, REFERENCE_PLANNER
+from uam_studio.planning.planners import PAPER_PLANNER, PLANNERS, POLICIES, REFERENCE_PLANNER
 
 if TYPE_CHECKING:
     from uam_studio.planning.planner import PlanResult
@@ -53,9 +53,9 @@ COMPARE_DELAY_S = 0.3  # a comparison starts once the shown plan has been stable
 COMPARE_CACHE_SIZE = 512
 
 COMPARE_ROWS = ("agent", "default", "paper", "greedy", "oracle")
-DEFAULT_POLICY = "attention"  # the "default" row: the default planner, unless the agent row is it already
-PAPER_POLICY = "dqn"  # the "paper" row: the paper's method beside ours, unless the agent row is a DQN already
-COMPARE_LABELS = {"attention": "Attention (default)", "dqn": "DQN (paper)"}
+DEFAULT_POLICY = POLICIES[0]  # the "default" row: the default planner, unless the agent row is it already
+PAPER_POLICY = PAPER_PLANNER  # the "paper" row: the paper's method beside ours, unless the agent row is one already
+COMPARE_LABELS = {DEFAULT_POLICY: "Attention (default)", PAPER_POLICY: "DQN (paper)"}
 """Short labels of the learned planners in the comparison table (its rows do not wrap)."""
 ORACLE_REFERENCE_LABEL = "Oracle (reference)"
 """The comparison's oracle row where the oracle returned the reference solver's plan (9-20
