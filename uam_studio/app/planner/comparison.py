@@ -43,6 +43,7 @@ __all__ = [
     "compare_row",
     "comparison_runner",
     "comparison_table",
+    "prepare_worker",
     "store_row",
     "use_shared_workers",
 ]
@@ -159,8 +160,8 @@ def store_row(req: PlanRequest, row: dict[str, Any]) -> None:
 # ----------------------------------------------------------------------------- runner
 
 
-def _runner_main(requests: Any, results: Any, parent_pid: int, nice: int) -> None:
-    """The comparison child process: :func:`compare_row` for each request, until the parent is gone."""
+def prepare_worker(nice: int) -> None:
+    """A comparison process's start: ``nice`` lower CPU priority (where allowed) and one torch thread."""
     if nice:
         try:
             os.nice(nice)
@@ -172,6 +173,11 @@ def _runner_main(requests: Any, results: Any, parent_pid: int, nice: int) -> Non
         torch.set_num_threads(1)
     except ImportError:  # pragma: no cover - torch is a dependency
         pass
+
+
+def _runner_main(requests: Any, results: Any, parent_pid: int, nice: int) -> None:
+    """The comparison child process: :func:`compare_row` for each request, until the parent is gone."""
+    prepare_worker(nice)
     while True:
         try:
             item = requests.get(timeout=2.0)

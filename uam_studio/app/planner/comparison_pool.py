@@ -24,7 +24,7 @@ import os
 from multiprocessing.connection import wait
 from typing import Any
 
-from uam_studio.app.planner.comparison import compare_row
+from uam_studio.app.planner.comparison import compare_row, prepare_worker
 
 __all__ = ["SharedComparisons", "shared_worker_count"]
 
@@ -39,14 +39,7 @@ def _worker_main(requests: dict[int, Any], results: dict[int, Any], busy: Any, w
     """Worker ``w``: :func:`compare_row` of each ``(slot, mission, policy)`` request read from its slots'
     request pipes, the row sent on the slot's row pipe, until the front is gone. ``busy[w]`` is the slot
     it is computing for (-1: none)."""
-    if nice:
-        try:
-            os.nice(nice)
-        except OSError:
-            pass
-    import torch
-
-    torch.set_num_threads(1)
+    prepare_worker(nice)
     slot_of = {id(conn): slot for slot, conn in requests.items()}
     conns = list(requests.values())
     while conns:
