@@ -19,15 +19,6 @@ def test_worker_count():
     assert [shared_worker_count(n) for n in (1, 2, 3, 4, 7, 8, 16)] == [1, 1, 1, 1, 1, 2, 4]
 
 
-def _wait(cond, timeout_s: float = 30.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.1)
-    return False
-
-
 def test_two_app_slots_share_one_worker_and_a_worker_that_ends_is_replaced(monkeypatch):
     """Runners of two app slots get their own rows from one worker (no process of their own); a worker that
     ends while it owes slot 1 a row gives slot 1 an error row, and its replacement serves the next request."""
@@ -52,7 +43,8 @@ def test_two_app_slots_share_one_worker_and_a_worker_that_ends_is_replaced(monke
         first = pool.procs[0]
         pool.busy[0] = 1  # as if the worker had taken a request of slot 1
         os.kill(first.pid, signal.SIGKILL)
-        assert _wait(lambda: not first.is_alive())
+        first.join(timeout=30)
+        assert not first.is_alive()
         assert pool.check() == [0] and pool.procs[0] is not first
         assert pool.client(1)[1].poll(5)
         row = pool.client(1)[1].recv()
