@@ -17,8 +17,9 @@ the new complete content, or absent (never written yet); any exception removes t
   written as one more sidecar, ``<name>.sha256`` (:func:`digest_path`); :func:`check_digest` is
   the loaders' check of it.
 - :func:`remove_stale_temps`: delete the temp files a killed writer left in a folder.
+- :func:`make_writable_folder`: create a run's folder and check a file can be written in it, before the run.
 
-No function here creates folders; the destination's folder must exist.
+No other function here creates folders; the destination's folder must exist.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import re
 import secrets
 import socket
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
@@ -292,3 +294,23 @@ def remove_stale_temps(folder: StrPath, names: Iterable[str] | None = None) -> l
         except OSError:  # gone meanwhile, or not ours to delete
             continue
     return removed
+
+
+def make_writable_folder(folder: StrPath, field: str) -> Path:
+    """Create ``folder`` if needed and check that a file can be written in it (before a run's work).
+
+    :raises InputError: (``field``) it exists and is not a folder, or it cannot be created or written in.
+    """
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise InputError(field, f"{folder} exists and is not a folder") from None
+    except OSError as err:
+        raise InputError(field, f"cannot create the folder {folder} ({err.strerror or err})") from None
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as err:
+        raise InputError(field, f"cannot write in {folder} ({err.strerror or err})") from None
+    return folder

@@ -131,3 +131,10 @@ def is_bundled(path: str | os.PathLike[str]) -> bool:
         return False
     bundled, p = folder.resolve(), Path(path).resolve()
     return p == bundled or bundled in p.parents
+
+
+def refuse_bundled(path: str | os.PathLike[str], field: str) -> None:
+    """Raise :class:`InputError` (``field``) if a run would write ``path`` into the bundled folder (retraining
+    never overwrites a bundled model)."""
+    if is_bundled(path):
+        raise InputError(field, "must not be the bundled pretrained/ folder (copy weights there by hand)")

@@ -19,7 +19,11 @@ from uam_studio.planning.agents.run_result import RetrainResult
 from uam_studio.planning.missions.mission import Mission
 from uam_studio.planning.planners import PLANNERS
 
-__all__ = ["AgentFile", "TrainJob", "Trainer", "trainer", "trainers"]
+__all__ = ["SHARED_CLI_OPTIONS", "AgentFile", "TrainJob", "Trainer", "trainer", "trainers"]
+
+# the options of ``uam-studio train`` that several models read (their own options are each model's);
+# ``seed`` is every model's
+SHARED_CLI_OPTIONS = ("out", "steps", "device", "init_from")
 
 
 @dataclass(frozen=True)
@@ -57,13 +61,27 @@ class Trainer(Protocol):
     ``planner``: its planner's name (and its cards' ``"model"``); ``unit``: what each report of a run counts
     (``"episode"`` or ``"epoch"``); ``settings``: the Retrain tab's settings it reads besides ``scenario``,
     ``seed`` and where it starts from; ``trains_on_map``: a run on a map learns that map (else the map only
-    scores each report).
+    scores each report). ``uam-studio train <planner>``: ``cli_title``, the title of its own options in
+    ``--help``; ``cli_shared``, which of :data:`SHARED_CLI_OPTIONS` it reads, each with what it means for it.
     """
 
     planner: str
     unit: str
     settings: tuple[str, ...]
     trains_on_map: bool
+    cli_title: str
+    cli_shared: dict[str, str]
+
+    def add_cli_arguments(self, group: Any) -> tuple[str, ...]:
+        """Add its own options of ``uam-studio train`` to the argparse argument ``group`` (each defaulting to
+        None: not given); the names (``dest``) of those options."""
+        ...
+
+    def train_cli(self, args: Any) -> str:
+        """``uam-studio train``'s full run from the parsed options (``seed``, its :attr:`cli_shared` and its
+        own options), saved into a run folder, never into the bundled one. Bad options raise
+        :class:`~uam_studio.errors.InputError` (field: the option) before any work; returns the line printed."""
+        ...
 
     def find(self, folder: Path) -> list[AgentFile]:
         """Its retrained files in ``folder`` (unreadable ones skipped)."""

@@ -26,7 +26,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from uam_studio.bundled import agents_dir, is_bundled
+from uam_studio.atomic_io import make_writable_folder
+from uam_studio.bundled import agents_dir, is_bundled, refuse_bundled
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.run_result import RetrainResult
 from uam_studio.planning.agents.trainer import AgentFile, TrainJob
@@ -146,6 +147,40 @@ class AttentionTrainer:
     unit = "epoch"
     settings = ("missions", "epochs")
     trains_on_map = False
+    cli_title = "attention only (the default planner)"
+    cli_shared = {
+        "out": "default runs/attention, writes attention_planner.pt and card.json",
+        "device": "auto (CUDA when available, default), cpu or cuda",
+    }
+
+    def add_cli_arguments(self, group: Any) -> tuple[str, ...]:
+        return tuple(action.dest for action in (
+            group.add_argument("--oracle-missions", type=int, default=None,
+                               help="phase 1: missions of 2-8 destinations solved by the exact oracle "
+                                    "(default 1200)"),
+            group.add_argument("--search-missions", type=int, default=None,
+                               help="phase 2: missions of 9-20 destinations per scenario planned by the "
+                                    "network's own beam search (default 300; 0 skips the phase)"),
+            group.add_argument("--epochs", type=int, default=None, help="phase 1 epochs (default 40)"),
+        ))
+
+    def train_cli(self, args: Any) -> str:
+        """The full recipe of :func:`~uam_studio.planning.agents.attention.train.train_attention`."""
+        from uam_studio.dynaformer.train import pick_device
+        from uam_studio.planning.agents.attention.train import AttentionTrainConfig, train_attention
+
+        out = Path(args.out or "runs/attention")
+        refuse_bundled(out, "--out")
+        cfg = AttentionTrainConfig(seed=args.seed)
+        cfg.device = str(pick_device(args.device or "auto"))
+        for name, lo in (("oracle_missions", 10), ("search_missions", 0), ("epochs", 1)):
+            value = getattr(args, name)
+            if value is not None:
+                if value < lo:
+                    raise InputError(f"--{name.replace('_', '-')}", f"must be >= {lo}")
+                setattr(cfg, name, value)
+        make_writable_folder(out, "--out")
+        return f"wrote {train_attention(cfg, out)}"
 
     def _card(self, weights: Path) -> dict[str, Any] | None:
         """The card (``card.json``) beside an attention planner's weights, or None if it is not one."""

@@ -1,6 +1,6 @@
 """Retraining the paper's DQN agent: its settings, its run and its card, and its :class:`DQNTrainer`.
 
-Shared by ``uam-studio train dqn`` and the app's Retrain tab:
+Shared by ``uam-studio train dqn`` (:meth:`DQNTrainer.train_cli`) and the app's Retrain tab:
 
 - :func:`training_setup`: validate the settings and build the :class:`DQNTrainConfig` and the env
   factory (a fixed map with a random cell each episode, or a random mission every episode);
@@ -22,13 +22,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from uam_studio.atomic_io import remove_stale_temps
-from uam_studio.bundled import agents_dir, is_bundled
+from uam_studio.atomic_io import make_writable_folder, remove_stale_temps
+from uam_studio.bundled import agents_dir, is_bundled, refuse_bundled
 from uam_studio.errors import InputError, check_range
 from uam_studio.planning.agents.run_result import RetrainResult
 from uam_studio.planning.agents.trainer import AgentFile, TrainJob
 from uam_studio.planning.env.environment import REWARD_DEFAULTS
-from uam_studio.planning.missions.mission import SCENARIOS, Mission, mission_to_dict
+from uam_studio.planning.missions.mission import SCENARIOS, Mission, load_mission, mission_to_dict
 from uam_studio.planning.missions.scenario import DEFAULT_SCENARIO, check_scenario
 
 __all__ = ["DQN_REWARD_DEFAULTS", "DQNTrainer", "new_agent_path", "retrain_dqn", "training_setup"]
@@ -214,6 +214,57 @@ class DQNTrainer:
     unit = "episode"
     settings = ("alpha", "beta", "gamma", "steps")
     trains_on_map = True
+    cli_title = "dqn only"
+    cli_shared = {
+        "out": "default runs/dqn_<scenario>, writes agent.zip and card.json (a path ending in .zip names the "
+               "agent file itself)",
+        "steps": "env transitions (default 50000)",
+        "init_from": "fine-tune this agent zip (e.g. pretrained/dqn_single_charge.zip), exploration starting at "
+                     "epsilon 0.2",
+    }
+
+    def add_cli_arguments(self, group: Any) -> tuple[str, ...]:
+        return tuple(action.dest for action in (
+            group.add_argument("--scenario", default=None,
+                               help="single_flight, single_charge or multi_charge; default: the mission's, else "
+                                    "single_charge"),
+            group.add_argument("--mission", default=None, metavar="FILE",
+                               help="train on this mission's map (battery health drawn at random each episode); "
+                                    "default: a random mission every episode"),
+            group.add_argument("--alpha", type=float, default=None,
+                               help="reward per reached destination x priority (default 1)"),
+            group.add_argument("--beta", type=float, default=None, help="penalty per charging stop (default 1)"),
+            group.add_argument("--gamma", type=float, default=None, help="penalty for an end of discharge (default 5)"),
+            group.add_argument("--safe-return", action="store_true", default=None,
+                               help="a leg that would leave no way home ends the episode with -gamma (the "
+                                    "planner's safety rule, learnt in training); default off, the paper's setting"),
+        ))
+
+    def train_cli(self, args: Any) -> str:
+
+        if args.scenario is not None and args.scenario not in SCENARIOS:
+            raise InputError("--scenario", f"{args.scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}")
+        mission = load_mission(args.mission) if args.mission is not None else None
+        scenario = args.scenario or (mission.scenario if mission is not None else DEFAULT_SCENARIO)
+        out = Path(args.out or f"runs/dqn_{scenario}")
+        agent = out if out.suffix == ".zip" else out / "agent.zip"
+        refuse_bundled(agent, "--out")
+        if agent.exists() and not agent.is_file():
+            raise InputError("--out", f"{agent} exists and is not a file")
+        if args.steps is not None and args.steps < 1:
+            raise InputError("--steps", "must be >= 1")
+        # every option is checked here, before the run folder is made
+        cfg, env_fn = training_setup(scenario, mission, args.alpha, args.beta, args.gamma, args.steps, args.seed,
+                                     safe_return=bool(args.safe_return), init_agent=args.init_from)
+        make_writable_folder(agent.parent, "--out")
+        card_path = agent.with_name("card.json") if agent.name == "agent.zip" else agent.with_suffix(".card.json")
+        res = retrain_dqn(cfg, env_fn, agent, mission=mission, progress_bar=True, source="cli", card_path=card_path)
+        assert res is not None  # None only for a run stopped through its stop event, which is never set here
+        card, final = res.card, res.card["final_stats"]
+        summary = (f"{final['episodes']} episodes; last {final['last_episodes']}: mean reward "
+                   f"{final['mean_reward']:.2f}, EOD rate {final['eod_rate']:.0%}" if final["last_episodes"]
+                   else "no finished episode")
+        return f"wrote {agent} ({summary}; {card['timing']['wall_s']:.0f} s)"
 
     def find(self, folder: Path) -> list[AgentFile]:
         """The DQN agents (``*.zip`` with a readable model card of model ``dqn``) in ``folder``."""
