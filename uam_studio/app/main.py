@@ -106,7 +106,8 @@ TABS: list[tuple[str, Callable[[AppSession], Any]]] = [
 def _lazy(build: Callable[[AppSession], Any], session: AppSession) -> pn.viewable.Viewable:
     """A pane that calls ``build(session)`` the first time it is rendered."""
 
-    @pn.depends()
+    # param's stub of depends wants a method (a first `self` argument); a function is valid too
+    @pn.depends()  # type: ignore[arg-type]
     def view() -> Any:
         return build(session)
 
@@ -145,7 +146,7 @@ def new_session() -> AppSession:
     return session
 
 
-def create_app(template: bool | None = None) -> pn.viewable.Viewable:
+def create_app(template: bool | None = None) -> pn.viewable.Viewable | pn.template.BaseTemplate:
     """Build one session of the app.
 
     :param template: wrap the tabs in a page template; default: only when building a server session

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
+from typing import cast
 
 import panel as pn
+from bokeh.document import Document
 
 
 def in_server_session() -> bool:
@@ -53,7 +55,7 @@ def session_dispatcher(delay_ms: int = 0) -> Callable[[Callable[[], None]], None
         return None
     from panel.io.state import set_curdoc
 
-    doc = pn.state.curdoc
+    doc = cast(Document, pn.state.curdoc)  # in_server_session() has just found this session's document
 
     def dispatch(cb: Callable[[], None]) -> None:
         def run() -> None:
@@ -83,7 +85,8 @@ def respond_at_once(widgets: Iterable[pn.widgets.Widget]) -> None:
     for wd in widgets:
         prop = value_property(wd)
         if prop is not None and prop not in wd._priority_changes:
-            wd._priority_changes = [*wd._priority_changes, prop]  # this widget only (a class list)
+            # this widget only (a class list; Panel types it a ClassVar, so mypy forbids the instance's own)
+            wd._priority_changes = [*wd._priority_changes, prop]  # type: ignore[misc]
 
 
 def value_property(widget: pn.widgets.Widget) -> str | None:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -72,8 +73,8 @@ def fly_batch(
         n_rows = rows.size
         lens = lengths[rows]
         cur = np.zeros((n_rows, int(lens.max())))
-        for k, r in enumerate(rows):
-            cur[k, : lens[k]] = currents[r]
+        for i, r in enumerate(rows):
+            cur[i, : lens[i]] = currents[r]
         state = x_end[rows]
         alive = np.arange(n_rows)
         with np.errstate(all="ignore"):
@@ -150,13 +151,13 @@ class Episode:
         """bool [slots]: destinations the aircraft may ever fly to: present and far enough from the
         vertiport for some level (a way back exists at that level too); in ``single_flight`` only
         ``destinations[0]``. Do not modify."""
-        out = self.legs.feasible[self.home, :self.slots].any(axis=1)
+        out = cast(np.ndarray, self.legs.feasible[self.home, :self.slots].any(axis=1))  # [slots, levels] -> [slots]
         if self.rules.one_leg:
             out[1:] = False
         out.setflags(write=False)
         return out
 
-    def targets(self, node: np.ndarray, visited: np.ndarray, among: np.ndarray | None = None) -> np.ndarray:
+    def targets(self, node: int | np.ndarray, visited: np.ndarray, among: np.ndarray | None = None) -> np.ndarray:
         """bool [B, slots + 1]: the nodes a next leg may go to from ``node`` ([B] node indices) with
         ``visited`` ([B, slots] bool) already served: the destinations ``among`` ([slots] bool; default
         :attr:`servable`) not yet visited, and the vertiport from anywhere but itself (never in
@@ -169,7 +170,7 @@ class Episode:
         out[:, self.home] = (node != self.home) & (not self.rules.one_leg)
         return out
 
-    def moves(self, node: np.ndarray, visited: np.ndarray, among: np.ndarray | None = None) -> np.ndarray:
+    def moves(self, node: int | np.ndarray, visited: np.ndarray, among: np.ndarray | None = None) -> np.ndarray:
         """bool [B, slots + 1, levels]: the (node, level) moves open from ``node``: :meth:`targets`
         whose leg fits the level (``legs.feasible``). The battery is not asked."""
         node = np.atleast_1d(np.asarray(node))

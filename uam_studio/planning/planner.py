@@ -31,14 +31,14 @@ from __future__ import annotations
 import os
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from uam_studio.bundled import require_bundled
 from uam_studio.errors import InputError, check_range
 from uam_studio.planning.env import observe_takeoff
-from uam_studio.planning.missions.check import PlanCheck, check_plan
+from uam_studio.planning.missions.check import Plan, PlanCheck, check_plan
 from uam_studio.planning.missions.mission import SCENARIOS, Mission, as_mission
 from uam_studio.planning.planners import LEARNED_POLICIES, PLANNERS, POLICIES, planner_info
 from uam_studio.planning.voltage_predictor import BandPredictor, HealthFittingPredictor, VoltagePredictor
@@ -94,7 +94,8 @@ def _load_predictor(predictor: VoltagePredictor | bool | None, messages: list[st
         messages.append(f"Dynaformer unavailable ({err}); showing the physics model only")
         return None
     try:
-        return load_pretrained()
+        # DynaformerPredictor.predict names its keywords, where the protocol's takes **kwargs
+        return cast(VoltagePredictor, load_pretrained())
     except WeightsError as err:
         messages.append(f"no Dynaformer weights ({err}); showing the physics model only")
         return None
@@ -124,6 +125,7 @@ def _predict(check: PlanCheck, predictor: VoltagePredictor, messages: list[str],
         return None, None
     band = None
     if band_fn is not None:
+        assert band_level is not None  # band_fn is only set with a band_level
         try:
             for a, b in zip(cuts[:-1], cuts[1:]):
                 lo, _, hi = band_fn(ci, cv, sim.current_a[a:b], dt_s=sim.dt_s, level=band_level, **kw)
@@ -259,7 +261,9 @@ def plan_mission(
     if m.scenario not in SCENARIOS:  # pragma: no cover - Mission validates it
         raise InputError("scenario", f"{m.scenario!r} is not a scenario")
     if agent_path is None and info.learned:  # an install without it: an error, not an empty plan
-        require_bundled(info.bundled_file(m.scenario), "agent", "agent",
+        bundled = info.bundled_file(m.scenario)
+        assert bundled is not None  # a learned policy has an agent file
+        require_bundled(bundled, "agent", "agent",
                         "plan with the oracle or greedy policy, or give an agent file")
     if agent_path is not None and not info.learned:
         raise InputError("agent_path", f"only used with the {' and '.join(LEARNED_POLICIES)} policies (not {policy})")
@@ -278,7 +282,8 @@ def plan_mission(
         kwargs["predictor"] = pred_model
     if info.lookahead:
         kwargs["lookahead"] = int(lookahead)
-    plan = info.plan_function()(m, **kwargs)  # the planner's answer, with its physics check where it made one
+    # the planner's answer, with its physics check where it made one
+    plan = cast(Plan, info.plan_function()(m, **kwargs))
     route, alts = list(plan.route), list(plan.altitudes_m)
     messages.extend(plan.messages)
     exact = bool(plan.stats.get("exact", True)) if info.reports_exact else None
@@ -307,6 +312,7 @@ def plan_mission(
         if v_pred is not None:
             predicted = {"time_s": list(t), "voltage_v": _round_list(v_pred[idx])}
         if v_band is not None and v_band[0].size == sim.voltage_v.size:
+            assert band_level is not None  # a band is only made with a band_level
             low, high = v_band
             band = {"time_s": list(t), "low_v": _round_list(low[idx]), "high_v": _round_list(high[idx]),
                     "level": float(band_level), "min_low_v": float(low.min()), "min_high_v": float(high.min())}

@@ -10,7 +10,7 @@ truth, and the served priority per day for the three dispatchers. The numbers co
 from __future__ import annotations
 
 import html
-from typing import Any
+from typing import Any, cast
 
 import holoviews as hv
 import pandas as pd
@@ -32,7 +32,8 @@ BREACH_COLOR = "#d62728"
 class FleetView(pn.viewable.Viewer):
     """Settings, the next-day button and the three figures of a :class:`FleetState`."""
 
-    state = param.ClassSelector(class_=FleetState)
+    # a required argument of __init__: never None once built (param types it Optional, as it has no default)
+    state = cast("param.ClassSelector[FleetState]", param.ClassSelector(class_=FleetState))
 
     def __init__(self, state: FleetState, **params: Any) -> None:
         ensure_bokeh_backend()

@@ -10,13 +10,14 @@ time. Everything comes from :class:`~uam_studio.app.fly.state.FlyState`; this vi
 from __future__ import annotations
 
 import io
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import pandas as pd
 import panel as pn
 import param
-from bokeh.models import ColumnDataSource, HoverTool, Range1d, Span
+from bokeh.models import ColumnDataSource, HoverTool, Range1d
+from bokeh.models.annotations import Span  # = bokeh.models.Span, a re-export mypy misses (its stubs lack __all__)
 
 from uam_studio.app.fly.state import SPEEDS, FlyState
 from uam_studio.app.planner.map_geometry import altitude_labels, place_label
@@ -66,7 +67,8 @@ def _leg_labels(path: list[tuple[float, float]], altitudes_m: list[float], missi
 class FlyView(pn.viewable.Viewer):
     """Controls, map, voltage plot and decision log of a :class:`FlyState`."""
 
-    state = param.ClassSelector(class_=FlyState)
+    # a required argument of __init__: never None once built (param types it Optional, as it has no default)
+    state = cast("param.ClassSelector[FlyState]", param.ClassSelector(class_=FlyState))
 
     def __init__(self, state: FlyState, **params: Any) -> None:
         super().__init__(state=state, **params)
@@ -124,7 +126,7 @@ class FlyView(pn.viewable.Viewer):
         s.param.watch(lambda e: setattr(self.play, "value", e.new), "playing")
         s.param.watch(lambda e: self.progress.param.update(value=e.new, visible=e.new), "running")
         s.param.watch(self._on_text, ["status", "error"])
-        self._callback = None
+        self._callback: pn.io.PeriodicCallback | None = None
         self._layout = pn.Row(
             pn.Column(self.fly_button, self.play, self.speed, self.clock, pn.Spacer(height=10),
                       self.inject_kts, self.inject_button, self.clear_button, pn.Spacer(height=10),
@@ -147,8 +149,9 @@ class FlyView(pn.viewable.Viewer):
         self.seen = ColumnDataSource({"x_km": [], "y_km": []})
         self.leg_labels = ColumnDataSource({"x": [], "y": [], "text": []})
         self.pos = ColumnDataSource({"x_km": [], "y_km": []})
-        fig = page_figure(title="flight", width=MAP_PX, height=MAP_PX, x_axis_label="x (km)",
-                          y_axis_label="y (km)", x_range=Range1d(0.0, 1.0), y_range=Range1d(0.0, 1.0))
+        # bokeh's stubs lack Range1d's positional (start, end) form (bokeh/models/ranges.pyi: a TODO)
+        fig = page_figure(title="flight", width=MAP_PX, height=MAP_PX, x_axis_label="x (km)", y_axis_label="y (km)",
+                          x_range=Range1d(0.0, 1.0), y_range=Range1d(0.0, 1.0))  # type: ignore[arg-type]
         fig.scatter("x_km", "y_km", source=self.vertiport, marker="square", size=14, color="black")
         dots = fig.scatter("x_km", "y_km", source=self.dests, size=10, color="#ff7f0e", line_color="black")
         fig.text("x_km", "y_km", text="name", source=self.dests, text_font_size="9pt", text_baseline="bottom",
@@ -165,9 +168,10 @@ class FlyView(pn.viewable.Viewer):
         self.cutoff = ColumnDataSource({"x": [], "y": []})
         self.marks = ColumnDataSource({"time_min": [], "voltage_v": [], "decision": []})
         self.changes = ColumnDataSource({"x": [], "y": [], "text": [], "y0": []})
+        # bokeh's stubs lack Range1d(start, end), as above
         fig = page_figure(title="voltage: fly the mission to see it", height=MAP_PX, sizing_mode="stretch_width",
-                          x_range=Range1d(0.0, 1.0), y_range=Range1d(2.9, 4.25), x_axis_label="time (min)",
-                          y_axis_label="voltage (V)", min_border_top=0)
+                          x_range=Range1d(0.0, 1.0), y_range=Range1d(2.9, 4.25),  # type: ignore[arg-type]
+                          x_axis_label="time (min)", y_axis_label="voltage (V)", min_border_top=0)
         for key, label, style in VOLTAGE_SERIES:
             fig.line("time_min", "voltage_v", source=self.curves[key], legend_label=label, **style)
         fig.line("x", "y", source=self.cutoff, legend_label="EOD cut-off", color=EOD_COLOR, line_dash="dashed",
@@ -234,12 +238,13 @@ class FlyView(pn.viewable.Viewer):
         self.clock.value = min(s.t_s, self.clock.end)
         x, y, leg = s.position()
         m = s.mission_flown
+        assert m is not None  # set with the record (FlyState._flown updates both at once)
         nodes = [VERTIPORT] + list(s.record.route)
         path = [(m.node(n).x_km, m.node(n).y_km) for n in nodes[: max(leg, 0) + 1]] + [(x, y)]
         self.seen.data = {"x_km": [p[0] for p in path], "y_km": [p[1] for p in path]}
         self.pos.data = {"x_km": [x], "y_km": [y]}
         series = s.series_until()
-        for key, _, _ in VOLTAGE_SERIES:
+        for key, _label, _style in VOLTAGE_SERIES:  # not `_`: the name of this method's *args
             t, v = series[key]
             self.curves[key].data = {"time_min": np.asarray(t, dtype=float), "voltage_v": np.asarray(v, dtype=float)}
         self.now_line.location = float(s.t_s) / 60.0

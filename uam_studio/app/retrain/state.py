@@ -80,12 +80,14 @@ class RetrainState(param.Parameterized):
     the values that views watch and returns the new ones.
     """
 
-    model = param.Selector(default=DEFAULT_MODEL, objects=list(MODELS.values()),
-                           doc="the paper's DQN, or the attention planner (the app's default planner)")
-    source = param.Selector(default="map", objects=["map", "random"],
-                            doc="DQN: train on the current map or on random missions; attention: score each "
-                                "epoch on the current map, or not at all (it always trains on random missions)")
-    scenario = param.Selector(default=DEFAULT_SCENARIO, objects=list(SCENARIOS))
+    model: param.Selector[str] = param.Selector(
+        default=DEFAULT_MODEL, objects=list(MODELS.values()),
+        doc="the paper's DQN, or the attention planner (the app's default planner)")
+    source: param.Selector[str] = param.Selector(
+        default="map", objects=["map", "random"],
+        doc="DQN: train on the current map or on random missions; attention: score each "
+            "epoch on the current map, or not at all (it always trains on random missions)")
+    scenario: param.Selector[str] = param.Selector(default=DEFAULT_SCENARIO, objects=list(SCENARIOS))
     alpha = param.Number(default=1.0, bounds=(0.0, 100.0), doc="reward per destination x priority")
     beta = param.Number(default=1.0, bounds=(0.0, 100.0), doc="penalty per charging stop")
     gamma = param.Number(default=5.0, bounds=(0.0, 100.0), doc="penalty for an end of discharge")
@@ -94,10 +96,11 @@ class RetrainState(param.Parameterized):
                              doc="attention: training missions, each solved by the exact oracle")
     epochs = param.Integer(default=CLASS_EPOCHS, bounds=EPOCHS_RANGE, doc="attention: passes over the examples")
     seed = param.Integer(default=0, bounds=(0, 2**31 - 1))
-    start_from = param.Selector(default="scratch", objects=["scratch", "bundled"],
-                                doc="random weights, or fine-tune the bundled agent (DQN: "
-                                    "pretrained/dqn_<scenario>.zip, exploration from epsilon 0.2; attention: "
-                                    "pretrained/attention_planner.pt)")
+    start_from: param.Selector[str] = param.Selector(
+        default="scratch", objects=["scratch", "bundled"],
+        doc="random weights, or fine-tune the bundled agent (DQN: "
+            "pretrained/dqn_<scenario>.zip, exploration from epsilon 0.2; attention: "
+            "pretrained/attention_planner.pt)")
 
     running = param.Boolean(default=False)
     timesteps = param.Integer(default=0)
@@ -108,9 +111,10 @@ class RetrainState(param.Parameterized):
     reference = param.Dict(default=None, allow_None=True,
                            doc="the exact oracle's plan of the map (compare_row, plus 'label' and 'cell'), the "
                                "learning curves' reference; None for random missions or until computed")
-    runner = param.Selector(default="process", objects=["process", "thread"],
-                            doc="train in a child process (default; $UAM_STUDIO_RETRAIN_RUNNER overrides) "
-                                "or in a thread of this process")
+    runner: param.Selector[str] = param.Selector(
+        default="process", objects=["process", "thread"],
+        doc="train in a child process (default; $UAM_STUDIO_RETRAIN_RUNNER overrides) "
+            "or in a thread of this process")
 
     MA_WINDOW = 50
 

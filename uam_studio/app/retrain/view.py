@@ -11,7 +11,7 @@ left. A finished (or stopped) agent is saved in the user folder and appears in e
 from __future__ import annotations
 
 import html
-from typing import Any
+from typing import Any, cast
 
 import holoviews as hv
 import numpy as np
@@ -35,8 +35,9 @@ SETTINGS_WIDTH = 270  # px, the settings' widgets
 class RetrainView(pn.viewable.Viewer):
     """Settings, Start/Stop, progress and learning curves of a :class:`RetrainState`."""
 
-    state = param.ClassSelector(class_=RetrainState)
-    planner = param.ClassSelector(class_=PlannerState)
+    # required arguments of __init__: never None once built (param types them Optional, as they have no default)
+    state = cast("param.ClassSelector[RetrainState]", param.ClassSelector(class_=RetrainState))
+    planner = cast("param.ClassSelector[PlannerState]", param.ClassSelector(class_=PlannerState))
 
     def __init__(self, state: RetrainState, planner: PlannerState, **params: Any) -> None:
         ensure_bokeh_backend()
@@ -133,7 +134,7 @@ class RetrainView(pn.viewable.Viewer):
                                                        "missions": [self.missions], "epochs": [self.epochs]}
         # each report unit's curves (a HoloViews pane's own `visible` fails in Panel 1.9: their columns)
         self.unit_curves = {"episode": self.dqn_curves, "epoch": self.attention_curves}
-        self._poller = None
+        self._poller: pn.io.PeriodicCallback | None = None
         s.param.watch(self._on_status, ["running", "status", "error", "timesteps", "episodes", "agent_path"])
         s.param.watch(self._on_reference_inputs, ["source", "scenario"])
         s.param.watch(self._on_model, "model")

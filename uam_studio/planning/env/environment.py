@@ -11,7 +11,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -226,8 +226,9 @@ class UAMPlanningEnv(EpisodeQueries, gym.Env):
         self.n_dest = n_dest
         self.randomize_battery = bool(randomize_battery)
         self.randomize_wind = bool(randomize_wind)
-        self.r0_range = tuple(float(x) for x in r0_range)
-        self.q_range = tuple(float(x) for x in q_range)
+        # (lo, hi) ranges, drawn from with rng.uniform(*range)
+        self.r0_range = cast(tuple[float, float], tuple(float(x) for x in r0_range))
+        self.q_range = cast(tuple[float, float], tuple(float(x) for x in q_range))
         self.radius_km = tuple(float(x) for x in radius_km)
         self._fixed = mission
         if mission is not None:

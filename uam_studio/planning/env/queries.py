@@ -13,8 +13,10 @@ import gymnasium as gym
 import numpy as np
 
 from uam_studio.planning.env.backends import BatteryBackend
-from uam_studio.planning.legs import N_ACTIONS, N_ALTITUDES, N_MAX, VERTIPORT_SLOT
+from uam_studio.planning.episode import Episode
+from uam_studio.planning.legs import N_ACTIONS, N_ALTITUDES, N_MAX, VERTIPORT_SLOT, LegTable
 from uam_studio.planning.missions.check import Plan
+from uam_studio.planning.missions.mission import Mission
 
 _Env = TypeVar("_Env", bound="EpisodeQueries")
 
@@ -22,6 +24,32 @@ _Env = TypeVar("_Env", bound="EpisodeQueries")
 class EpisodeQueries:
     """What :class:`~uam_studio.planning.env.environment.UAMPlanningEnv` answers about its episode
     without stepping it (planners' look-ahead, rendering, the plan so far)."""
+
+    # the episode's state, set by UAMPlanningEnv (its __init__ and reset())
+    render_mode: str | None
+    scenario: str
+    max_steps: int
+    backend: BatteryBackend
+    mission: Mission | None
+    _episode: Episode
+    _legs: LegTable
+    _health: np.ndarray
+    _node: int
+    _visited: np.ndarray
+    _mask: np.ndarray
+    _obs: np.ndarray
+    _voltage: float
+    _steps: int
+    _cycles: int
+    _route: list[str]
+    _alts: list[float]
+    _reached: list[str]
+    _reached_priority: int
+    _return: float
+    _eod: bool
+    _invalid: bool
+    _stranded: bool
+    _done: bool
 
     def render(self) -> str | None:
         """With ``render_mode="ansi"``: the episode so far as text (scenario, mission, step, state,
@@ -121,6 +149,7 @@ class EpisodeQueries:
                         f"({self.backend.name} battery)")
         if self._invalid:
             msgs.append("the policy chose an invalid action")
+        assert self.mission is not None  # reset() set it, as it set _eod read above
         missed = [d.name for d, seen in zip(self.mission.destinations, self._visited) if not seen]
         if missed and not self._episode.rules.one_leg:
             msgs.append(f"not visited: {', '.join(missed)}")

@@ -23,7 +23,7 @@ import dataclasses
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -32,7 +32,7 @@ from uam_studio.errors import InputError
 from uam_studio.flight import leg_profile
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.legs import DT_S, N_MAX, takeoff_current
-from uam_studio.planning.missions.mission import VERTIPORT, Battery, Mission, check_destination_count
+from uam_studio.planning.missions.mission import VERTIPORT, Battery, Destination, Mission, check_destination_count
 from uam_studio.planning.operations.decision import Decision
 from uam_studio.planning.operations.operator import (
     HEALTH_Z,
@@ -159,7 +159,7 @@ def record_csv(rec: FlightRecord) -> str:
 
 
 def _priority(mission: Mission, reached: Sequence[str]) -> int:
-    return int(sum(mission.node(n).priority for n in reached if n != VERTIPORT))
+    return int(sum(cast(Destination, mission.node(n)).priority for n in reached if n != VERTIPORT))
 
 
 def _fly_fixed(world: World, route: Sequence[str], alts: Sequence[float],
@@ -289,6 +289,7 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
         if first:
             op.start_leg_at(0.0)
         pred = _predict_leg(op, d, first)
+        assert d.next_altitude_m is not None  # a decision's next leg has both
         r = world.fly_leg(d.next_to, d.next_altitude_m)
         leg = world.legs[-1]
         take(r, _fit_length(pred, r.time_s.size))
@@ -338,10 +339,11 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
 
 def _predict_leg(op: Operator, d: Decision, first: bool) -> np.ndarray:
     """The operator's predicted voltage (V) for the leg it chose: its median health, predicted wind."""
+    assert d.next_to is not None and d.next_altitude_m is not None  # a decision with a next leg
     m = op.forecast_mission
     wind, _ = op.winds.predict(d.next_to)
     wind = float(np.clip(wind, *WIND_RANGE_KTS))
-    dwell = m.node(d.next_to).dwell_s if d.next_to != VERTIPORT else 0.0
+    dwell = cast(Destination, m.node(d.next_to)).dwell_s if d.next_to != VERTIPORT else 0.0
     prof = leg_profile(m.distance_km(d.node, d.next_to), d.next_altitude_m, wind, DT_S, dwell)
     cur, _ = op.health_belief.segment.arrays()
     skip = cur.size if first else 0

@@ -36,6 +36,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from typing import Any, cast
 
 import numpy as np
 
@@ -46,12 +47,7 @@ from uam_studio.flight import leg_profile
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.episode import Episode
 from uam_studio.planning.legs import ALTITUDES_M, DT_S, N_MAX, N_TARGETS, VERTIPORT_SLOT, LegTable
-from uam_studio.planning.missions.mission import (
-    VERTIPORT,
-    Battery,
-    Mission,
-    check_destination_count,
-)
+from uam_studio.planning.missions.mission import VERTIPORT, Battery, Destination, Mission, check_destination_count
 from uam_studio.planning.missions.scenario import check_scenario
 from uam_studio.planning.operations.decision import Decision, LegObservation
 from uam_studio.planning.operations.defaults import DEFAULT_FORECAST_SIGMA_KT, WEATHER_RESERVE_KT
@@ -139,7 +135,7 @@ class Operator:
         frm, _, alt = self._leg
         m = self.forecast_mission
         duration = self.time_s - self._leg_start_s
-        dwell = m.node(to).dwell_s if to != VERTIPORT else 0.0
+        dwell = cast(Destination, m.node(to)).dwell_s if to != VERTIPORT else 0.0
         wind = wind_from_duration(m.distance_km(frm, to), alt, dwell, duration)
         resid, surprise = self.winds.observe(to, wind)
         self.node = to
@@ -198,7 +194,7 @@ class Operator:
 
     def _leg_current(self, frm: str, to: str, altitude_m: float, wind_kts: float) -> np.ndarray:
         m = self.forecast_mission
-        dwell = m.node(to).dwell_s if to != VERTIPORT else 0.0
+        dwell = cast(Destination, m.node(to)).dwell_s if to != VERTIPORT else 0.0
         wind = float(np.clip(wind_kts, *WIND_RANGE_KTS))
         return np.asarray(leg_profile(m.distance_km(frm, to), altitude_m, wind, DT_S, dwell).current_a)
 
@@ -248,8 +244,8 @@ class Operator:
             ok2, _, _ = episode.fly_currents([c for _, c in back], x_end[[k for k, _ in back]])
             for (k, _), good in zip(back, ok2):
                 home_ok[k] |= bool(good)
-        for k, (j, a, _) in enumerate(firsts):
-            safe[j, a] = ok[k] and (j == VERTIPORT_SLOT or home_ok[k])
+        for k, (tgt, lvl, _) in enumerate(firsts):
+            safe[tgt, lvl] = ok[k] and (tgt == VERTIPORT_SLOT or home_ok[k])
         return safe
 
     def abort(self, reason: str) -> Decision:
@@ -260,7 +256,8 @@ class Operator:
         except InputError:
             est = self.health_belief.prior_health()
         shift, shift_sd = self.winds.shift()
-        d = Decision(time_s=self.time_s, node=self.node, kind="abort", reason=reason, **est.in_units(),
+        d = Decision(time_s=self.time_s, node=self.node, kind="abort", reason=reason,
+                     **cast(dict[str, Any], est.in_units()),  # its four floats (the others could be any type)
                      plan_q_max_c=est.q_max_c, plan_r0_ohm=est.r0_ohm, wind_shift_kts=shift,
                      wind_shift_sd_kts=shift_sd, route=(), altitudes_m=(), next_to=None, next_altitude_m=None,
                      health_flags=self.health_belief.flags(), reserve_kt=self.reserve_kt)
@@ -356,8 +353,8 @@ class Operator:
                 [a for a in range(len(ALTITUDES_M)) if legs.feasible[VERTIPORT_SLOT, 0, a]]
             if not levels:
                 return [], [], f"{self.names[0]} cannot be reached at any level"
-            best, _, vmin = safest_level(episode, VERTIPORT_SLOT, 0, levels, state)
-            return [self.names[0]], [ALTITUDES_M[best]], f"highest expected minimum voltage ({vmin.max():.3f} V)"
+            level, _, vmin = safest_level(episode, VERTIPORT_SLOT, 0, levels, state)
+            return [self.names[0]], [ALTITUDES_M[level]], f"highest expected minimum voltage ({vmin.max():.3f} V)"
 
         if here == VERTIPORT_SLOT and rules.one_sortie and self.sorties >= 1:
             return [], [], "back home: the charge is used"
@@ -373,6 +370,7 @@ class Operator:
                 return [], [], "no unvisited destination can be reached safely"
         elif not cont:
             return None, [], ""
+        best: Sortie | None  # the sortie flown next (None below: no cover found yet)
         if rules.one_sortie:
             best = best_single_sortie(cont, legs)
             route, alts = names(best)
@@ -396,6 +394,7 @@ class Operator:
             best = max(cont.values(), key=lambda s: (bin(s.mask).count("1"), -s.time_s))
             route, alts = names(best)
             return route, alts, "the rest cannot all be covered; visiting what this charge reaches"
+        assert best_key is not None  # set with best
         route, alts = names(best)
         rest = universe & ~(best.mask & ~visited)
         while rest:  # the later sorties of the plan, as the cover table has them

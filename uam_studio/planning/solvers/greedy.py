@@ -28,6 +28,7 @@ def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
     setup = prepare_mission(mission, scenario, "greedy")
     if setup.early is not None:
         return setup.early
+    assert setup.mission is not None and setup.full_mission is not None and setup.episode is not None
     mission, full_mission, msgs, stats, ep = (setup.mission, setup.full_mission, setup.messages, setup.stats,
                                               setup.episode)
     legs, dests = ep.legs, mission.destinations
@@ -78,7 +79,9 @@ def greedy_plan(mission: Mission, scenario: str | None = None) -> Plan:
         if at == home:  # a fresh cell fits nothing more
             break
         route.append(VERTIPORT)
-        alts.append(ALTITUDES_M[legs.cheapest_level(at, home)])
+        back = legs.cheapest_level(at, home)
+        assert back is not None  # ``at`` was flown to only with a level home (b above)
+        alts.append(ALTITUDES_M[back])
         at, x = home, ep.arrive(home, x)
         if ep.ends_after(home, visited):
             break

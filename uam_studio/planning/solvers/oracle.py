@@ -71,7 +71,7 @@ import dataclasses
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -129,7 +129,7 @@ def _dominated(keys: np.ndarray, good: np.ndarray) -> np.ndarray:
         if m < 2:
             continue
         g = good[grp]
-        ge = (g[:, None, :] >= g[None, :, :]).all(axis=-1)  # ge[j, i]: j at least as good as i
+        ge = cast(np.ndarray, (g[:, None, :] >= g[None, :, :]).all(axis=-1))  # ge[j, i]: j at least as good as i
         np.fill_diagonal(ge, False)
         # strict dominance, or equal with a smaller index (keeps one of identical labels)
         beats = ge & (~ge.T | (np.arange(m)[:, None] < np.arange(m)[None, :]))
@@ -327,6 +327,8 @@ def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iter
     setup = prepare_mission(mission, scenario, "oracle")
     if setup.early is not None:  # nothing to plan: the empty answer is exact
         return dataclasses.replace(setup.early, stats={**setup.early.stats, "exact": True})
+    assert (setup.mission is not None and setup.full_mission is not None and setup.episode is not None
+            and setup.legs is not None)
     mission, full_mission, msgs, stats, legs = (setup.mission, setup.full_mission, setup.messages, setup.stats,
                                                 setup.legs)
     rules, dests = setup.episode.rules, mission.destinations

@@ -42,7 +42,7 @@ destinations, proportionally less for fewer), so that a 20-destination mission p
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
@@ -204,15 +204,15 @@ def _polish(ep: Episode, level: np.ndarray, sorties: list[list[int]], reachable:
         rest = [r for r in plan if r is not s]
         placed = True
         for k in s:
-            cands = [(r, p) for r in range(len(rest)) for p in range(len(rest[r]) + 1)]
-            trial = [rest[r][:p] + [k] + rest[r][p:] for r, p in cands]
+            spots = [(r, p) for r in range(len(rest)) for p in range(len(rest[r]) + 1)]
+            trial = [rest[r][:p] + [k] + rest[r][p:] for r, p in spots]
             ok, times = _fly_sorties(ep, level, trial)
             good = [i for i in range(len(trial)) if ok[i]]
             if not good:
                 placed = False
                 break
             i = min(good, key=lambda i: times[i])
-            rest[cands[i][0]] = trial[i]
+            rest[spots[i][0]] = trial[i]
         if placed:
             plan = rest
     return plan
@@ -220,7 +220,7 @@ def _polish(ep: Episode, level: np.ndarray, sorties: list[list[int]], reachable:
 
 def _solve(charge: np.ndarray, nodes: list[int], home: int, prio: np.ndarray, multi: bool,
            budget_c: float, takeoff_c: float, time_s: float,
-           starts: list[list[list[int]]] = ()) -> list[list[int]] | None:
+           starts: Sequence[list[list[int]]] = ()) -> list[list[int]] | None:
     """One OR-Tools solve: the sorties (table node lists, visiting order), or None if it found nothing.
     ``starts``: plans (lists of sorties) to start the search from, the first that fits the budgets
     (else the solver's own first solution)."""
@@ -341,18 +341,19 @@ def reference_from_setup(setup: PlanSetup, policy: str, alt_indices: Iterable[in
 
     if alts == tuple(range(N_ALTITUDES)):  # the greedy plan flies the same legs: a start never to fall below
         node = {legs.name(k): k for k in reachable}
-        sorties, cur = [], []
+        greedy: list[list[int]] = []  # the greedy plan's sorties
+        cur: list[int] = []
         for name in greedy_plan(mission, ep.rules.name).route:
             if name == VERTIPORT:
-                sorties, cur = sorties + [cur], []
+                greedy, cur = greedy + [cur], []
             else:
                 cur.append(node.get(name, -1))
-        if sorties and not cur and all(k >= 0 for s in sorties for k in s):
+        if greedy and not cur and all(k >= 0 for s in greedy for k in s):
             if multi:  # and the destinations greedy left out alone
-                sorties += [[k] for k in reachable if all(k not in s for s in sorties)]
-            flown, times = _fly_sorties(ep, level, sorties)
+                greedy += [[k] for k in reachable if all(k not in s for s in greedy)]
+            flown, times = _fly_sorties(ep, level, greedy)
             if flown.all():
-                consider(sorties, times, 0.0)
+                consider(greedy, times, 0.0)
 
     total, takeoff = _first_budgets(ep, level, reachable)
     lo, hi = 0.0, 2.0  # scale of both budgets: safe at lo so far, unsafe at hi
@@ -426,6 +427,7 @@ def reference_plan(mission: Mission, scenario: str | None = None,
     setup = prepare_mission(mission, scenario, policy)
     if setup.early is not None:
         return setup.early
+    assert setup.episode is not None  # a setup with no early plan has its episode
     if setup.episode.rules.one_leg:  # one leg: exact at any size
         return single_flight_plan(setup, policy, alt_indices, t0)
     return reference_from_setup(setup, policy, alt_indices, t0, time_limit_s)

@@ -104,17 +104,17 @@ def prepare_mission(mission: Any, scenario: str | None, policy: str) -> PlanSetu
     early if the battery cannot finish takeoff."""
     mission, msgs = _as_mission(mission)
     if mission is None:
-        return PlanSetup(None, None, scenario, msgs, {}, early=Plan(policy, messages=msgs))
+        return PlanSetup(None, None, scenario, msgs, {}, early=Plan(policy, messages=tuple(msgs)))
     scenario = scenario or mission.scenario
     try:
         check_scenario(scenario)
     except InputError as err:
-        return PlanSetup(mission, mission, scenario, msgs, {}, early=Plan(policy, messages=[str(err)]))
+        return PlanSetup(mission, mission, scenario, msgs, {}, early=Plan(policy, messages=(str(err),)))
     stats: dict[str, Any] = {"scenario": scenario}
     dests = mission.destinations
     if not dests:
         return PlanSetup(mission, mission, scenario, msgs, stats,
-                         early=Plan(policy, messages=["the mission has no destinations"], stats=stats))
+                         early=Plan(policy, messages=("the mission has no destinations",), stats=stats))
     full_mission = mission
     limit = destination_limit(policy)
     if len(dests) > limit:
@@ -128,7 +128,7 @@ def prepare_mission(mission: Any, scenario: str | None, policy: str) -> PlanSetu
     setup = PlanSetup(mission, full_mission, scenario, msgs, stats, episode=episode)
     fail = takeoff_failure(episode.cell)
     if fail is not None:
-        setup.early = Plan(policy, messages=msgs + [fail], stats=stats)
+        setup.early = Plan(policy, messages=(*msgs, fail), stats=stats)
     return setup
 
 
@@ -171,6 +171,7 @@ def single_flight_plan(setup: PlanSetup, policy: str, alt_indices: Iterable[int]
     """The exact plan of a single_flight ``setup`` (:func:`safest_single_flight`: one leg, any
     number of destinations), labelled ``policy``; ``stats["exact"]`` True, ``stats["time_s"]`` since
     ``t0`` (:func:`time.perf_counter`, s)."""
+    assert setup.episode is not None and setup.full_mission is not None  # a setup with no early plan
     stats = setup.stats
     stats["exact"] = True
     route, alts = safest_single_flight(setup.episode, alt_indices, setup.messages, stats)
