@@ -14,6 +14,7 @@ the table over sensor noise x context length x log start (``--table noise``).
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 
@@ -27,7 +28,7 @@ from .decoder_error import decode_given_health
 from .predictor import DynaformerPredictor
 
 EOD_V = DEFAULT_EOD_V  # V
-SETS = {
+SETS: dict[str, dict[str, Any]] = {
     "interpolation_flight": dict(band="train", flight_fraction=1.0),
     "interpolation_generic": dict(band="train", flight_fraction=0.0),
     "extrapolation_flight": dict(band="extra", flight_fraction=1.0),
@@ -283,7 +284,7 @@ def _noise_cell(pred, cur, volt, length, true_t, ctx_len, r0, q_max, sv, si, rng
     d_lo, d_med, d_hi, p_lo, p_med, p_hi, take = (np.empty(m) for _ in range(7))
     other = {k: np.empty(m) for k in compare}
     pcs = np.empty((m, 2))
-    cases = []
+    cases: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     for c in np.unique(ctx_len):  # contexts of one length are batched together
         grp = np.where(ctx_len == c)[0]
         ci = cur[grp, :c] + noise_i[grp, :c]
@@ -304,7 +305,7 @@ def _noise_cell(pred, cur, volt, length, true_t, ctx_len, r0, q_max, sv, si, rng
     # A cut-off the profile never reaches is inf; inside the profile it is on the profile's grid.
     d_med = np.where(d_med <= length, d_med, np.inf)
     p_med = np.where(p_med <= length, p_med, np.inf)
-    lat = {"dyn_predict": [], "dyn_interval": [], "phys_fit_eod": []}
+    lat: dict[str, list[float]] = {"dyn_predict": [], "dyn_interval": [], "phys_fit_eod": []}
     for ci, cv, p_i in cases:
         t0 = time.perf_counter()
         pred.predict_eod_s(ci, cv, p_i)

@@ -120,6 +120,13 @@ class TakeoffHealth(nn.Module):
     The output is clamped to R0 in about [-0.09, 0.56] ohm and q_max in [2700, 16000] C.
     """
 
+    points: torch.Tensor  # buffers (register_buffer)
+    iu: torch.Tensor
+    mean: torch.Tensor
+    scale: torch.Tensor
+    weight: torch.Tensor
+    bias: torch.Tensor
+
     def __init__(self, window: int = 20) -> None:
         super().__init__()
         self.window = int(window)
@@ -155,6 +162,8 @@ class _HealthScale(nn.Module):
     """Health embedding from TakeoffHealth's (R0, u): u at half scale, so that PC1 follows R0
     and PC2 q_max (as in the transformer's supervised embedding). Not used by the decoder."""
 
+    gain: torch.Tensor  # buffer (register_buffer)
+
     def __init__(self) -> None:
         super().__init__()
         self.register_buffer("gain", torch.tensor([1.0, 0.5]), persistent=False)
@@ -164,6 +173,8 @@ class _HealthScale(nn.Module):
 
 
 class Dynaformer(nn.Module):
+    health_head: nn.Module  # _HealthScale (take-off health) or nn.Linear (transformer)
+
     def __init__(self, cfg: DynaformerConfig | None = None) -> None:
         super().__init__()
         cfg = cfg or DynaformerConfig()

@@ -30,10 +30,12 @@ All times are in s from the first loaded sample, currents in A, voltages in V.
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import numpy as np
 import torch
 
+from uam_studio.battery.health.estimate import HealthEstimate
 from uam_studio.battery.health.intervals import with_preroll
 from uam_studio.battery.real.nasa_data import LOADED_A, NasaCell, NasaDischarge
 from uam_studio.battery.real.nasa_predict import KnownDischarge, known_before
@@ -159,7 +161,8 @@ def training_example(predictor: DynaformerPredictor, d: NasaDischarge, context_s
     if n_ctx < 20 or n <= n_ctx:
         return None
     cur = d.current_a[np.searchsorted(d.time_s, t0 + np.arange(n) + 0.5, side="right") - 1]
-    est = predictor.health_estimate(cur[:n_ctx], _context_voltage(known, start, n_ctx))
+    # a 1-D context: one estimate
+    est = cast(HealthEstimate, predictor.health_estimate(cur[:n_ctx], _context_voltage(known, start, n_ctx)))
     grid, k_pre = with_preroll([est], cur[None], 1.0)
     k0 = int(leading_rest(grid)[0])
     grid = grid[:, k0:]

@@ -111,8 +111,8 @@ def noisy_context(ds: DischargeSet, idx: np.ndarray, rng: np.random.Generator, n
     n_valid = ds.valid[idx].sum(1)
     lens = np.minimum(sample_context_lengths(rng, idx.size, max_s), np.maximum(n_valid, 1))
     lmax = int(lens.max())
-    ctx_i = ds.current_a[idx, :lmax].astype(np.float32)
-    ctx_v = ds.voltage_v[idx, :lmax].astype(np.float32)
+    ctx_i: np.ndarray = ds.current_a[idx, :lmax].astype(np.float32)  # float64 once noise is added
+    ctx_v: np.ndarray = ds.voltage_v[idx, :lmax].astype(np.float32)
     ctx_mask = np.arange(lmax)[None, :] < lens[:, None]
     if noise:
         sig_v = np.where(rng.random(idx.size) < 0.5, 0.0, rng.uniform(0.0, 0.010, idx.size))

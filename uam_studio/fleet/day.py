@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import simpy
@@ -264,7 +265,8 @@ class OperatingDay:
         self.version = [0] * self.n
         self.waiting: list[Request] = []
         self.cache: dict[tuple[str, int, int], float] = {}
-        self.stats = {"priority": 0, "served": 0, "breaches": 0, "flights": 0, "charge_c": 0.0, "wait_s": 0.0}
+        self.stats: dict[str, Any] = {"priority": 0, "served": 0, "breaches": 0, "flights": 0, "charge_c": 0.0,
+                                      "wait_s": 0.0}
         self.log: list[tuple[float, int, str, float, float]] = []
         self.required = BLIND_RESERVE_V if dispatcher == "blind" else 0.0
 

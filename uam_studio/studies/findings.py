@@ -149,7 +149,7 @@ def _sweep_task(name: str, v: float, scenario: str, steps: int, seed: int, weigh
     from uam_studio.planning.env import make_env
     from uam_studio.planning.missions.route import simulate_route
 
-    w = {**REWARD_DEFAULTS, **weights, name: float(v)}
+    w: dict[str, Any] = {**REWARD_DEFAULTS, **weights, name: float(v)}
     cfg = DQNTrainConfig(scenario=scenario, steps=steps, seed=seed, **w)
     episodes: list[Any] = []
     model = train_dqn(cfg, make_env(scenario=scenario, backend="physics", **w), callback=episodes.append)

@@ -34,10 +34,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 
-from uam_studio.battery import fit_health, simulate, simulate_constant_power
+from uam_studio.battery import HealthEstimate, fit_health, simulate, simulate_constant_power
 from uam_studio.battery.parameters import (
     NASA_18650,
     VTC6,
@@ -102,7 +103,7 @@ def _landing_min(voltage: np.ndarray, mission: MissionLog) -> np.ndarray:
 def physics_row(label: str, held_out: str, cell: Cell, mission: MissionLog) -> dict:
     """The mission flown on ``cell`` by power (and by the measured current), scored on the measurement."""
     measured = mission.log.voltage_v
-    row = {"model": label, "held out": held_out}
+    row: dict[str, Any] = {"model": label, "held out": held_out}
     for how, by_power in (("power", True), ("current", False)):
         res = replay_mission(mission, cell, by_power=by_power)
         n = int(np.sum(res.valid))
@@ -156,14 +157,15 @@ def dynaformer_rows(mission: MissionLog, cell: str = "nasa18650") -> list[dict]:
 
     log = mission.log
     truth = float(_landing_min(log.voltage_v, mission))
-    rows = []
+    rows: list[dict[str, Any]] = []
     try:
         pred = load_pretrained(cell)
     except Exception as exc:  # a missing or broken weights file is reported in the table, not raised
         return [{"context_s": c, "error": str(exc).splitlines()[0]} for c in CONTEXTS_S]
     for ctx in CONTEXTS_S:
         try:
-            est = pred.health_estimate(log.current_a[:ctx], log.voltage_v[:ctx])
+            # a 1-D context: one estimate
+            est = cast(HealthEstimate, pred.health_estimate(log.current_a[:ctx], log.voltage_v[:ctx]))
             lo, med, hi = pred.voltage_band(log.current_a[:ctx], log.voltage_v[:ctx], log.current_a, estimate=est)
             med_min, lo_min, hi_min = (float(_landing_min(np.asarray(x), mission)) for x in (med, lo, hi))
             phys = float(_landing_min(np.asarray(physics_band(est, log.current_a, cell=pred.cell)[1]), mission))

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from statistics import NormalDist
+from typing import cast
 
 import numpy as np
 
@@ -69,8 +70,8 @@ class EodInterval:
     def from_times(cls, low: float, median: float, high: float, horizon_s: float) -> EodInterval:
         """From times (s) where inf means "not within the profile" (:func:`crossing_times`)."""
         vals = (float(low), float(median), float(high))
-        return cls(*(v if math.isfinite(v) else float(horizon_s) for v in vals), float(horizon_s),
-                   tuple(not math.isfinite(v) for v in vals))
+        return cls(*cast(tuple[float, float, float], (v if math.isfinite(v) else float(horizon_s) for v in vals)),
+                   float(horizon_s), cast(tuple[bool, bool, bool], tuple(not math.isfinite(v) for v in vals)))
 
     def __iter__(self):
         return iter((self.low_s, self.median_s, self.high_s))
@@ -244,6 +245,7 @@ def eod_interval_s(estimate: HealthEstimate, current_a, dt_s: float = 1.0, level
         raise InputError("estimate", "expected a HealthEstimate (from fit_health)")
     if n_draws is not None and not (isinstance(n_draws, (int, np.integer)) and 10 <= n_draws <= 10000):
         raise InputError("n_draws", f"{n_draws!r} is out of range; allowed None or integers in [10, 10000]")
+    med: np.ndarray | float  # eod_intervals' per-estimate times, or the draws' median (s)
     if n_draws is None:
         lo, med, hi = eod_intervals([estimate], cur, dt, lv, eod, initial_state, cell)
         return EodInterval.from_times(lo[0], med[0], hi[0], cur.size * dt)

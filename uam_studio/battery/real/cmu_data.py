@@ -324,7 +324,7 @@ def reference_discharges(log: CellLog, max_gap: int = 2) -> list[ReferenceDischa
     on = (cur > REFERENCE_CURRENT_A[0]) & (cur < REFERENCE_CURRENT_A[1])
     edges = np.diff(np.r_[0, on.astype(int), 0])
     starts, stops = list(np.flatnonzero(edges == 1)), list(np.flatnonzero(edges == -1))
-    runs: list[list[int]] = []
+    runs: list[list[np.intp]] = []
     for a, b in zip(starts, stops):
         if runs and a - runs[-1][1] <= max_gap:
             runs[-1][1] = b

@@ -172,6 +172,7 @@ class DecodeSearch:
                 go = self.current(b.at, t)
                 rows.append(np.concatenate([go, self.current(t, n)]))  # the leg there, then home
                 split.append(go.size)
+                assert b.x is not None  # the filter is on: every beam carries its battery state
                 x0.append(b.x)
                 keys.append((i, t))
             if not rows:
@@ -201,7 +202,8 @@ class DecodeSearch:
         n = self.tok.n
         if start is None:
             start = _Beam(n, np.zeros(n, dtype=bool), self.fresh if self.filter else None, 0.0, 0)
-        active, finished = [start], []
+        active: list[_Beam] = [start]
+        finished: list[_Beam] = []
         for step in range(4 * n + 4):  # each step visits a destination or ends a sortie
             if not active:
                 break
@@ -218,8 +220,8 @@ class DecodeSearch:
                 else:
                     ranked = [int(t) for t in np.argsort(-lp[i], kind="stable") if mask[i, t] and t != n]
                     moves = [(t, None, float(self.tok.charge[b.at, t])) for t in ranked[: self.expand]]
-                for t, x, c in moves:
-                    children.append(_Beam(t, b.visited.copy(), x, b.used_c + c, b.sorties, b.tokens + [t],
+                for t, x, leg_c in moves:
+                    children.append(_Beam(t, b.visited.copy(), x, b.used_c + leg_c, b.sorties, b.tokens + [t],
                                           b.levels + [self.level(b.at, t)], b.logp + float(lp[i, t]),
                                           b.priority + int(self.tok.priority[t]),
                                           b.time_s + self.current(b.at, t).size))
@@ -328,9 +330,10 @@ def attention_plan(mission: Mission | dict, net: AttentionPolicy | None = None, 
     setup = prepare_mission(mission, scenario, "attention")
     if setup.early is not None:
         return setup.early
+    assert (setup.mission is not None and setup.full_mission is not None and setup.scenario is not None
+            and setup.episode is not None)
     mission, full, scenario, msgs, stats = (setup.mission, setup.full_mission, setup.scenario, setup.messages,
                                             setup.stats)
-    assert mission is not None and scenario is not None
     n = len(mission.destinations)
     episode = setup.episode
     legs = episode.legs  # max(N_MAX, n) slots

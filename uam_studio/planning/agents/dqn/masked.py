@@ -27,7 +27,7 @@ observations (``VecNormalize(norm_obs=True)`` would corrupt the mask).
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast, overload
 
 import numpy as np
 import torch as th
@@ -64,6 +64,10 @@ def _check_spaces(observation_space: spaces.Space, action_space: spaces.Space) -
     return n
 
 
+@overload
+def action_mask(obs: np.ndarray, n_actions: int) -> np.ndarray: ...
+@overload
+def action_mask(obs: th.Tensor, n_actions: int) -> th.Tensor: ...
 def action_mask(obs: np.ndarray | th.Tensor, n_actions: int) -> np.ndarray | th.Tensor:
     """Boolean mask of valid actions: the last ``n_actions`` entries of ``obs`` (> 0.5 means valid).
 
@@ -179,8 +183,8 @@ class MaskedDQN(DQN):
         """One action per row of ``observation`` (``(B, obs_dim)``), uniform among that row's valid
         actions (uniform among all actions if a row has none). Uses ``np.random`` (seeded by SB3).
         """
-        mask = np.asarray(action_mask(np.asarray(observation).reshape(-1, self.observation_space.shape[0]),
-                                      self.n_actions))
+        obs_space = cast(spaces.Box, self.observation_space)  # a flat Box: MaskedDQNPolicy checks the spaces
+        mask = np.asarray(action_mask(np.asarray(observation).reshape(-1, obs_space.shape[0]), self.n_actions))
         mask = mask | ~mask.any(axis=1, keepdims=True)
         # Uniform among valid entries: argmax of masked uniform noise.
         noise = np.where(mask, np.random.rand(*mask.shape), -1.0)

@@ -53,6 +53,7 @@ def dqn_route(mission: Mission, agent_path: str | os.PathLike[str] | None, predi
         messages.extend(setup.early.messages)
         return [], []
     messages.extend(setup.messages)
+    assert setup.mission is not None and setup.episode is not None and setup.scenario is not None
     mission, episode, scenario = setup.mission, setup.episode, setup.scenario
     dests = mission.destinations
     for k in range(len(dests) if not episode.rules.one_leg else 1):

@@ -238,7 +238,8 @@ def train_dqn(
         raise InputError("n_workers", f"{config.n_workers!r} is out of range; allowed 1 to n_envs ({config.n_envs})")
     in_process = config.n_workers == 1
     vec_env = make_vec_env(env_fn, n_envs=config.n_envs, seed=config.seed,
-                           vec_env_cls=DummyVecEnv if in_process else GroupedSubprocVecEnv,
+                           # SB3 annotates vec_env_cls as DummyVecEnv | SubprocVecEnv, but calls any VecEnv class
+                           vec_env_cls=DummyVecEnv if in_process else GroupedSubprocVecEnv,  # type: ignore[arg-type]
                            vec_env_kwargs=None if in_process else {"n_workers": config.n_workers})
     try:
         model = MaskedDQN(
@@ -280,8 +281,8 @@ def train_dqn(
 # Exploration and warm-up of a fine-tuning run (``init_agent``): the agent already plans, so it
 # explores a little around its own choices, warm-up included, instead of starting from uniform
 # random actions (which made a fine-tuning run start as badly as random weights).
-FINE_TUNE = {"exploration_initial_eps": 0.2, "exploration_fraction": 0.2, "exploration_final_eps": 0.02,
-             "learning_starts": 500, "random_warmup": False}
+FINE_TUNE: dict[str, Any] = {"exploration_initial_eps": 0.2, "exploration_fraction": 0.2, "exploration_final_eps": 0.02,
+                             "learning_starts": 500, "random_warmup": False}
 
 
 def _load_init_agent(agent_path: str | os.PathLike[str]) -> MaskedDQN:
