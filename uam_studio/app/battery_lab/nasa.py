@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import html
 from collections.abc import Callable
-from typing import Any
+from pathlib import Path
+from typing import Any, cast
 
 import holoviews as hv
 import numpy as np
@@ -22,7 +23,7 @@ import param
 from uam_studio.app.services import LatestWorker, one_line
 from uam_studio.app.session import ensure_bokeh_backend
 from uam_studio.app.style import heading, no_scroll_zoom, window_height
-from uam_studio.battery.real.nasa_data import DATA_ENV, NasaDataError, nasa_cell_files, nasa_folder
+from uam_studio.battery.real.nasa_data import DATA_ENV, NasaCell, NasaDataError, nasa_cell_files, nasa_folder
 from uam_studio.errors import InputError
 
 __all__ = ["NASA_COLORS", "NasaLabState", "NasaLabView"]
@@ -43,7 +44,8 @@ class NasaLabState(param.Parameterized):
     or ``{"error": one line}``; without the data, :attr:`missing` says where to put it.
     """
 
-    cell = param.Selector(default=None, objects=[], allow_None=True, doc="the cell (file name stem)")
+    cell: param.Selector[str | None] = param.Selector(default=None, objects=[], allow_None=True,
+                                                      doc="the cell (file name stem)")
     position = param.Integer(default=0, bounds=(0, None), doc="the discharge, 0 = the cell's first")
     discharges = param.Integer(default=1, doc="how many scoreable discharges the cell has")
     context_s = param.Number(default=300.0, bounds=(60.0, 600.0), doc="voltage read before predicting (s)")
@@ -55,11 +57,11 @@ class NasaLabState(param.Parameterized):
                  dispatch: Callable[[Callable[[], None]], None] | None = None, **params: Any) -> None:
         super().__init__(**params)
         self.background = background
-        self._cell = None  # the NasaCell shown, read once per cell
+        self._cell: NasaCell | None = None  # the NasaCell shown, read once per cell
         self._worker: LatestWorker[tuple, dict[str, Any]] = LatestWorker(
             self._compute, self._apply, lambda _r, err: {"error": one_line(err)}, dispatch=dispatch)
         try:
-            self.folder = nasa_folder(folder)
+            self.folder: Path | None = nasa_folder(folder)
             names = [f.name.split(".")[0] for f in nasa_cell_files(self.folder)]
         except NasaDataError as err:
             self.folder, names = None, []
@@ -91,7 +93,8 @@ class NasaLabState(param.Parameterized):
         name, position, context_s = request
         try:
             if self._cell is None or self._cell.name != name:  # a slider move replays the cell already read
-                self._cell = load_nasa_cell(self.folder / f"{name}.csv.gz")
+                # refresh() requests a replay only with the data folder found
+                self._cell = load_nasa_cell(cast("Path", self.folder) / f"{name}.csv.gz")
             cell = self._cell
             n = len(cell.discharges)
             return {"replay": replay_discharge(cell, min(position, max(n - 1, 0)), context_s), "discharges": n}
@@ -151,7 +154,8 @@ def nasa_figure(r) -> hv.Overlay:
 class NasaLabView(pn.viewable.Viewer):
     """A cell picker, a slider over its life, the replay's figure and its sentence."""
 
-    state = param.ClassSelector(class_=NasaLabState)
+    # never None once built: __init__ gives a new NasaLabState when none is given (param types it Optional)
+    state = cast("param.ClassSelector[NasaLabState]", param.ClassSelector(class_=NasaLabState))
 
     def __init__(self, state: NasaLabState | None = None, **params: Any) -> None:
         ensure_bokeh_backend()

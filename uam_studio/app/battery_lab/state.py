@@ -64,7 +64,8 @@ class BatteryLabState(param.Parameterized):
     the shared thread pool with :attr:`busy` set meanwhile and only the newest request kept.
     """
 
-    cell = param.Selector(default=NASA_NAME, objects=list(CELLS), doc="the cell's parameter set (:data:`CELLS`)")
+    cell: param.Selector[str] = param.Selector(default=NASA_NAME, objects=list(CELLS),
+                                               doc="the cell's parameter set (:data:`CELLS`)")
     q_max = param.Number(default=DEFAULT_Q_MAX, bounds=APP_Q_RANGE, doc="q_max (C)")
     r0 = param.Number(default=DEFAULT_R0, bounds=APP_R0_RANGE, doc="R0 (ohm)")
     altitude_m = param.Number(default=1000.0, bounds=ALTITUDE_RANGE_M)
@@ -72,7 +73,7 @@ class BatteryLabState(param.Parameterized):
     distance_km = param.Number(default=55.6, bounds=(10.0, 150.0), doc="leg length (km); 30 nm = 55.6 km")
     legs = param.Integer(default=3, bounds=(1, 10), doc="legs flown back to back (no recharge)")
     eod_v = param.Number(default=3.0, bounds=APP_EOD_RANGE)
-    vary = param.Selector(default="altitude", objects=list(VARY))
+    vary: param.Selector[str] = param.Selector(default="altitude", objects=list(VARY))
 
     result = param.Dict(default=None, allow_None=True, doc=":meth:`curves` of the current inputs")
     busy = param.Boolean(default=False, doc="a newer result is being computed")

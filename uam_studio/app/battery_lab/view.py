@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import functools
 import html
-from typing import Any
+from collections.abc import Callable
+from typing import Any, cast
 
 import holoviews as hv
 import numpy as np
@@ -48,7 +49,8 @@ def eod_text(curve: dict[str, Any]) -> str:
 class BatteryLabView(pn.viewable.Viewer):
     """Sliders for the leg and the cell, and current/voltage plots of a :class:`BatteryLabState`."""
 
-    state = param.ClassSelector(class_=BatteryLabState)
+    # never None once built: __init__ gives a new BatteryLabState when none is given (param types it Optional)
+    state = cast("param.ClassSelector[BatteryLabState]", param.ClassSelector(class_=BatteryLabState))
 
     def __init__(self, state: BatteryLabState | None = None, nasa: NasaLabView | None = None, **params: Any) -> None:
         ensure_bokeh_backend()
@@ -122,7 +124,7 @@ class BatteryLabView(pn.viewable.Viewer):
         """
         s = self.state
         for key in ("q_max", "r0"):
-            wd = self.widgets[key]
+            wd = cast("pn.widgets.FloatSlider", self.widgets[key])  # q_max's and R0's: float sliders
             lo, hi = s.param[key].bounds
             wd.param.update(start=min(lo, wd.start), end=max(hi, wd.end))
             wd.value = getattr(s, key)
@@ -132,8 +134,9 @@ class BatteryLabView(pn.viewable.Viewer):
         """Served, the busy indicator appears only once a change has taken :data:`BUSY_AFTER_MS`
         (each change sent to the browser costs it a page layout; a fast change would pay twice)."""
         if event.new:
-            self._busy_later(lambda: self.busy.param.update(value=bool(self.state.busy),
-                                                            visible=bool(self.state.busy)))
+            # cast: the dispatcher ignores what its callback returns (here param.update's restorer)
+            self._busy_later(cast("Callable[[], None]", lambda: self.busy.param.update(value=bool(self.state.busy),
+                                                                                   visible=bool(self.state.busy))))
         else:
             self.busy.param.update(value=False, visible=False)  # no idle ring beside the heading
 
@@ -159,8 +162,9 @@ class BatteryLabView(pn.viewable.Viewer):
                     functools.partial(self._voltage_element, labels=labels, factor=c["factor"]),
                     streams=[self._voltage_pipe])
             else:
-                self._current_pipe.send(data)
-                self._voltage_pipe.send(data)
+                # the same legend: the pipes made with it (set together with self._factor above)
+                cast("hv.streams.Pipe", self._current_pipe).send(data)
+                cast("hv.streams.Pipe", self._voltage_pipe).send(data)
             me = c["setting"][0]
             rows = "".join(f"<tr><td style='padding-right:12px'>{html.escape(cv['label'])}</td>"
                            f"<td>{eod_text(cv)}</td></tr>"

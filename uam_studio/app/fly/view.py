@@ -149,9 +149,8 @@ class FlyView(pn.viewable.Viewer):
         self.seen = ColumnDataSource({"x_km": [], "y_km": []})
         self.leg_labels = ColumnDataSource({"x": [], "y": [], "text": []})
         self.pos = ColumnDataSource({"x_km": [], "y_km": []})
-        # bokeh's stubs lack Range1d's positional (start, end) form (bokeh/models/ranges.pyi: a TODO)
         fig = page_figure(title="flight", width=MAP_PX, height=MAP_PX, x_axis_label="x (km)", y_axis_label="y (km)",
-                          x_range=Range1d(0.0, 1.0), y_range=Range1d(0.0, 1.0))  # type: ignore[arg-type]
+                          x_range=Range1d(start=0.0, end=1.0), y_range=Range1d(start=0.0, end=1.0))
         fig.scatter("x_km", "y_km", source=self.vertiport, marker="square", size=14, color="black")
         dots = fig.scatter("x_km", "y_km", source=self.dests, size=10, color="#ff7f0e", line_color="black")
         fig.text("x_km", "y_km", text="name", source=self.dests, text_font_size="9pt", text_baseline="bottom",
@@ -168,9 +167,8 @@ class FlyView(pn.viewable.Viewer):
         self.cutoff = ColumnDataSource({"x": [], "y": []})
         self.marks = ColumnDataSource({"time_min": [], "voltage_v": [], "decision": []})
         self.changes = ColumnDataSource({"x": [], "y": [], "text": [], "y0": []})
-        # bokeh's stubs lack Range1d(start, end), as above
         fig = page_figure(title="voltage: fly the mission to see it", height=MAP_PX, sizing_mode="stretch_width",
-                          x_range=Range1d(0.0, 1.0), y_range=Range1d(2.9, 4.25),  # type: ignore[arg-type]
+                          x_range=Range1d(start=0.0, end=1.0), y_range=Range1d(start=2.9, end=4.25),
                           x_axis_label="time (min)", y_axis_label="voltage (V)", min_border_top=0)
         for key, label, style in VOLTAGE_SERIES:
             fig.line("time_min", "voltage_v", source=self.curves[key], legend_label=label, **style)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import functools
 import threading
+from collections.abc import Callable
 from typing import Any
 
 from uam_studio.app.planner.comparison import (
@@ -30,6 +31,15 @@ class PlannerComparison:
     """The planner comparison of :class:`~uam_studio.app.planner.state.PlannerState` (its
     ``comparison``), mixed into the state: it reads the state's ``compare`` mode, ``dispatch``,
     ``plan_request`` and :meth:`policy_label`, and keeps ``_compare_key`` and ``_compare_timer``."""
+
+    # the state's, declared for the type checker (PlannerState sets them; ``comparison`` is also written here)
+    compare: str
+    dispatch: Callable[[Callable[[], None]], None]
+    plan_request: PlanRequest | None
+    comparison: dict[str, Any] | None
+    policy_label: Callable[[str], str]
+    _compare_key: tuple | None
+    _compare_timer: threading.Timer | None
 
     def _compare_specs(self, req: PlanRequest) -> dict[str, tuple[str, str]]:
         """Row name -> (policy value, label): the agent (the selected learned planner: the attention

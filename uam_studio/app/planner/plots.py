@@ -5,21 +5,22 @@ voltage against EOD and the health estimate, each built from its data (km, m, mi
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import pandas as pd
 from bokeh.core.properties import field, value
 from bokeh.models import (
-    ColorBar,
     ColumnDataSource,
     FixedTicker,
     HoverTool,
-    Legend,
-    LegendItem,
     PointDrawTool,
     Range1d,
 )
+
+# = bokeh.models.ColorBar, Legend, LegendItem: re-exports mypy misses (bokeh's stubs lack __all__)
+from bokeh.models.annotations import ColorBar, Legend, LegendItem
 from bokeh.palettes import Viridis256
 from bokeh.transform import linear_cmap
 
@@ -40,6 +41,11 @@ from uam_studio.app.style import (
     page_figure,
 )
 from uam_studio.planning.missions.mission import VERTIPORT
+
+if TYPE_CHECKING:
+    from bokeh.models.mappers import LinearColorMapper
+
+    from uam_studio.app.planner.state import PlannerState
 
 VOLTAGE_POINTS = 800  # samples per series drawn in the voltage plot (its lowest points always kept)
 WIDE_MIN_PX = 440  # narrowest width of the plan column and of the extra plots' column
@@ -62,6 +68,12 @@ class PlannerPlots:
     ``state`` (a :class:`~uam_studio.app.planner.state.PlannerState`), and each plot a Bokeh figure
     built once (``_*_figure``) whose sources its ``_draw_*`` method replaces with that data."""
 
+    # the view's, declared for the type checker (PlannerView sets them)
+    state: PlannerState
+    altitude_fig: Any
+    voltage_fig: Any
+    _on_points_edit: Callable[[str, Any, dict[str, Any]], None]
+
     def _route_data(self) -> dict[str, list]:
         """:func:`route_legs` of the plan, plus ``nodes``: every place on the map (x, y km)."""
         s = self.state
@@ -78,8 +90,10 @@ class PlannerPlots:
         per leg, a legend of the cycles), the places' names, the vertiport and the destinations, which
         a ``PointDrawTool`` adds, drags and deletes (its edits reach :meth:`_on_points_edit`).
         :meth:`_draw_points` and :meth:`_draw_map_route` put the state in it."""
-        fig = page_figure(frame_width=frame_px, frame_height=frame_px, x_range=Range1d(-half_km, half_km),
-                          y_range=Range1d(-half_km, half_km), x_axis_label="x (km)", y_axis_label="y (km)",
+        fig = page_figure(frame_width=frame_px, frame_height=frame_px,
+                          x_range=Range1d(start=-half_km, end=half_km),
+                          y_range=Range1d(start=-half_km, end=half_km),
+                          x_axis_label="x (km)", y_axis_label="y (km)",
                           min_border_left=10, min_border_right=10,
                           title="Map (km): click to add, drag to move, select + Backspace to delete")
         fig.title.text_font_size = "9.5pt"
@@ -101,7 +115,9 @@ class PlannerPlots:
         self._route_legend = Legend(items=[LegendItem(label=field("legend"), renderers=[legs]),
                                            LegendItem(label=field("failed"), renderers=[lost])],
                                     name="uam-route-legend", location="top_left", label_text_font_size="8pt",
-                                    padding=4, spacing=0, background_fill_alpha=0.8, visible=False)
+                                    # bokeh's stubs type padding as a Property (bokeh/core/property_aliases.pyi)
+                                    padding=4,  # type: ignore[arg-type]
+                                    spacing=0, background_fill_alpha=0.8, visible=False)
         fig.add_layout(self._route_legend)
         fig.add_tools(HoverTool(renderers=[legs, lost], tooltips=[("leg", "@leg"), ("altitude (m)", "@altitude_m")]))
         self._names_src = ColumnDataSource({"x": [], "y": [], "text": []})
@@ -156,7 +172,8 @@ class PlannerPlots:
         self._altitude_bars = ColumnDataSource({c: [] for c in ("left", "right", "top", "bottom", "color", "leg",
                                                                 "altitude_m")})
         self._altitude_text = ColumnDataSource({"x": [], "y": [], "text": []})
-        fig = page_figure(width=WIDE_MIN_PX, height=240, x_range=Range1d(0.4, 1.6), y_range=Range1d(0.0, 3300.0),
+        fig = page_figure(width=WIDE_MIN_PX, height=240,
+                          x_range=Range1d(start=0.4, end=1.6), y_range=Range1d(start=0.0, end=3300.0),
                           y_axis_label="altitude (m)", title="Cruise altitude per leg (colour = charging cycle)")
         bars = fig.quad(left="left", right="right", top="top", bottom="bottom", source=self._altitude_bars,
                         fill_color="color", line_color="white")
@@ -215,13 +232,15 @@ class PlannerPlots:
         series, the EOD line, each leg's take-off (a dotted line and its name), and a legend above.
         :meth:`_draw_voltage` puts a frame's data in it (a new plan costs replacing some sources' data,
         not a new figure)."""
-        src = {key: ColumnDataSource(cols) for key, cols in (
+        # cast: the empty columns' lists give mypy no element type to infer
+        src = {key: ColumnDataSource(cols) for key, cols in cast("tuple[tuple[str, dict[str, list]], ...]", (
             ("band", {"t": [], "low": [], "high": []}), ("physics", {"t": [], "v": []}),
             ("predicted", {"t": [], "v": []}), ("eod", {"t": [], "v": []}),
-            ("legs", {"x": [], "y0": [], "y1": []}), ("leg_names", {"x": [], "y": [], "text": []}))}
+            ("legs", {"x": [], "y0": [], "y1": []}), ("leg_names", {"x": [], "y": [], "text": []})))}
         fig = page_figure(height=VOLTAGE_HEIGHT_PX, width=None, sizing_mode="stretch_width", align="start",
                           min_border_left=10, min_border_right=10, min_border_bottom=10, min_border_top=0,
-                          x_range=Range1d(0.0, 1.0), y_range=Range1d(2.9, 4.3), x_axis_label="time (min)",
+                          x_range=Range1d(start=0.0, end=1.0), y_range=Range1d(start=2.9, end=4.3),
+                          x_axis_label="time (min)",
                           y_axis_label="voltage (V)", title="Voltage: physics (what happens) vs Dynaformer (predicted)")
         fig.title.text_font_size = "10pt"
         band = fig.varea("t", "low", "high", source=src["band"], fill_color="#ff7f0e", fill_alpha=0.35)
@@ -236,7 +255,7 @@ class PlannerPlots:
         items = {key: LegendItem(label=value(key), renderers=[r]) for key, r in
                  (("band", band), ("physics", phys), ("predicted", pred), ("eod", eod))}
         fig.add_layout(Legend(items=list(items.values()), orientation="horizontal", label_text_font_size="8pt",
-                              margin=0, padding=4), "above")
+                              margin=0, padding=4), "above")  # type: ignore[arg-type]  # padding: as above
         self._voltage_src, self._voltage_items = src, items
         return derived_looks(fig)
 
@@ -281,8 +300,8 @@ class PlannerPlots:
         pc1 = np.asarray(cols["PC1"], float)
         x0, x1 = (float(pc1.min()), float(pc1.max())) if pc1.size else (-1.0, 1.0)
         fig = page_figure(width=WIDE_MIN_PX, height=280,
-                          x_range=Range1d(x0 - 0.05 * (x1 - x0), x1 + 0.05 * (x1 - x0)),
-                          y_range=Range1d(lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo)),
+                          x_range=Range1d(start=x0 - 0.05 * (x1 - x0), end=x1 + 0.05 * (x1 - x0)),
+                          y_range=Range1d(start=lo - 0.05 * (hi - lo), end=hi + 0.05 * (hi - lo)),
                           x_axis_label="PC1 (tracks R0)", y_axis_label="PC2 (tracks q_max)",
                           title="Health estimate (Dynaformer PCs) vs population")
         r0 = np.asarray(cols["r0"], float)
@@ -292,7 +311,9 @@ class PlannerPlots:
         self._health_src = ColumnDataSource({"PC1": [], "PC2": []})
         fig.scatter("PC1", "PC2", source=self._health_src, marker="star", size=22, color="#d62728",
                     line_color="black", legend_label="this cell")
-        fig.add_layout(ColorBar(color_mapper=mapper.transform, title="R0 (ohm)", width=12), "right")
+        # linear_cmap's transform is a LinearColorMapper (bokeh's stubs type it as any Transform, or unset)
+        fig.add_layout(ColorBar(color_mapper=cast("LinearColorMapper", mapper.transform), title="R0 (ohm)", width=12),
+                       "right")
         fig.add_tools(HoverTool(renderers=[dots], tooltips=[("PC1", "@PC1{0.00}"), ("PC2", "@PC2{0.00}"),
                                                              ("R0 (ohm)", "@r0{0.000}"), ("q_max (C)", "@q_max{0}")]))
         legend_above(fig)

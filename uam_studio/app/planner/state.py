@@ -83,11 +83,12 @@ class PlannerState(PlannerComparison, param.Parameterized):
     vertiport_x_km = param.Number(default=0.0, bounds=COORD_RANGE_KM)
     vertiport_y_km = param.Number(default=0.0, bounds=COORD_RANGE_KM)
     return_wind = param.Number(default=0.0, bounds=WIND_RANGE_KTS, doc="wind (kt) on legs back to the vertiport")
-    scenario = param.Selector(default=DEFAULT_SCENARIO, objects=list(SCENARIOS))
+    scenario: param.Selector[str] = param.Selector(default=DEFAULT_SCENARIO, objects=list(SCENARIOS))
     q_max = param.Number(default=DEFAULT_Q_MAX, bounds=APP_Q_RANGE, doc="mobile lithium charge q_max (C)")
     r0 = param.Number(default=DEFAULT_R0, bounds=APP_R0_RANGE, doc="ohmic resistance R0 (ohm)")
     eod_v = param.Number(default=3.0, bounds=APP_EOD_RANGE, doc="end-of-discharge cut-off (V)")
-    policy = param.Selector(default="greedy", objects=list(POLICY_LABELS.values()), check_on_set=False)
+    policy: param.Selector[str] = param.Selector(default="greedy", objects=list(POLICY_LABELS.values()),
+                                                 check_on_set=False)
     policy_objects = param.Dict(default=dict(POLICY_LABELS), doc="policy select options: label -> value")
 
     plan = param.Dict(default=None, allow_None=True, doc="plan_mission's result for plan_request")
@@ -143,7 +144,7 @@ class PlannerState(PlannerComparison, param.Parameterized):
         self.param.watch(self._sync_mission, list(self.MISSION_INPUTS))
         reg = registry()
         self._update_policy_options(reg.agents)
-        self._agents_watcher = reg.param.watch(self._on_agents, "agents")
+        self._agents_watcher: param.parameterized.Watcher | None = reg.param.watch(self._on_agents, "agents")
         if "policy" not in params:
             self.policy = default_policy(self.scenario)
         self.param.watch(self._on_inputs, list(self.INPUTS))

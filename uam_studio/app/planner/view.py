@@ -13,7 +13,7 @@ from __future__ import annotations
 import html
 import io
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import pandas as pd
@@ -33,8 +33,8 @@ from uam_studio.app.session import (
 )
 from uam_studio.app.style import NOTE_STYLE, heading
 from uam_studio.flight.tables import WIND_RANGE_KTS
-from uam_studio.planning import plan_csv
 from uam_studio.planning.missions.mission import COORD_RANGE_KM, SCENARIOS
+from uam_studio.planning.planner import plan_csv  # its module: mypy reads uam_studio.planning's lazy names as object
 
 # The map is sized by its frame (frame_width/frame_height, as HoloViews sets them); Bokeh's
 # FIXED_SIZING_MODE check (W-1005) reads only width/height, and warned once for every session served.
@@ -86,7 +86,8 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
     plan on wide ones.
     """
 
-    state = param.ClassSelector(class_=PlannerState)
+    # a required argument of __init__: never None once built (param types it Optional, as it has no default)
+    state = cast("param.ClassSelector[PlannerState]", param.ClassSelector(class_=PlannerState))
 
     def __init__(self, state: PlannerState, **params: Any) -> None:
         super().__init__(state=state, **params)
@@ -202,7 +203,7 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
                            css_classes=["uam-map-column"])
         # Served, the plots that are not above the fold load right after the page (defer_load): the
         # map, the table, the summary, the comparison and the voltage come first.
-        extras = (self.altitude_plot, self.health_plot)
+        extras: tuple[pn.viewable.ServableMixin, ...] = (self.altitude_plot, self.health_plot)
         if in_server_session():
             extras = tuple(pn.panel(lambda p=p: p, defer_load=True) for p in extras)
         results = pn.Column(pn.Row(heading("Plan"), self.busy), self.summary,

@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from statistics import NormalDist
-from typing import cast
 
 import numpy as np
 
@@ -69,9 +68,9 @@ class EodInterval:
     @classmethod
     def from_times(cls, low: float, median: float, high: float, horizon_s: float) -> EodInterval:
         """From times (s) where inf means "not within the profile" (:func:`crossing_times`)."""
-        vals = (float(low), float(median), float(high))
-        return cls(*cast(tuple[float, float, float], (v if math.isfinite(v) else float(horizon_s) for v in vals)),
-                   float(horizon_s), cast(tuple[bool, bool, bool], tuple(not math.isfinite(v) for v in vals)))
+        lo, med, hi = (float(v) if math.isfinite(v) else float(horizon_s) for v in (low, median, high))
+        beyond = (not math.isfinite(low), not math.isfinite(median), not math.isfinite(high))
+        return cls(lo, med, hi, float(horizon_s), beyond)
 
     def __iter__(self):
         return iter((self.low_s, self.median_s, self.high_s))
