@@ -281,8 +281,7 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
 
     def _on_busy(self, event: param.parameterized.Event) -> None:
         """Served, the busy state is shown only once a plan has taken :data:`BUSY_AFTER_MS`: every
-        change sent to the browser costs it a page layout (about 0.15 s on a 2-core laptop), which a
-        fast plan would otherwise pay twice."""
+        change sent to the browser costs it a page layout, which a fast plan would otherwise pay twice."""
         if event.new:
             self._busy_later(self._show_busy)
         elif self._busy_shown:
