@@ -9,6 +9,7 @@ import argparse
 from typing import Any
 
 from uam_studio.cli.common import EXIT_INPUT, EXIT_OK, CliExit, Command, seed_arg
+from uam_studio.errors import InputError
 from uam_studio.planning.agents.trainer import SHARED_CLI_OPTIONS, trainers
 
 # uam_studio.dynaformer.cells.DYNAFORMER_CELLS' keys (that module imports torch; the parser must not)
@@ -55,11 +56,11 @@ class DynaformerRun:
             read_init(cfg.init, DynaformerConfig.for_cell(cfg.cell))
         if args.steps is not None:
             if args.steps < 1:
-                raise CliExit("--steps: must be >= 1", EXIT_INPUT)
+                raise InputError("--steps", "must be >= 1")
             cfg.steps = args.steps
         if args.n_train is not None:
             if args.n_train < 64:
-                raise CliExit("--n-train: must be >= 64", EXIT_INPUT)
+                raise InputError("--n-train", "must be >= 64")
             cfg.n_train = args.n_train
         make_writable_folder(out, "--out")
         return f"wrote {train(cfg, out, resume=not args.no_resume)}"
@@ -70,40 +71,37 @@ def _models() -> dict[str, Any]:
     return {"dynaformer": DynaformerRun(), **trainers()}
 
 
-_SHARED_HELP = {"out": "run folder", "steps": "how long to train", "device": "the torch device",
-                "init_from": "start from this file instead of random weights"}
+# the shared options (SHARED_CLI_OPTIONS): what each is, and its argparse keywords besides its default None
+_SHARED: dict[str, tuple[str, dict[str, Any]]] = {
+    "out": ("run folder", {}), "steps": ("how long to train", {"type": int}), "device": ("the torch device", {}),
+    "init_from": ("start from this file instead of random weights", {"metavar": "FILE"})}
 
 
 def _add_train_arguments(p: argparse.ArgumentParser) -> None:
+    """The models' options; the parser's defaults carry the models (``train_models``) and, for each option but
+    ``--seed``, the models that read it (``train_option_models``: the others refuse it)."""
     models = _models()
     p.add_argument("model", choices=list(models), help="what to train")
     p.add_argument("--seed", type=seed_arg, default=0)
+    owners: dict[str, list[str]] = {}
     for name in SHARED_CLI_OPTIONS:
-        uses = "; ".join(f"{m}: {model.cli_shared[name]}" for m, model in models.items() if name in model.cli_shared)
-        kind: dict[str, Any] = {"type": int} if name == "steps" else {"metavar": "FILE"} if name == "init_from" else {}
-        p.add_argument("--" + name.replace("_", "-"), default=None, help=f"{_SHARED_HELP[name]}. {uses}", **kind)
-    for model in models.values():
-        model.add_cli_arguments(p.add_argument_group(model.cli_title))
-
-
-def _option_models() -> dict[str, tuple[str, ...]]:
-    """Each option of ``uam-studio train`` but ``--seed``: the models that read it (the others refuse it)."""
-    found: dict[str, list[str]] = {}
-    for m, model in _models().items():
-        for name in model.cli_shared:
-            found.setdefault(name, []).append(m)
-        for name in model.add_cli_arguments(argparse.ArgumentParser().add_argument_group()):
-            found.setdefault(name, []).append(m)
-    return {name: tuple(ms) for name, ms in found.items()}
+        what, kind = _SHARED[name]
+        owners[name] = [m for m, model in models.items() if name in model.cli_shared]
+        uses = "; ".join(f"{m}: {models[m].cli_shared[name]}" for m in owners[name])
+        p.add_argument("--" + name.replace("_", "-"), default=None, help=f"{what}. {uses}", **kind)
+    for m, model in models.items():
+        for name in model.add_cli_arguments(p.add_argument_group(model.cli_title)):
+            owners.setdefault(name, []).append(m)
+    p.set_defaults(train_models=models, train_option_models=owners)
 
 
 def _run_train(args: argparse.Namespace) -> int:
-    for name, models in _option_models().items():
+    for name, models in args.train_option_models.items():
         if getattr(args, name) is not None and args.model not in models:
             flag = "--" + name.replace("_", "-")
             raise CliExit(f"{flag}: not an option of 'train {args.model}' (only of 'train {' / '.join(models)}')",
                           EXIT_INPUT)
-    print(_models()[args.model].train_cli(args))
+    print(args.train_models[args.model].train_cli(args))
     return EXIT_OK
 
 

@@ -241,9 +241,8 @@ class DQNTrainer:
         ))
 
     def train_cli(self, args: Any) -> str:
-
-        if args.scenario is not None and args.scenario not in SCENARIOS:
-            raise InputError("--scenario", f"{args.scenario!r} is not a scenario; allowed: {', '.join(SCENARIOS)}")
+        if args.scenario is not None:
+            check_scenario(args.scenario, "--scenario")
         mission = load_mission(args.mission) if args.mission is not None else None
         scenario = args.scenario or (mission.scenario if mission is not None else DEFAULT_SCENARIO)
         out = Path(args.out or f"runs/dqn_{scenario}")
