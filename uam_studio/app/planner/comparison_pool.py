@@ -40,20 +40,18 @@ def _worker_main(requests: dict[int, Any], results: dict[int, Any], busy: Any, w
     request pipes, the row sent on the slot's row pipe, until the front is gone. ``busy[w]`` is the slot
     it is computing for (-1: none)."""
     prepare_worker(nice)
-    slot_of = {id(conn): slot for slot, conn in requests.items()}
-    conns = list(requests.values())
-    while conns:
-        ready = wait(conns, timeout=2.0)
+    slot_of: dict[Any, int] = {conn: slot for slot, conn in requests.items()}
+    while slot_of:
+        ready: list[Any] = wait(list(slot_of), timeout=2.0)  # the request pipes' ends with something to read
         if not ready and os.getppid() != parent_pid:  # the front was killed: do not linger
             return
-        for ready_conn in ready:
-            conn: Any = ready_conn
+        for conn in ready:
             try:
                 _, mission, policy = conn.recv()
             except (EOFError, OSError):  # its app process ended (OSError: in the middle of a request)
-                conns.remove(conn)
+                del slot_of[conn]
                 continue
-            slot = slot_of[id(conn)]
+            slot = slot_of[conn]
             busy[w] = slot
             results[slot].send(compare_row(mission, policy))
             busy[w] = -1
