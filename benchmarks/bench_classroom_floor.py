@@ -2,16 +2,19 @@
 
     OMP_NUM_THREADS=1 python benchmarks/bench_classroom_floor.py [--sessions 1 30]
 
-Three servers, one after another, each loaded by :func:`bench_classroom.first_load` (the page GET, the
-websocket, the whole document), N clients at once:
+Three servers, one after another, each loaded by :func:`bench_classroom.full_load` (the page GET, the
+websocket, the whole document, then the browser's ``document_ready`` and everything the page defers), N
+clients at once:
 
 - ``bare``: ``panel serve`` of a page with one Markdown pane and one slider (Panel's own floor);
 - ``figures``: ``panel serve`` of four Bokeh figures of five 100-point lines each with the usual six
   tools, and one slider (about the model count of the Planner's four plots);
 - ``app``: ``uam-studio serve`` (:class:`uam_studio.app.serve.ServedApp`), the app as a class opens it.
 
-Printed per server and N: p50 / p95 of the load times (s) and the server's CPU seconds per session
-(``/proc/PID/stat``, user + system, over the N loads; the app's comparison process not counted). With every
+Printed per server and N: p50 / p95 of the first page's load times (s), p95 of the complete loads (the
+last deferred part or update received), and the server's CPU seconds per session (``/proc/PID/stat``,
+user + system, of the server and its child processes, from the first GET until the server is idle again:
+every deferred part built and sent). With every
 page built on one event loop, p95 at N concurrent loads is about N x the CPU per session: a p95 of 5 s for 30
 sessions needs <= ~0.17 s each.
 """
@@ -20,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import os
 import subprocess
 import sys
 import tempfile
@@ -32,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_classroom import first_load  # noqa: E402
+from bench_classroom import Load, full_load, settle, tree_cpu_s  # noqa: E402
 
 from uam_studio.app.serve import ServedApp  # noqa: E402
 
@@ -51,28 +53,28 @@ pn.Column(*[pn.pane.Bokeh(fig(i)) for i in range(4)], pn.widgets.FloatSlider(nam
 """
 
 
-def cpu_s(pid: int) -> float:
-    """User + system CPU seconds of one process so far."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (float(fields[11]) + float(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
-async def _loads(url: str, n: int) -> list[float]:
+async def _loads(url: str, n: int, pid: int) -> tuple[list[Load], float]:
+    """N loads at once; (the loads, the server's CPU seconds once it is idle again)."""
     with ThreadPoolExecutor(max_workers=n) as pool:
-        results = await asyncio.gather(*(first_load(url, pool) for _ in range(n)))
-    for _, conn in results:
-        conn.close()
-    return [t for t, _ in results]
+        loads = await asyncio.gather(*(full_load(url, pool) for _ in range(n)))
+    cpu = await settle(pid)
+    for load in loads:
+        load.conn.close()
+    await asyncio.gather(*(load.reader for load in loads if load.reader is not None))
+    return loads, cpu
 
 
 def measure(name: str, url: str, pid: int, sessions: list[int]) -> None:
     """Print one line per N for the server ``pid`` answering at ``url``."""
     for n in sessions:
-        before = cpu_s(pid)
-        times = np.array(asyncio.run(_loads(url, n)))
-        per = (cpu_s(pid) - before) / n
-        print(f"{name:8s} {n:3d} sessions: p50 {np.percentile(times, 50):6.2f} s, "
-              f"p95 {np.percentile(times, 95):6.2f} s, server CPU {per:5.3f} s/session", flush=True)
+        before = tree_cpu_s(pid)
+        loads, cpu = asyncio.run(_loads(url, n, pid))
+        times = np.array([ld.page_s for ld in loads])
+        complete = np.array([ld.complete_s for ld in loads])
+        per = (cpu - before) / n
+        print(f"{name:8s} {n:3d} sessions: first page p50 {np.percentile(times, 50):6.2f} s, "
+              f"p95 {np.percentile(times, 95):6.2f} s; complete p95 {np.percentile(complete, 95):6.2f} s; "
+              f"server CPU {per:5.3f} s/session", flush=True)
         time.sleep(2.0)
 
 
