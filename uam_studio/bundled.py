@@ -137,4 +137,5 @@ def refuse_bundled(path: str | os.PathLike[str], field: str) -> None:
     """Raise :class:`InputError` (``field``) if a run would write ``path`` into the bundled folder (retraining
     never overwrites a bundled model)."""
     if is_bundled(path):
-        raise InputError(field, "must not be the bundled pretrained/ folder (copy weights there by hand)")
+        raise InputError(field, f"{path}: must not be in the bundled pretrained/ folder (retraining never overwrites a "
+                                "bundled model; copy weights there by hand)")

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from uam_studio.bundled import HOME_ENV, agents_dir, is_bundled, user_home
+from uam_studio.bundled import HOME_ENV, agents_dir, is_bundled, refuse_bundled, user_home
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.dqn.retrain import DQN_REWARD_DEFAULTS, new_agent_path, retrain_dqn, training_setup
 from uam_studio.planning.agents.run_result import RetrainResult
@@ -154,8 +154,7 @@ class RetrainProcess:
                  source: str | None = "app", nice: int = 10, pause_event: Any = None, max_pause_s: float = 2.0,
                  kind: str = "dqn", **setup: Any) -> None:
         how = trainer(kind, "kind")
-        if is_bundled(agent_path):
-            raise InputError("agent_path", f"{agent_path}: must not be in the bundled pretrained/ folder")
+        refuse_bundled(agent_path, "agent_path")
         self.config = how.check(mission, setup)
         self.kind = kind
         self.agent_path = Path(agent_path)

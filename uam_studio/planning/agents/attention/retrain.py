@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from uam_studio.atomic_io import make_writable_folder
-from uam_studio.bundled import agents_dir, is_bundled, refuse_bundled
+from uam_studio.bundled import agents_dir, refuse_bundled
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.run_result import RetrainResult
 from uam_studio.planning.agents.trainer import AgentFile, TrainJob
@@ -124,8 +124,8 @@ def retrain_attention(config: Any, folder: str | os.PathLike[str], mission: Miss
     from uam_studio.planning.agents.attention.train import train_attention
 
     out = Path(folder)
-    if is_bundled(out / WEIGHTS_NAME) or is_bundled(out):
-        raise InputError("agent_path", f"{out}: must not be in the bundled pretrained/ folder")
+    refuse_bundled(out, "agent_path")
+    refuse_bundled(out / WEIGHTS_NAME, "agent_path")
     extra = {"source": source, "watched_map": mission_to_dict(mission) if mission is not None else None}
     weights = train_attention(replace(config), out, log=lambda _line: None, on_epoch=on_epoch,
                               evaluate=map_score(mission) if mission is not None else None,

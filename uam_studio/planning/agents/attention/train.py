@@ -39,7 +39,7 @@ import torch
 from torch import nn
 
 from uam_studio.atomic_io import atomic_save, remove_stale_temps
-from uam_studio.bundled import is_bundled
+from uam_studio.bundled import refuse_bundled
 from uam_studio.errors import InputError
 from uam_studio.planning.agents.attention import WEIGHTS_NAME
 from uam_studio.planning.agents.attention.decode import FORMAT, DecodeSearch
@@ -314,8 +314,7 @@ def _check_out(out: Path) -> Path:
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InputError("--out", f"{out} exists and is not a folder")
-    if is_bundled(out / WEIGHTS_NAME):
-        raise InputError("--out", f"{out} holds the bundled planner; training never overwrites it")
+    refuse_bundled(out / WEIGHTS_NAME, "--out")
     return out
 
 

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from uam_studio.atomic_io import make_writable_folder, remove_stale_temps
-from uam_studio.bundled import agents_dir, is_bundled, refuse_bundled
+from uam_studio.bundled import agents_dir, refuse_bundled
 from uam_studio.errors import InputError, check_range
 from uam_studio.planning.agents.run_result import RetrainResult
 from uam_studio.planning.agents.trainer import AgentFile, TrainJob
@@ -168,8 +168,7 @@ def retrain_dqn(
     from uam_studio.planning.env import OBS_DIM
 
     agent = Path(agent_path)
-    if is_bundled(agent):
-        raise InputError("agent_path", f"{agent}: must not be in the bundled pretrained/ folder")
+    refuse_bundled(agent, "agent_path")
     remove_stale_temps(agent.parent)
     tally = _Tally()
 
