@@ -42,7 +42,10 @@ def _discharge(q_max: float, r0: float, load_a: float, params) -> NasaDischarge:
 def test_a_finished_discharges_health_reaches_the_cutoff_when_the_cell_did(q, r0, load):
     d = _discharge(q, r0, load, NASA_IDENTIFIED.params)
     q_fit, r0_fit = discharge_health(d, NASA_IDENTIFIED.params, (NASA_IDENTIFIED.q_max, NASA_IDENTIFIED.r0))
-    assert q_fit == pytest.approx(q, rel=0.01)
+    # the samples are 10 s apart: the cell's cut-off time, and so its charge, is known to one sample
+    t_true = d.time_to_cutoff_s(3.0)
+    assert t_true is not None
+    assert q_fit == pytest.approx(q, rel=0.005 + 10.0 / t_true)
     assert np.isfinite(r0_fit) and r0_fit > 0
 
 

@@ -15,7 +15,7 @@ from nasa_synthetic import synthetic_cell, synthetic_rows, write_cell
 from uam_studio.battery.real.nasa_data import NasaCell
 from uam_studio.battery.real.nasa_eval import evaluate_nasa, fit_nasa_model, score_cell, summarise
 from uam_studio.battery.real.nasa_model import BUNDLED, bundled_model
-from uam_studio.battery.real.nasa_predict import CellBelief, known_before
+from uam_studio.battery.real.nasa_predict import EARLY_ERRORS, CellBelief, known_before
 from uam_studio.cli import main
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "nasa_pcoe"
@@ -68,6 +68,22 @@ def test_the_bounds_miss_at_their_risk_on_held_out_synthetic_lives(lives, tmp_pa
     assert st["miss99"] <= 0.01 + 2.5 * np.sqrt(0.01 * 0.99 / st["n"]), st
     assert 0.80 <= st["coverage90"] <= 0.99, st
     assert st["median_pct"] < 2.0, st
+
+
+def test_a_cells_first_history_predictions_take_the_early_quantiles(lives):
+    """Until a cell has EARLY_ERRORS errors of its own, its interval reads the training cells' 'early'
+    studentized quantiles (their first predictions' tails), then its ambient band's; without an 'early'
+    table (too few training errors: 8 synthetic lives) the band's throughout."""
+    model = fit_nasa_model(lives[1:], 300.0, 3.0)
+    assert "early" not in model.z
+    table = model.z.get("room", model.z["all"])
+    wide = replace(model, z={**model.z, "early": tuple(3.0 * v for v in table)})
+    plain, early = (score_cell(lives[0], m, progpy=False) for m in (model, wide))
+    history = [k for k, r in enumerate(plain) if r.method == "history"]
+    for k in history[:EARLY_ERRORS]:
+        assert early[k].high_s - early[k].low_s > 2.0 * (plain[k].high_s - plain[k].low_s)
+    for k in history[EARLY_ERRORS + 1:]:  # later predictions: the band's table (the levels move alike)
+        assert early[k].median_s == pytest.approx(plain[k].median_s)
 
 
 def test_a_first_discharge_is_a_prior_prediction_with_a_wide_interval(lives):

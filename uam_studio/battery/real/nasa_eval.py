@@ -181,6 +181,8 @@ def fit_nasa_model(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: fl
                 e = (math.log(t / belief.centre_s(known, p)) - belief.bias()) / belief.spread(known, p)
                 studentized["all"].append(e)
                 studentized.setdefault(ambient_band(d.ambient_c), []).append(e)
+                if len(belief.errors) < EARLY_ERRORS:
+                    studentized.setdefault("early", []).append(e)
             else:
                 logs.append(math.log(t / pred.median_s))
     z = {band: tuple(_conservative(np.array(e), r) for r in Z_LEVELS) for band, e in studentized.items()
@@ -299,7 +301,21 @@ def models_literal(models: list[NasaEodModel]) -> str:
             f"        trained_on={m.trained_on!r},",
             "    ),"]
     lines.append(")")
-    return "\n".join(lines)
+    return "\n".join(wrapped for line in lines for wrapped in _wrap(line))
+
+
+def _wrap(line: str, width: int = 120) -> list[str]:
+    """``line`` (inside the literal's brackets) broken after commas into lines of at most ``width``
+    characters, each continuation indented four spaces more."""
+    indent = " " * (len(line) - len(line.lstrip()) + 4)
+    out: list[str] = []
+    while len(line) > width:
+        cut = line.rfind(", ", 0, width - 1)
+        if cut <= len(indent):
+            break
+        out.append(line[:cut + 1])
+        line = indent + line[cut + 2:]
+    return out + [line]
 
 
 COLUMNS = ("scored", "skipped", "med %", "p95 %", "bias %", "cov90", "miss95", "miss99", "width %", "flagged",

@@ -17,7 +17,8 @@ How (:class:`CellBelief`, one per cell, carried along its life):
   ``a`` (fade per discharge) and ``b`` (1/V) fitted across training cells, and ``bias`` the cell's own
   running mean error (its belief of its own fade). The spread is the cell's own running scale of
   relative error, shrunk to a prior scale for its ambient band, times studentized quantiles fitted
-  across training cells.
+  across training cells: those of its ambient band, or, for a cell's first :data:`EARLY_ERRORS`
+  predictions, those of the training cells' first predictions (heavier tailed: a new cell changes most).
 - **prior** (a first discharge, or a load or ambient the cell has not run before): the charge the cell
   will deliver to the cut-off (Ah) is its latest discharge's, scaled by the training cells' median charge
   at the new and the old condition, or the young training cells' median at a first discharge; the time
@@ -157,8 +158,9 @@ class NasaEodModel:
     :param b: relative change per volt of context shift (1/V).
     :param scale: prior scale of the log error of a history prediction, per ambient band, and 'early': that
         of a cell's first :data:`EARLY_ERRORS` history predictions (a new cell's first cycles change most).
-    :param z: studentized quantiles of that error at :data:`Z_LEVELS`, per ambient band and 'all' (the
-        quantiles of a band with few training errors).
+    :param z: studentized quantiles of that error at :data:`Z_LEVELS`, per ambient band, 'all' (the
+        quantiles of a band with few training errors) and 'early' (of the training cells' first
+        :data:`EARLY_ERRORS` predictions each, where there are enough).
     :param charge: (load A, ambient C, median charge to the cut-off Ah over all discharges, over the first
         five of each cell) per training condition.
     :param prior_log: quantiles at :data:`RISKS` of log(true / predicted) of a prior prediction.
@@ -252,6 +254,8 @@ class CellBelief:
     def _history(self, known: KnownDischarge, p: NasaDischarge) -> np.ndarray:
         """The quantiles (s) at :data:`RISKS` of a history prediction from ``p``."""
         table = self.model.z.get(ambient_band(known.ambient_c), self.model.z["all"])
+        if len(self.errors) < EARLY_ERRORS:  # a cell's first predictions: the training cells' first errors' tails
+            table = self.model.z.get("early", table)
         z = np.interp(self.levels, Z_LEVELS, table)
         return self.centre_s(known, p) * np.exp(self.bias() + self.spread(known, p) * np.array(z))
 
