@@ -18,6 +18,7 @@ from uam_studio.fleet.nasa_aging import (
     fit_nasa_law,
     fit_rest_recovery,
     forecast_score,
+    law_floor_rms,
     nasa_leave_one_cell_out,
     nasa_life_points,
 )
@@ -30,6 +31,23 @@ def _life(name: str, law: AgingLaw, c0: float, n: int, seed: int, noise: float =
     efc = np.arange(n, dtype=float)
     cap = c0 * law.capacity_fraction(efc, 24.0) + rng.normal(0, noise, n)
     return LifePoints(name, efc, cap, np.arange(n), 24.0, efc[::10], 0.2 * (1 + 0.002 * efc[::10]))
+
+
+@settings(max_examples=12, deadline=None)
+@given(a=st.floats(0.002, 0.05), b=st.floats(0.3, 2.0), noise=st.floats(0.002, 0.03), n=st.integers(20, 200),
+       seed=st.integers(0, 10_000))
+def test_the_law_floor_is_the_scatter_and_no_law_of_the_form_beats_it(a, b, noise, n, seed):
+    """A life of the law's form plus scatter: the floor leaves at least most of the scatter (two parameters
+    fitted to the life itself), and the law it was drawn from, or the fleet's, scored on it as the
+    leave-one-out table scores a law (from the life's noisy reference), is never below the floor."""
+    scale = 0.5 / (a * (n - 1) ** b)  # at most half the capacity gone by the life's end
+    truth = AgingLaw(a=a * min(scale, 1.0), b=b, ea_k=0.0, k_r=0.0)
+    lf = _life("S", truth, 1.8, n, seed, noise)
+    floor = law_floor_rms(lf)
+    assert 0.6 * noise <= floor
+    for law in (truth, NASA_AGING_LAW):
+        err = np.median(lf.capacity_ah[:5]) * law.capacity_fraction(lf.efc, 24.0) - lf.capacity_ah
+        assert floor <= np.sqrt(np.mean(err[1:] ** 2)) + 1e-9
 
 
 def test_the_law_is_recovered_from_synthetic_lives_and_the_belief_band_covers():

@@ -38,7 +38,8 @@ from uam_studio.errors import InputError
 from uam_studio.fleet.aging import AGING_LAW, T_REF_C, AgingLaw, LifePoints, fit_resistance_growth
 
 __all__ = ["NASA_AGING_LAW", "NASA_REST_RECOVERY", "CapacityBelief", "RestRecovery", "fit_nasa_law",
-           "fit_rest_recovery", "forecast_score", "nasa_leave_one_cell_out", "nasa_life_points"]
+           "fit_rest_recovery", "forecast_score", "law_floor_rms", "nasa_leave_one_cell_out",
+           "nasa_life_points", "smooth_floor_rms"]
 
 NASA_AGING_LAW = AgingLaw(a=0.0213434, b=0.49731, ea_k=-778.876, k_r=0.00145988)  # fit_nasa_law, all 25 lives
 MIN_POINTS = 10  # a life with fewer measured capacities is too short to fit or score
@@ -145,12 +146,37 @@ def _rms(law: AgingLaw, lf: LifePoints) -> float:
     return float(np.sqrt(np.mean(err[1:] ** 2)))
 
 
+def law_floor_rms(lf: LifePoints) -> float:
+    """The least RMS (Ah) :func:`_rms` can give on ``lf`` for any law of the fleet's form: at the life's
+    temperature the law is ``reference (1 - A efc^b)``, so (``A``, ``b``) fitted to the life itself by least
+    squares (in-sample; several starts of ``b`` in 0.2-3) bound from below every fit of it on other lives."""
+    x, c, ref = lf.efc[1:], lf.capacity_ah[1:], reference_ah(lf)
+    best = math.inf
+    for b0 in (0.3, 0.5, 1.0, 1.5, 2.5):
+        start = np.r_[math.log(0.1) - b0 * math.log(max(float(x.max()), 2.0)), b0]  # 10% fade at the life's end
+        sol = least_squares(lambda p: ref * (1.0 - np.exp(p[0]) * x ** p[1]) - c, start,
+                            bounds=(np.r_[-40.0, 0.2], np.r_[5.0, 3.0]))
+        best = min(best, float(np.sqrt(np.mean(sol.fun ** 2))))
+    return best
+
+
+def smooth_floor_rms(lf: LifePoints, degree: int = 3) -> float:
+    """RMS (Ah), over the points :func:`_rms` scores, of the best polynomial of ``degree`` in equivalent full
+    cycles fitted to the life itself (in-sample, least squares, its own level): the scatter and the rests'
+    jumps that a smooth curve of as many parameters leaves, whatever its form."""
+    x, c = lf.efc[1:], lf.capacity_ah[1:]
+    fit = np.polynomial.Polynomial.fit(x, c, min(degree, max(x.size - 1, 0)))
+    return float(np.sqrt(np.mean((c - fit(x)) ** 2)))
+
+
 def nasa_leave_one_cell_out(lives: list[LifePoints]) -> list[dict]:
-    """Per life: capacity RMS (Ah) of the NASA law fitted on the other lives, and of the VTC6 law."""
+    """Per life: capacity RMS (Ah) of the NASA law fitted on the other lives, of the VTC6 law, and the life's
+    :func:`law_floor_rms` and :func:`smooth_floor_rms`."""
     return [{"cell": lf.cell, "temperature_c": lf.temperature_c, "discharges": int(lf.efc.size),
              "first_ah": float(lf.capacity_ah[0]), "last_ah": float(lf.capacity_ah[-1]),
              "rms_ah": _rms(fit_nasa_law([x for x in lives if x.cell != lf.cell]), lf),
-             "vtc6_rms_ah": _rms(AGING_LAW, lf)} for lf in lives]
+             "vtc6_rms_ah": _rms(AGING_LAW, lf), "law_floor_rms_ah": law_floor_rms(lf),
+             "cubic_floor_rms_ah": smooth_floor_rms(lf)} for lf in lives]
 
 
 @dataclass(frozen=True)
@@ -318,10 +344,14 @@ def _main() -> None:  # pragma: no cover - the fitting command; its numbers go t
     lives = nasa_life_points()
     law = fit_nasa_law(lives)
     print(f"AgingLaw(a={law.a:.6g}, b={law.b:.6g}, ea_k={law.ea_k:.6g}, k_r={law.k_r:.6g})  (all {len(lives)} lives)")
-    print(f"{'cell':6} {'T C':>5} {'n':>4} {'first':>6} {'last':>6} {'NASA law rms':>12} {'VTC6 law rms':>12}")
+    print(f"{'cell':6} {'T C':>5} {'n':>4} {'first':>6} {'last':>6} {'NASA law rms':>12} {'VTC6 law rms':>12} "
+          f"{'law floor':>9} {'cubic':>7}  (floors: the law's form, and a cubic, fitted to the life itself)")
     for r in nasa_leave_one_cell_out(lives):
         print(f"{r['cell']:6} {r['temperature_c']:5.0f} {r['discharges']:4d} {r['first_ah']:6.3f} {r['last_ah']:6.3f} "
-              f"{r['rms_ah']:12.4f} {r['vtc6_rms_ah']:12.4f}")
+              f"{r['rms_ah']:12.4f} {r['vtc6_rms_ah']:12.4f} {r['law_floor_rms_ah']:9.4f} "
+              f"{r['cubic_floor_rms_ah']:7.4f}"
+              + ("  half the VTC6 rms out of this form's reach" if r["law_floor_rms_ah"] > r["vtc6_rms_ah"] / 2
+                 else ""))
     rec = fit_rest_recovery(law, lives)
     print(f"RestRecovery(rho={rec.rho:.6g}, beta={rec.beta:.6g})  (all {len(lives)} lives)")
     print("next-20 forecasts, each life held out:")
