@@ -70,6 +70,28 @@ def test_prediction_never_reads_the_voltage_after_the_context(b0005, k):
 
 
 @needs_data
+def test_the_cells_history_corrects_later_predictions_never_the_one_it_came_from(b0005):
+    """Discharge 1 ends earlier after its context: its own row is unchanged, and the next (same load and
+    ambient; its correction the mean of discharges 0 and 1's errors) is earlier by what discharge 1's
+    error became; without history, every median is the Dynaformer's own."""
+    cell = replace(b0005, discharges=b0005.discharges[:3])
+    d = cell.discharges[1]
+    end = known_before(d, 300.0).voltage_v.size
+    shorter = replace(d, voltage_v=np.r_[d.voltage_v[:end], d.voltage_v[end:] - 0.08])
+    moved = replace(cell, discharges=(cell.discharges[0], shorter, cell.discharges[2]))
+    predictor = load_pretrained()
+    a, b = (score_dynaformer([c], predictor=predictor) for c in (cell, moved))
+    assert b[1]["true_s"] < a[1]["true_s"]
+    assert b[1]["median_s"] == a[1]["median_s"] and b[1]["raw_median_s"] == a[1]["raw_median_s"]
+    assert b[2]["raw_median_s"] == a[2]["raw_median_s"] and b[2]["median_s"] < a[2]["median_s"]
+    errors = [r["raw_median_s"] / r["true_s"] - 1.0 for r in b[:2]]
+    assert b[2]["median_s"] == pytest.approx(b[2]["raw_median_s"] / (1.0 + np.mean(errors)))
+    assert a[0]["median_s"] == a[0]["raw_median_s"]  # a first discharge: no history to correct by
+    plain = score_dynaformer([moved], predictor=predictor, history=False)
+    assert [r["median_s"] for r in plain] == [r["raw_median_s"] for r in b]
+
+
+@needs_data
 def test_a_short_fine_tune_runs_and_leaves_the_bundled_weights_alone(b0005):
     base = load_pretrained()
     before = {k: v.clone() for k, v in base.model.state_dict().items()}

@@ -20,6 +20,12 @@ its phase) up to :data:`HORIZON_S`, so a prediction never reads when the load en
 starts at the rest sample before the load (``start_at_rest``); starting at the first loaded sample instead
 (the fit then looks for a pre-roll) scored worse on these cells (median error 27% against 21%).
 
+The cell's history (:func:`score_dynaformer`'s ``history``, default on): the protocol lets a method read the
+cell's finished discharges, and the physics method and the history predictor do. The Dynaformer reads no
+history itself; its predicted times are divided by one plus the median of its relative errors on the cell's
+last ten finished discharges at the same load and ambient (:func:`own_error_factor`), as the physics
+method's are.
+
 Fine-tuning (:func:`training_example`, :func:`finetune_dynaformer`): the decoder trained further on real
 discharges, read exactly as at inference, with their whole measured voltage as the target. Only training
 cells' discharges may go in; the result stays in memory (nothing is written).
@@ -38,7 +44,7 @@ import torch
 from uam_studio.battery.health.estimate import HealthEstimate
 from uam_studio.battery.health.intervals import with_preroll
 from uam_studio.battery.real.nasa_data import LOADED_A, NasaCell, NasaDischarge
-from uam_studio.battery.real.nasa_predict import KnownDischarge, known_before
+from uam_studio.battery.real.nasa_predict import KnownDischarge, known_before, own_error_factor
 from uam_studio.dynaformer.model import Dynaformer
 from uam_studio.dynaformer.predictor import DynaformerPredictor, load_pretrained
 from uam_studio.dynaformer.predictor_inputs import leading_rest
@@ -108,22 +114,33 @@ def dynaformer_eod_s(predictor: DynaformerPredictor, known: KnownDischarge, cuto
 
 
 def score_dynaformer(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: float = 3.0, every: int = 1,
-                     predictor: DynaformerPredictor | None = None, **options) -> list[dict]:
+                     predictor: DynaformerPredictor | None = None, history: bool = True, **options) -> list[dict]:
     """One row per scored discharge (every ``every``-th of each cell, from its first) whose true time to
     ``cutoff_v`` (V) is after ``context_s`` (s): cell, discharge, ambient_c (C), context_s, true_s,
-    median_s, low_s, high_s (s from the first loaded sample; None where the Dynaformer gives no crossing).
+    median_s, low_s, high_s (s from the first loaded sample; None where the Dynaformer gives no crossing),
+    and raw_median_s, the Dynaformer's own median.
+
+    With ``history`` (default), the cell's history is read as the online protocol allows and as the physics
+    method reads it: the Dynaformer's times are divided by :func:`own_error_factor` of its errors on the
+    cell's earlier scored discharges at the same load and ambient (finished, so their truth is known).
     ``options`` go to :func:`dynaformer_eod_s`; ``predictor`` defaults to the bundled NASA one."""
     predictor = predictor or load_pretrained()
     rows = []
     for cell in cells:
+        past: list[tuple[NasaDischarge, float | None]] = []  # earlier scored discharges and their raw errors
         for d in cell.discharges[::every]:
             true_s = d.time_to_cutoff_s(cutoff_v)
             if true_s is None or true_s <= context_s:
                 continue
-            pred = dynaformer_eod_s(predictor, known_before(d, context_s), cutoff_v, **options)
+            known = known_before(d, context_s)
+            pred = dynaformer_eod_s(predictor, known, cutoff_v, **options)
             low, med, high = pred if pred is not None else (None, None, None)
+            f = own_error_factor(past, known) if history else 1.0
             rows.append({"cell": cell.name, "discharge": d.index, "ambient_c": d.ambient_c, "context_s": context_s,
-                         "true_s": true_s, "median_s": med, "low_s": low, "high_s": high})
+                         "true_s": true_s, "median_s": None if med is None else med / f,
+                         "low_s": None if low is None else low / f, "high_s": None if high is None else high / f,
+                         "raw_median_s": med})
+            past.append((d, None if med is None else med / true_s - 1.0))  # finished: its truth is history now
     return rows
 
 

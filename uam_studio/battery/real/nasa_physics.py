@@ -44,7 +44,7 @@ from uam_studio.battery.real.nasa_data import (
     nasa_folder,
     same_conditions,
 )
-from uam_studio.battery.real.nasa_predict import KnownDischarge, known_before
+from uam_studio.battery.real.nasa_predict import OWN_ERROR_WINDOW, KnownDischarge, known_before, own_error_factor
 from uam_studio.battery.simulate import simulate
 
 __all__ = ["BIAS_WINDOW", "IDENTIFY_CELL", "IDENTIFY_DISCHARGES", "LifePrediction", "discharge_health",
@@ -52,7 +52,7 @@ __all__ = ["BIAS_WINDOW", "IDENTIFY_CELL", "IDENTIFY_DISCHARGES", "LifePredictio
 
 IDENTIFY_CELL = "B0005"
 IDENTIFY_DISCHARGES = (0, 1, 2)
-BIAS_WINDOW = 10  # discharges: the method's running bias is the median of this many last relative errors
+BIAS_WINDOW = OWN_ERROR_WINDOW  # discharges: the method's running bias is the median of this many last errors
 DT_S = 1.0  # s: the model's step on a discharge's grid
 SIM_FLOOR_V = 2.5  # V: the lowest cut-off the model runs to
 FIT_ABOVE_V = 2.8  # V: a discharge's health is fitted to its samples above this
@@ -190,8 +190,7 @@ def predict_life(cell: NasaCell, cell_type: Cell, cutoff_v: float = 3.0,
         median = raw = None
         if past:
             raw = _predict(known, health, cell_type.params, ZERO_C + float(known.ambient_c), cutoff_v)
-            rel = [p[2] for p in same if p[2] is not None][-BIAS_WINDOW:]
-            median = raw / (1.0 + float(np.median(rel))) if rel else raw
+            median = raw / own_error_factor(((p[0], p[2]) for p in past), known, BIAS_WINDOW)
         true = d.time_to_cutoff_s(cutoff_v)  # the discharge has finished: from here on it is history
         out.append(LifePrediction(d.index, median, true, health[0], health[1]))
         err = raw / true - 1.0 if raw is not None and true else None

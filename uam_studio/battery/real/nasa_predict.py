@@ -38,10 +38,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from uam_studio.battery.real.nasa_data import LOADED_A, NasaDischarge, same_conditions
+from uam_studio.battery.real.nasa_data import LOADED_A, NasaDischarge, RunConditions, same_conditions
 
-__all__ = ["EARLY_ERRORS", "RISKS", "UNSEEN_WIDEN", "CellBelief", "charge_to_cutoff_ah", "EodPrediction",
-           "KnownDischarge", "NasaEodModel", "ambient_band", "known_before", "voltage_shift_v"]
+__all__ = ["EARLY_ERRORS", "OWN_ERROR_WINDOW", "RISKS", "UNSEEN_WIDEN", "CellBelief", "charge_to_cutoff_ah",
+           "EodPrediction", "KnownDischarge", "NasaEodModel", "ambient_band", "known_before", "own_error_factor",
+           "voltage_shift_v"]
 
 RISKS = (0.01, 0.05, 0.5, 0.95)  # the quantiles every prediction carries: bound99, bound95/low, median, high
 Z_LEVELS = (0.001, 0.0025, 0.005, 0.01, 0.02, 0.035, 0.05, 0.075, 0.1, 0.15, 0.25, 0.5, 0.75, 0.85, 0.9, 0.925,
@@ -53,6 +54,7 @@ N0_SCALE = 5.0  # weight (discharges) of the prior scale against the cell's own 
 N0_BIAS = 10.0  # weight (discharges) of zero bias against the cell's own mean error
 SCALE_WINDOW = 20  # the cell's own scale reads its latest this many errors
 EARLY_ERRORS = 5  # until a cell has this many errors of its own, its prior scale is at least the 'early' one
+OWN_ERROR_WINDOW = 10  # discharges: a method's running bias on a cell is the median of this many last errors
 
 
 def ambient_band(ambient_c: float) -> str:
@@ -96,6 +98,17 @@ def known_before(d: NasaDischarge, context_s: float) -> KnownDischarge:
     end = int(np.searchsorted(d.time_s, d.load_time_s + context_s, side="right"))
     return KnownDischarge(d.cell, d.index, d.uid, d.ambient_c, d.time_s.copy(), d.current_a.copy(), d.load_start,
                           float(context_s), d.voltage_v[:end].copy())
+
+
+def own_error_factor(past: Iterable[tuple[RunConditions, float | None]], target: RunConditions,
+                     window: int = OWN_ERROR_WINDOW) -> float:
+    """One plus the median of a method's latest ``window`` relative errors (predicted / true time - 1, -) on
+    the cell's finished discharges ``past`` (each with its error, None where it made no prediction) that
+    ran at ``target``'s load and ambient; 1.0 where there is none. A method's predicted time divided by it
+    loses the bias it has shown on this cell: the online protocol allows it, as those discharges are
+    finished."""
+    rel = [e for d, e in past if e is not None and same_conditions(d, target)][-window:]
+    return 1.0 + float(np.median(rel)) if rel else 1.0
 
 
 def voltage_shift_v(known: KnownDischarge, prev: NasaDischarge) -> float:
