@@ -2,15 +2,18 @@
 without the cell's own history, per group of test conditions.
 
     python benchmarks/bench_nasa_dynaformer.py [--data DIR] [--folds 3] [--steps 3000] [--seed 0] [--zero-shot-only]
+    (about 12 minutes on 2 cores)
 
 Every discharge of every cell in DIR (default ``../shared/data/nasa_pcoe``), 300 s context, 3.0 V, under the
 online protocol of ``uam_studio.battery.real.nasa_predict`` (:func:`uam_studio.dynaformer.nasa_discharges.
 score_dynaformer`). Fine-tuned: the cells sorted by name and split into ``--folds`` folds (index mod folds);
 each fold is scored by the bundled weights' decoder fine-tuned on the other folds' discharges only (asserted),
-kept in memory. "raw" is the Dynaformer's own median; "history" divides it by one plus the median of its
-relative errors on the cell's last ten finished discharges at the same load and ambient, as the physics
-method does (``score_dynaformer``'s default). Errors are in % of the true time left after the context; the
-90% interval is the Dynaformer's own (its calibration is the bundled weights', not refitted).
+kept in memory. Each is scored three ways (``score_dynaformer``'s ``history``): ``off``, the Dynaformer
+alone; ``bias``, its times divided by one plus the median of its relative errors on the cell's last ten
+finished discharges at the same load and ambient, as the physics method's are; ``health`` (the default),
+also decoded at the health fitted on the cell's latest such discharge whole, chosen where that has done
+better on the cell so far. Errors are in % of the true time left after the context; the 90% interval is
+the Dynaformer's own (its calibration is the bundled weights', not refitted).
 
 Goal (issue "The paper's own cells, for real"): fine-tuned median <= 1.25x the physics method's
 (``bench_nasa_physics.py``: 0.84% over 25 cells, B0005 left out; not rerun here).
@@ -43,30 +46,28 @@ GROUPS = {
 }
 
 
-def raw_rows(rows: list[dict]) -> list[dict]:
-    """``rows`` with the Dynaformer's own times (the history correction divides median, low and high alike)."""
-    out = []
-    for r in rows:
-        f = 1.0 if r["median_s"] is None else r["raw_median_s"] / r["median_s"]
-        out.append({**r, **{k: None if r[k] is None else r[k] * f for k in ("median_s", "low_s", "high_s")}})
-    return out
-
-
-def report(name: str, rows: list[dict]) -> None:
-    """Print ``name``'s rows per group and over all, raw and with the cell's history."""
-    print(f"{name}: {len(rows)} discharges")
-    print(f"  {'group':36s} {'n':>5s} | {'raw med%':>8s} {'p95%':>7s} {'cov90':>6s} | {'history med%':>12s} "
-          f"{'p95%':>7s} {'bias%':>6s} {'cov90':>6s}")
-    names = {r["cell"] for r in rows}
+def report(name: str, runs: dict[str, list[dict]]) -> None:
+    """Print ``name``'s rows per group and over all, for each history mode in ``runs``."""
+    first = next(iter(runs.values()))
+    print(f"{name}: {len(first)} discharges")
+    print(f"  {'group':36s} {'n':>5s} | " + " | ".join(f"{m + ' med%':>12s} {'p95%':>6s} {'cov90':>5s}" for m in runs)
+          + " | previous health used")
+    names = {r["cell"] for r in first}
     groups = {g: cs for g, cs in GROUPS.items() if names & set(cs)} or {c: (c,) for c in sorted(names)}
     for g, cs in [*groups.items(), ("all", tuple(names))]:
-        sub = [r for r in rows if r["cell"] in cs]
-        raw, hist = summarise_dynaformer(raw_rows(sub)), summarise_dynaformer(sub)
-        if "median_pct" not in hist:  # no crossing predicted in the group
-            continue
-        print(f"  {g:36s} {hist['n']:5d} | {raw['median_pct']:8.2f} {raw['p95_pct']:7.1f} {raw['coverage90']:6.2f} | "
-              f"{hist['median_pct']:12.2f} {hist['p95_pct']:7.1f} {hist['bias_pct']:+6.2f} {hist['coverage90']:6.2f}",
-              flush=True)
+        parts, n = [], 0
+        for rows in runs.values():
+            st = summarise_dynaformer([r for r in rows if r["cell"] in cs])
+            n = st["n"]
+            parts.append(f"{st.get('median_pct', float('nan')):12.2f} {st.get('p95_pct', float('nan')):6.1f} "
+                         f"{st.get('coverage90', float('nan')):5.2f}")
+        used = sum(r["health_from"] != "context" for r in runs.get("health", []) if r["cell"] in cs)
+        print(f"  {g:36s} {n:5d} | " + " | ".join(parts) + f" | {used}", flush=True)
+
+
+def score_all(cells: list, predictor) -> dict[str, list[dict]]:
+    """Rows of :func:`score_dynaformer` for each history mode (``off``: the model alone)."""
+    return {mode: score_dynaformer(cells, predictor=predictor, history=mode) for mode in ("off", "bias", "health")}
 
 
 def main() -> None:
@@ -80,22 +81,23 @@ def main() -> None:
     cells = sorted(load_nasa_folder(nasa_folder(args.data)), key=lambda c: c.name)
     base = load_pretrained()
     t0 = time.perf_counter()
-    report("zero-shot (bundled weights)", score_dynaformer(cells, predictor=base))
+    report("zero-shot (bundled weights)", score_all(cells, base))
     print(f"  ({time.perf_counter() - t0:.0f} s)")
     if args.zero_shot_only:
         return
     t0 = time.perf_counter()
-    rows: list[dict] = []
+    runs: dict[str, list[dict]] = {}
     for fold in range(args.folds):
         held = [c for i, c in enumerate(cells) if i % args.folds == fold]
         train = [c for i, c in enumerate(cells) if i % args.folds != fold]
         examples = [e for c in train for d in c.discharges if (e := training_example(base, d)) is not None]
         assert not {e[0] for e in examples} & {c.name for c in held}, "a held-out cell in the fine-tune"
         tuned = finetune_dynaformer(examples, base, steps=args.steps, seed=args.seed)
-        rows += score_dynaformer(held, predictor=tuned)
+        for mode, rows in score_all(held, tuned).items():
+            runs.setdefault(mode, []).extend(rows)
         print(f"  fold {fold}: fine-tuned on {len(examples)} discharges of {len(train)} cells, scored {len(held)} "
               f"cells ({time.perf_counter() - t0:.0f} s)", flush=True)
-    report(f"fine-tuned on the other folds ({args.folds} folds, {args.steps} steps, seed {args.seed})", rows)
+    report(f"fine-tuned on the other folds ({args.folds} folds, {args.steps} steps, seed {args.seed})", runs)
 
 
 if __name__ == "__main__":

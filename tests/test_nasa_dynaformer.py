@@ -15,6 +15,7 @@ import pytest
 from uam_studio.battery.real.nasa_data import load_nasa_folder
 from uam_studio.battery.real.nasa_predict import known_before
 from uam_studio.dynaformer.nasa_discharges import (
+    MIN_OWN_ERRORS,
     dynaformer_eod_s,
     finetune_dynaformer,
     score_dynaformer,
@@ -70,25 +71,53 @@ def test_prediction_never_reads_the_voltage_after_the_context(b0005, k):
 
 
 @needs_data
-def test_the_cells_history_corrects_later_predictions_never_the_one_it_came_from(b0005):
+@pytest.mark.parametrize("history", ["bias", "health"])
+def test_the_cells_history_corrects_later_predictions_never_the_one_it_came_from(b0005, history):
     """Discharge 1 ends earlier after its context: its own row is unchanged, and the next (same load and
-    ambient; its correction the mean of discharges 0 and 1's errors) is earlier by what discharge 1's
-    error became; without history, every median is the Dynaformer's own."""
+    ambient; its correction the mean of discharges 0 and 1's errors, too few for the previous discharge's
+    health to be chosen) is earlier by what discharge 1's error became; with history off, every median is
+    the Dynaformer's own."""
     cell = replace(b0005, discharges=b0005.discharges[:3])
     d = cell.discharges[1]
     end = known_before(d, 300.0).voltage_v.size
     shorter = replace(d, voltage_v=np.r_[d.voltage_v[:end], d.voltage_v[end:] - 0.08])
     moved = replace(cell, discharges=(cell.discharges[0], shorter, cell.discharges[2]))
     predictor = load_pretrained()
-    a, b = (score_dynaformer([c], predictor=predictor) for c in (cell, moved))
+    a, b = (score_dynaformer([c], predictor=predictor, history=history) for c in (cell, moved))
     assert b[1]["true_s"] < a[1]["true_s"]
     assert b[1]["median_s"] == a[1]["median_s"] and b[1]["raw_median_s"] == a[1]["raw_median_s"]
     assert b[2]["raw_median_s"] == a[2]["raw_median_s"] and b[2]["median_s"] < a[2]["median_s"]
+    assert {r["health_from"] for r in a + b} == {"context"}
     errors = [r["raw_median_s"] / r["true_s"] - 1.0 for r in b[:2]]
     assert b[2]["median_s"] == pytest.approx(b[2]["raw_median_s"] / (1.0 + np.mean(errors)))
     assert a[0]["median_s"] == a[0]["raw_median_s"]  # a first discharge: no history to correct by
-    plain = score_dynaformer([moved], predictor=predictor, history=False)
+    plain = score_dynaformer([moved], predictor=predictor, history="off")
     assert [r["median_s"] for r in plain] == [r["raw_median_s"] for r in b]
+
+
+@needs_data
+def test_the_previous_discharges_health_is_chosen_where_it_has_done_better_and_never_reads_ahead(b0005):
+    """On B0005 (one load and ambient) the whole-record health of the previous discharge predicts better
+    than a 300 s context: once it has MIN_OWN_ERRORS errors of its own it is chosen, and its rows are
+    within 1% of the truth. Poisoning a discharge after its context changes no row up to its own."""
+    cell = replace(b0005, discharges=b0005.discharges[:MIN_OWN_ERRORS + 5])
+    predictor = load_pretrained()
+    rows = score_dynaformer([cell], predictor=predictor)
+    chosen = [r for r in rows if r["health_from"] == "previous discharge"]
+    assert [r["discharge"] for r in rows[:MIN_OWN_ERRORS + 2]] == list(range(MIN_OWN_ERRORS + 2))
+    assert all(r["health_from"] == "context" for r in rows[:MIN_OWN_ERRORS + 1])  # d0: no history; then too few
+    assert len(chosen) >= 3
+    assert all(abs(r["median_s"] / r["true_s"] - 1.0) < 0.01 for r in chosen)
+    assert all(r["low_s"] <= r["median_s"] <= r["high_s"] for r in rows)
+    k = MIN_OWN_ERRORS + 2
+    d = cell.discharges[k]
+    end = known_before(d, 300.0).voltage_v.size
+    poisoned = replace(d, voltage_v=np.r_[d.voltage_v[:end], np.linspace(4.2, 2.0, d.voltage_v.size - end)])
+    cheat = replace(cell, discharges=cell.discharges[:k] + (poisoned,) + cell.discharges[k + 1:])
+    again = score_dynaformer([cheat], predictor=predictor)
+    keys = ("median_s", "low_s", "high_s", "raw_median_s", "health_from")
+    assert again[k]["true_s"] != rows[k]["true_s"]
+    assert [[r[c] for c in keys] for r in again[:k + 1]] == [[r[c] for c in keys] for r in rows[:k + 1]]
 
 
 @needs_data

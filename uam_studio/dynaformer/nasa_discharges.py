@@ -20,11 +20,13 @@ its phase) up to :data:`HORIZON_S`, so a prediction never reads when the load en
 starts at the rest sample before the load (``start_at_rest``); starting at the first loaded sample instead
 (the fit then looks for a pre-roll) scored worse on these cells (median error 27% against 21%).
 
-The cell's history (:func:`score_dynaformer`'s ``history``, default on): the protocol lets a method read the
-cell's finished discharges, and the physics method and the history predictor do. The Dynaformer reads no
-history itself; its predicted times are divided by one plus the median of its relative errors on the cell's
-last ten finished discharges at the same load and ambient (:func:`own_error_factor`), as the physics
-method's are.
+The cell's history (:func:`score_dynaformer`'s ``history``, default ``'health'``): the protocol lets a
+method read the cell's finished discharges, and the physics method and the history predictor do. Two
+readings: the Dynaformer's times divided by one plus the median of its relative errors on the cell's last
+ten finished discharges at the same load and ambient (:func:`own_error_factor`, as the physics method's
+are), and the health it decodes with taken from the cell's latest such discharge, fitted on its whole
+record (:func:`finished_health`: a 300 s context says little about capacity, a whole discharge says it),
+chosen over the context's fit where that has done better on the cell so far at that condition.
 
 Fine-tuning (:func:`training_example`, :func:`finetune_dynaformer`): the decoder trained further on real
 discharges, read exactly as at inference, with their whole measured voltage as the target. Only training
@@ -43,13 +45,15 @@ import torch
 
 from uam_studio.battery.health.estimate import HealthEstimate
 from uam_studio.battery.health.intervals import with_preroll
-from uam_studio.battery.real.nasa_data import LOADED_A, NasaCell, NasaDischarge
-from uam_studio.battery.real.nasa_predict import KnownDischarge, known_before, own_error_factor
+from uam_studio.battery.real.nasa_data import LOADED_A, NasaCell, NasaDischarge, RunConditions, same_conditions
+from uam_studio.battery.real.nasa_predict import OWN_ERROR_WINDOW, KnownDischarge, known_before, own_error_factor
 from uam_studio.dynaformer.model import Dynaformer
 from uam_studio.dynaformer.predictor import DynaformerPredictor, load_pretrained
 from uam_studio.dynaformer.predictor_inputs import leading_rest
+from uam_studio.errors import InputError
 
-__all__ = ["HORIZON_S", "Example", "dynaformer_eod_s", "finetune_dynaformer", "score_dynaformer",
+__all__ = ["COVER", "HISTORY", "HORIZON_S", "MIN_OWN_ERRORS", "Example", "dynaformer_eod_s", "finetune_dynaformer",
+           "finished_health", "score_dynaformer",
            "summarise_dynaformer", "training_example"]
 
 HORIZON_S = 12000.0  # s from the log's start: the extended profile's length (NASA runs end before 7000 s)
@@ -87,10 +91,12 @@ def _context_voltage(known: KnownDischarge, start: int, n_grid: int) -> np.ndarr
 
 
 def dynaformer_eod_s(predictor: DynaformerPredictor, known: KnownDischarge, cutoff_v: float = 3.0, *,
-                     start_at_rest: bool = True, extend_load: bool = True) -> tuple[float, float, float] | None:
+                     start_at_rest: bool = True, extend_load: bool = True,
+                     estimate: HealthEstimate | None = None) -> tuple[float, float, float] | None:
     """(low, median, high) of the 90% interval of the time (s, from the first loaded sample) to the first
     predicted voltage below ``cutoff_v`` (V), from ``known`` only; None where the median never crosses
-    within the profile (a high end beyond it is ``math.inf``).
+    within the profile (a high end beyond it is ``math.inf``). ``estimate``: the health to decode with
+    (e.g. :func:`finished_health` of the cell's previous discharge) instead of the context's fit.
 
     :param start_at_rest: start the log at the rest sample before the load (0 A held until the first
         loaded sample); else at the first loaded sample (the fit then looks for a pre-roll).
@@ -106,41 +112,109 @@ def dynaformer_eod_s(predictor: DynaformerPredictor, known: KnownDischarge, cuto
     held = np.clip(np.searchsorted(times, t0 + np.arange(n_grid) + 0.5, side="right") - 1, 0, times.size - 1)
     grid_i = current[held]
     ctx_v = _context_voltage(known, start, n_ctx)
-    iv = predictor.eod_interval_s(grid_i[:n_ctx], ctx_v, grid_i, dt_s=1.0, level=0.9, eod_v=cutoff_v)
+    iv = predictor.eod_interval_s(grid_i[:n_ctx], ctx_v, grid_i, dt_s=1.0, level=0.9, eod_v=cutoff_v, estimate=estimate)
     if iv.censored[1]:
         return None
     shift = float(known.time_s[known.load_start]) - t0
     return iv.low_s - shift, iv.median_s - shift, (math.inf if iv.censored[2] else iv.high_s - shift)
 
 
+HISTORY = ("health", "bias", "off")
+"""What of the cell's history :func:`score_dynaformer` reads (module docstring)."""
+COVER = 0.9  # the share of a method's own errors its interval must hold (the 90% interval)
+MIN_OWN_ERRORS = 9  # errors at a condition before the previous discharge's health may be chosen: with n of
+# them, the ceil(0.9 (n + 1))-th smallest |error| holds 90% (split conformal), which needs n >= 9
+
+
+def finished_health(predictor: DynaformerPredictor, d: NasaDischarge) -> HealthEstimate:
+    """The physics fit (q_max C, R0 ohm) of finished discharge ``d``'s whole record up to its last loaded
+    sample, read as :func:`dynaformer_eod_s` reads a context (log from the rest sample, 1 s grid): what the
+    cell's health was on its latest discharge, with its whole capacity seen."""
+    start, last = d.load_start - 1, int(np.flatnonzero(d.current_a > LOADED_A)[-1])
+    t0 = float(d.time_s[start])
+    n = int(math.floor(float(d.time_s[last]) - t0 + 1e-9))
+    cur = d.current_a[np.searchsorted(d.time_s, t0 + np.arange(n) + 0.5, side="right") - 1]
+    volt = _grid_voltage(d.time_s, d.current_a, d.voltage_v, t0 + np.arange(1, n + 1, dtype=float), start)
+    return cast(HealthEstimate, predictor.health_estimate(cur, volt))
+
+
+class _Method:
+    """One way of predicting a cell's discharges, with its record on the cell: raw relative errors (for
+    :func:`own_error_factor`) and |errors| after that correction (to choose between methods)."""
+
+    def __init__(self) -> None:
+        self.raw: list[tuple[NasaDischarge, float | None]] = []
+        self.corrected: list[tuple[NasaDischarge, float]] = []
+
+    def skill(self, d: RunConditions) -> tuple[int, float, float]:
+        """(how many, median, conformal 90% bound) of its latest ten corrected |errors| (-) at ``d``'s load
+        and ambient; the bound is infinite below :data:`MIN_OWN_ERRORS` errors."""
+        e = np.sort([x for q, x in self.corrected if same_conditions(q, d)][-OWN_ERROR_WINDOW:])
+        k = math.ceil(COVER * (e.size + 1))
+        return e.size, float(np.median(e)) if e.size else math.inf, float(e[k - 1]) if k <= e.size else math.inf
+
+    def record(self, d: NasaDischarge, raw: float | None, corrected: float | None, true_s: float) -> None:
+        self.raw.append((d, None if raw is None else raw / true_s - 1.0))
+        if corrected is not None:
+            self.corrected.append((d, abs(corrected / true_s - 1.0)))
+
+
 def score_dynaformer(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: float = 3.0, every: int = 1,
-                     predictor: DynaformerPredictor | None = None, history: bool = True, **options) -> list[dict]:
+                     predictor: DynaformerPredictor | None = None, history: str = "health",
+                     **options) -> list[dict]:
     """One row per scored discharge (every ``every``-th of each cell, from its first) whose true time to
     ``cutoff_v`` (V) is after ``context_s`` (s): cell, discharge, ambient_c (C), context_s, true_s,
     median_s, low_s, high_s (s from the first loaded sample; None where the Dynaformer gives no crossing),
-    and raw_median_s, the Dynaformer's own median.
+    raw_median_s (the Dynaformer at the context's health, uncorrected) and health_from ('context' or
+    'previous discharge').
 
-    With ``history`` (default), the cell's history is read as the online protocol allows and as the physics
-    method reads it: the Dynaformer's times are divided by :func:`own_error_factor` of its errors on the
-    cell's earlier scored discharges at the same load and ambient (finished, so their truth is known).
+    ``history`` (:data:`HISTORY`), what of the cell's finished discharges it reads (module docstring):
+    'off', nothing; 'bias', each method's times divided by :func:`own_error_factor` of its own errors on
+    the cell; 'health' (default), also a second prediction decoded at :func:`finished_health` of the
+    cell's latest scored discharge at the same load and ambient, chosen over the context's when its
+    corrected errors at that condition (at least :data:`MIN_OWN_ERRORS`) have the smaller median.
     ``options`` go to :func:`dynaformer_eod_s`; ``predictor`` defaults to the bundled NASA one."""
+    if history not in HISTORY:
+        raise InputError("history", f"must be one of {', '.join(HISTORY)}, got {history!r}")
     predictor = predictor or load_pretrained()
     rows = []
     for cell in cells:
-        past: list[tuple[NasaDischarge, float | None]] = []  # earlier scored discharges and their raw errors
+        context, previous = _Method(), _Method()
+        latest: list[tuple[NasaDischarge, HealthEstimate]] = []  # scored discharges and their whole-record health
         for d in cell.discharges[::every]:
             true_s = d.time_to_cutoff_s(cutoff_v)
             if true_s is None or true_s <= context_s:
                 continue
             known = known_before(d, context_s)
-            pred = dynaformer_eod_s(predictor, known, cutoff_v, **options)
-            low, med, high = pred if pred is not None else (None, None, None)
-            f = own_error_factor(past, known) if history else 1.0
+            preds = {"context": dynaformer_eod_s(predictor, known, cutoff_v, **options)}
+            est = next((e for q, e in reversed(latest) if same_conditions(q, known)), None)
+            if history == "health" and est is not None:
+                preds["previous discharge"] = dynaformer_eod_s(predictor, known, cutoff_v, estimate=est, **options)
+            methods = (("context", context), ("previous discharge", previous))
+            out: dict[str, tuple[float, float, float] | None] = {}
+            for name, method in methods:
+                pred = preds.get(name)
+                f = own_error_factor(method.raw, known) if history != "off" else 1.0
+                out[name] = None if pred is None else (pred[0] / f, pred[1] / f, pred[2] / f)
+            pick = "context"
+            chosen = out.get("previous discharge")
+            if chosen is not None:
+                (n_p, m_p, bound), (_, m_c, _) = previous.skill(known), context.skill(known)
+                if n_p >= MIN_OWN_ERRORS and m_p < m_c:
+                    pick = "previous discharge"  # its interval also holds its own errors on this cell
+                    out[pick] = (min(chosen[0], chosen[1] / (1.0 + bound)), chosen[1],
+                                 max(chosen[2], chosen[1] / max(1.0 - bound, 1e-3)))
+            low, med, high = out[pick] or (None, None, None)
+            raw = preds["context"]
             rows.append({"cell": cell.name, "discharge": d.index, "ambient_c": d.ambient_c, "context_s": context_s,
-                         "true_s": true_s, "median_s": None if med is None else med / f,
-                         "low_s": None if low is None else low / f, "high_s": None if high is None else high / f,
-                         "raw_median_s": med})
-            past.append((d, None if med is None else med / true_s - 1.0))  # finished: its truth is history now
+                         "true_s": true_s, "median_s": med, "low_s": low, "high_s": high,
+                         "raw_median_s": None if raw is None else raw[1], "health_from": pick})
+            for name, method in methods:  # the discharge has finished: its errors are history now
+                pred, corrected = preds.get(name), out.get(name)
+                method.record(d, None if pred is None else pred[1], None if corrected is None else corrected[1],
+                              true_s)
+            if history == "health":
+                latest.append((d, finished_health(predictor, d)))  # finished: its whole record is history now
     return rows
 
 
