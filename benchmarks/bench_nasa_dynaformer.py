@@ -22,7 +22,9 @@ Goal (issue "The paper's own cells, for real"): fine-tuned median <= 1.25x the p
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 from uam_studio.battery.real.nasa_data import load_nasa_folder, nasa_folder
 from uam_studio.dynaformer.nasa_discharges import (
@@ -33,17 +35,8 @@ from uam_studio.dynaformer.nasa_discharges import (
 )
 from uam_studio.dynaformer.predictor import load_pretrained
 
-GROUPS = {
-    "24 C, 2 A (B0005-18)": ("B0005", "B0006", "B0007", "B0018"),
-    "24 C, 4 A square wave (B0025-28)": ("B0025", "B0026", "B0027", "B0028"),
-    "43 C, 4 A (B0029-32)": ("B0029", "B0030", "B0031", "B0032"),
-    "24 C, 4 A and 2 A (B0033-36)": ("B0033", "B0034", "B0036"),
-    "24/44 C, changing load (B0038-40)": ("B0038", "B0039", "B0040"),
-    "4/22 C, 4 A and 1 A (B0041-44)": ("B0041", "B0042", "B0043", "B0044"),
-    "4 C, 1 A (B0045-48)": ("B0045", "B0046", "B0047", "B0048"),
-    "4 C, 2 A, crashed runs (B0049-52)": ("B0049", "B0050", "B0051", "B0052"),
-    "4 C, 2 A (B0053-56)": ("B0053", "B0054", "B0055", "B0056"),
-}
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_nasa_eod import GROUPS  # noqa: E402  (the dataset's groups of test conditions)
 
 
 def report(name: str, runs: dict[str, list[dict]]) -> None:
