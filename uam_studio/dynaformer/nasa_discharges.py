@@ -130,12 +130,22 @@ def finished_health(predictor: DynaformerPredictor, d: NasaDischarge) -> HealthE
     """The physics fit (q_max C, R0 ohm) of finished discharge ``d``'s whole record up to its last loaded
     sample, read as :func:`dynaformer_eod_s` reads a context (log from the rest sample, 1 s grid): what the
     cell's health was on its latest discharge, with its whole capacity seen."""
-    start, last = d.load_start - 1, int(np.flatnonzero(d.current_a > LOADED_A)[-1])
-    t0 = float(d.time_s[start])
-    n = int(math.floor(float(d.time_s[last]) - t0 + 1e-9))
-    cur = d.current_a[np.searchsorted(d.time_s, t0 + np.arange(n) + 0.5, side="right") - 1]
-    volt = _grid_voltage(d.time_s, d.current_a, d.voltage_v, t0 + np.arange(1, n + 1, dtype=float), start)
+    start, t0, last = _record_start(d)
+    cur = _record_current(d, t0, last)
+    volt = _grid_voltage(d.time_s, d.current_a, d.voltage_v, t0 + np.arange(1, cur.size + 1, dtype=float), start)
     return cast(HealthEstimate, predictor.health_estimate(cur, volt))
+
+
+def _record_start(d: NasaDischarge) -> tuple[int, float, int]:
+    """(the rest sample before the load, its time s, the last loaded sample) of a whole record."""
+    start = d.load_start - 1
+    return start, float(d.time_s[start]), int(np.flatnonzero(d.current_a > LOADED_A)[-1])
+
+
+def _record_current(d: NasaDischarge, t0: float, last: int) -> np.ndarray:
+    """The record's current (A) on the 1 s grid from ``t0`` (s) to its sample ``last``, each sample held."""
+    n = int(math.floor(float(d.time_s[last]) - t0 + 1e-9))
+    return d.current_a[np.searchsorted(d.time_s, t0 + np.arange(n) + 0.5, side="right") - 1]
 
 
 class _Method:
@@ -245,13 +255,11 @@ def training_example(predictor: DynaformerPredictor, d: NasaDischarge, context_s
     measured voltage there as the target (the whole record: training cells only). Loss weight 4x between
     2.8 and 3.3 V (as :mod:`uam_studio.dynaformer.train`). None where the context is too short."""
     known = known_before(d, context_s)
-    start, last = d.load_start - 1, int(np.flatnonzero(d.current_a > LOADED_A)[-1])
-    t0 = float(d.time_s[start])
+    start, t0, last = _record_start(d)
     n_ctx = int(math.floor(float(known.time_s[known.voltage_v.size - 1]) - t0 + 1e-9))
-    n = int(math.floor(float(d.time_s[last]) - t0 + 1e-9))
-    if n_ctx < 20 or n <= n_ctx:
+    cur = _record_current(d, t0, last)
+    if n_ctx < 20 or cur.size <= n_ctx:
         return None
-    cur = d.current_a[np.searchsorted(d.time_s, t0 + np.arange(n) + 0.5, side="right") - 1]
     # a 1-D context: one estimate
     est = cast(HealthEstimate, predictor.health_estimate(cur[:n_ctx], _context_voltage(known, start, n_ctx)))
     grid, k_pre = with_preroll([est], cur[None], 1.0)
