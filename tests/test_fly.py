@@ -122,6 +122,25 @@ def test_decisions_unchanged_when_the_true_cell_is_swapped(example, monkeypatch)
         assert swapped.route == base.route and swapped.altitudes_m == base.altitudes_m
 
 
+@pytest.mark.parametrize("at_takeoff", [False, True])
+def test_the_flight_uses_the_operator_it_is_given_and_the_later_check_starts_where_it_says(example, at_takeoff):
+    """``fly_mission(operator=...)`` makes the operator; the plan search's later-take-off check is asked from
+    the first landing on, and at take-off too where ``check_at_takeoff`` says so."""
+    asked: list[bool] = []
+
+    class Probe(Operator):
+        check_at_takeoff = at_takeoff
+
+        def _later_check(self, health):
+            episode = super()._later_check(health)
+            asked.append(episode is not None)
+            return episode
+
+    rec = fly_mission(example, seed=5, references=False, operator=Probe)
+    assert not rec.breached and len(asked) == len(rec.events) >= 2
+    assert asked == [at_takeoff] + [True] * (len(asked) - 1)
+
+
 @pytest.mark.parametrize("policy", ["attention", "oracle"])
 def test_both_in_flight_planners_fly_safely_and_attention_is_the_default(example, policy):
     rec = fly_mission(example, policy, seed=5, references=False)

@@ -227,7 +227,8 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
                 sensor_noise_ma: float = DEFAULT_SENSOR_NOISE_MA,
                 events: Sequence[WindEvent] = (), scenario: str | None = None,
                 health_z: float = HEALTH_Z, wind_z: float = WIND_Z, plan_wind_z: float = PLAN_WIND_Z,
-                references: bool = True, reserve_kt: float = WEATHER_RESERVE_KT) -> FlightRecord:
+                references: bool = True, reserve_kt: float = WEATHER_RESERVE_KT,
+                operator: Callable[..., Operator] = Operator) -> FlightRecord:
     """Fly ``mission`` once: the operator plans from the take-off check, re-plans at every arrival.
 
     :param mission: the mission; its ``battery`` is the world's true cell, its winds the forecast.
@@ -244,6 +245,8 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
     :param references: also fly the blind pre-flight plan and the hindsight oracle.
     :param reserve_kt: the operator's weather reserve (kt, 0-60, default 25): every take-off keeps the
         next leg and the way home safe under its cautious belief plus this much more headwind.
+    :param operator: makes the operator from :class:`Operator`'s arguments (default: :class:`Operator`); a
+        reference study passes another (``benchmarks/bench_weather.py informed``: one told the true cell).
     :raises InputError: for bad input, naming the field; an event that starts after the flight
         (and its references) ended is an error of field ``event``.
     """
@@ -258,7 +261,7 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
 
     world = new_world()
     known = dataclasses.replace(mission, battery=Battery(DEFAULT_Q_MAX, DEFAULT_R0))  # the operator's view
-    op = Operator(known, scenario, world.forecast_sigma_kt, world.sensor_noise_mv, health_z, wind_z, plan_wind_z,
+    op = operator(known, scenario, world.forecast_sigma_kt, world.sensor_noise_mv, health_z, wind_z, plan_wind_z,
                   policy, reserve_kt)
     rec = FlightRecord(mission.name, scenario, int(seed), world.forecast_sigma_kt, world.sensor_noise_mv,
                        world.sensor_noise_ma, [e.text for e in world.events], op.reserve_kt,

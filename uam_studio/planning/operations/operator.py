@@ -87,6 +87,8 @@ class Operator:
         safe under the cautious belief plus this much more headwind on each.
     """
 
+    check_at_takeoff = False  # the take-off's plan asks the later take-offs' check too (:meth:`_later_check`)
+
     def __init__(self, mission: Mission, scenario: str | None = None,
                  forecast_sigma_kt: float = DEFAULT_FORECAST_SIGMA_KT,
                  sensor_noise_mv: float | None = None, health_z: float = HEALTH_Z, wind_z: float = WIND_Z,
@@ -96,8 +98,7 @@ class Operator:
             raise InputError("policy", f"{planner!r} is not an in-flight policy; allowed: "
                                        f"{', '.join(IN_FLIGHT_PLANNERS)}")
         self.planner = planner
-        scenario = scenario or mission.scenario
-        check_scenario(scenario)
+        check_scenario(scenario := scenario or mission.scenario)
         # the exact search of planner "oracle": 8 at most
         check_destination_count(len(mission.destinations), N_MAX, "fly")
         self.forecast_mission = mission
@@ -189,8 +190,7 @@ class Operator:
         cur, _ = self.health_belief.segment.arrays()
         if cur.size == 0:
             return full_charge(q_plan)
-        res = simulate(np.clip(cur, -50, 50), DT_S, q_plan, r_plan, 2.5)
-        return res.final_state
+        return simulate(np.clip(cur, -50, 50), DT_S, q_plan, r_plan, 2.5).final_state
 
     def _leg_current(self, frm: str, to: str, altitude_m: float, wind_kts: float) -> np.ndarray:
         m = self.forecast_mission
@@ -248,6 +248,15 @@ class Operator:
             safe[tgt, lvl] = ok[k] and (tgt == VERTIPORT_SLOT or home_ok[k])
         return safe
 
+    def _later_check(self, health: BelievedHealth) -> Episode | None:
+        """The mission under the check every later take-off of a plan must pass (the plan search's ``checked``):
+        each leg at its predicted wind + its share of the joint bound for two like legs (``wind_z`` / sqrt 2
+        std) + the reserve, on the expected cell. None at take-off unless ``check_at_takeoff``: the cell is
+        then the fleet prior (20 s of readings say little of q_max), not the cell the later checks fly."""
+        if not (self.decisions or self.check_at_takeoff):
+            return None
+        return self._episode(self._belief(health, 0.0, self.wind_z / math.sqrt(2.0), self.reserve_kt)[0])
+
     def abort(self, reason: str) -> Decision:
         """The flight ends before any plan (the take-off check fell below the cut-off): a decision of kind
         ``"abort"`` with the belief so far (the fleet prior where the readings are too short to fit)."""
@@ -285,18 +294,12 @@ class Operator:
         state = self._state(q_exp, r_exp).as_array()[0]
         plan = self._plan_learned if PLANNERS[self.planner].learned else self._plan
         believed = self._episode(expected)
-        later = None  # every later take-off of the plan must pass the check its first one does: the same
-        if self.decisions:  # winds (each leg's share of the joint bound as for two like legs), the expected cell
-            checked, _, _ = self._belief(health, 0.0, self.wind_z / math.sqrt(2.0), self.reserve_kt)
-            later = self._episode(checked)  # (not at take-off: the cell is still the fleet prior)
-        route, alts, why = plan(believed, here, state, visited, moves, later)
+        route, alts, why = plan(believed, here, state, visited, moves, self._later_check(health))
         if route is None:
             route, alts, why = self._best_effort_home(believed, here, state)
         shift, shift_sd = self.winds.shift()
         kind = "plan" if not self.decisions else "replan"
-        learned = []
-        if self.last_observation:
-            learned.append(self.last_observation)
+        learned = [self.last_observation] if self.last_observation else []
         prev = self.decisions[-1] if self.decisions else None
         if prev is not None and abs(q - prev.q_max_c) > max(2 * prev.q_max_sd_c, 0.03 * prev.q_max_c):
             learned.append(f"q_max estimate {prev.q_max_c:.0f} -> {q:.0f} C "
@@ -416,9 +419,8 @@ class Operator:
         done = np.array([bool(visited >> k & 1) for k in range(n)])
         res = continue_route(episode, here, state, done, self.sorties, moves, reserve=checked)
         if res is None:
-            if here == VERTIPORT_SLOT:
-                return [], [], "no unvisited destination can be reached safely"
-            return None, [], ""
+            return ([], [], "no unvisited destination can be reached safely") if here == VERTIPORT_SLOT else \
+                (None, [], "")
         nodes, levels = res
         route = [VERTIPORT if k == legs.home else self.names[k] for k in nodes]
         alts = [ALTITUDES_M[a] for a in levels]
