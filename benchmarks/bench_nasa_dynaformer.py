@@ -1,19 +1,22 @@
 """The bundled NASA Dynaformer on real NASA discharges, zero-shot and fine-tuned on other cells, each with and
 without the cell's own history, per group of test conditions.
 
-    python benchmarks/bench_nasa_dynaformer.py [--data DIR] [--folds 3] [--steps 3000] [--seed 0] [--zero-shot-only]
+    python benchmarks/bench_nasa_dynaformer.py [--data DIR] [--folds 3] [--steps 3000] [--seed 0]
+        [--examples previous|context] [--zero-shot-only]
     (about 12 minutes on 2 cores)
 
-Every discharge of every cell in DIR (default ``../shared/data/nasa_pcoe``), 300 s context, 3.0 V, under the
-online protocol of ``uam_studio.battery.real.nasa_predict`` (:func:`uam_studio.dynaformer.nasa_discharges.
-score_dynaformer`). Fine-tuned: the cells sorted by name and split into ``--folds`` folds (index mod folds);
-each fold is scored by the bundled weights' decoder fine-tuned on the other folds' discharges only (asserted),
-kept in memory. Each is scored three ways (``score_dynaformer``'s ``history``): ``off``, the Dynaformer
-alone; ``bias``, its times divided by one plus the median of its relative errors on the cell's last ten
-finished discharges at the same load and ambient, as the physics method's are; ``health`` (the default),
-also decoded at the health fitted on the cell's latest such discharge whole, chosen where that has done
-better on the cell so far. Errors are in % of the true time left after the context; the 90% interval is
-the Dynaformer's own (its calibration is the bundled weights', not refitted).
+Every discharge of every cell in DIR (default ``../shared/data/nasa_pcoe``), 300 s context, 3.0 V, under the online
+protocol of ``uam_studio.battery.real.nasa_predict`` (:func:`uam_studio.dynaformer.nasa_discharges.
+score_dynaformer`). Fine-tuned: the cells sorted by name and split into ``--folds`` folds (index mod folds); each
+fold is scored by the bundled weights' decoder fine-tuned on the other folds' discharges only (asserted), kept in
+memory: by default (``--examples previous``) each decoded at the whole-record health of its cell's previous
+discharge at the same load and ambient, as ``health`` decodes (:func:`history_examples`); ``context``: at its own
+context's health (:func:`training_example`). Each is scored three ways (``score_dynaformer``'s ``history``):
+``off``, the Dynaformer alone; ``bias``, its times divided by one plus the median of its relative errors on the
+cell's last ten finished discharges at the same load and ambient, as the physics method's are; ``health`` (the
+default), also decoded at the health fitted on the cell's latest such discharge whole, chosen where that has done
+better on the cell so far. Errors are in % of the true time left after the context; the 90% interval is the
+Dynaformer's own (its calibration is the bundled weights', not refitted).
 
 Goal (issue "The paper's own cells, for real"): fine-tuned median <= 1.25x the physics method's
 (``bench_nasa_physics.py``: 0.84% over 25 cells, B0005 left out; not rerun here).
@@ -29,6 +32,7 @@ from pathlib import Path
 from uam_studio.battery.real.nasa_data import load_nasa_folder, nasa_folder
 from uam_studio.dynaformer.nasa_discharges import (
     finetune_dynaformer,
+    history_examples,
     score_dynaformer,
     summarise_dynaformer,
     training_example,
@@ -69,6 +73,7 @@ def main() -> None:
     p.add_argument("--folds", type=int, default=3)
     p.add_argument("--steps", type=int, default=3000)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--examples", choices=["previous", "context"], default="previous")
     p.add_argument("--zero-shot-only", action="store_true")
     args = p.parse_args()
     cells = sorted(load_nasa_folder(nasa_folder(args.data)), key=lambda c: c.name)
@@ -83,14 +88,18 @@ def main() -> None:
     for fold in range(args.folds):
         held = [c for i, c in enumerate(cells) if i % args.folds == fold]
         train = [c for i, c in enumerate(cells) if i % args.folds != fold]
-        examples = [e for c in train for d in c.discharges if (e := training_example(base, d)) is not None]
+        if args.examples == "previous":
+            examples = [e for c in train for e in history_examples(base, c)]
+        else:
+            examples = [e for c in train for d in c.discharges if (e := training_example(base, d)) is not None]
         assert not {e[0] for e in examples} & {c.name for c in held}, "a held-out cell in the fine-tune"
         tuned = finetune_dynaformer(examples, base, steps=args.steps, seed=args.seed)
         for mode, rows in score_all(held, tuned).items():
             runs.setdefault(mode, []).extend(rows)
         print(f"  fold {fold}: fine-tuned on {len(examples)} discharges of {len(train)} cells, scored {len(held)} "
               f"cells ({time.perf_counter() - t0:.0f} s)", flush=True)
-    report(f"fine-tuned on the other folds ({args.folds} folds, {args.steps} steps, seed {args.seed})", runs)
+    report(f"fine-tuned on the other folds ({args.folds} folds, {args.steps} steps, seed {args.seed}, "
+           f"{args.examples} health)", runs)
 
 
 if __name__ == "__main__":

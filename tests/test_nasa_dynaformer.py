@@ -18,6 +18,8 @@ from uam_studio.dynaformer.nasa_discharges import (
     MIN_OWN_ERRORS,
     dynaformer_eod_s,
     finetune_dynaformer,
+    finished_health,
+    history_examples,
     score_dynaformer,
     summarise_dynaformer,
     training_example,
@@ -118,6 +120,19 @@ def test_the_previous_discharges_health_is_chosen_where_it_has_done_better_and_n
     keys = ("median_s", "low_s", "high_s", "raw_median_s", "health_from")
     assert again[k]["true_s"] != rows[k]["true_s"]
     assert [[r[c] for c in keys] for r in again[:k + 1]] == [[r[c] for c in keys] for r in rows[:k + 1]]
+
+
+@needs_data
+def test_history_examples_decode_at_the_previous_discharges_whole_record_health(b0005):
+    base = load_pretrained()
+    cell = replace(b0005, discharges=b0005.discharges[:3])
+    examples = history_examples(base, cell)
+    assert len(examples) == 2  # the first discharge has no earlier one
+    for k, e in zip((1, 2), examples):
+        want = training_example(base, cell.discharges[k], estimate=finished_health(base, cell.discharges[k - 1]))
+        assert want is not None and np.allclose(e[1], want[1]) and np.array_equal(e[3], want[3])
+        own = training_example(base, cell.discharges[k])
+        assert own is not None and not np.allclose(e[1], own[1])  # not the context's health
 
 
 @needs_data

@@ -28,9 +28,11 @@ are), and the health it decodes with taken from the cell's latest such discharge
 record (:func:`finished_health`: a 300 s context says little about capacity, a whole discharge says it),
 chosen over the context's fit where that has done better on the cell so far at that condition.
 
-Fine-tuning (:func:`training_example`, :func:`finetune_dynaformer`): the decoder trained further on real
-discharges, read exactly as at inference, with their whole measured voltage as the target. Only training
-cells' discharges may go in; the result stays in memory (nothing is written).
+Fine-tuning (:func:`training_example`, :func:`history_examples`, :func:`finetune_dynaformer`): the decoder
+trained further on real discharges, read exactly as at inference, with their whole measured voltage as the
+target: at the context's health, or (:func:`history_examples`) at the previous discharge's whole-record
+health, as ``history='health'`` decodes. Only training cells' discharges may go in; the result stays in
+memory (nothing is written).
 
 All times are in s from the first loaded sample, currents in A, voltages in V.
 """
@@ -53,8 +55,7 @@ from uam_studio.dynaformer.predictor_inputs import leading_rest
 from uam_studio.errors import InputError
 
 __all__ = ["COVER", "HISTORY", "HORIZON_S", "MIN_OWN_ERRORS", "Example", "dynaformer_eod_s", "finetune_dynaformer",
-           "finished_health", "score_dynaformer",
-           "summarise_dynaformer", "training_example"]
+           "finished_health", "history_examples", "score_dynaformer", "summarise_dynaformer", "training_example"]
 
 HORIZON_S = 12000.0  # s from the log's start: the extended profile's length (NASA runs end before 7000 s)
 
@@ -197,7 +198,7 @@ def score_dynaformer(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: 
                 continue
             known = known_before(d, context_s)
             preds = {"context": dynaformer_eod_s(predictor, known, cutoff_v, **options)}
-            est = next((e for q, e in reversed(latest) if same_conditions(q, known)), None)
+            est = _latest_health(latest, known)
             if history == "health" and est is not None:
                 preds["previous discharge"] = dynaformer_eod_s(predictor, known, cutoff_v, estimate=est, **options)
             methods = (("context", context), ("previous discharge", previous))
@@ -228,6 +229,12 @@ def score_dynaformer(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: 
     return rows
 
 
+def _latest_health(latest: list[tuple[NasaDischarge, HealthEstimate]], d: RunConditions) -> HealthEstimate | None:
+    """The whole-record health of the latest of ``latest`` (a cell's finished discharges, oldest first) run at
+    ``d``'s load and ambient; None where there is none."""
+    return next((e for q, e in reversed(latest) if same_conditions(q, d)), None)
+
+
 def summarise_dynaformer(rows: list[dict]) -> dict:
     """n, predictions with no crossing (``none``), and over the rest: median and 95th percentile of
     |median_s - true_s| / (true_s - context_s) (%), its median signed value (bias, %) and the 90%
@@ -248,9 +255,12 @@ Example = tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 voltage [n] (V) at the end of each step, loss weight [n] (0 where nothing was measured under load))."""
 
 
-def training_example(predictor: DynaformerPredictor, d: NasaDischarge, context_s: float = 300.0) -> Example | None:
+def training_example(predictor: DynaformerPredictor, d: NasaDischarge, context_s: float = 300.0,
+                     estimate: HealthEstimate | None = None) -> Example | None:
     """``d`` as the decoder reads it at inference (:func:`dynaformer_eod_s`, log from the rest sample): the
-    latent of the physics fit of its first ``context_s`` s (re-observed, as in ``_decode``), its current
+    latent of the physics fit of its first ``context_s`` s, or of ``estimate`` where given (e.g. the
+    :func:`finished_health` of the cell's previous discharge, as ``history='health'`` decodes), re-observed
+    as in ``_decode``, its current
     up to the last loaded sample on the grid (the fit's pre-roll before it, its leading rest cut), and the
     measured voltage there as the target (the whole record: training cells only). Loss weight 4x between
     2.8 and 3.3 V (as :mod:`uam_studio.dynaformer.train`). None where the context is too short."""
@@ -260,8 +270,8 @@ def training_example(predictor: DynaformerPredictor, d: NasaDischarge, context_s
     cur = _record_current(d, t0, last)
     if n_ctx < 20 or cur.size <= n_ctx:
         return None
-    # a 1-D context: one estimate
-    est = cast(HealthEstimate, predictor.health_estimate(cur[:n_ctx], _context_voltage(known, start, n_ctx)))
+    est = estimate or cast(HealthEstimate,  # a 1-D context: one estimate
+                           predictor.health_estimate(cur[:n_ctx], _context_voltage(known, start, n_ctx)))
     grid, k_pre = with_preroll([est], cur[None], 1.0)
     k0 = int(leading_rest(grid)[0])
     grid = grid[:, k0:]
@@ -270,6 +280,21 @@ def training_example(predictor: DynaformerPredictor, d: NasaDischarge, context_s
     volt = _grid_voltage(d.time_s, d.current_a, d.voltage_v, at, start)
     weight = ((at >= d.load_time_s) & (at <= d.time_s[last])) * (1.0 + 3.0 * ((volt > 2.8) & (volt < 3.3)))
     return d.cell, latent, grid[0], volt, weight
+
+
+def history_examples(predictor: DynaformerPredictor, cell: NasaCell, context_s: float = 300.0) -> list[Example]:
+    """The :func:`training_example` of each of ``cell``'s discharges decoded at the :func:`finished_health` of
+    the cell's latest earlier discharge at the same load and ambient, as ``score_dynaformer(history='health')``
+    decodes it (discharges with no such earlier one are left out): the decoder fine-tuned where it is used.
+    Training cells only."""
+    out: list[Example] = []
+    latest: list[tuple[NasaDischarge, HealthEstimate]] = []
+    for d in cell.discharges:
+        est = _latest_health(latest, known_before(d, context_s))
+        if est is not None and (e := training_example(predictor, d, context_s, estimate=est)) is not None:
+            out.append(e)
+        latest.append((d, finished_health(predictor, d)))
+    return out
 
 
 def finetune_dynaformer(examples: list[Example], base: DynaformerPredictor | None = None, steps: int = 3000,
