@@ -123,6 +123,24 @@ def test_the_previous_discharges_health_is_chosen_where_it_has_done_better_and_n
 
 
 @needs_data
+def test_the_finished_health_reaches_the_cut_off_when_its_discharge_did(b0005, monkeypatch):
+    """``finished_health`` moves the whole-record fit's q_max until the Dynaformer ends the discharge when it
+    ended; with no steps allowed the fit is returned as it is."""
+    import uam_studio.dynaformer.nasa_discharges as nd
+
+    base = load_pretrained()
+    for d in b0005.discharges[3:6]:
+        true_s = d.time_to_cutoff_s(3.0)
+        moved = finished_health(base, d)
+        monkeypatch.setattr(nd, "MATCH_STEPS", 0)
+        fit = finished_health(base, d)
+        monkeypatch.undo()
+        assert moved.r0 == fit.r0
+        err = [abs(dynaformer_eod_s(base, known_before(d, 300.0), estimate=e)[1] - true_s) for e in (moved, fit)]
+        assert err[0] <= err[1] and err[0] <= 0.01 * true_s
+
+
+@needs_data
 def test_history_examples_decode_at_the_previous_discharges_whole_record_health(b0005):
     base = load_pretrained()
     cell = replace(b0005, discharges=b0005.discharges[:3])

@@ -25,7 +25,8 @@ method read the cell's finished discharges, and the physics method and the histo
 readings: the Dynaformer's times divided by one plus the median of its relative errors on the cell's last
 ten finished discharges at the same load and ambient (:func:`own_error_factor`, as the physics method's
 are), and the health it decodes with taken from the cell's latest such discharge, fitted on its whole
-record (:func:`finished_health`: a 300 s context says little about capacity, a whole discharge says it),
+record (:func:`finished_health`: a 300 s context says little about capacity, a whole discharge says it; its
+q_max moved so that the model reaches the cut-off when that discharge did, as the physics method's is),
 chosen over the context's fit where that has done better on the cell so far at that condition.
 
 Fine-tuning (:func:`training_example`, :func:`history_examples`, :func:`finetune_dynaformer`): the decoder
@@ -40,6 +41,7 @@ All times are in s from the first loaded sample, currents in A, voltages in V.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import cast
 
 import numpy as np
@@ -54,8 +56,9 @@ from uam_studio.dynaformer.predictor import DynaformerPredictor, load_pretrained
 from uam_studio.dynaformer.predictor_inputs import leading_rest
 from uam_studio.errors import InputError
 
-__all__ = ["COVER", "HISTORY", "HORIZON_S", "MIN_OWN_ERRORS", "Example", "dynaformer_eod_s", "finetune_dynaformer",
-           "finished_health", "history_examples", "score_dynaformer", "summarise_dynaformer", "training_example"]
+__all__ = ["COVER", "HISTORY", "HORIZON_S", "MATCH_STEPS", "MIN_OWN_ERRORS", "Example", "dynaformer_eod_s",
+           "finetune_dynaformer", "finished_health", "history_examples", "score_dynaformer", "summarise_dynaformer",
+           "training_example"]
 
 HORIZON_S = 12000.0  # s from the log's start: the extended profile's length (NASA runs end before 7000 s)
 
@@ -123,18 +126,35 @@ def dynaformer_eod_s(predictor: DynaformerPredictor, known: KnownDischarge, cuto
 HISTORY = ("health", "bias", "off")
 """What of the cell's history :func:`score_dynaformer` reads (module docstring)."""
 COVER = 0.9  # the share of a method's own errors its interval must hold (the 90% interval)
+MATCH_STEPS = 6  # proportional steps of finished_health's q_max towards the discharge's own end
 MIN_OWN_ERRORS = 9  # errors at a condition before the previous discharge's health may be chosen: with n of
 # them, the ceil(0.9 (n + 1))-th smallest |error| holds 90% (split conformal), which needs n >= 9
 
 
-def finished_health(predictor: DynaformerPredictor, d: NasaDischarge) -> HealthEstimate:
-    """The physics fit (q_max C, R0 ohm) of finished discharge ``d``'s whole record up to its last loaded
-    sample, read as :func:`dynaformer_eod_s` reads a context (log from the rest sample, 1 s grid): what the
-    cell's health was on its latest discharge, with its whole capacity seen."""
+def finished_health(predictor: DynaformerPredictor, d: NasaDischarge, context_s: float = 300.0, cutoff_v: float = 3.0,
+                    **options) -> HealthEstimate:
+    """What the cell's health was on its finished discharge ``d``: the physics fit (q_max C, R0 ohm) of its
+    whole record up to its last loaded sample, read as :func:`dynaformer_eod_s` reads a context (log from the
+    rest sample, 1 s grid), with q_max then moved so that the Dynaformer, reading ``d``'s first ``context_s``
+    s and its planned current as :func:`dynaformer_eod_s` does (``options``), reaches ``cutoff_v`` (V) when
+    ``d`` did (as the physics method moves its q_max): at most :data:`MATCH_STEPS` proportional steps, the
+    closest kept. Unmoved where ``d`` did not reach the cut-off after its context or the model never does."""
     start, t0, last = _record_start(d)
     cur = _record_current(d, t0, last)
     volt = _grid_voltage(d.time_s, d.current_a, d.voltage_v, t0 + np.arange(1, cur.size + 1, dtype=float), start)
-    return cast(HealthEstimate, predictor.health_estimate(cur, volt))
+    est = cast(HealthEstimate, predictor.health_estimate(cur, volt))
+    true_s = d.time_to_cutoff_s(cutoff_v)
+    if true_s is None or true_s <= context_s:
+        return est
+    known = known_before(d, context_s)
+    q, best = est.q_max, (math.inf, est.q_max)
+    for _ in range(MATCH_STEPS):
+        pred = dynaformer_eod_s(predictor, known, cutoff_v, estimate=replace(est, q_max=q), **options)
+        if pred is None or not 0.0 < pred[1] < math.inf:
+            break
+        best = min(best, (abs(pred[1] - true_s), q))
+        q = float(np.clip(q * true_s / pred[1], 0.5 * est.q_max, 2.0 * est.q_max))
+    return replace(est, q_max=best[1])
 
 
 def _record_start(d: NasaDischarge) -> tuple[int, float, int]:
@@ -225,7 +245,8 @@ def score_dynaformer(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: 
                 method.record(d, None if pred is None else pred[1], None if corrected is None else corrected[1],
                               true_s)
             if history == "health":
-                latest.append((d, finished_health(predictor, d)))  # finished: its whole record is history now
+                # finished: its whole record is history now
+                latest.append((d, finished_health(predictor, d, context_s, cutoff_v, **options)))
     return rows
 
 
@@ -293,7 +314,7 @@ def history_examples(predictor: DynaformerPredictor, cell: NasaCell, context_s: 
         est = _latest_health(latest, known_before(d, context_s))
         if est is not None and (e := training_example(predictor, d, context_s, estimate=est)) is not None:
             out.append(e)
-        latest.append((d, finished_health(predictor, d)))
+        latest.append((d, finished_health(predictor, d, context_s)))
     return out
 
 
