@@ -90,14 +90,14 @@ def main() -> None:
     if args.zero_shot_only:
         return
     t0 = time.perf_counter()
+    # each cell's examples read the bundled weights only, so they are built once and serve every fold it trains
+    of_cell = {c.name: history_examples(base, c) if args.examples == "previous" else
+               [e for d in c.discharges if (e := training_example(base, d)) is not None] for c in cells}
     runs: dict[str, list[dict]] = {}
     for fold in range(args.folds):
         held = [c for i, c in enumerate(cells) if i % args.folds == fold]
         train = [c for i, c in enumerate(cells) if i % args.folds != fold]
-        if args.examples == "previous":
-            examples = [e for c in train for e in history_examples(base, c)]
-        else:
-            examples = [e for c in train for d in c.discharges if (e := training_example(base, d)) is not None]
+        examples = [e for c in train for e in of_cell[c.name]]
         assert not {e[0] for e in examples} & {c.name for c in held}, "a held-out cell in the fine-tune"
         tuned = finetune_dynaformer(examples, base, steps=args.steps, seed=args.seed)
         for mode, rows in score_all(held, tuned).items():
