@@ -2,7 +2,7 @@
 without the cell's own history, per group of test conditions.
 
     python benchmarks/bench_nasa_dynaformer.py [--data DIR] [--folds 3] [--steps 3000] [--seed 0]
-        [--examples previous|context] [--zero-shot-only]
+        [--examples previous|context] [--zero-shot-only] [--cell nasa18650_4a|nasa18650]
     (about 17 minutes on 2 cores)
 
 Every discharge of every cell in DIR (default ``../shared/data/nasa_pcoe``), 300 s context, 3.0 V, under the online
@@ -31,6 +31,7 @@ from pathlib import Path
 
 from uam_studio.battery.real.nasa_data import load_nasa_folder, nasa_folder
 from uam_studio.dynaformer.nasa_discharges import (
+    NASA_DATA_CELL,
     finetune_dynaformer,
     history_examples,
     score_dynaformer,
@@ -81,11 +82,13 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--examples", choices=["previous", "context"], default="previous")
     p.add_argument("--zero-shot-only", action="store_true")
+    p.add_argument("--cell", choices=["nasa18650_4a", "nasa18650"], default=NASA_DATA_CELL,
+                   help="the bundled weights: trained up to 4.5 A (default) or the aircraft's, up to 3 A")
     args = p.parse_args()
     cells = sorted(load_nasa_folder(nasa_folder(args.data)), key=lambda c: c.name)
-    base = load_pretrained()
+    base = load_pretrained(args.cell)
     t0 = time.perf_counter()
-    report("zero-shot (bundled weights)", score_all(cells, base))
+    report(f"zero-shot (bundled weights, {args.cell})", score_all(cells, base))
     print(f"  ({time.perf_counter() - t0:.0f} s)")
     if args.zero_shot_only:
         return

@@ -18,7 +18,7 @@ ROOT_PRETRAINED = ROOT / "pretrained"
 NAMES = ["dynaformer.pt", "dqn_single_flight.zip", "dqn_single_charge.zip", "dqn_multi_charge.zip",
          "DQN_CARD.md", "DYNAFORMER_CARD.md", "attention_planner.pt", "ATTENTION_CARD.md", "dynaformer_vtc6.pt",
          "DYNAFORMER_VTC6_CARD.md", "dynaformer_vtc6_landing_held_out.pt", "dynaformer_vtc6_cell_held_out.pt",
-         "DYNAFORMER_VTC6_HELD_OUT_CARD.md", "SHA256SUMS"]
+         "DYNAFORMER_VTC6_HELD_OUT_CARD.md", "dynaformer_4a.pt", "DYNAFORMER_4A_CARD.md", "SHA256SUMS"]
 
 
 @pytest.fixture(autouse=True)

@@ -195,8 +195,8 @@ def test_flights_by_power_draw_more_current_as_the_voltage_sags():
     np.testing.assert_allclose(res.current_a[1:] * res.voltage_v[:-1], 54.0, rtol=1e-9)
 
 
-@pytest.mark.parametrize("key", VTC6_KEYS)
-def test_stored_decoder_calibration_of_the_vtc6_weights_is_what_calibration_gives(key):
+@pytest.mark.parametrize("key", (*VTC6_KEYS, "nasa18650_4a"))
+def test_stored_decoder_calibration_of_the_fine_tuned_weights_is_what_calibration_gives(key):
     """The stored split-conformal quantiles are recomputed from their documented seed and count."""
     from uam_studio.dynaformer.decoder_error import (
         BUNDLED_DECODER_LAMBDA,
@@ -250,3 +250,33 @@ def test_health_correlations_read_only_discharges_that_last_the_context():
     text = format_report({"weights": "w", "sets": {}, "health": [{"context_s": 400, "noise_mv": 0, **shortest},
                                                                  {"context_s": 400, "noise_mv": 0, **row}]})
     assert "too few discharges last the context" in text and f"n {long.size:4d}" in text
+
+
+HAS_NASA_4A = bundled_weights_path("nasa18650_4a").is_file()
+
+
+@pytest.mark.skipif(not (HAS_NASA_4A and HAS_NASA), reason="bundled weights not present")
+@settings(max_examples=6, deadline=None, derandomize=True)
+@given(q_max=st.floats(5000.0, 8000.0), r0=st.floats(0.02, 0.13), current=st.floats(3.8, 4.5))
+@example(q_max=6400.0, r0=0.13, current=4.0)
+def test_the_4a_weights_follow_the_physics_above_3a_where_the_aircrafts_do_not(q_max, r0, current):
+    """At a constant 3.8-4.5 A (the data set's 4 A loads) the weights trained for the PCoE loads end the
+    discharge within 2% of the physics model at the exact health; the aircraft's weights (trained up to
+    3 A) at least 5% off. (Above about 0.15 ohm at 4 A the model's voltage lies along 3.0 V for minutes, so
+    a few mV move its end by several %: the 4a weights miss by up to 5% there, measured; not asserted.)"""
+    from uam_studio.dynaformer.data import DischargeSet
+    from uam_studio.dynaformer.decoder_error import decode_given_health
+
+    n = 8000
+    cur = np.full(n, current)
+    res = simulate(cur, 1.0, q_max, r0, eod_v=2.5)
+    ds = DischargeSet(cur[None, :].astype(np.float32), res.voltage_v[None, :].astype(np.float32),
+                      res.valid[None, :], np.array([n]), np.array([q_max]), np.array([r0]), np.array([1], np.int8))
+    true_s = int(np.argmax(res.voltage_v < 3.0))
+    assert 0 < true_s < int(res.valid.sum())
+    miss = {}
+    for key in ("nasa18650_4a", "nasa18650"):
+        v = decode_given_health(load_predictor(bundled_weights_path(key)), ds)[0]
+        miss[key] = abs(int(np.argmax(v < 3.0)) - true_s) / true_s
+    assert miss["nasa18650_4a"] <= 0.02, miss
+    assert miss["nasa18650"] >= 0.05, miss

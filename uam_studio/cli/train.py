@@ -13,7 +13,7 @@ from uam_studio.errors import InputError
 from uam_studio.planning.agents.trainer import SHARED_CLI_OPTIONS, trainers
 
 # uam_studio.dynaformer.cells.DYNAFORMER_CELLS' keys (that module imports torch; the parser must not)
-DYNAFORMER_CELL_KEYS = ["nasa18650", "vtc6", "vtc6_landing_held_out", "vtc6_cell_held_out"]
+DYNAFORMER_CELL_KEYS = ["nasa18650", "nasa18650_4a", "vtc6", "vtc6_landing_held_out", "vtc6_cell_held_out"]
 
 
 class DynaformerRun:
@@ -35,7 +35,8 @@ class DynaformerRun:
             group.add_argument("--no-resume", action="store_true", default=None,
                                help="start from scratch even if a checkpoint exists"),
             group.add_argument("--cell", default=None, choices=DYNAFORMER_CELL_KEYS,
-                               help="the cell type to train for: nasa18650 (the paper's, default), vtc6 (the VTC6 "
+                               help="the cell type to train for: nasa18650 (the paper's, default), nasa18650_4a "
+                                    "(the same cell at the NASA PCoE data set's loads, up to 4.5 A), vtc6 (the VTC6 "
                                     "identified on the CMU eVTOL dataset, loads flown by power), or "
                                     "vtc6_landing_held_out / vtc6_cell_held_out (the VTC6 sets identified without "
                                     "VAH01's landing / without cell VAH01); see uam_studio/dynaformer/cells.py"),

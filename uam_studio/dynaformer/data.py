@@ -155,12 +155,13 @@ def sample_health(rng: np.random.Generator, n: int, band: str = "train", kind: D
     return q, r
 
 
-def make_dataset(n: int, seed: int, max_len: int | None = None, flight_fraction: float = 0.7,
+def make_dataset(n: int, seed: int, max_len: int | None = None, flight_fraction: float | None = None,
                  band: str = "train", batch: int = 512, cell: str = "nasa18650") -> DischargeSet:
     """Generate n discharges (profiles, health, physics voltage) of the cell type ``cell``
     (:mod:`uam_studio.dynaformer.cells`), deterministic by seed; ``max_len`` samples (s), default the
-    type's (10240 for the NASA cell)."""
+    type's (10240 for the NASA cell); ``flight_fraction``: the share of flights, default the type's."""
     kind = dynaformer_cell(cell)
+    flight_fraction = kind.flight_fraction if flight_fraction is None else flight_fraction
     max_len = kind.max_len if max_len is None else int(max_len)
     rng = np.random.default_rng(seed)
     q, r = sample_health(rng, n, band, kind)

@@ -25,7 +25,7 @@ DECODER_CAL_N = 400  # flights
 DECODER_ERROR_SHAPE = (0.01, 0.002)  # (V, -) per unit of lam
 CAL_PROBS = (0.5, 0.6, 0.7, 0.75, 0.8, 0.85, 0.9, 0.925, 0.95, 0.975, 0.99, 0.999)
 # Split-conformal quantiles of lam at CAL_PROBS for the bundled weights, keyed by the file's SHA-256
-# (``decoder_error_scores(load_pretrained(cell))``: 400 flights of the weights' cell type, seed 424242; 333
+# (``decoder_error_scores(load_pretrained(cell))``: 400 discharges of the weights' cell type, seed 424242; 333
 # of the VTC6's end after their 20 s context; for the held-out sets' weights, the count after the name).
 # Other weights are calibrated on first use (200 flights, a few seconds).
 BUNDLED_DECODER_LAMBDA: dict[str, tuple[float, ...]] = {
@@ -37,6 +37,8 @@ BUNDLED_DECODER_LAMBDA: dict[str, tuple[float, ...]] = {
         (0.2444, 0.3600, 0.4903, 0.6427, 0.7960, 0.9551, 1.2151, 1.4663, 1.8587, 2.4561, 4.7815, 6.5148),
     "0918e1c24baa9e0e8e0de2879ceb0b3930e7efe17b6eeb6acf51c1131306481b":  # dynaformer_vtc6_cell_held_out.pt (317)
         (0.1958, 0.3169, 0.4212, 0.5042, 0.6002, 0.6926, 0.8935, 1.0941, 1.6163, 2.6821, 4.0625, 4.9153),
+    "f90e59bfc9f896c9beb898ab22c624da6cf8203f0455cd71fea611637cd73e93":  # dynaformer_4a.pt (272; 30% flights)
+        (0.3562, 0.5058, 0.7947, 0.9304, 1.0950, 1.3256, 1.8296, 2.2474, 3.7337, 6.4536, 7.9880, 8.7126),
 }
 
 
@@ -69,7 +71,8 @@ def file_sha256(path) -> str:
 @torch.no_grad()
 def decoder_error_scores(pred, n: int = DECODER_CAL_N, seed: int = DECODER_CAL_SEED,
                          eod_v: float = DEFAULT_EOD_V) -> np.ndarray:
-    """The decoder's own EOD error on ``n`` synthetic flights (training ranges, ``seed``), given the
+    """The decoder's own EOD error on ``n`` synthetic discharges of the weights' cell type (training ranges,
+    ``seed``; flights, or the type's training mix where that is mostly generic loads), given the
     exact health (read as in
     :meth:`~uam_studio.dynaformer.predictor.DynaformerPredictor._reobserved_latent`) and a 20 s
     observed context: per flight whose true EOD falls after the context, the smallest lam >= 0 such that
@@ -78,10 +81,13 @@ def decoder_error_scores(pred, n: int = DECODER_CAL_N, seed: int = DECODER_CAL_S
     :data:`DECODER_ERROR_SHAPE`; t_med: the decoded EOD). Closed form per side: the voltage part needs
     lam a > (min of the curve up to the true EOD) - eod_v (low side) or >= eod_v - (min before it)
     (high side); the time part lam b >= |t_med - t_true| / t_med on the side it is missing."""
+    from .cells import dynaformer_cell
     from .data import make_dataset
 
     a, b = DECODER_ERROR_SHAPE
-    ds = make_dataset(n, seed=seed, flight_fraction=1.0, cell=pred.model.cfg.cell)
+    kind = dynaformer_cell(pred.model.cfg.cell)
+    mix = 1.0 if kind.flight_fraction >= 0.5 else kind.flight_fraction
+    ds = make_dataset(n, seed=seed, flight_fraction=mix, cell=kind.key)
     t = np.arange(ds.voltage_v.shape[1])[None, :]
     true_t, _ = crossing_times(np.where(t < ds.length[:, None], ds.voltage_v, 5.0), 1.0, eod_v)
     keep = np.where(np.isfinite(true_t) & (true_t > 20))[0]

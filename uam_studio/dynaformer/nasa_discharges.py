@@ -35,6 +35,9 @@ target: at the context's health, or (:func:`history_examples`) at the previous d
 health, as ``history='health'`` decodes. Only training cells' discharges may go in; the result stays in
 memory (nothing is written).
 
+The weights: by default the bundled ones trained for these loads (:data:`NASA_DATA_CELL`,
+``dynaformer_4a.pt``, currents up to 4.5 A); the aircraft's ``dynaformer.pt`` stops at 3 A.
+
 All times are in s from the first loaded sample, currents in A, voltages in V.
 """
 
@@ -56,11 +59,12 @@ from uam_studio.dynaformer.predictor import DynaformerPredictor, load_pretrained
 from uam_studio.dynaformer.predictor_inputs import leading_rest
 from uam_studio.errors import InputError
 
-__all__ = ["COVER", "HISTORY", "HORIZON_S", "MATCH_STEPS", "MIN_OWN_ERRORS", "Example", "dynaformer_eod_s",
-           "finetune_dynaformer", "finished_health", "history_examples", "score_dynaformer", "summarise_dynaformer",
-           "training_example"]
+__all__ = ["COVER", "HISTORY", "HORIZON_S", "MATCH_STEPS", "MATCH_TOL_S", "MIN_OWN_ERRORS", "NASA_DATA_CELL",
+           "Example", "dynaformer_eod_s", "finetune_dynaformer", "finished_health", "history_examples",
+           "score_dynaformer", "summarise_dynaformer", "training_example"]
 
 HORIZON_S = 12000.0  # s from the log's start: the extended profile's length (NASA runs end before 7000 s)
+NASA_DATA_CELL = "nasa18650_4a"  # the bundled weights for these discharges: trained up to 4.5 A (cells.py)
 
 
 def _planned(known: KnownDischarge, start: int, extend_load: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -126,7 +130,8 @@ def dynaformer_eod_s(predictor: DynaformerPredictor, known: KnownDischarge, cuto
 HISTORY = ("health", "bias", "off")
 """What of the cell's history :func:`score_dynaformer` reads (module docstring)."""
 COVER = 0.9  # the share of a method's own errors its interval must hold (the 90% interval)
-MATCH_STEPS = 6  # proportional steps of finished_health's q_max towards the discharge's own end
+MATCH_STEPS = 6  # tries of finished_health's q_max towards the discharge's own end
+MATCH_TOL_S = 1.0  # s: a try ending this close to the discharge's own end is kept (the predictor's grid step)
 MIN_OWN_ERRORS = 9  # errors at a condition before the previous discharge's health may be chosen: with n of
 # them, the ceil(0.9 (n + 1))-th smallest |error| holds 90% (split conformal), which needs n >= 9
 
@@ -147,14 +152,28 @@ def finished_health(predictor: DynaformerPredictor, d: NasaDischarge, context_s:
     if true_s is None or true_s <= context_s:
         return est
     known = known_before(d, context_s)
-    q, best = est.q_max, (math.inf, est.q_max)
+    q, tried = est.q_max, []  # (|miss| s, q_max C, predicted end s)
     for _ in range(MATCH_STEPS):
         pred = dynaformer_eod_s(predictor, known, cutoff_v, estimate=replace(est, q_max=q), **options)
         if pred is None or not 0.0 < pred[1] < math.inf:
             break
-        best = min(best, (abs(pred[1] - true_s), q))
-        q = float(np.clip(q * true_s / pred[1], 0.5 * est.q_max, 2.0 * est.q_max))
-    return replace(est, q_max=best[1])
+        tried.append((abs(pred[1] - true_s), q, pred[1]))
+        if tried[-1][0] < MATCH_TOL_S:
+            break
+        q = _next_q(tried, true_s)
+        q = float(np.clip(q, 0.5 * est.q_max, 2.0 * est.q_max))
+    return replace(est, q_max=min(tried)[1]) if tried else est
+
+
+def _next_q(tried: list[tuple[float, float, float]], true_s: float) -> float:
+    """The next q_max (C) to try: the secant through the two closest tries (miss s, q_max C, end s) where
+    their ends differ and rise with q_max, else a proportional step from the latest."""
+    _, q, end = tried[-1]
+    if len(tried) >= 2:
+        (_, qa, ea), (_, qb, eb) = sorted(tried)[:2]
+        if qa != qb and (eb - ea) / (qb - qa) > 0.0:
+            return qa + (true_s - ea) * (qb - qa) / (eb - ea)
+    return q * true_s / end
 
 
 def _record_start(d: NasaDischarge) -> tuple[int, float, int]:
@@ -204,10 +223,11 @@ def score_dynaformer(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: 
     the cell; 'health' (default), also a second prediction decoded at :func:`finished_health` of the
     cell's latest scored discharge at the same load and ambient, chosen over the context's when its
     corrected errors at that condition (at least :data:`MIN_OWN_ERRORS`) have the smaller median.
-    ``options`` go to :func:`dynaformer_eod_s`; ``predictor`` defaults to the bundled NASA one."""
+    ``options`` go to :func:`dynaformer_eod_s`; ``predictor`` defaults to the bundled weights trained for
+    the data set's loads (:data:`NASA_DATA_CELL`)."""
     if history not in HISTORY:
         raise InputError("history", f"must be one of {', '.join(HISTORY)}, got {history!r}")
-    predictor = predictor or load_pretrained()
+    predictor = predictor or load_pretrained(NASA_DATA_CELL)
     rows = []
     for cell in cells:
         context, previous = _Method(), _Method()
@@ -320,11 +340,12 @@ def history_examples(predictor: DynaformerPredictor, cell: NasaCell, context_s: 
 
 def finetune_dynaformer(examples: list[Example], base: DynaformerPredictor | None = None, steps: int = 3000,
                         batch: int = 16, lr: float = 3e-4, seed: int = 0) -> DynaformerPredictor:
-    """The ``base`` Dynaformer (default: the bundled NASA one) with its decoder fine-tuned on ``examples``
-    (:func:`training_example`): AdamW, weighted MSE (V^2), ``steps`` batches of ``batch`` discharges of
-    similar length, linear warm-up over 100 steps then cosine decay, gradients clipped at 1. Kept in memory,
-    never written. Its intervals reuse the base weights' decoder-error calibration (``source``)."""
-    base = base or load_pretrained()
+    """The ``base`` Dynaformer (default: the bundled weights of :data:`NASA_DATA_CELL`) with its decoder
+    fine-tuned on ``examples`` (:func:`training_example`): AdamW, weighted MSE (V^2), ``steps`` batches of
+    ``batch`` discharges of similar length, linear warm-up over 100 steps then cosine decay, gradients clipped
+    at 1. Kept in memory, never written.
+    Its intervals reuse the base weights' decoder-error calibration (``source``)."""
+    base = base or load_pretrained(NASA_DATA_CELL)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     model = Dynaformer(base.model.cfg)

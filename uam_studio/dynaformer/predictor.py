@@ -432,7 +432,8 @@ def load_predictor(path=None) -> DynaformerPredictor:
 @lru_cache(maxsize=4)
 def load_pretrained(cell: str = "nasa18650") -> DynaformerPredictor:
     """The bundled, pretrained Dynaformer for the cell type ``cell`` (``"nasa18650"``, the paper's cell;
-    ``"vtc6"``, fine-tuned on the identified VTC6; ``"vtc6_landing_held_out"`` and ``"vtc6_cell_held_out"``,
+    ``"nasa18650_4a"``, the same cell at the NASA PCoE data set's loads, up to 4.5 A; ``"vtc6"``, fine-tuned
+    on the identified VTC6; ``"vtc6_landing_held_out"`` and ``"vtc6_cell_held_out"``,
     on the VTC6 sets that never read VAH01's landing), loaded once per process."""
     return load_predictor(bundled_weights_path(cell))
 
