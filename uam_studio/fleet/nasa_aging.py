@@ -319,19 +319,22 @@ def _forecast_errors(lf: LifePoints, belief: CapacityBelief, horizon: int, start
 
 
 def forecast_score(lives: list[LifePoints], horizon: int = 20, start: int = 5,
-                   cells: list[str] | None = None, rests: bool = True) -> list[dict]:
+                   cells: list[str] | None = None, rests: bool = True, in_sample: bool = False) -> list[dict]:
     """Each life, held out of the law's fit, of the rests' (:func:`fit_rest_recovery`; ``rests=False``: none)
     and of the noise's: after each of its discharges from ``start`` on, the belief forecasts the next
     ``horizon`` capacities. Per life (only ``cells`` if given): forecasts scored, RMS error (Ah) and the 90%
-    band's coverage."""
+    band's coverage. ``in_sample``: a reference, not a prediction: the law fitted on all ``lives`` and the
+    rests and the noise on the scored life itself, so what the belief's form reaches with the life's own
+    numbers."""
     out = []
     for lf in lives:
         if cells is not None and lf.cell not in cells:
             continue
         others = [x for x in lives if x.cell != lf.cell]
-        law = fit_nasa_law(others)
-        recovery = fit_rest_recovery(law, others) if rests else RestRecovery()
-        noise = _noise(law, others, recovery)
+        law = fit_nasa_law(lives if in_sample else others)
+        fitted_on = [lf] if in_sample else others
+        recovery = fit_rest_recovery(law, fitted_on) if rests else RestRecovery()
+        noise = _noise(law, fitted_on, recovery)
         belief = CapacityBelief.start(law, reference_ah(lf), lf.temperature_c, noise, recovery=recovery)
         errs, inside = _forecast_errors(lf, belief, horizon, start)
         if errs:
@@ -354,10 +357,11 @@ def _main() -> None:  # pragma: no cover - the fitting command; its numbers go t
                  else ""))
     rec = fit_rest_recovery(law, lives)
     print(f"RestRecovery(rho={rec.rho:.6g}, beta={rec.beta:.6g})  (all {len(lives)} lives)")
-    print("next-20 forecasts, each life held out:")
-    for r in forecast_score(lives):
+    print("next-20 forecasts, each life held out; then in-sample (the life's own rests and noise; a reference):")
+    for r, own in zip(forecast_score(lives), forecast_score(lives, in_sample=True)):
         print(f"{r['cell']:6} {r['temperature_c']:5.0f} {r['forecasts']:5d} rms {r['rms_ah']:.4f} Ah, "
-              f"90% band coverage {r['coverage90']:.3f}")
+              f"90% band coverage {r['coverage90']:.3f} | in-sample rms {own['rms_ah']:.4f} Ah, "
+              f"coverage {own['coverage90']:.3f}")
 
 
 if __name__ == "__main__":  # pragma: no cover
