@@ -65,7 +65,7 @@ def report(name: str, runs: dict[str, list[dict]]) -> None:
         print(f"  {g:36s} {n:5d} | " + " | ".join(parts) + f" | {used}", flush=True)
     same = {m: summarise_dynaformer([r for r in rows if r["cell"] != "B0005"]) for m, rows in runs.items()}
     print(f"  on the physics method's cells (B0005 out, {same[next(iter(same))]['n']} discharges), median %: "
-          + ", ".join(f"{m} {st.get('median_pct', float('nan')):.2f}" for m, st in same.items())
+          + ", ".join(f"{m} {st.get('median_pct', float('nan')):.3f}" for m, st in same.items())
           + f" (goal: <= {GOAL_PCT:.2f})")
 
 

@@ -280,3 +280,22 @@ def test_the_4a_weights_follow_the_physics_above_3a_where_the_aircrafts_do_not(q
         miss[key] = abs(int(np.argmax(v < 3.0)) - true_s) / true_s
     assert miss["nasa18650_4a"] <= 0.02, miss
     assert miss["nasa18650"] >= 0.05, miss
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2**32 - 1), max_len=st.integers(600, 10240))
+def test_square_waves_are_the_4a_types_own_and_look_like_the_pcoe_load(seed, max_len):
+    """``nasa18650_4a``'s square waves hold one level of 1-4.5 A for 5-20 s, then 0 A as long; the types
+    without a ``square_wave_share`` draw none (their data sets are unchanged)."""
+    from uam_studio.dynaformer.cells import NASA_4A_TRAINING, NASA_TRAINING
+    from uam_studio.dynaformer.data import generic_profile, square_wave_profile
+
+    p = square_wave_profile(np.random.default_rng(seed), max_len, NASA_4A_TRAINING)
+    assert min(600, max_len) <= p.size <= max_len
+    level = p.max()
+    assert 1.0 <= level <= 4.5 and set(np.unique(p)) == {0.0, level}
+    runs = np.diff(np.flatnonzero(np.diff(p) != 0))
+    assert runs.size and runs.min() == runs.max() and 5 <= runs[0] <= 20
+    assert NASA_TRAINING.square_wave_share == 0.0
+    q = generic_profile(np.random.default_rng(seed), max_len, NASA_TRAINING)
+    assert np.count_nonzero(np.diff(q)) <= 6

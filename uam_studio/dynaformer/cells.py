@@ -6,7 +6,8 @@ loads and the network's input scales.
   constant or piecewise-constant currents of 0.05-3 A.
 - ``"nasa18650_4a"``: the same cell, health box and scales, for the loads of NASA's PCoE battery data set
   (``../shared/data/nasa_pcoe``: constant 1, 2 and 4 A and a 4 A square wave), the bundled
-  ``dynaformer_4a.pt``: 70% constant or piecewise-constant currents of 0.05-4.5 A, 30% flight legs.
+  ``dynaformer_4a.pt``: 70% generic loads (constant or piecewise-constant currents of 0.05-4.5 A, and
+  for 30% of them square waves of 1-4.5 A, 5-20 s on and as long off), 30% flight legs.
   The bundled ``dynaformer.pt`` never saw more than 3 A: at 4 A it ends a discharge at about 40% of the
   time the physics model gives at the same health.
 - ``"vtc6"``: the Sony-Murata VTC6 identified on the CMU eVTOL dataset
@@ -53,7 +54,8 @@ class DynaformerCell:
     ``r0_mid``/``r0_half`` (ohm): the network's input and latent scales (see
     :class:`uam_studio.dynaformer.model.DynaformerConfig`). ``max_len``: training samples (s).
     ``weights_file``: the name of its bundled weights (:func:`uam_studio.bundled.bundled_path`).
-    ``flight_fraction``: the share of the training discharges that are flights (the rest generic loads).
+    ``flight_fraction``: the share of the training discharges that are flights (the rest generic loads);
+    ``square_wave_share``: the share of the generic loads that are square waves.
     """
 
     key: str
@@ -68,6 +70,7 @@ class DynaformerCell:
     max_len: int
     weights_file: str  # the bundled weights trained for this type (in pretrained/)
     flight_fraction: float = 0.7
+    square_wave_share: float = 0.0
 
     @property
     def params(self):
@@ -93,7 +96,7 @@ NASA_TRAINING = DynaformerCell("nasa18650", NASA_18650, PAPER_Q_RANGE, PAPER_R0_
                                "dynaformer.pt")
 # The paper's cell at the PCoE data set's loads (up to 4 A), for real NASA discharges
 NASA_4A_TRAINING = replace(NASA_TRAINING, key="nasa18650_4a", generic_a=(0.05, 4.5), flight_fraction=0.3,
-                           weights_file="dynaformer_4a.pt")
+                           square_wave_share=0.3, weights_file="dynaformer_4a.pt")
 VTC6_TRAINING = DynaformerCell("vtc6", VTC6, (8000.0, 12500.0), (0.012, 0.06),
                                ((6500.0, 8000.0), (12500.0, 14000.0)), (0.06, 0.08), "power", (0.5, 18.0), 15.0, 5120,
                                "dynaformer_vtc6.pt")

@@ -125,7 +125,10 @@ def power_mission_profile(rng: np.random.Generator, max_len: int) -> np.ndarray:
 
 def generic_profile(rng: np.random.Generator, max_len: int, kind: DynaformerCell = NASA_TRAINING) -> np.ndarray:
     """Constant or piecewise-constant current (A) in ``kind.generic_a`` (0.05-3 A for the NASA cell),
-    0-6 switches."""
+    0-6 switches; for a type with a ``square_wave_share``, that share of them a square wave instead
+    (:func:`square_wave_profile`)."""
+    if kind.square_wave_share and rng.random() < kind.square_wave_share:
+        return square_wave_profile(rng, max_len, kind)
     n_switch = int(rng.integers(0, 7))
     levels = rng.uniform(*kind.generic_a, n_switch + 1)
     # Pick a length that usually reaches EOD for the mean level, capped at max_len.
@@ -137,6 +140,16 @@ def generic_profile(rng: np.random.Generator, max_len: int, kind: DynaformerCell
     for k in range(n_switch + 1):
         out[edges[k]:edges[k + 1]] = levels[k]
     return out
+
+
+def square_wave_profile(rng: np.random.Generator, max_len: int, kind: DynaformerCell) -> np.ndarray:
+    """A square wave (A): a level in [1 A, top of ``kind.generic_a``] for a half-period of 5-20 s, then 0 A as
+    long (the NASA PCoE data set's 4 A square wave, logged about every 10 s, is 10 s on and 10 s off)."""
+    level = rng.uniform(1.0, kind.generic_a[1])
+    half = int(rng.integers(5, 21))
+    charge_c = 7000.0 * kind.u_ref_c / NASA_TRAINING.u_ref_c
+    length = int(min(max_len, max(600.0, rng.uniform(0.6, 1.3) * 2.0 * charge_c / level)))
+    return np.where((np.arange(length) // half) % 2 == 0, level, 0.0)
 
 
 def sample_health(rng: np.random.Generator, n: int, band: str = "train", kind: DynaformerCell = NASA_TRAINING):
