@@ -35,7 +35,7 @@ def main() -> None:
     key = args.cell
     t0 = time.perf_counter()
     goals = []
-    goal_set = "generic" if key.startswith("nasa") else "missions"
+    goal_set = "missions" if DYNAFORMER_CELLS[key].calibration_flights == 1.0 else "generic"
     for name, flights, seed in SETS:
         ds = make_dataset(args.n, seed=seed, cell=key, flight_fraction=flights)
         rows = {cell: decoder_errors(load_predictor(bundled_weights_path(cell)), ds) for cell in (key, "nasa18650")}

@@ -3,7 +3,7 @@ without the cell's own history, per group of test conditions.
 
     python benchmarks/bench_nasa_dynaformer.py [--data DIR] [--folds 3] [--steps 3000] [--seed 0]
         [--examples previous|context] [--zero-shot-only] [--cell nasa18650_4a|nasa18650]
-    (about 17 minutes on 2 cores)
+    (about 13 minutes on 2 cores)
 
 Every discharge of every cell in DIR (default ``../shared/data/nasa_pcoe``), 300 s context, 3.0 V, under the online
 protocol of ``uam_studio.battery.real.nasa_predict`` (:func:`uam_studio.dynaformer.nasa_discharges.

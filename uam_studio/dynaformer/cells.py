@@ -55,7 +55,9 @@ class DynaformerCell:
     :class:`uam_studio.dynaformer.model.DynaformerConfig`). ``max_len``: training samples (s).
     ``weights_file``: the name of its bundled weights (:func:`uam_studio.bundled.bundled_path`).
     ``flight_fraction``: the share of the training discharges that are flights (the rest generic loads);
-    ``square_wave_share``: the share of the generic loads that are square waves.
+    ``square_wave_share``: the share of the generic loads that are square waves;
+    ``calibration_flights``: the share of flights in the decoder-error calibration set
+    (:func:`uam_studio.dynaformer.decoder_error.decoder_error_scores`) and the benchmark's goal set.
     """
 
     key: str
@@ -71,6 +73,7 @@ class DynaformerCell:
     weights_file: str  # the bundled weights trained for this type (in pretrained/)
     flight_fraction: float = 0.7
     square_wave_share: float = 0.0
+    calibration_flights: float = 1.0
 
     @property
     def params(self):
@@ -96,7 +99,7 @@ NASA_TRAINING = DynaformerCell("nasa18650", NASA_18650, PAPER_Q_RANGE, PAPER_R0_
                                "dynaformer.pt")
 # The paper's cell at the PCoE data set's loads (up to 4 A), for real NASA discharges
 NASA_4A_TRAINING = replace(NASA_TRAINING, key="nasa18650_4a", generic_a=(0.05, 4.5), flight_fraction=0.3,
-                           square_wave_share=0.3, weights_file="dynaformer_4a.pt")
+                           square_wave_share=0.3, calibration_flights=0.3, weights_file="dynaformer_4a.pt")
 VTC6_TRAINING = DynaformerCell("vtc6", VTC6, (8000.0, 12500.0), (0.012, 0.06),
                                ((6500.0, 8000.0), (12500.0, 14000.0)), (0.06, 0.08), "power", (0.5, 18.0), 15.0, 5120,
                                "dynaformer_vtc6.pt")

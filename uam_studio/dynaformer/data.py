@@ -123,6 +123,13 @@ def power_mission_profile(rng: np.random.Generator, max_len: int) -> np.ndarray:
     return np.concatenate(parts)[:max_len]
 
 
+def _generic_length(rng: np.random.Generator, max_len: int, kind: DynaformerCell, mean_a: float) -> int:
+    """A generic load's length (s) that usually reaches EOD at its mean current ``mean_a`` (A; at least a tenth
+    of the type's top current), at least 600 s, capped at ``max_len``."""
+    charge_c, floor_a = 7000.0 * kind.u_ref_c / NASA_TRAINING.u_ref_c, kind.generic_a[1] / 10
+    return int(min(max_len, max(600.0, rng.uniform(0.6, 1.3) * charge_c / max(mean_a, floor_a))))
+
+
 def generic_profile(rng: np.random.Generator, max_len: int, kind: DynaformerCell = NASA_TRAINING) -> np.ndarray:
     """Constant or piecewise-constant current (A) in ``kind.generic_a`` (0.05-3 A for the NASA cell),
     0-6 switches; for a type with a ``square_wave_share``, that share of them a square wave instead
@@ -131,9 +138,7 @@ def generic_profile(rng: np.random.Generator, max_len: int, kind: DynaformerCell
         return square_wave_profile(rng, max_len, kind)
     n_switch = int(rng.integers(0, 7))
     levels = rng.uniform(*kind.generic_a, n_switch + 1)
-    # Pick a length that usually reaches EOD for the mean level, capped at max_len.
-    charge_c, floor_a = 7000.0 * kind.u_ref_c / NASA_TRAINING.u_ref_c, kind.generic_a[1] / 10
-    length = int(min(max_len, max(600.0, rng.uniform(0.6, 1.3) * charge_c / max(levels.mean(), floor_a))))
+    length = _generic_length(rng, max_len, kind, float(levels.mean()))
     cuts = np.sort(rng.integers(1, length, n_switch)) if n_switch else np.array([], int)
     out = np.empty(length)
     edges = np.concatenate([[0], cuts, [length]])
@@ -147,8 +152,7 @@ def square_wave_profile(rng: np.random.Generator, max_len: int, kind: Dynaformer
     long (the NASA PCoE data set's 4 A square wave, logged about every 10 s, is 10 s on and 10 s off)."""
     level = rng.uniform(1.0, kind.generic_a[1])
     half = int(rng.integers(5, 21))
-    charge_c = 7000.0 * kind.u_ref_c / NASA_TRAINING.u_ref_c
-    length = int(min(max_len, max(600.0, rng.uniform(0.6, 1.3) * 2.0 * charge_c / level)))
+    length = _generic_length(rng, max_len, kind, level / 2.0)
     return np.where((np.arange(length) // half) % 2 == 0, level, 0.0)
 
 

@@ -72,7 +72,7 @@ def file_sha256(path) -> str:
 def decoder_error_scores(pred, n: int = DECODER_CAL_N, seed: int = DECODER_CAL_SEED,
                          eod_v: float = DEFAULT_EOD_V) -> np.ndarray:
     """The decoder's own EOD error on ``n`` synthetic discharges of the weights' cell type (training ranges,
-    ``seed``; flights, or the type's training mix where that is mostly generic loads), given the
+    ``seed``; the type's ``calibration_flights`` share of flights, the rest generic loads), given the
     exact health (read as in
     :meth:`~uam_studio.dynaformer.predictor.DynaformerPredictor._reobserved_latent`) and a 20 s
     observed context: per flight whose true EOD falls after the context, the smallest lam >= 0 such that
@@ -86,8 +86,7 @@ def decoder_error_scores(pred, n: int = DECODER_CAL_N, seed: int = DECODER_CAL_S
 
     a, b = DECODER_ERROR_SHAPE
     kind = dynaformer_cell(pred.model.cfg.cell)
-    mix = 1.0 if kind.flight_fraction >= 0.5 else kind.flight_fraction
-    ds = make_dataset(n, seed=seed, flight_fraction=mix, cell=kind.key)
+    ds = make_dataset(n, seed=seed, flight_fraction=kind.calibration_flights, cell=kind.key)
     t = np.arange(ds.voltage_v.shape[1])[None, :]
     true_t, _ = crossing_times(np.where(t < ds.length[:, None], ds.voltage_v, 5.0), 1.0, eod_v)
     keep = np.where(np.isfinite(true_t) & (true_t > 20))[0]

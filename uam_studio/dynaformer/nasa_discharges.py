@@ -142,8 +142,9 @@ def finished_health(predictor: DynaformerPredictor, d: NasaDischarge, context_s:
     whole record up to its last loaded sample, read as :func:`dynaformer_eod_s` reads a context (log from the
     rest sample, 1 s grid), with q_max then moved so that the Dynaformer, reading ``d``'s first ``context_s``
     s and its planned current as :func:`dynaformer_eod_s` does (``options``), reaches ``cutoff_v`` (V) when
-    ``d`` did (as the physics method moves its q_max): at most :data:`MATCH_STEPS` proportional steps, the
-    closest kept. Unmoved where ``d`` did not reach the cut-off after its context or the model never does."""
+    ``d`` did (as the physics method moves its q_max): at most :data:`MATCH_STEPS` tries (:func:`_next_q`),
+    stopping within :data:`MATCH_TOL_S`, the closest kept. Unmoved where ``d`` did not reach the cut-off
+    after its context or the model never does."""
     start, t0, last = _record_start(d)
     cur = _record_current(d, t0, last)
     volt = _grid_voltage(d.time_s, d.current_a, d.voltage_v, t0 + np.arange(1, cur.size + 1, dtype=float), start)
@@ -160,8 +161,7 @@ def finished_health(predictor: DynaformerPredictor, d: NasaDischarge, context_s:
         tried.append((abs(pred[1] - true_s), q, pred[1]))
         if tried[-1][0] < MATCH_TOL_S:
             break
-        q = _next_q(tried, true_s)
-        q = float(np.clip(q, 0.5 * est.q_max, 2.0 * est.q_max))
+        q = float(np.clip(_next_q(tried, true_s), 0.5 * est.q_max, 2.0 * est.q_max))
     return replace(est, q_max=min(tried)[1]) if tried else est
 
 

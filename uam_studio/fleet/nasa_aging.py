@@ -327,11 +327,12 @@ def forecast_score(lives: list[LifePoints], horizon: int = 20, start: int = 5,
     rests and the noise on the scored life itself, so what the belief's form reaches with the life's own
     numbers."""
     out = []
+    law_all = fit_nasa_law(lives) if in_sample else None
     for lf in lives:
         if cells is not None and lf.cell not in cells:
             continue
         others = [x for x in lives if x.cell != lf.cell]
-        law = fit_nasa_law(lives if in_sample else others)
+        law = law_all if law_all is not None else fit_nasa_law(others)
         fitted_on = [lf] if in_sample else others
         recovery = fit_rest_recovery(law, fitted_on) if rests else RestRecovery()
         noise = _noise(law, fitted_on, recovery)
