@@ -14,7 +14,7 @@ import argparse
 
 from uam_studio.fleet.day import Fleet, day_of_life_seed, simulate_day
 from uam_studio.fleet.demand import poisson_demand
-from uam_studio.fleet.dispatch import HEALTH_Z
+from uam_studio.risk import HEALTH_Z
 
 REGIMES = {"default (45 km, 300 cycles)": (45.0, 300.0), "far (70 km, 450 cycles)": (70.0, 450.0)}
 

@@ -44,6 +44,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
+from uam_studio.battery.health.belief import BelievedHealth
 from uam_studio.battery.health.prior import Q_REF_C
 from uam_studio.classroom import asset_path
 from uam_studio.errors import InputError
@@ -57,10 +58,10 @@ from uam_studio.planning.operations import (
     fly_mission,
     parse_event,
 )
-from uam_studio.planning.operations.health_belief import BelievedHealth
-from uam_studio.planning.operations.operator import WIND_Z, Operator
+from uam_studio.planning.operations.operator import Operator
 from uam_studio.planning.operations.world import actual_winds_mission
 from uam_studio.planning.solvers.oracle import oracle_plan
+from uam_studio.risk import WIND_Z
 from uam_studio.studies.flying import study_missions
 
 WEATHERS = ("none", "wind+25", "wind-20", "wind+35")

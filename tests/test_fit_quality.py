@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from scipy.stats import chi2  # the reference for the library's chi-square quantile
 
 from uam_studio.battery import simulate
+from uam_studio.battery.health.belief import HealthBelief
 from uam_studio.battery.health.fit import fit_health
 from uam_studio.battery.health.prior import combine, disagrees, fleet_prior, hold_to_fleet
 from uam_studio.battery.health.quality import (
@@ -29,7 +30,6 @@ from uam_studio.battery.health.quality import (
 from uam_studio.battery.parameters import DEFAULT_CELL
 from uam_studio.flight import leg_profile
 from uam_studio.glossary import GLOSSARY
-from uam_studio.planning.operations.health_belief import HealthBelief
 
 CUR = np.concatenate([leg_profile(40.0, 600.0, 0.0).current_a] * 2)[:240]  # A: a take-off and cruise
 

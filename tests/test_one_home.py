@@ -14,6 +14,8 @@ HOMES = {
     0.017: ("battery/parameters.py", "PAPER_R0_RANGE low end, ohm"),
     0.45: ("battery/parameters.py", "PAPER_R0_RANGE high end, ohm"),
     39.0: ("flight/tables.py", "WIND_RANGE_KTS, kt"),
+    1.64: ("risk.py", "FIVE_PERCENT_Z, std: HEALTH_Z, WIND_Z, INTERVAL_Z"),
+    2.33: ("risk.py", "ONE_PERCENT_Z, std: DISPATCH_WIND_Z, WHITE_Z"),
 }
 # literals of the same value that mean something else, each named with what it is
 OTHER_MEANINGS = {

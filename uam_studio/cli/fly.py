@@ -32,21 +32,30 @@ def _add_fly_arguments(p: argparse.ArgumentParser) -> None:
                         "safe under the operator's belief plus this much more headwind")
     p.add_argument("--q-max", type=float, default=None, help="override the true cell's q_max (C)")
     p.add_argument("--r0", type=float, default=None, help="override the true cell's r0 (ohm)")
+    p.add_argument("--logbook", default=None, metavar="FILE",
+                   help="the pack's logbook (uam-studio logbook new): its health belief starts from it (default: a "
+                        "new pack, the fleet prior and the take-off's readings)")
+    p.add_argument("--save-logbook", default=None, metavar="FILE",
+                   help="write the pack's logbook with this flight appended (atomically; may be --logbook's file)")
     p.add_argument("--json", action="store_true", help="print the flight record as JSON")
     p.add_argument("--series", action="store_true", help="with --json: include the 1 Hz time series")
 
 
 def _run_fly(args: argparse.Namespace) -> int:
+    from uam_studio.battery.health import Logbook
     from uam_studio.planning import load_mission
     from uam_studio.planning.operations import fly_mission, parse_event
 
     events = [parse_event(e) for e in args.event]
     mission = load_mission(args.mission).with_battery(args.q_max, args.r0)
+    book = Logbook.load(args.logbook) if args.logbook else None
     given = {"forecast_sigma_kt": args.forecast_sigma, "sensor_noise_mv": args.sensor_noise_mv,
              "sensor_noise_ma": args.sensor_noise_ma, "reserve_kt": args.reserve}
     # an option left out takes the library's default (uam_studio.planning.operations.defaults), not a copy
-    rec = fly_mission(mission, args.policy, seed=args.seed, events=events,
+    rec = fly_mission(mission, args.policy, seed=args.seed, events=events, logbook=book,
                       **{k: v for k, v in given.items() if v is not None})
+    if args.save_logbook:
+        rec.logbook_after().save(args.save_logbook)
     if args.json:
         json.dump(rec.to_dict(series=args.series), sys.stdout, allow_nan=False)
         sys.stdout.write("\n")
@@ -54,6 +63,11 @@ def _run_fly(args: argparse.Namespace) -> int:
     print(f"{mission.name} ({rec.scenario}): seed {rec.seed}, forecast sigma {rec.forecast_sigma_kt:g} kt, "
           f"sensor noise {rec.sensor_noise_mv:g} mV / {rec.sensor_noise_ma:g} mA, events: "
           f"{', '.join(rec.wind_events) or 'none'}, weather reserve {rec.reserve_kt:g} kt")
+    tb = rec.takeoff_belief
+    if tb:
+        print(f"take-off belief from the {tb['source']}" + (f" ({tb['flights']} flights)" if tb["flights"] else "")
+              + f": q_max {tb['q_max_c']:.0f} +- {tb['q_max_sd_c']:.0f} C, R0 {tb['r0_ohm']:.4f} +- "
+                f"{tb['r0_sd_ohm']:.4f} ohm")
     legs = iter(zip(rec.route, rec.altitudes_m, rec.actual_winds_kts, rec.forecast_winds_kts, rec.leg_end_s))
     for d in rec.events:
         print(f"t={d.time_s:>6.0f} s at {d.node}: {d.kind}: {d.reason}")
@@ -76,6 +90,8 @@ def _run_fly(args: argparse.Namespace) -> int:
     exact = "" if rec.hindsight.exact else (" at each leg's time; the best of the exact plans for each period of "
                                             "constant winds and the route flown")
     print(f"hindsight oracle (true cell, actual winds{exact}): priority {rec.hindsight.priority}")
+    if args.save_logbook:
+        print(f"logbook: {args.save_logbook} ({len(rec.logbook_before) + len(rec.flown_charges)} flights)")
     return EXIT_OK
 
 

@@ -15,8 +15,9 @@ a proxy: the voltage step over the first loaded sample of each reference dischar
 noisy (steps under half the cell's median are dropped as resampling artefacts). ``k_r`` is fitted with a
 free starting resistance per cell.
 
-:data:`AGING_LAW` holds the fitted numbers (the one place for them; ``python -m uam_studio.fleet.aging``
-refits and prints them, with each cell's error when the law is fitted on the other three).
+:class:`AgingLaw` and its fitted numbers :data:`AGING_LAW` live in :mod:`uam_studio.battery.aging` (the one place
+for them); ``python -m uam_studio.fleet.aging`` refits and prints them, with each cell's error when the law is fitted
+on the other three.
 
 A pack of the paper's NASA cell ages by the same law on the same clock: its ``efc`` is the charge it
 delivered over its first q_max, its q_max is ``q_max0 * c`` and its R0 ``r0_0 * r``
@@ -32,6 +33,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 
+from uam_studio.battery.aging import AGING_LAW, END_OF_LIFE_FRACTION, T_REF_C, AgingLaw
 from uam_studio.battery.parameters import ZERO_C
 from uam_studio.battery.real.cmu_data import (
     data_folder,
@@ -45,47 +47,9 @@ __all__ = ["AGING_LAW", "END_OF_LIFE_FRACTION", "LIFE_FILES", "AgingLaw", "LifeP
            "fit_aging_law", "fit_resistance_growth", "leave_one_cell_out", "life_points"]
 
 LIFE_FILES = ("VAH07.csv.mat", "VAH09.csv.mat", "VAH27.csv.mat", "VAH30.csv.mat")
-END_OF_LIFE_FRACTION = 0.8  # a pack retires below 80% of its first capacity
-T_REF_C = 25.0
-MAX_EFC = 1e5  # equivalent full cycles: far past any pack's life
 IR_ARTEFACT = 0.5  # resistance-proxy steps under this share of the cell's median are resampling artefacts
 
 
-@dataclass(frozen=True)
-class AgingLaw:
-    """Capacity fade and resistance growth against equivalent full cycles (module docstring).
-
-    ``a`` (fade scale), ``b`` (fade exponent), ``ea_k`` (activation energy over R, K: 0 = no
-    temperature effect), ``k_r`` (resistance growth per equivalent full cycle)."""
-
-    a: float
-    b: float
-    ea_k: float
-    k_r: float
-
-    def _scale(self, temperature_c: float) -> float:
-        t = check_range("temperature_c", float(temperature_c), -20.0, 60.0, " C")
-        return self.a * math.exp(self.ea_k * (1.0 / (T_REF_C + ZERO_C) - 1.0 / (t + ZERO_C)))
-
-    def capacity_fraction(self, efc: float | np.ndarray, temperature_c: float = T_REF_C) -> np.ndarray:
-        """Capacity (fraction of the first) after ``efc`` equivalent full cycles at ``temperature_c`` (C),
-        never below 0."""
-        e = np.clip(np.asarray(efc, dtype=float), 0.0, MAX_EFC)
-        return np.clip(1.0 - self._scale(temperature_c) * e ** self.b, 0.0, 1.0)
-
-    def resistance_ratio(self, efc: float | np.ndarray) -> np.ndarray:
-        """Resistance (ratio to the first) after ``efc`` equivalent full cycles."""
-        return 1.0 + self.k_r * np.clip(np.asarray(efc, dtype=float), 0.0, MAX_EFC)
-
-    def cycles_to(self, fraction: float = END_OF_LIFE_FRACTION, temperature_c: float = T_REF_C) -> float:
-        """Equivalent full cycles until the capacity falls to ``fraction`` of the first."""
-        f = check_range("fraction", float(fraction), 0.0, 1.0)
-        return float(min(MAX_EFC, ((1.0 - f) / self._scale(temperature_c)) ** (1.0 / self.b)))
-
-
-# Fitted by `python -m uam_studio.fleet.aging` on the four CMU lives (all of them: in-sample numbers;
-# the held-out error of each cell is the leave-one-cell-out fit, benchmarks/RESULTS.md).
-AGING_LAW = AgingLaw(a=0.00365567, b=0.646114, ea_k=175.433, k_r=0.00204851)
 
 
 @dataclass(frozen=True)

@@ -43,9 +43,7 @@ from uam_studio.fleet.demand import (
 from uam_studio.fleet.dispatch import (
     BLIND_RESERVE_V,
     DISPATCHERS,
-    HEALTH_Z,
     NOMINAL,
-    WIND_Z,
     AircraftView,
     PackBelief,
     assign,
@@ -54,6 +52,7 @@ from uam_studio.fleet.dispatch import (
 )
 from uam_studio.fleet.hindsight import Job, day_bound
 from uam_studio.fleet.nasa_aging import NASA_AGING_LAW
+from uam_studio.risk import DISPATCH_WIND_Z, HEALTH_Z
 
 __all__ = ["AGE_SPREAD_LIFE", "DayResult", "END_S", "Fleet", "FIT_WINDOW_S", "OperatingDay", "PACK_LAWS",
            "day_of_life_seed", "default_age_spread", "fly_day_of_life", "hindsight_bound", "pack_law", "simulate_day",
@@ -278,8 +277,8 @@ class OperatingDay:
             if self.dispatcher == "aware":
                 b = a.belief
                 self.cache[key] = round_trip_margin(req, b.q_max - HEALTH_Z * b.q_max_sd, b.r0 + HEALTH_Z * b.r0_sd,
-                                                    req.wind_kts + WIND_Z * FORECAST_SIGMA_KT,
-                                                    -req.wind_kts + WIND_Z * FORECAST_SIGMA_KT)
+                                                    req.wind_kts + DISPATCH_WIND_Z * FORECAST_SIGMA_KT,
+                                                    -req.wind_kts + DISPATCH_WIND_Z * FORECAST_SIGMA_KT)
             elif self.dispatcher == "blind":
                 self.cache[key] = round_trip_margin(req, *NOMINAL, req.wind_kts, -req.wind_kts)
             else:  # hindsight: the truth (the world's), never the aircraft's view

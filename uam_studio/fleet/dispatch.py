@@ -34,8 +34,6 @@ __all__ = ["ALTITUDE_M", "BLIND_RESERVE_V", "DISPATCHERS", "NOMINAL", "AircraftV
 ALTITUDE_M = 500.0  # m: every leg's cruise
 NOMINAL = (DEFAULT_Q_MAX, DEFAULT_R0)  # a new NASA pack: q_max (C), R0 (ohm)
 EOD_V = DEFAULT_EOD_V  # V: the cut-off
-HEALTH_Z = 1.64  # std to the weak side of the belief
-WIND_Z = 2.33  # std of the forecast error to the head side (tuned: RESULTS.md)
 BLIND_RESERVE_V = 0.5  # V: the health-blind rule's reserve above the cut-off (tuned: RESULTS.md)
 DISPATCHERS = ("aware", "blind", "hindsight")
 

@@ -32,16 +32,17 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 
+from uam_studio.battery.aging import AGING_LAW, NASA_AGING_LAW, T_REF_C, AgingLaw
 from uam_studio.battery.parameters import ZERO_C
 from uam_studio.battery.real.nasa_data import NasaDataError, load_nasa_folder, nasa_folder
 from uam_studio.errors import InputError
-from uam_studio.fleet.aging import AGING_LAW, T_REF_C, AgingLaw, LifePoints, fit_resistance_growth
+from uam_studio.fleet.aging import LifePoints, fit_resistance_growth
+from uam_studio.risk import INTERVAL_Z
 
 __all__ = ["NASA_AGING_LAW", "NASA_REST_RECOVERY", "CapacityBelief", "RestRecovery", "fit_nasa_law",
            "fit_rest_recovery", "forecast_score", "law_floor_rms", "nasa_leave_one_cell_out",
            "nasa_life_points", "smooth_floor_rms"]
 
-NASA_AGING_LAW = AgingLaw(a=0.0213434, b=0.49731, ea_k=-778.876, k_r=0.00145988)  # fit_nasa_law, all 25 lives
 MIN_POINTS = 10  # a life with fewer measured capacities is too short to fit or score
 REFERENCE_N = 5  # a life's reference capacity is the median of its first this many
 REST_REF_H = 8.0  # h: a longer rest than this (about two charges and their pauses) gives capacity back
@@ -276,7 +277,7 @@ class CapacityBelief:
         self.mean = self.mean + k * (capacity_ah - float(h @ self.mean))
         self.cov = self.cov - np.outer(k, h @ self.cov)
 
-    def forecast(self, efc: np.ndarray, z: float = 1.6449) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def forecast(self, efc: np.ndarray, z: float = INTERVAL_Z) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(mean, low, high) capacity (Ah) at each ``efc``, the h-th of them h discharges ahead (the random
         walk grows with h, what rests gave back fades by ``rho ** h``): the 90% band by default."""
         rows = np.array([self._row(e) for e in np.atleast_1d(efc)])

@@ -21,7 +21,8 @@ from uam_studio.app.services import FLIGHT_POOL, LatestWorker, one_line
 from uam_studio.errors import InputError
 from uam_studio.fleet.day import DayResult, Fleet, day_of_life_seed, default_age_spread, fly_day_of_life
 from uam_studio.fleet.demand import poisson_demand
-from uam_studio.fleet.dispatch import DISPATCHERS, HEALTH_Z
+from uam_studio.fleet.dispatch import DISPATCHERS
+from uam_studio.risk import HEALTH_Z
 
 LABELS = {"aware": "health-aware", "blind": "health-blind", "hindsight": "hindsight"}
 

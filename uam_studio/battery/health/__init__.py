@@ -7,11 +7,18 @@
 - :mod:`~uam_studio.battery.health.likelihood`, :mod:`~uam_studio.battery.health.quality`: the fit's
   likelihood and its checks of a fit's quality;
 - :mod:`~uam_studio.battery.health.intervals`: the end of discharge (s) and the voltage band (V) a fit
-  implies, with their intervals.
+  implies, with their intervals;
+- :mod:`~uam_studio.battery.health.logbook`: :class:`Logbook`, a pack's every finished flight as measured, with
+  each flight's stored fit;
+- :mod:`~uam_studio.battery.health.belief`: :class:`HealthBelief`, the one health belief of a pack (its logbook
+  aged by the aging law, then this flight's readings), and :class:`BelievedHealth`, what it holds.
 """
 
+from uam_studio.battery.health.belief import BelievedHealth, HealthBelief
 from uam_studio.battery.health.estimate import HealthEstimate
 from uam_studio.battery.health.fit import fit_health, fit_health_batch
 from uam_studio.battery.health.intervals import eod_interval_s, eod_intervals, voltage_band
+from uam_studio.battery.health.logbook import Logbook, LogbookError
 
-__all__ = ["HealthEstimate", "eod_interval_s", "eod_intervals", "fit_health", "fit_health_batch", "voltage_band"]
+__all__ = ["BelievedHealth", "HealthBelief", "HealthEstimate", "Logbook", "LogbookError", "eod_interval_s",
+           "eod_intervals", "fit_health", "fit_health_batch", "voltage_band"]

@@ -30,11 +30,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from uam_studio.risk import ONE_PERCENT_Z
+
 __all__ = ["FLAG_MISFIT", "FLAG_OUTSIDE_FLEET", "FLEET_Z", "MAX_FIT_RMS_V", "MAX_RHO", "WHITE_Z", "andrews_bandwidth",
            "current_noise_a", "describe_flags", "excess_factor", "fit_flags", "hac_covariance", "not_white",
            "residual_autocorrelation"]
 
-WHITE_Z = 2.33  # rho sqrt(n) above this: the residuals are not white (one-sided, p = 0.01)
+WHITE_Z = ONE_PERCENT_Z  # rho sqrt(n) above this: the residuals are not white (one-sided, p = 0.01)
 MAX_RHO = 0.99  # rho is capped here in the bandwidth rule
 NOISE_P = 0.01  # significance of residuals above a stated sensor noise
 MAX_FIT_RMS_V = 0.5  # V: residuals above this are not a reading of the cell type (units, cell or sensor)

@@ -28,6 +28,7 @@ from typing import Any, cast
 import numpy as np
 
 from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0, simulate
+from uam_studio.battery.health.logbook import Logbook
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_profile
 from uam_studio.flight.tables import WIND_RANGE_KTS
@@ -85,6 +86,10 @@ class FlightRecord:
     References (:class:`ReferenceFlight`, each flown in the same world): ``static`` (the pre-flight plan
     flown blind) and ``hindsight`` (the best plan knowing the true cell and the actual winds at each leg's
     time).
+    ``takeoff_belief``: the health belief the first decision planned on: ``q_max_c`` and ``q_max_sd_c`` (C),
+    ``r0_ohm`` and ``r0_sd_ohm`` (ohm), ``source`` (``"logbook"``: it started from the pack's logbook;
+    ``"take-off"``: from the fleet prior and the take-off's readings) and ``flights`` (in the logbook).
+    :meth:`logbook_after` is the pack's logbook with this flight appended (its readings, one flight per charge).
     """
 
     mission: str
@@ -117,7 +122,15 @@ class FlightRecord:
     hindsight: ReferenceFlight = field(default_factory=ReferenceFlight)
     true_q_max: float = 0.0
     true_r0: float = 0.0
+    takeoff_belief: dict[str, Any] = field(default_factory=dict)
     wall_s: float = 0.0
+    logbook_before: Logbook = field(default_factory=Logbook, repr=False)
+    flown_charges: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list, repr=False)
+
+    def logbook_after(self) -> Logbook:
+        """The pack's logbook with this flight appended, one logged flight per charge (its measured readings;
+        each fitted once, here)."""
+        return self.logbook_before.extended(self.flown_charges, DT_S)
 
     @property
     def replan_s(self) -> list[float]:
@@ -128,6 +141,8 @@ class FlightRecord:
         """JSON-ready dict (finite numbers only); ``series=False`` leaves out the time series."""
         out: dict[str, Any] = {}
         for f in dataclasses.fields(self):
+            if f.name in ("logbook_before", "flown_charges"):
+                continue
             v = getattr(self, f.name)
             if isinstance(v, np.ndarray):
                 if not series:
@@ -228,7 +243,7 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
                 events: Sequence[WindEvent] = (), scenario: str | None = None,
                 health_z: float = HEALTH_Z, wind_z: float = WIND_Z, plan_wind_z: float = PLAN_WIND_Z,
                 references: bool = True, reserve_kt: float = WEATHER_RESERVE_KT,
-                operator: Callable[..., Operator] = Operator) -> FlightRecord:
+                operator: Callable[..., Operator] = Operator, logbook: Logbook | None = None) -> FlightRecord:
     """Fly ``mission`` once: the operator plans from the take-off check, re-plans at every arrival.
 
     :param mission: the mission; its ``battery`` is the world's true cell, its winds the forecast.
@@ -247,6 +262,8 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
         next leg and the way home safe under its cautious belief plus this much more headwind.
     :param operator: makes the operator from :class:`Operator`'s arguments (default: :class:`Operator`); a
         reference study passes another (``benchmarks/bench_weather.py informed``: one told the true cell).
+    :param logbook: the pack's logbook (:class:`~uam_studio.battery.health.logbook.Logbook`: its earlier flights,
+        as measured); the operator's health belief starts from it. None: a new pack (the fleet prior).
     :raises InputError: for bad input, naming the field; an event that starts after the flight
         (and its references) ended is an error of field ``event``.
     """
@@ -261,11 +278,13 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
 
     world = new_world()
     known = dataclasses.replace(mission, battery=Battery(DEFAULT_Q_MAX, DEFAULT_R0))  # the operator's view
+    book = logbook if logbook is not None else Logbook(noise_v=max(world.sensor_noise_mv, 0.5) * 1e-3,
+                                                       eod_v=mission.eod_v)
     op = operator(known, scenario, world.forecast_sigma_kt, world.sensor_noise_mv, health_z, wind_z, plan_wind_z,
-                  policy, reserve_kt)
+                  policy, reserve_kt, logbook=book)
     rec = FlightRecord(mission.name, scenario, int(seed), world.forecast_sigma_kt, world.sensor_noise_mv,
                        world.sensor_noise_ma, [e.text for e in world.events], op.reserve_kt,
-                       true_q_max=mission.battery.q_max, true_r0=mission.battery.r0)
+                       true_q_max=mission.battery.q_max, true_r0=mission.battery.r0, logbook_before=book)
     takeoff = np.asarray(takeoff_current(), dtype=float)  # every leg's vertical take-off and first climb
     series_t, series_i, series_v, series_true, series_true_i, series_pred = [], [], [], [], [], []
 
@@ -305,6 +324,8 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
             break
         op.arrived(d.next_to)
         first = False
+    rec.takeoff_belief = _takeoff_belief(rec.events[0], op) if rec.events else {}
+    rec.flown_charges = op.health_belief.flown()
     rec.breached = world.breached
     rec.breach_cause = breach_cause(world, op.reserve_kt) if rec.breached else ""
     rec.reached = [n for n in rec.route if n != VERTIPORT]
@@ -338,6 +359,13 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
                                   f"({end_s:.0f} s); allowed: a start within the flight")
     rec.wall_s = time.perf_counter() - t_wall
     return rec
+
+
+def _takeoff_belief(first: Decision, op: Operator) -> dict[str, Any]:
+    """The belief the first decision planned on, with where it started and the logbook's length."""
+    return {"q_max_c": round(first.q_max_c, 3), "q_max_sd_c": round(first.q_max_sd_c, 3),
+            "r0_ohm": round(first.r0_ohm, 6), "r0_sd_ohm": round(first.r0_sd_ohm, 6),
+            "source": op.health_belief.source, "flights": len(op.health_belief.logbook)}
 
 
 def _predict_leg(op: Operator, d: Decision, first: bool) -> np.ndarray:

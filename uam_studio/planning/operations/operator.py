@@ -5,10 +5,10 @@ sensor readings; never the true cell nor the actual winds. At each decision poin
 take-off check and at every arrival) it
 
 1. estimates the health (q_max, R0) with its uncertainty
-   (:class:`~uam_studio.planning.operations.health_belief.HealthBelief`: the fit of **all** readings
+   (:class:`~uam_studio.battery.health.belief.HealthBelief`: the fit of **all** readings
    since the last full charge, combined by precision with the fits of earlier charges and with the
-   fleet prior; a 20 s take-off says much about R0 and little about q_max, which the flight then
-   sharpens);
+   pack's logbook, or the fleet prior for a new pack, on which a 20 s take-off says much about R0 and
+   little about q_max, which the flight then sharpens);
 2. estimates the wind (:class:`~uam_studio.planning.operations.wind_belief.WindBelief`): the actual
    wind of each flown leg follows from its measured duration (cruise time = distance / ground speed);
    the shift common to all legs, which may change in flight, is estimated from those residuals by
@@ -41,6 +41,7 @@ from typing import Any, cast
 import numpy as np
 
 from uam_studio.battery import BatteryState, full_charge, simulate
+from uam_studio.battery.health import BelievedHealth, HealthBelief, Logbook
 from uam_studio.battery.simulate import simulate_cell
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight import leg_profile
@@ -51,7 +52,6 @@ from uam_studio.planning.missions.mission import VERTIPORT, Battery, Destination
 from uam_studio.planning.missions.scenario import check_scenario
 from uam_studio.planning.operations.decision import Decision, LegObservation
 from uam_studio.planning.operations.defaults import DEFAULT_FORECAST_SIGMA_KT, WEATHER_RESERVE_KT
-from uam_studio.planning.operations.health_belief import BelievedHealth, HealthBelief
 from uam_studio.planning.operations.wind_belief import WindBelief, wind_from_duration
 from uam_studio.planning.planners import IN_FLIGHT_PLANNERS, PLANNERS
 from uam_studio.planning.solvers.oracle import (
@@ -62,9 +62,8 @@ from uam_studio.planning.solvers.oracle import (
     sortie_cover_table,
 )
 from uam_studio.planning.solvers.setup import safest_level
+from uam_studio.risk import HEALTH_Z, WIND_Z
 
-HEALTH_Z = 1.64  # std of the health estimate the belief cell is taken at (one-sided 95%)
-WIND_Z = 1.64  # one-sided joint bound (std) on the next leg's and the way home's winds
 PLAN_WIND_Z = 0.5  # std of a leg's predicted wind the expected belief takes
 RESERVE_RANGE_KT = (0.0, 60.0)  # kt, allowed weather reserves
 Q_PLAN_RANGE = (2000.0, 12000.0)  # C, belief cell bounds
@@ -85,6 +84,7 @@ class Operator:
     :param planner: ``"attention"`` (the learned planner, default) or ``"oracle"`` (exact search).
     :param reserve_kt: the weather reserve (kt, 0-60): every take-off keeps the next leg and the way home
         safe under the cautious belief plus this much more headwind on each.
+    :param logbook: the pack's logbook (its earlier flights, as measured); None or empty: a new pack.
     """
 
     check_at_takeoff = False  # the take-off's plan asks the later take-offs' check too (:meth:`_later_check`)
@@ -93,7 +93,7 @@ class Operator:
                  forecast_sigma_kt: float = DEFAULT_FORECAST_SIGMA_KT,
                  sensor_noise_mv: float | None = None, health_z: float = HEALTH_Z, wind_z: float = WIND_Z,
                  plan_wind_z: float = PLAN_WIND_Z, planner: str = "attention",
-                 reserve_kt: float = WEATHER_RESERVE_KT) -> None:
+                 reserve_kt: float = WEATHER_RESERVE_KT, logbook: Logbook | None = None) -> None:
         if planner not in IN_FLIGHT_PLANNERS:
             raise InputError("policy", f"{planner!r} is not an in-flight policy; allowed: "
                                        f"{', '.join(IN_FLIGHT_PLANNERS)}")
@@ -109,7 +109,7 @@ class Operator:
         self.plan_wind_z = check_range("plan_wind_z", plan_wind_z, 0.0, 5.0)
         self.reserve_kt = check_range("reserve_kt", reserve_kt, *RESERVE_RANGE_KT)
         self.noise_v = None if sensor_noise_mv is None else max(float(sensor_noise_mv), 0.5) * 1e-3
-        self.health_belief = HealthBelief(self.noise_v, self.eod_v)  # the paper's box: the default cell's fleet
+        self.health_belief = HealthBelief(self.noise_v, self.eod_v, logbook=logbook, dt_s=DT_S)  # the paper's box
         self.winds = WindBelief({n: mission.node(n).wind_kts for n in mission.node_names}, forecast_sigma_kt)
         self.names = tuple(d.name for d in mission.destinations)
         self.node = VERTIPORT
