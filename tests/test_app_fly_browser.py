@@ -154,3 +154,38 @@ def test_fleet_tab_runs_a_day_for_the_three_dispatchers(browser, app_url):
         page.screenshot(path=str(ROOT / "assets" / "screenshots" / "fleet_tab.png"))
     assert page.evaluate("() => document.documentElement.scrollWidth") <= 1366 + 1
     page.close()
+
+
+def test_fly_tab_flies_a_pack_with_its_logbook(browser, app_url, tmp_path):
+    """The student picks a pack whose logbook holds 3 flights: the log's first decision says where its belief came
+    from and prints q_max +- std in full, the same numbers as the library's flight of that pack."""
+    page = browser.new_page(viewport={"width": 1366, "height": 768})
+    page.goto(app_url, timeout=TIMEOUT_MS)
+    page.locator(".bk-tab", has_text="Fly").click(timeout=TIMEOUT_MS)
+    page.locator(".uam-fly-pack select").select_option("its logbook: 3 flights")
+    _speed(page, "1000")
+    page.locator("button", has_text="Fly the mission").click(timeout=TIMEOUT_MS)
+    page.locator(".uam-fly-status").get_by_text("flown:").wait_for(timeout=TIMEOUT_MS)
+    from uam_studio.app.planner.state import PlannerState
+    from uam_studio.planning.operations import fly_mission
+    from uam_studio.planning.operations.pack_history import simulate_logbook
+
+    mission = PlannerState().mission
+    rec = fly_mission(mission, seed=0, logbook=simulate_logbook(mission, 3, 0))
+    first = rec.events[0]
+    cell = '.uam-fly-log .tabulator-row .tabulator-cell[tabulator-field="{}"]'
+    sources = page.locator(cell.format("belief from"))
+    sources.nth(len(rec.events) - 1).wait_for(timeout=TIMEOUT_MS)
+    assert sources.all_inner_texts()[-1].strip() == "logbook (3 flights)"
+    q_cells = page.locator(cell.format("q_max (C)"))
+    shown = q_cells.all_inner_texts()[-1].strip()
+    assert shown == f"{first.q_max_c:.0f} ± {first.q_max_sd_c:.0f}", shown
+    # shown whole: the cell's text is not cut by its column
+    fits = page.evaluate(f"() => [...document.querySelectorAll('{cell.format('q_max (C)')}')]"
+                         ".every(c => c.scrollWidth <= c.clientWidth)")
+    assert fits
+    page.screenshot(path=str(tmp_path / "fly_logbook.png"))
+    if os.environ.get("UAM_SCREENSHOTS") == "1":
+        page.screenshot(path=str(ROOT / "assets" / "screenshots" / "fly_tab_logbook.png"))
+    assert page.evaluate("() => document.documentElement.scrollWidth") <= 1366 + 1
+    page.close()

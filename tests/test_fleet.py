@@ -7,10 +7,13 @@ import dataclasses
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from uam_studio.battery.health.belief import logbook_belief
+from uam_studio.battery.health.logbook import FlightFit
 from uam_studio.cli import main
 from uam_studio.errors import InputError
 from uam_studio.fleet.aging import PackHealth
@@ -49,6 +52,12 @@ def test_a_day_is_seeded_serves_within_the_fleet_and_ages_the_packs(day_demand):
         assert (t.delivered_c > before[i]) == (i in flown)
     assert all(b.delivered_c >= 0 for b in fleet.belief)
     json.dumps(a.to_dict(), allow_nan=False)
+    # each aircraft's belief is its pack's logbook's: the one belief, from the flights its sensors logged
+    for i, (b, book) in enumerate(zip(fleet.belief, fleet.logbooks)):
+        assert len(book) == sum(1 for entry in a.log if entry[1] == i)
+        start = PackBelief.new_pack(book.delivered_before_c, fleet.aging_law)
+        mean, cov = logbook_belief(book, start.prior, fleet.aging_law)
+        assert np.allclose(b.mean, mean, rtol=1e-9) and np.allclose(np.reshape(b.cov, (2, 2)), cov, rtol=1e-6)
 
 
 def test_the_dispatcher_never_reads_the_true_cell(day_demand):
@@ -82,8 +91,10 @@ def test_the_belief_ages_with_charge_and_learns_from_a_fit():
     b = PackBelief.new_pack()
     old = b.aged(7600.0 * 200)
     assert old.q_max < b.q_max and old.r0 > b.r0 and old.q_max_sd >= b.q_max_sd
-    learned = old.update(6500.0, 50.0, 0.15, 0.005)
+    w, sd_w = 6500.0 / 6500.0, 6500.0 * 50.0 / 6500.0 ** 2  # a fit of q_max 6500 +- 50 C, R0 0.15 +- 0.005 ohm
+    learned = old.update(FlightFit(w, 0.15, (sd_w ** 2, 0.0, 0.0, 0.005 ** 2)))
     assert abs(learned.q_max - 6500.0) < abs(old.q_max - 6500.0) and learned.q_max_sd < 50.0
+    assert old.update(None) == old
     with pytest.raises(InputError, match="^charge_c: "):
         b.aged(-1.0)
 

@@ -13,7 +13,8 @@ Importing the package registers the planning environment's gymnasium ids
 
 The front door: the names of the main jobs, imported when first used (the README's example runs them):
 simulate a cell (:func:`simulate`), fit its health (:func:`fit_health`), load, plan and fly a mission
-(:func:`load_mission`, :func:`plan_mission`, :func:`fly_mission`), run a fleet's day (:class:`Fleet`,
+(:func:`load_mission`, :func:`plan_mission`, :func:`fly_mission`) with a pack's logbook (:class:`Logbook`,
+:func:`simulate_logbook`), run a fleet's day (:class:`Fleet`,
 :func:`poisson_demand`, :func:`simulate_day`), and predict a real NASA discharge's end
 (:func:`load_nasa_folder`, :func:`replay_discharge`).
 """
@@ -29,6 +30,8 @@ _FRONT_DOOR = {
     "load_mission": "uam_studio.planning",
     "plan_mission": "uam_studio.planning",
     "fly_mission": "uam_studio.planning",
+    "Logbook": "uam_studio.battery.health.logbook",
+    "simulate_logbook": "uam_studio.planning.operations.pack_history",
     "Fleet": "uam_studio.fleet.day",
     "simulate_day": "uam_studio.fleet.day",
     "poisson_demand": "uam_studio.fleet.demand",

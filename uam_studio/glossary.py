@@ -31,6 +31,10 @@ GLOSSARY: dict[str, str] = {
                    "fleet spans (the paper's box for the NASA cell). A health fit multiplies what the "
                    "readings say by it, so a short or noisy take-off gives the fleet's typical cell, not a "
                    "wild guess; a long flight outweighs it.",
+    "Logbook (pack)": "The record of every flight a battery pack has flown, as its sensors read it (current, voltage, "
+                      "the rest before it), each with its health fit. A pack with a logbook starts its flight "
+                      "believing what its earlier flights showed (aged by the pack aging law since), not the "
+                      "fleet prior: the Fly tab's \"The aircraft's pack\" chooses a new pack or one with a logbook.",
     "Model discrepancy": "How far the physics model is from the real cell, beyond the sensor's noise. A "
                          "health fit reads it from its own residuals: residuals that form a smooth curve "
                          "(correlated) or sit above the sensor's stated noise widen the fit's interval by "

@@ -4,8 +4,10 @@ The world holds each pack's true health (:class:`~uam_studio.fleet.aging.PackHea
 charge it delivers) and the actual winds (the forecast plus a seeded error). Dispatchers see only
 :class:`~uam_studio.fleet.dispatch.AircraftView` s (each aircraft's own belief). A served request is a
 round trip at 500 m from full charge, flown on the true cell in the actual winds: below the cut-off
-is a breach (the request scores 0 and the aircraft is grounded for the day). Each flight's first
-:data:`FIT_WINDOW_S` s of noisy readings update its aircraft's belief (the health fit). Landed, the
+is a breach (the request scores 0 and the aircraft is grounded for the day). Each flight's noisy readings go
+into its pack's logbook (``Fleet.logbooks``, :class:`~uam_studio.battery.health.logbook.Logbook`) with their
+whole-record fit, which updates the aircraft's belief (the one health belief,
+:func:`~uam_studio.battery.health.belief.logbook_belief`'s steps). Landed, the
 aircraft charges at 1 C back to full on one of its vertiport's chargers (a queue when all are busy).
 A fleet may be based at several vertiports: each aircraft serves the requests of its own vertiport
 and charges there.
@@ -29,6 +31,7 @@ from typing import Any
 import numpy as np
 import simpy
 
+from uam_studio.battery.health.logbook import Logbook
 from uam_studio.errors import InputError, check_range, check_seed
 from uam_studio.fleet.aging import AGING_LAW, END_OF_LIFE_FRACTION, AgingLaw, PackHealth
 from uam_studio.fleet.demand import (
@@ -43,6 +46,7 @@ from uam_studio.fleet.demand import (
 from uam_studio.fleet.dispatch import (
     BLIND_RESERVE_V,
     DISPATCHERS,
+    EOD_V,
     NOMINAL,
     AircraftView,
     PackBelief,
@@ -54,11 +58,10 @@ from uam_studio.fleet.hindsight import Job, day_bound
 from uam_studio.fleet.nasa_aging import NASA_AGING_LAW
 from uam_studio.risk import DISPATCH_WIND_Z, HEALTH_Z
 
-__all__ = ["AGE_SPREAD_LIFE", "DayResult", "END_S", "Fleet", "FIT_WINDOW_S", "OperatingDay", "PACK_LAWS",
+__all__ = ["AGE_SPREAD_LIFE", "DayResult", "END_S", "Fleet", "OperatingDay", "PACK_LAWS",
            "day_of_life_seed", "default_age_spread", "fly_day_of_life", "hindsight_bound", "pack_law", "simulate_day",
            "simulate_life"]
 
-FIT_WINDOW_S = 600  # s of each flight's readings fitted for its pack's health
 FORECAST_SIGMA_KT = 8.0  # kt: the actual wind is the forecast plus N(0, this)
 NOISE_V, NOISE_A = 0.005, 0.020  # sensor noise std (V, A)
 CHARGE_C_RATE = 1.0  # charge current, in q_max per hour
@@ -95,7 +98,8 @@ def day_of_life_seed(seed: int, day: int) -> int:
 
 @dataclass
 class Fleet:
-    """The aircraft: each one's true pack (``truth``, the world's) and its own ``belief``; ``in_service``
+    """The aircraft: each one's true pack (``truth``, the world's), its own ``belief`` and its pack's ``logbooks``
+    (every flight as its sensors read it; the belief is the logbook's); ``in_service``
     false once a pack has retired (below 80% of its first capacity); ``base``: each one's vertiport
     (default all at vertiport 0); ``law``: the packs' cell type, a key of :data:`PACK_LAWS`."""
 
@@ -104,6 +108,7 @@ class Fleet:
     in_service: list[bool] = field(default_factory=list)
     base: list[int] = field(default_factory=list)
     law: str = "nasa"
+    logbooks: list[Logbook] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         pack_law(self.law)
@@ -113,6 +118,8 @@ class Fleet:
             self.in_service = [not t.retired for t in self.truth]
         if not self.base:
             self.base = [0] * len(self.truth)
+        if not self.logbooks:
+            self.logbooks = [_new_logbook(b.delivered_c) for b in self.belief]
         if len(self.base) != len(self.truth) or not all(0 <= b < MAX_VERTIPORTS for b in self.base):
             raise InputError("vertiports", f"a base vertiport 0-{MAX_VERTIPORTS - 1} for each aircraft")
 
@@ -158,6 +165,7 @@ class Fleet:
             q0, r0 = _factory_pack(rng)
             self.truth[i] = PackHealth(q0, r0, 0.0, law=self.aging_law)
             self.belief[i] = PackBelief.new_pack(0.0, self.aging_law)
+            self.logbooks[i] = _new_logbook(0.0)
             self.in_service[i] = True
         return renewed
 
@@ -202,6 +210,11 @@ def _charger_counts(fleet: Fleet, demand: list[Request], chargers: int | Sequenc
             raise InputError("vertiport", f"request {req.name!r} at vertiport {req.vertiport}: the fleet is based "
                                           f"at vertiports 0-{ports - 1}")
     return counts
+
+
+def _new_logbook(delivered_c: float) -> Logbook:
+    """An empty logbook of a pack that has delivered ``delivered_c`` (C), read by the fleet's sensors."""
+    return Logbook(delivered_before_c=delivered_c, noise_v=NOISE_V, eod_v=EOD_V)
 
 
 def _recharge_s(charge_c: float, q_max: float) -> float:
@@ -313,14 +326,14 @@ class OperatingDay:
         self.log.append((float(env.now), i, req.name, float(sim.min_voltage_v) - sim.eod_v, flight_s))
         yield env.timeout(flight_s)
         fleet.truth[i] = truth.after(charge)
-        belief = fleet.belief[i].aged(charge, fleet.aging_law)
-        m = min(FIT_WINDOW_S, k)
-        if m >= 30:
-            est = _fit(cur[:m] + self.noise.normal(0.0, NOISE_A, m),
-                       np.asarray(sim.voltage_v[:m]) + self.noise.normal(0.0, NOISE_V, m), sim.dt_s)
-            if est is not None:
-                belief = belief.update(*est)
-        fleet.belief[i] = belief
+        # the flight's readings (the sensors', never the truth) go into the pack's logbook, fitted once there;
+        # the belief takes that fit, then ages by the law over the flight's measured charge (logbook_belief's steps)
+        measured_i = cur + self.noise.normal(0.0, NOISE_A, k)
+        measured_v = np.asarray(sim.voltage_v[:k]) + self.noise.normal(0.0, NOISE_V, k)
+        book = fleet.logbooks[i].appended(measured_i, measured_v, sim.dt_s)
+        fleet.logbooks[i] = book
+        fleet.belief[i] = fleet.belief[i].update(book.flights[-1].fit).aged(book.flights[-1].charge_c,
+                                                                              fleet.aging_law)
         self.version[i] += 1
         if breached:
             stats["breaches"] += 1
@@ -369,18 +382,6 @@ def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int
         raise InputError("dispatcher", f"{dispatcher!r}: allowed {', '.join(DISPATCHERS)}")
     counts = _charger_counts(fleet, demand, chargers)
     return OperatingDay(fleet, demand, dispatcher, day_seed(seed), counts).run()
-
-
-def _fit(current: np.ndarray, voltage: np.ndarray, dt_s: float) -> tuple[float, float, float, float] | None:
-    """One flight's health fit: (q_max, its std C, R0, its std ohm), or None where the fit refuses it."""
-    from uam_studio.battery import fit_health
-
-    try:
-        est = fit_health(current, voltage, dt_s, start="full")
-    except InputError:
-        return None
-    q_sd, r_sd = est.std
-    return float(est.q_max), float(q_sd), float(est.r0), float(r_sd)
 
 
 def fly_day_of_life(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int, day: int,

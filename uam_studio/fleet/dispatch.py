@@ -1,9 +1,9 @@
 """What a fleet's dispatcher knows and how it decides: each pack's belief, and three rules.
 
-- :class:`PackBelief`: an aircraft's own estimate of its pack (q_max C, R0 ohm, their std) and the
-  charge it has delivered (C, from its current sensor), carried from flight to flight: aged by the
-  aging law between flights (:meth:`PackBelief.aged`), sharpened by each flight's health fit
-  (:meth:`PackBelief.update`).
+- :class:`PackBelief`: the dispatcher's view of an aircraft's health belief about its pack (q_max C, R0 ohm, their
+  std; the one belief of :mod:`uam_studio.battery.health.belief`) and the charge it has delivered (C, from its
+  current sensor), carried from flight to flight as its logbook grows: sharpened by each flight's whole-record
+  fit (:meth:`PackBelief.update`), aged by the aging law (:meth:`PackBelief.aged`).
 - :class:`AircraftView`: all a dispatcher is given about a free aircraft: its name and its belief.
   No true cell: the truth lives in :mod:`uam_studio.fleet.day`'s world.
 - Rules (:data:`DISPATCHERS`): ``aware`` flies a request with an aircraft whose cautious belief
@@ -18,9 +18,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+
+import numpy as np
 
 from uam_studio.battery import DEFAULT_EOD_V, DEFAULT_Q_MAX, DEFAULT_R0
+from uam_studio.battery.health.belief import AGING_PROCESS_SD, BelievedHealth, aged_belief
+from uam_studio.battery.health.logbook import FlightFit
+from uam_studio.battery.health.prior import Q_REF_C, HealthPrior, combine
 from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
 from uam_studio.errors import InputError
 from uam_studio.fleet.aging import AGING_LAW, AgingLaw
@@ -33,6 +38,7 @@ __all__ = ["ALTITUDE_M", "BLIND_RESERVE_V", "DISPATCHERS", "NOMINAL", "AircraftV
 
 ALTITUDE_M = 500.0  # m: every leg's cruise
 NOMINAL = (DEFAULT_Q_MAX, DEFAULT_R0)  # a new NASA pack: q_max (C), R0 (ohm)
+NEW_PACK_SD = (300.0, 0.02)  # the spread of new packs around it: q_max (C), R0 (ohm)
 EOD_V = DEFAULT_EOD_V  # V: the cut-off
 BLIND_RESERVE_V = 0.5  # V: the health-blind rule's reserve above the cut-off (tuned: RESULTS.md)
 DISPATCHERS = ("aware", "blind", "hindsight")
@@ -40,14 +46,16 @@ DISPATCHERS = ("aware", "blind", "hindsight")
 
 @dataclass(frozen=True)
 class PackBelief:
-    """An aircraft's estimate of its pack: ``q_max`` / ``q_max_sd`` (C), ``r0`` / ``r0_sd`` (ohm), and
-    the charge it has delivered (``delivered_c``, C, measured), with the new pack's nominal q_max
-    (``q_max_nominal``, C) as the aging clock's unit."""
+    """An aircraft's belief about its pack, as the dispatcher reads it: a thin view of the one health belief
+    (:mod:`uam_studio.battery.health.belief`), the Gaussian in (w, R0) (w = 6500 C / q_max) with mean ``mean`` and
+    covariance ``cov`` (row-major), the charge the pack has delivered (``delivered_c``, C, measured) and the new
+    pack's nominal q_max (``q_max_nominal``, C), the aging clock's unit. ``q_max`` / ``q_max_sd`` (C) and ``r0`` /
+    ``r0_sd`` (ohm) are its views. :meth:`update` multiplies in one flight's fit, :meth:`aged` ages it by the law:
+    the same steps, in the same order, as :func:`~uam_studio.battery.health.belief.logbook_belief` over the pack's
+    logbook."""
 
-    q_max: float
-    q_max_sd: float
-    r0: float
-    r0_sd: float
+    mean: tuple[float, float]
+    cov: tuple[float, float, float, float]
     delivered_c: float = 0.0
     q_max_nominal: float = NOMINAL[0]
 
@@ -55,32 +63,61 @@ class PackBelief:
     def new_pack(cls, delivered_c: float = 0.0, law: AgingLaw = AGING_LAW) -> PackBelief:
         """A pack known only by its logged throughput: the nominal new pack (q_max 7600 +- 300 C, R0
         0.117 +- 0.02 ohm), aged by ``law`` over ``delivered_c`` (C)."""
-        return cls(NOMINAL[0], 300.0, NOMINAL[1], 0.02).aged(delivered_c, law)
+        w = Q_REF_C / NOMINAL[0]
+        sd_w = Q_REF_C * NEW_PACK_SD[0] / NOMINAL[0] ** 2
+        return cls((w, NOMINAL[1]), (sd_w ** 2, 0.0, 0.0, NEW_PACK_SD[1] ** 2)).aged(delivered_c, law)
 
-    def aged(self, charge_c: float, law: AgingLaw = AGING_LAW, process_sd: float = 0.2) -> PackBelief:
-        """After delivering ``charge_c`` (C) more: the estimate moves as ``law`` says, and its std grows
-        by ``process_sd`` of the predicted change (the law is not exact)."""
+    @classmethod
+    def of(cls, mean: np.ndarray, cov: np.ndarray, delivered_c: float, q_max_nominal: float = NOMINAL[0]
+           ) -> PackBelief:
+        """The view of a belief ``(mean [2], cov [2, 2])`` in (w, R0)."""
+        c = np.asarray(cov, dtype=float)
+        return cls((float(mean[0]), float(mean[1])), (float(c[0, 0]), float(c[0, 1]), float(c[1, 0]), float(c[1, 1])),
+                   float(delivered_c), float(q_max_nominal))
+
+    @property
+    def health(self) -> BelievedHealth:
+        """The belief's Gaussian (:class:`~uam_studio.battery.health.belief.BelievedHealth`)."""
+        cov = np.array(self.cov).reshape(2, 2)
+        return BelievedHealth(inverse_capacity=self.mean[0], inverse_capacity_sd=math.sqrt(cov[0, 0]),
+                              r0_ohm=self.mean[1], r0_sd_ohm=math.sqrt(cov[1, 1]), cov_w=cov)
+
+    @property
+    def prior(self) -> HealthPrior:
+        """The belief as a prior (the start of a logbook's belief)."""
+        return HealthPrior(np.array(self.mean), np.array(self.cov).reshape(2, 2))
+
+    @property
+    def q_max(self) -> float:
+        return self.health.q_max_c
+
+    @property
+    def q_max_sd(self) -> float:
+        return self.health.q_max_sd_c
+
+    @property
+    def r0(self) -> float:
+        return self.mean[1]
+
+    @property
+    def r0_sd(self) -> float:
+        return self.health.r0_sd_ohm
+
+    def aged(self, charge_c: float, law: AgingLaw = AGING_LAW, process_sd: float = AGING_PROCESS_SD) -> PackBelief:
+        """After delivering ``charge_c`` (C) more: :func:`~uam_studio.battery.health.belief.aged_belief`."""
         if not math.isfinite(charge_c) or charge_c < 0:
             raise InputError("charge_c", f"{charge_c!r}: allowed a finite charge >= 0 C")
-        e0 = self.delivered_c / self.q_max_nominal
-        e1 = (self.delivered_c + charge_c) / self.q_max_nominal
-        fq = float(law.capacity_fraction(e1) / max(float(law.capacity_fraction(e0)), 1e-6))
-        fr = float(law.resistance_ratio(e1) / law.resistance_ratio(e0))
-        dq, dr = self.q_max * (1.0 - fq), self.r0 * (fr - 1.0)
-        return replace(self, q_max=self.q_max - dq, r0=self.r0 + dr, delivered_c=self.delivered_c + charge_c,
-                       q_max_sd=math.hypot(self.q_max_sd, process_sd * dq),
-                       r0_sd=math.hypot(self.r0_sd, process_sd * dr))
+        mean, cov = aged_belief(np.array(self.mean), np.array(self.cov).reshape(2, 2), self.delivered_c, charge_c,
+                                self.q_max_nominal, law, process_sd=process_sd)
+        return PackBelief.of(mean, cov, self.delivered_c + charge_c, self.q_max_nominal)
 
-    def update(self, q_max: float, q_max_sd: float, r0: float, r0_sd: float) -> PackBelief:
-        """Combined with one flight's health fit (its estimate and std), parameter by parameter
-        (precision-weighted)."""
-        def comb(m0: float, s0: float, m1: float, s1: float) -> tuple[float, float]:
-            w0, w1 = 1.0 / max(s0, 1e-9) ** 2, 1.0 / max(s1, 1e-9) ** 2
-            return (w0 * m0 + w1 * m1) / (w0 + w1), math.sqrt(1.0 / (w0 + w1))
-
-        q, qs = comb(self.q_max, self.q_max_sd, q_max, q_max_sd)
-        r, rs = comb(self.r0, self.r0_sd, r0, r0_sd)
-        return replace(self, q_max=q, q_max_sd=qs, r0=r, r0_sd=rs)
+    def update(self, fit: FlightFit | None) -> PackBelief:
+        """Multiplied by one flight's fit (its likelihood, :class:`~uam_studio.battery.health.logbook.FlightFit`);
+        unchanged for a flight too short to fit (None)."""
+        if fit is None:
+            return self
+        mean, cov = combine([(np.array(self.mean), np.array(self.cov).reshape(2, 2)), (fit.mean, fit.cov)])
+        return PackBelief.of(mean, cov, self.delivered_c, self.q_max_nominal)
 
 
 @dataclass(frozen=True)

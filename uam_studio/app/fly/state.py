@@ -11,6 +11,7 @@ where it was. Flights run in the flights' own thread pool, the newest request wi
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -30,6 +31,7 @@ from uam_studio.planning.operations import (
     position_at,
 )
 from uam_studio.planning.operations.operator import RESERVE_RANGE_KT
+from uam_studio.planning.operations.pack_history import simulate_logbook
 from uam_studio.planning.operations.world import (
     DEFAULT_FORECAST_SIGMA_KT,
     DEFAULT_SENSOR_NOISE_MV,
@@ -39,6 +41,7 @@ from uam_studio.planning.operations.world import (
 from uam_studio.wording import charging_cycles_text
 
 SPEEDS = (10, 30, 100, 300, 1000)  # playback speed-ups (simulated s per wall s)
+PACKS = {"a new pack (no logbook)": 0, "its logbook: 3 flights": 3, "its logbook: 10 flights": 10}
 ERROR_CHARS = 300  # an error line is cut here
 
 
@@ -50,12 +53,23 @@ class _Flight:
     mission: Mission
     kwargs: dict[str, Any]
     keep_time: bool
+    pack_flights: int = 0
+
+
+@functools.lru_cache(maxsize=8)
+def _pack_logbook(mission: Mission, flights: int, seed: int, sensor_noise_mv: float):
+    """The logbook of the mission's pack after ``flights`` earlier flights (the same for the same inputs)."""
+    return simulate_logbook(mission, flights, seed, sensor_noise_mv=sensor_noise_mv)
 
 
 def _fly(flight: _Flight) -> tuple[_Flight, FlightRecord | None, str]:
     """``(flight, its record, '')``, or ``(flight, None, one line)`` for bad input."""
     try:
-        return flight, fly_mission(flight.mission, **flight.kwargs), ""
+        kwargs = flight.kwargs
+        if flight.pack_flights:
+            book = _pack_logbook(flight.mission, flight.pack_flights, kwargs["seed"], kwargs["sensor_noise_mv"])
+            kwargs = {**kwargs, "logbook": book}
+        return flight, fly_mission(flight.mission, **kwargs), ""
     except InputError as exc:
         return flight, None, one_line(exc, ERROR_CHARS)
 
@@ -68,13 +82,16 @@ def _flight_failed(flight: _Flight, exc: BaseException) -> tuple[_Flight, Flight
 class FlyState(param.Parameterized):
     """One flight and its playback (see the module docstring).
 
-    Inputs: ``seed``, ``forecast_sigma_kt`` (kt), ``sensor_noise_mv`` (mV), ``reserve_kt`` (kt, the
+    Inputs: ``pack`` (a key of :data:`PACKS`: a new pack, or one whose logbook holds that many earlier flights of
+    the mission, :func:`~uam_studio.planning.operations.pack_history.simulate_logbook`), ``seed``,
+    ``forecast_sigma_kt`` (kt), ``sensor_noise_mv`` (mV), ``reserve_kt`` (kt, the
     operator's weather reserve), ``speed`` (playback speed-up), ``inject_kts`` (kt, the wind change
     :meth:`inject` adds). Outputs: ``record``, ``t_s``
     (the playback clock, s), ``mission_flown``, ``running`` (a flight is being computed), ``playing``, ``status``,
     ``error`` (one line).
     """
 
+    pack: param.Selector = param.Selector(default=next(iter(PACKS)), objects=list(PACKS))
     seed = param.Integer(default=0, bounds=(0, 10**9))
     forecast_sigma_kt = param.Number(default=DEFAULT_FORECAST_SIGMA_KT, bounds=(0.0, MAX_SIGMA_KT))
     sensor_noise_mv = param.Number(default=DEFAULT_SENSOR_NOISE_MV, bounds=(0.0, MAX_NOISE_MV))
@@ -113,7 +130,7 @@ class FlyState(param.Parameterized):
             return
         flight = _Flight(mission, dict(seed=self.seed, forecast_sigma_kt=self.forecast_sigma_kt,
                                        sensor_noise_mv=self.sensor_noise_mv, events=list(self.events),
-                                       reserve_kt=self.reserve_kt), keep_time)
+                                       reserve_kt=self.reserve_kt), keep_time, PACKS[self.pack])
         self.running = True
         self.status = "flying..."
         if not keep_time:
@@ -178,10 +195,20 @@ class FlyState(param.Parameterized):
         return position_at(self.record, self.mission_flown, self.t_s)
 
     def decisions_until(self) -> list[dict[str, Any]]:
-        """The decisions made up to the playback time, newest first, as table rows."""
-        if self.record is None:
+        """The decisions made up to the playback time, newest first, as table rows, each with where its health
+        belief came from (``belief from``: the pack's logbook and its flights, or the take-off's readings; then
+        this flight's readings)."""
+        r = self.record
+        if r is None:
             return []
-        return [d.row() for d in reversed(self.record.events) if d.time_s <= self.t_s]
+        tb = r.takeoff_belief
+        first = f"logbook ({tb.get('flights', 0)} flights)" if tb.get("source") == "logbook" else "take-off only"
+        rows = []
+        for k, d in enumerate(r.events):
+            row = d.row()
+            rows.append({"t (s)": row.pop("t (s)"), "at": row.pop("at"),
+                         "belief from": first if k == 0 else "+ in flight", **row})
+        return [row for row, d in zip(reversed(rows), reversed(r.events)) if d.time_s <= self.t_s]
 
     @param.depends("t_s", watch=True)
     def _show_status(self) -> None:

@@ -19,7 +19,7 @@ import param
 from bokeh.models import ColumnDataSource, HoverTool, Range1d
 from bokeh.models.annotations import Span  # = bokeh.models.Span, a re-export mypy misses (its stubs lack __all__)
 
-from uam_studio.app.fly.state import SPEEDS, FlyState
+from uam_studio.app.fly.state import PACKS, SPEEDS, FlyState
 from uam_studio.app.planner.map_geometry import altitude_labels, place_label
 from uam_studio.app.style import (
     MEASURED_COLOR,
@@ -78,6 +78,8 @@ class FlyView(pn.viewable.Viewer):
         self.play = pn.widgets.Toggle(name="Play / pause", value=s.playing, width=w)
         self.speed = pn.widgets.Select(name="Playback speed (x)", options=list(SPEEDS), value=s.speed, width=w)
         self.seed = pn.widgets.IntInput(name="World seed", value=s.seed, start=0, width=w)
+        self.pack = pn.widgets.Select(name="The aircraft's pack", options=list(PACKS), value=s.pack, width=w,
+                                      css_classes=["uam-fly-pack"])
         self.sigma = pn.widgets.FloatSlider(name="Forecast error (kt, std)", start=0, end=40, step=1,
                                             value=s.forecast_sigma_kt, width=w)
         self.noise = pn.widgets.FloatSlider(name="Voltage sensor noise (mV)", start=0, end=20, step=0.5,
@@ -95,17 +97,19 @@ class FlyView(pn.viewable.Viewer):
         self.status = pn.pane.Markdown("", css_classes=["uam-fly-status"], sizing_mode="stretch_width")
         self.error = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width")
         self.progress = pn.indicators.LoadingSpinner(value=False, size=24, name="flying...", visible=False)
-        self.log = pn.widgets.Tabulator(pd.DataFrame(columns=["t (s)", "at", "q_max (C)", "R0 (ohm)", "fit flags",
-                                                              "leg wind vs forecast (kt)", "common shift (kt)",
+        self.log = pn.widgets.Tabulator(pd.DataFrame(columns=["t (s)", "at", "belief from", "q_max (C)", "R0 (ohm)",
+                                                              "fit flags", "leg wind vs forecast (kt)",
+                                                              "common shift (kt)",
                                                               "wind changed (p)", "next", "reason"]),
                                         disabled=True, show_index=False, sizing_mode="stretch_both",
                                         css_classes=["uam-fly-log"], layout="fit_columns",
                                         configuration={"columnDefaults": {"headerWordWrap": True},
                                                        "renderVertical": "basic"},  # every row in the page
                                         formatters={"reason": {"type": "textarea"}},
-                                        widths={"t (s)": 55, "at": 85, "q_max (C)": 95, "R0 (ohm)": 85,
-                                                "fit flags": 80, "leg wind vs forecast (kt)": 190,
-                                                "common shift (kt)": 135, "wind changed (p)": 95, "next": 85})
+                                        widths={"t (s)": 55, "at": 85, "belief from": 105, "q_max (C)": 100,
+                                                "R0 (ohm)": 85,
+                                                "fit flags": 70, "leg wind vs forecast (kt)": 150,
+                                                "common shift (kt)": 110, "wind changed (p)": 95, "next": 85})
         self._shown = (-1, -1, -1)
         self._figures()
         self.map_pane = pn.pane.Bokeh(self.map_fig, width=MAP_PX + 10, height=MAP_PX + 10)
@@ -116,6 +120,7 @@ class FlyView(pn.viewable.Viewer):
         self.play.param.watch(lambda e: setattr(s, "playing", e.new), "value")
         self.speed.param.watch(lambda e: setattr(s, "speed", e.new), "value")
         self.seed.param.watch(lambda e: setattr(s, "seed", e.new), "value")
+        self.pack.param.watch(lambda e: setattr(s, "pack", e.new), "value")
         self.sigma.param.watch(lambda e: setattr(s, "forecast_sigma_kt", e.new), "value")
         self.noise.param.watch(lambda e: setattr(s, "sensor_noise_mv", e.new), "value")
         self.reserve.param.watch(lambda e: setattr(s, "reserve_kt", e.new), "value")
@@ -130,7 +135,8 @@ class FlyView(pn.viewable.Viewer):
         self._layout = pn.Row(
             pn.Column(self.fly_button, self.play, self.speed, self.clock, pn.Spacer(height=10),
                       self.inject_kts, self.inject_button, self.clear_button, pn.Spacer(height=10),
-                      self.seed, self.sigma, self.noise, self.reserve, pn.Spacer(height=10), self.download, width=230),
+                      self.pack, self.seed, self.sigma, self.noise, self.reserve, pn.Spacer(height=10), self.download,
+                      width=230),
             pn.Column(self.error, pn.Row(self.progress, self.status, sizing_mode="stretch_width"),
                       pn.Row(self.map_pane, self.volt_pane, sizing_mode="stretch_width"),
                       window_height(self.log, LOG_HEIGHT_CSS),

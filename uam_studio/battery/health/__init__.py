@@ -14,11 +14,11 @@
   aged by the aging law, then this flight's readings), and :class:`BelievedHealth`, what it holds.
 """
 
-from uam_studio.battery.health.belief import BelievedHealth, HealthBelief
+from uam_studio.battery.health.belief import SOURCE_LOGBOOK, SOURCE_TAKEOFF, BelievedHealth, HealthBelief
 from uam_studio.battery.health.estimate import HealthEstimate
 from uam_studio.battery.health.fit import fit_health, fit_health_batch
 from uam_studio.battery.health.intervals import eod_interval_s, eod_intervals, voltage_band
 from uam_studio.battery.health.logbook import Logbook, LogbookError
 
-__all__ = ["BelievedHealth", "HealthBelief", "HealthEstimate", "Logbook", "LogbookError", "eod_interval_s",
-           "eod_intervals", "fit_health", "fit_health_batch", "voltage_band"]
+__all__ = ["SOURCE_LOGBOOK", "SOURCE_TAKEOFF", "BelievedHealth", "HealthBelief", "HealthEstimate", "Logbook",
+           "LogbookError", "eod_interval_s", "eod_intervals", "fit_health", "fit_health_batch", "voltage_band"]

@@ -92,9 +92,10 @@ def fit_flight(current_a: np.ndarray, voltage_v: np.ndarray, dt_s: float = 1.0, 
 
 @dataclass(frozen=True, eq=False)
 class LoggedFlight:
-    """One finished flight of the pack, as measured: ``current_a`` (A) and ``voltage_v`` (V) at step ``dt_s`` (s)
-    from a full charge, ``rest_s`` (s) since the previous flight ended (NaN: unknown), ``ambient_c`` (C; NaN:
-    unknown) and its stored :class:`FlightFit` (None: too short to fit)."""
+    """One finished flight of the pack, as measured: ``current_a`` (A) and ``voltage_v`` (V; both kept in single
+    precision, far finer than the sensors) at step ``dt_s`` (s) from a full charge, ``rest_s`` (s) since the
+    previous flight ended (NaN: unknown), ``ambient_c`` (C; NaN: unknown) and its stored :class:`FlightFit` (None:
+    too short to fit)."""
 
     current_a: np.ndarray
     voltage_v: np.ndarray
@@ -106,7 +107,7 @@ class LoggedFlight:
     @property
     def charge_c(self) -> float:
         """The charge it delivered (C): its measured current integrated over the record."""
-        return float(np.sum(np.clip(self.current_a, 0.0, None)) * self.dt_s)
+        return float(np.sum(np.clip(self.current_a, 0.0, None), dtype=float) * self.dt_s)
 
     @property
     def duration_s(self) -> float:
@@ -151,7 +152,8 @@ class Logbook:
             raise InputError("flight", f"current ({cur.size}) and voltage ({volt.size}) readings: allowed the same "
                                        "number, at least one")
         fit = fit_flight(cur, volt, dt_s, self.noise_v, self.eod_v)
-        flight = LoggedFlight(cur, volt, float(dt_s), float(rest_s), float(ambient_c), fit)
+        flight = LoggedFlight(cur.astype(np.float32), volt.astype(np.float32), float(dt_s), float(rest_s),
+                              float(ambient_c), fit)
         return replace(self, flights=self.flights + (flight,))
 
     def extended(self, records: Sequence[tuple[np.ndarray, np.ndarray]], dt_s: float = 1.0,
@@ -252,7 +254,7 @@ def _flight(where: str | os.PathLike[str], k: int, f: Any) -> LoggedFlight:
         arr = np.asarray(raw, dtype=float)
         if not np.all(np.isfinite(arr)) or arr.min() < lo or arr.max() > hi:
             raise LogbookError(where, f"flights[{k}].{name}: values outside [{lo:g}, {hi:g}]")
-        arrays.append(arr)
+        arrays.append(arr.astype(np.float32))
     if arrays[0].size != arrays[1].size:
         raise LogbookError(where, f"flights[{k}]: {arrays[0].size} currents against {arrays[1].size} voltages")
     fit = f.get("fit")

@@ -24,8 +24,8 @@ take-off check and at every arrival) it
    (:meth:`Operator._safe_moves`). The search asks every later move of the plan to pass the same
    check at its own take-off, on the expected cell, with each leg's wind at its share of the joint
    bound for two like legs (``wind_z`` / sqrt 2 std) plus the reserve: a plan that the next take-offs
-   would cut short is not chosen. The take-off's own plan is searched without it: its cell is still
-   the fleet prior (20 s of readings say little of q_max), not the cell the later checks will fly;
+   would cut short is not chosen. A new pack's take-off plan is searched without it (its cell is still the
+   fleet prior: 20 s of readings say little of q_max); a pack with a logbook is checked from the take-off on;
 4. flies that first leg only, and re-plans on arrival.
 
 The margins come from its own uncertainty and from the declared weather reserve.
@@ -41,7 +41,7 @@ from typing import Any, cast
 import numpy as np
 
 from uam_studio.battery import BatteryState, full_charge, simulate
-from uam_studio.battery.health import BelievedHealth, HealthBelief, Logbook
+from uam_studio.battery.health import SOURCE_LOGBOOK, BelievedHealth, HealthBelief, Logbook
 from uam_studio.battery.simulate import simulate_cell
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight import leg_profile
@@ -251,9 +251,9 @@ class Operator:
     def _later_check(self, health: BelievedHealth) -> Episode | None:
         """The mission under the check every later take-off of a plan must pass (the plan search's ``checked``):
         each leg at its predicted wind + its share of the joint bound for two like legs (``wind_z`` / sqrt 2
-        std) + the reserve, on the expected cell. None at take-off unless ``check_at_takeoff``: the cell is
-        then the fleet prior (20 s of readings say little of q_max), not the cell the later checks fly."""
-        if not (self.decisions or self.check_at_takeoff):
+        std) + the reserve, on the expected cell. None at take-off for a new pack (unless ``check_at_takeoff``): its
+        cell is the fleet prior then, not the cell the later checks fly; a pack with a logbook is checked at once."""
+        if not (self.decisions or self.check_at_takeoff or self.health_belief.source == SOURCE_LOGBOOK):
             return None
         return self._episode(self._belief(health, 0.0, self.wind_z / math.sqrt(2.0), self.reserve_kt)[0])
 
