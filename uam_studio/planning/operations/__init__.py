@@ -16,6 +16,7 @@ from uam_studio.planning.operations.fly import (
     record_csv,
 )
 from uam_studio.planning.operations.operator import WEATHER_RESERVE_KT, Operator
+from uam_studio.planning.operations.pack_history import simulate_logbook
 from uam_studio.planning.operations.world import (
     DEFAULT_FORECAST_SIGMA_KT,
     DEFAULT_SENSOR_NOISE_MA,
@@ -29,5 +30,5 @@ from uam_studio.planning.operations.world import (
 __all__ = [
     "DEFAULT_FORECAST_SIGMA_KT", "DEFAULT_SENSOR_NOISE_MA", "DEFAULT_SENSOR_NOISE_MV", "Decision",
     "FlightRecord", "Operator", "Readings", "ReferenceFlight", "WEATHER_RESERVE_KT", "WindEvent", "World",
-    "fly_mission", "parse_event", "breach_cause", "position_at", "record_csv",
+    "fly_mission", "parse_event", "breach_cause", "position_at", "record_csv", "simulate_logbook",
 ]
