@@ -34,6 +34,9 @@ def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
                    help="nasa: seconds of each discharge's voltage read before predicting (10-3600, default 300)")
     p.add_argument("--cutoff-v", type=float, default=None,
                    help="nasa: the cut-off whose time is predicted (2.5-3.6 V, default 3.0)")
+    p.add_argument("--method", choices=["history", "belief"], default=None,
+                   help="nasa: history (default: the history predictor, nasa_predict) or belief (the one health "
+                        "belief over the cell's logbook of earlier discharges, on the identified NASA cell; slower)")
     p.add_argument("--max-nfev", type=int, default=None,
                    help="lives: evaluations of each parameter set's identification (1-10000, default 100)")
     p.add_argument("--quick", action="store_true",
@@ -59,7 +62,8 @@ def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
 
 # Each option but --json, and the models that read it: any other model refuses it in one line.
 OPTION_MODELS = {"data": ("real", "lives", "nasa"), "quick": ("real",), "refit": ("real",), "cell": ("lives", "nasa"),
-                 "every": ("lives", "nasa"), "context_s": ("nasa",), "cutoff_v": ("nasa",), "max_nfev": ("lives",),
+                 "every": ("lives", "nasa"), "context_s": ("nasa",), "cutoff_v": ("nasa",), "method": ("nasa",),
+                 "max_nfev": ("lives",),
                  "weights": ("dynaformer",), "table": ("dynaformer",),
                  "n": ("dynaformer",), "compare": ("dynaformer",), "seed": ("dynaformer", "lives")}
 
@@ -131,11 +135,16 @@ def _run_nasa(args: argparse.Namespace) -> int:
     every = int(check_range("--every", 1 if args.every is None else args.every, 1, 1000))
     folder = nasa_folder(args.data)
     cells = load_nasa_folder(folder, args.cell, cutoff_v)
-    model = bundled_model(context_s, cutoff_v)
-    training = None
-    if any(c.name in model.trained_on for c in cells):
-        training = [c for c in load_nasa_folder(folder, None, cutoff_v) if c.name in model.trained_on]
-    rows = evaluate_nasa(cells, model, training, every=every)
+    if args.method == "belief":
+        from ..battery.real.nasa_belief import evaluate_belief
+
+        rows = evaluate_belief(cells, cutoff_v, context_s, every=every)
+    else:
+        model = bundled_model(context_s, cutoff_v)
+        training = None
+        if any(c.name in model.trained_on for c in cells):
+            training = [c for c in load_nasa_folder(folder, None, cutoff_v) if c.name in model.trained_on]
+        rows = evaluate_nasa(cells, model, training, every=every)
     if args.json:
         print(json.dumps({"context_s": context_s, "cutoff_v": cutoff_v, "discharges": [r.as_dict() for r in rows]},
                          indent=1, allow_nan=False))

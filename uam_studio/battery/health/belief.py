@@ -36,6 +36,7 @@ from uam_studio.battery.health.intervals import EodInterval, eod_interval_s
 from uam_studio.battery.health.logbook import Logbook
 from uam_studio.battery.health.prior import Q_REF_C, HealthPrior, combine, fleet_prior, hold_to_fleet
 from uam_studio.battery.health.quality import FLAG_MISFIT, FLAG_OUTSIDE_FLEET, FLEET_Z, fit_flags
+from uam_studio.battery.parameters import DEFAULT_CELL, CellParameters
 from uam_studio.errors import InputError
 
 __all__ = ["AGING_PROCESS_SD", "MIN_FIT_SAMPLES", "SOURCE_LOGBOOK", "SOURCE_TAKEOFF", "BelievedHealth",
@@ -149,13 +150,16 @@ class HealthBelief:
     :param logbook: the pack's logbook (None or empty: a new pack, the belief starts from ``prior``).
     :param aging: the aging law between the logbook's flights.
     :param dt_s: the readings' step (s).
+    :param cell: the parameter set this flight's readings are fitted, and its intervals simulated, on.
     """
 
     def __init__(self, noise_v: float | None, eod_v: float, prior: HealthPrior | None = None,
-                 logbook: Logbook | None = None, aging: AgingLaw = NASA_AGING_LAW, dt_s: float = 1.0) -> None:
+                 logbook: Logbook | None = None, aging: AgingLaw = NASA_AGING_LAW, dt_s: float = 1.0,
+                 cell: CellParameters = DEFAULT_CELL) -> None:
         self.noise_v = noise_v
         self.eod_v = eod_v
         self.dt_s = float(dt_s)
+        self.cell = cell
         self.prior = prior if prior is not None else fleet_prior()
         self.logbook = logbook if logbook is not None else Logbook()
         self.start = (HealthPrior(*logbook_belief(self.logbook, self.prior, aging)) if len(self.logbook)
@@ -195,7 +199,7 @@ class HealthBelief:
         cur, volt = self.segment.arrays()
         if cur.size * self.dt_s < MIN_FIT_SAMPLES:
             return None
-        return fit_health(cur, volt, self.dt_s, noise_v=self.noise_v, eod_v=self.eod_v, prior=False)
+        return fit_health(cur, volt, self.dt_s, noise_v=self.noise_v, eod_v=self.eod_v, cell=self.cell, prior=False)
 
     def health(self) -> BelievedHealth:
         """The belief from the logbook, all readings so far and the prior. Readings that put the cell beyond its
@@ -238,4 +242,4 @@ class HealthBelief:
         """The ``level`` interval (s) of the end of discharge of a planned load ``current_a`` (A at the belief's step,
         from a full charge) on the believed cell (the physics model at the belief's sigma points)."""
         h = self.health() if (self.segment.current or self.past) else self.prior_health()
-        return eod_interval_s(h.as_estimate(), current_a, self.dt_s, level, self.eod_v)
+        return eod_interval_s(h.as_estimate(), current_a, self.dt_s, level, self.eod_v, cell=self.cell)

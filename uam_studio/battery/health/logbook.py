@@ -30,7 +30,7 @@ import numpy as np
 from uam_studio.atomic_io import atomic_write_text
 from uam_studio.battery.health.estimate import MIN_CONTEXT_S
 from uam_studio.battery.health.fit import fit_health
-from uam_studio.battery.parameters import DEFAULT_Q_MAX
+from uam_studio.battery.parameters import DEFAULT_CELL, DEFAULT_Q_MAX, CellParameters
 from uam_studio.battery.simulate import CURRENT_LIMIT_A, DEFAULT_EOD_V
 from uam_studio.errors import InputError
 
@@ -74,15 +74,15 @@ class FlightFit:
 
 
 def fit_flight(current_a: np.ndarray, voltage_v: np.ndarray, dt_s: float = 1.0, noise_v: float | None = None,
-               eod_v: float = DEFAULT_EOD_V) -> FlightFit | None:
+               eod_v: float = DEFAULT_EOD_V, cell: CellParameters = DEFAULT_CELL) -> FlightFit | None:
     """The whole-record fit of one flight from a full charge (current A, voltage V, step s; ``noise_v``: the
-    voltage sensor's stated noise std, V, or None to estimate it); None for a record shorter than the fit's
-    shortest context or one the fit refuses."""
+    voltage sensor's stated noise std, V, or None to estimate it) on the parameter set ``cell``; None for a record
+    shorter than the fit's shortest context or one the fit refuses."""
     cur, volt = np.asarray(current_a, dtype=float), np.asarray(voltage_v, dtype=float)
     if cur.size * dt_s < MIN_CONTEXT_S:
         return None
     try:
-        est = fit_health(cur, volt, dt_s, noise_v=noise_v, eod_v=eod_v, prior=False)
+        est = fit_health(cur, volt, dt_s, noise_v=noise_v, eod_v=eod_v, cell=cell, prior=False)
     except InputError:
         return None
     c = est.cov_w
@@ -145,13 +145,14 @@ class Logbook:
         return self.delivered_before_c + sum(f.charge_c for f in self.flights[:k])
 
     def appended(self, current_a: np.ndarray, voltage_v: np.ndarray, dt_s: float = 1.0, rest_s: float = math.nan,
-                 ambient_c: float = math.nan) -> Logbook:
-        """This logbook with one more flight (its readings from a full charge), fitted now and kept with its fit."""
+                 ambient_c: float = math.nan, cell: CellParameters = DEFAULT_CELL) -> Logbook:
+        """This logbook with one more flight (its readings from a full charge), fitted now on the parameter set
+        ``cell`` and kept with its fit."""
         cur, volt = _series("current_a", current_a), _series("voltage_v", voltage_v)
         if cur.size != volt.size or cur.size == 0:
             raise InputError("flight", f"current ({cur.size}) and voltage ({volt.size}) readings: allowed the same "
                                        "number, at least one")
-        fit = fit_flight(cur, volt, dt_s, self.noise_v, self.eod_v)
+        fit = fit_flight(cur, volt, dt_s, self.noise_v, self.eod_v, cell)
         flight = LoggedFlight(cur.astype(np.float32), volt.astype(np.float32), float(dt_s), float(rest_s),
                               float(ambient_c), fit)
         return replace(self, flights=self.flights + (flight,))

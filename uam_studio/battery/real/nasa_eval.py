@@ -39,8 +39,9 @@ from uam_studio.battery.real.nasa_predict import (
 )
 from uam_studio.battery.simulate import simulate
 
-__all__ = ["BUNDLED_SETTINGS", "ScoredDischarge", "condition_of", "evaluate_nasa", "fit_bundled", "fit_nasa_model",
-           "format_table", "models_literal", "progpy_default_curve", "progpy_default_s", "score_cell", "summarise"]
+__all__ = ["BUNDLED_SETTINGS", "ScoredDischarge", "condition_of", "conservative_quantile", "evaluate_nasa",
+           "fit_bundled", "fit_nasa_model", "format_table", "models_literal", "progpy_default_curve",
+           "progpy_default_s", "score_cell", "summarise"]
 
 YOUNG = 5  # a cell's first this many discharges at a condition give its "young" charge
 MIN_BAND = 100  # an ambient band with fewer training errors takes the pooled quantiles
@@ -146,7 +147,7 @@ def _pairs(cells: list[NasaCell], context_s: float, cutoff_v: float) -> tuple[np
     return np.array(y), np.array(dv), band
 
 
-def _conservative(x: np.ndarray, risk: float) -> float:
+def conservative_quantile(x: np.ndarray, risk: float) -> float:
     """The ``risk`` quantile of ``x``, taken one order statistic further out (split-conformal style)."""
     x = np.sort(x)
     n = x.size
@@ -185,9 +186,10 @@ def fit_nasa_model(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: fl
                     studentized.setdefault("early", []).append(e)
             else:
                 logs.append(math.log(t / pred.median_s))
-    z = {band: tuple(_conservative(np.array(e), r) for r in Z_LEVELS) for band, e in studentized.items()
+    z = {band: tuple(conservative_quantile(np.array(e), r) for r in Z_LEVELS) for band, e in studentized.items()
          if band == "all" or len(e) >= MIN_BAND}
-    prior_log = tuple(_conservative(np.array(logs), r) for r in RISKS) if len(logs) >= 5 else (-1.0, -0.5, 0.0, 0.5)
+    prior_log = (tuple(conservative_quantile(np.array(logs), r) for r in RISKS) if len(logs) >= 5
+                 else (-1.0, -0.5, 0.0, 0.5))
     return NasaEodModel(context_s, cutoff_v, float(a), float(b), scale, z, draft.charge, prior_log,
                         tuple(c.name for c in cells))
 

@@ -48,7 +48,7 @@ from uam_studio.battery.real.nasa_predict import OWN_ERROR_WINDOW, KnownDischarg
 from uam_studio.battery.simulate import simulate
 
 __all__ = ["BIAS_WINDOW", "IDENTIFY_CELL", "IDENTIFY_DISCHARGES", "LifePrediction", "discharge_health",
-           "fit_segment", "identify_nasa", "nasa_cell_literal", "predict_life", "time_to_cutoff_s"]
+           "fit_segment", "grid_current", "identify_nasa", "nasa_cell_literal", "predict_life", "time_to_cutoff_s"]
 
 IDENTIFY_CELL = "B0005"
 IDENTIFY_DISCHARGES = (0, 1, 2)
@@ -60,7 +60,7 @@ Q_BOUNDS = (2000.0, 20000.0)  # C: the health fit's box
 R0_BOUNDS = (1e-3, 1.0)  # ohm
 
 
-def _grid_current(time_s: np.ndarray, current_a: np.ndarray, start: int, extend: bool) -> np.ndarray:
+def grid_current(time_s: np.ndarray, current_a: np.ndarray, start: int, extend: bool) -> np.ndarray:
     """The current (A) on a :data:`DT_S` grid from sample ``start``. ``extend``: the last loaded current
     carries on past the profile's end for twice its loaded length (a plan does not know when it ends)."""
     t = time_s[start:] - time_s[start]
@@ -79,7 +79,7 @@ def fit_segment(d: NasaDischarge, name: str | None = None) -> FitSegment:
     """``d`` from its first loaded sample as a :class:`FitSegment` (1 s grid, the cell's surface
     temperature at the load as its start and its measured temperatures fitted beside the voltage)."""
     t = d.time_s[d.load_start:] - d.load_time_s
-    cur = _grid_current(d.time_s, d.current_a, d.load_start, extend=False)
+    cur = grid_current(d.time_s, d.current_a, d.load_start, extend=False)
     obs = np.round(t / DT_S).astype(int) - 1
     keep = (obs >= 0) & (obs < cur.size)
     k = np.arange(d.load_start, d.time_s.size)[keep]
@@ -146,7 +146,7 @@ def discharge_health(d: NasaDischarge, params: CellParameters, start: tuple[floa
     true = d.time_to_cutoff_s(cutoff_v)
     if true is None:
         return q, r0
-    ext = _grid_current(d.time_s, d.current_a, d.load_start, extend=True)
+    ext = grid_current(d.time_s, d.current_a, d.load_start, extend=True)
 
     def gap(qq: float) -> float:
         return time_to_cutoff_s(ext, qq, r0, params, t0, cutoff_v) - true
@@ -172,7 +172,7 @@ class LifePrediction:
 
 def _predict(known: KnownDischarge, health: tuple[float, float], params: CellParameters, t0_k: float,
              cutoff_v: float) -> float:
-    cur = _grid_current(known.time_s, known.current_a, known.load_start, extend=True)
+    cur = grid_current(known.time_s, known.current_a, known.load_start, extend=True)
     return time_to_cutoff_s(cur, health[0], health[1], params, t0_k, cutoff_v)
 
 

@@ -1,0 +1,136 @@
+"""The one health belief on real NASA lives: ``uam-studio evaluate nasa --method belief``.
+
+A cell's logbook is its earlier discharges (:class:`~uam_studio.battery.health.logbook.Logbook`): each finished
+discharge on a 1 s grid from its first loaded sample (the current held between samples, the voltage interpolated
+between them, down to :data:`FIT_ABOVE_V`), its ambient, and its whole-record fit on the identified NASA cell
+(``NASA_IDENTIFIED``, fitted on B0005's first three discharges only) at that ambient. Discharge k is predicted from
+the :class:`~uam_studio.battery.health.belief.HealthBelief` over that logbook (the NASA cell's fleet prior, each
+discharge's fit, aged between discharges by the NASA aging law), sharpened by discharge k's own first ``context_s``
+of readings; the operator's planned current is the physics method's (the load as recorded, its last level carried
+on). The median is the physics model's time to the cut-off at the belief's mean, divided by the physics method's
+own-error factor (:func:`~uam_studio.battery.real.nasa_predict.own_error_factor`: the cell's own latest errors at
+the same load and ambient; the discharges are finished). Its interval and bounds are the median times the
+quantiles of ``true / median`` over the training cells (every cell given but the scored one: leave one cell out),
+a cell's first :data:`~uam_studio.battery.real.nasa_predict.EARLY_ERRORS` predictions taking those of the training
+cells' first predictions. The rows are :class:`~uam_studio.battery.real.nasa_eval.ScoredDischarge` s, as the
+history method's.
+
+Public API: :func:`belief_life` (one cell's raw predictions), :func:`evaluate_belief` (rows for a folder of cells).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from uam_studio.battery.aging import NASA_AGING_LAW
+from uam_studio.battery.health.belief import HealthBelief
+from uam_studio.battery.health.logbook import Logbook, LoggedFlight, fit_flight
+from uam_studio.battery.health.prior import fleet_prior
+from uam_studio.battery.parameters import NASA_IDENTIFIED, ZERO_C, Cell
+from uam_studio.battery.real.nasa_data import NasaCell, NasaDischarge, persistence_s
+from uam_studio.battery.real.nasa_eval import ScoredDischarge, condition_of, conservative_quantile, progpy_default_s
+from uam_studio.battery.real.nasa_physics import BIAS_WINDOW, fit_segment, grid_current, time_to_cutoff_s
+from uam_studio.battery.real.nasa_predict import EARLY_ERRORS, RISKS, known_before, own_error_factor
+
+__all__ = ["FIT_ABOVE_V", "BeliefPrediction", "belief_life", "evaluate_belief"]
+
+FIT_ABOVE_V = 2.8  # V: a discharge's record is fitted down to here (the model is not run far below its cut-off)
+METHOD = "belief"
+
+
+@dataclass(frozen=True)
+class BeliefPrediction:
+    """One discharge predicted by :func:`belief_life`: times (s from the first loaded sample) to the cut-off,
+    the median (``median_s``, bias-corrected) and the truth (``true_s``, None if never reached); the believed
+    health (q_max C, R0 ohm, and the q_max std C) and whether it is among the cell's first predictions."""
+
+    discharge: NasaDischarge
+    median_s: float
+    true_s: float | None
+    q_max: float
+    q_max_sd: float
+    r0: float
+    early: bool
+
+
+def _on_grid(d: NasaDischarge, end_s: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+    """``d`` on a 1 s grid from its first loaded sample: (current A, voltage V, the cell's temperature at the load
+    K), down to :data:`FIT_ABOVE_V` (and up to ``end_s`` s where given)."""
+    seg = fit_segment(d)
+    n = seg.current_a.size
+    v = np.interp(np.arange(n), seg.observed, seg.voltage_v)
+    below = np.flatnonzero(v < FIT_ABOVE_V)
+    n = int(below[0]) if below.size else n
+    if end_s is not None:  # up to the last sample read by then: nothing interpolated from a later one
+        seen = seg.observed[seg.observed <= end_s - 1.0]
+        n = min(n, int(seen.max()) + 1 if seen.size else 0)
+    return seg.current_a[:n], v[:n], seg.t_ambient_k
+
+
+def belief_life(cell: NasaCell, cell_type: Cell = NASA_IDENTIFIED, cutoff_v: float = 3.0,
+                context_s: float = 300.0) -> list[BeliefPrediction]:
+    """Every discharge of ``cell`` predicted online from the belief over its logbook (module docstring); each reads
+    the earlier discharges and a :func:`~uam_studio.battery.real.nasa_predict.known_before` view of its own."""
+    prior = fleet_prior(cell_type.params)
+    book = Logbook(q_nominal_c=cell_type.q_max, eod_v=cutoff_v)
+    past: list[tuple[NasaDischarge, float | None]] = []
+    out = []
+    for d in cell.discharges:
+        known = known_before(d, context_s)
+        params = replace(cell_type.params, t_ambient_k=ZERO_C + float(d.ambient_c))
+        belief = HealthBelief(None, cutoff_v, prior, book, NASA_AGING_LAW, cell=params)
+        cur, volt, t0_k = _on_grid(d, context_s)
+        belief.observe(cur, volt)
+        h = belief.health()
+        planned = grid_current(known.time_s, known.current_a, known.load_start, extend=True)
+        raw = time_to_cutoff_s(planned, h.q_max_c, h.r0_ohm, params, t0_k, cutoff_v)
+        median = raw / own_error_factor(past, known, BIAS_WINDOW)
+        true = d.time_to_cutoff_s(cutoff_v)  # the discharge has finished: from here on it is history
+        out.append(BeliefPrediction(d, median, true, h.q_max_c, h.q_max_sd_c, h.r0_ohm,
+                                    sum(e is not None for _, e in past) < EARLY_ERRORS))
+        past.append((d, raw / true - 1.0 if true else None))
+        whole_cur, whole_v, _ = _on_grid(d)
+        fit = fit_flight(whole_cur, whole_v, 1.0, None, cutoff_v, params)
+        book = replace(book, flights=book.flights + (LoggedFlight(whole_cur.astype(np.float32),
+                                                                    whole_v.astype(np.float32), 1.0,
+                                                                    ambient_c=float(d.ambient_c), fit=fit),))
+    return out
+
+
+def _quantiles(errors: list[float]) -> tuple[float, ...]:
+    """log(true / median) at each of :data:`~uam_studio.battery.real.nasa_predict.RISKS`, one order statistic
+    further out (split-conformal style)."""
+    x = np.array(errors)
+    return tuple(conservative_quantile(x, r) for r in RISKS)
+
+
+def evaluate_belief(cells: list[NasaCell], cutoff_v: float = 3.0, context_s: float = 300.0, progpy: bool = True,
+                    every: int = 1) -> list[ScoredDischarge]:
+    """Rows for every cell (each ``every``-th discharge that ends after the context), each cell's interval from the
+    other cells' errors (leave one cell out: ``fit`` 'loco'; with one cell, its own: 'in-sample')."""
+    lives = {c.name: belief_life(c, cutoff_v=cutoff_v, context_s=context_s) for c in cells}
+    errors: dict[str, dict[bool, list[float]]] = {}
+    for name, preds in lives.items():
+        errs = errors.setdefault(name, {True: [], False: []})
+        for p in preds:
+            if p.true_s is not None and p.true_s > context_s:
+                errs[p.early].append(math.log(p.true_s / p.median_s))
+    rows = []
+    for c in cells:
+        others = [n for n in lives if n != c.name] or [c.name]
+        fit = "loco" if others != [c.name] else "in-sample"
+        q = {early: _quantiles([e for n in others for e in errors[n][early]] or
+                               [e for n in others for e in errors[n][not early]]) for early in (True, False)}
+        for k, p in enumerate(lives[c.name]):
+            if k % every or p.true_s is None or p.true_s <= context_s:
+                continue
+            b99, b95, _, hi = (p.median_s * math.exp(x) for x in q[p.early])
+            d = p.discharge
+            rows.append(ScoredDischarge(
+                c.name, d.index, d.ambient_c, condition_of(d), context_s, p.true_s, p.median_s, min(b95, p.median_s),
+                max(hi, p.median_s), min(b95, p.median_s), min(b99, p.median_s), persistence_s(c, k, cutoff_v),
+                progpy_default_s(d, cutoff_v) if progpy else None, METHOD, None, fit))
+    return rows
