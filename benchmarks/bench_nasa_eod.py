@@ -104,12 +104,14 @@ def main() -> None:
         if g in ROOM_GROUPS and pm is not None:
             verdicts.append(f"{g}: no worse than persistence (median {st['median_pct']:.2f} vs {pm:.2f}, p95 "
                             f"{st['p95_pct']:.2f} vs {pp:.2f}) {_ok(st['median_pct'] <= pm and st['p95_pct'] <= pp)}")
-    first = _stats([r for r in rows if r.method == "prior"])
-    print(f"{'no history at the condition (prior)':36s} {first['n']:5d} {first['median_pct']:6.2f} "
-          f"{first['p95_pct']:7.2f} {first['bias_pct']:+6.2f} {first['coverage90']:6.3f} {first['miss95']:7.3f} "
-          f"{first['miss99']:7.3f} {first['width_pct']:7.2f}")
-    verdicts.append(f"prior predictions (first discharges, new conditions): coverage {first['coverage90']:.3f} "
-                    f"{_ok(0.85 <= first['coverage90'] <= 0.95)}")
+    prior_rows = [r for r in rows if r.method == "prior"]  # the history method's; the belief method has none
+    if prior_rows:
+        first = _stats(prior_rows)
+        print(f"{'no history at the condition (prior)':36s} {first['n']:5d} {first['median_pct']:6.2f} "
+              f"{first['p95_pct']:7.2f} {first['bias_pct']:+6.2f} {first['coverage90']:6.3f} {first['miss95']:7.3f} "
+              f"{first['miss99']:7.3f} {first['width_pct']:7.2f}")
+        verdicts.append(f"prior predictions (first discharges, new conditions): coverage {first['coverage90']:.3f} "
+                        f"{_ok(0.85 <= first['coverage90'] <= 0.95)}")
     firsts = _stats([r for r in rows if r.discharge == 0])
     verdicts.append(f"first discharges of a cell: n {firsts['n']}, coverage {firsts['coverage90']:.3f} "
                     f"{_ok(0.85 <= firsts['coverage90'] <= 0.95)}, median width {firsts['width_pct']:.0f}%")

@@ -2,18 +2,22 @@
 
 A cell's logbook is its earlier discharges (:class:`~uam_studio.battery.health.logbook.Logbook`): each finished
 discharge on a 1 s grid from its first loaded sample (the current held between samples, the voltage interpolated
-between them, down to :data:`FIT_ABOVE_V`), its ambient, and its whole-record fit on the identified NASA cell
-(``NASA_IDENTIFIED``, fitted on B0005's first three discharges only) at that ambient. Discharge k is predicted from
+between them, down to :data:`FIT_ABOVE_V`), its ambient, and its whole-record likelihood fit on the identified NASA cell
+(``NASA_IDENTIFIED``, fitted on B0005's first three discharges only) at that ambient. (The physics method's health,
+its end matched to the cut-off, with this fit's covariance, was tried: no better on B0007, B0018, B0029 and B0033,
+at twice the time; RESULTS.) Discharge k is predicted from
 the :class:`~uam_studio.battery.health.belief.HealthBelief` over that logbook (the NASA cell's fleet prior, each
-discharge's fit, aged between discharges by the NASA aging law), sharpened by discharge k's own first ``context_s``
-of readings; the operator's planned current is the physics method's (the load as recorded, its last level carried
-on). The median is the physics model's time to the cut-off at the belief's mean, divided by the physics method's
-own-error factor (:func:`~uam_studio.battery.real.nasa_predict.own_error_factor`: the cell's own latest errors at
-the same load and ambient; the discharges are finished). Its interval and bounds are the median times the
-quantiles of ``true / median`` over the training cells (every cell given but the scored one: leave one cell out),
-a cell's first :data:`~uam_studio.battery.real.nasa_predict.EARLY_ERRORS` predictions taking those of the training
-cells' first predictions. The rows are :class:`~uam_studio.battery.real.nasa_eval.ScoredDischarge` s, as the
-history method's.
+discharge's fit, aged between discharges by the NASA aging law; where the cell has run at the discharge's load and
+ambient before, only those discharges' fits are read, as the physics method reads its last one), sharpened by
+discharge k's own first ``context_s`` of readings; the operator's planned current is the physics method's (the load
+as recorded, its last level carried on). The median is the physics model's time to the cut-off at the belief's mean,
+divided by the physics method's own-error factor (:func:`~uam_studio.battery.real.nasa_predict.own_error_factor`:
+the cell's own latest errors at the same load and ambient; the discharges are finished). Its interval and bounds
+are the median times the quantiles of ``true / median`` over the training cells (every cell given but the scored
+one: leave one cell out) in the prediction's group: a cell's first
+:data:`~uam_studio.battery.real.nasa_predict.EARLY_ERRORS` predictions take those of the training cells' first
+predictions, the others those of their ambient band (cold, room, hot). The rows are
+:class:`~uam_studio.battery.real.nasa_eval.ScoredDischarge` s, as the history method's.
 
 Public API: :func:`belief_life` (one cell's raw predictions), :func:`evaluate_belief` (rows for a folder of cells).
 """
@@ -30,15 +34,16 @@ from uam_studio.battery.health.belief import HealthBelief
 from uam_studio.battery.health.logbook import Logbook, LoggedFlight, fit_flight
 from uam_studio.battery.health.prior import fleet_prior
 from uam_studio.battery.parameters import NASA_IDENTIFIED, ZERO_C, Cell
-from uam_studio.battery.real.nasa_data import NasaCell, NasaDischarge, persistence_s
+from uam_studio.battery.real.nasa_data import NasaCell, NasaDischarge, persistence_s, same_conditions
 from uam_studio.battery.real.nasa_eval import ScoredDischarge, condition_of, conservative_quantile, progpy_default_s
 from uam_studio.battery.real.nasa_physics import BIAS_WINDOW, fit_segment, grid_current, time_to_cutoff_s
-from uam_studio.battery.real.nasa_predict import EARLY_ERRORS, RISKS, known_before, own_error_factor
+from uam_studio.battery.real.nasa_predict import EARLY_ERRORS, RISKS, ambient_band, known_before, own_error_factor
 
 __all__ = ["FIT_ABOVE_V", "BeliefPrediction", "belief_life", "evaluate_belief"]
 
 FIT_ABOVE_V = 2.8  # V: a discharge's record is fitted down to here (the model is not run far below its cut-off)
 METHOD = "belief"
+MIN_BAND = 100  # a group with fewer training errors takes the pooled quantiles
 
 
 @dataclass(frozen=True)
@@ -81,7 +86,8 @@ def belief_life(cell: NasaCell, cell_type: Cell = NASA_IDENTIFIED, cutoff_v: flo
     for d in cell.discharges:
         known = known_before(d, context_s)
         params = replace(cell_type.params, t_ambient_k=ZERO_C + float(d.ambient_c))
-        belief = HealthBelief(None, cutoff_v, prior, book, NASA_AGING_LAW, cell=params)
+        belief = HealthBelief(None, cutoff_v, prior, _read_at(book, [p for p, _ in past], known), NASA_AGING_LAW,
+                              cell=params)
         cur, volt, t0_k = _on_grid(d, context_s)
         belief.observe(cur, volt)
         h = belief.health()
@@ -100,6 +106,23 @@ def belief_life(cell: NasaCell, cell_type: Cell = NASA_IDENTIFIED, cutoff_v: flo
     return out
 
 
+def _band(p: BeliefPrediction) -> str:
+    """The group whose errors set a prediction's interval: a cell's first predictions ('early'), else its ambient
+    band (cold, room, hot)."""
+    return "early" if p.early else ambient_band(p.discharge.ambient_c)
+
+
+def _read_at(book: Logbook, logged: list[NasaDischarge], known) -> Logbook:
+    """The logbook as read for a discharge at ``known``'s load and ambient: where the cell has run at them before,
+    only those discharges' fits are read (the model's error depends on the load and the temperature, as the physics
+    method's choice of the last discharge at the same conditions), every discharge still aging the belief by its
+    charge; else every fit."""
+    same = [same_conditions(d, known) for d in logged]
+    if not any(same):
+        return book
+    return replace(book, flights=tuple(f if keep else replace(f, fit=None) for f, keep in zip(book.flights, same)))
+
+
 def _quantiles(errors: list[float]) -> tuple[float, ...]:
     """log(true / median) at each of :data:`~uam_studio.battery.real.nasa_predict.RISKS`, one order statistic
     further out (split-conformal style)."""
@@ -112,22 +135,22 @@ def evaluate_belief(cells: list[NasaCell], cutoff_v: float = 3.0, context_s: flo
     """Rows for every cell (each ``every``-th discharge that ends after the context), each cell's interval from the
     other cells' errors (leave one cell out: ``fit`` 'loco'; with one cell, its own: 'in-sample')."""
     lives = {c.name: belief_life(c, cutoff_v=cutoff_v, context_s=context_s) for c in cells}
-    errors: dict[str, dict[bool, list[float]]] = {}
+    errors: dict[str, dict[str, list[float]]] = {}
     for name, preds in lives.items():
-        errs = errors.setdefault(name, {True: [], False: []})
+        errs = errors.setdefault(name, {})
         for p in preds:
             if p.true_s is not None and p.true_s > context_s:
-                errs[p.early].append(math.log(p.true_s / p.median_s))
+                errs.setdefault(_band(p), []).append(math.log(p.true_s / p.median_s))
     rows = []
     for c in cells:
         others = [n for n in lives if n != c.name] or [c.name]
         fit = "loco" if others != [c.name] else "in-sample"
-        q = {early: _quantiles([e for n in others for e in errors[n][early]] or
-                               [e for n in others for e in errors[n][not early]]) for early in (True, False)}
+        pooled = [e for n in others for errs in errors[n].values() for e in errs]
         for k, p in enumerate(lives[c.name]):
             if k % every or p.true_s is None or p.true_s <= context_s:
                 continue
-            b99, b95, _, hi = (p.median_s * math.exp(x) for x in q[p.early])
+            band = [e for n in others for e in errors[n].get(_band(p), [])]
+            b99, b95, _, hi = (p.median_s * math.exp(x) for x in _quantiles(band if len(band) >= MIN_BAND else pooled))
             d = p.discharge
             rows.append(ScoredDischarge(
                 c.name, d.index, d.ambient_c, condition_of(d), context_s, p.true_s, p.median_s, min(b95, p.median_s),
