@@ -36,6 +36,7 @@ def main() -> None:
     args = ap.parse_args()
     for name, (far, spread, chargers) in REGIMES.items():
         stars = {d: 0 for d in DISPATCHERS}
+        breaches = {d: 0 for d in DISPATCHERS}
         bound, bound_s, above = 0, 0.0, 0
         for k in range(args.days):
             seed = args.seed + k
@@ -45,13 +46,16 @@ def main() -> None:
             bound_s += time.perf_counter() - t0
             bound += b
             for d in DISPATCHERS:
-                p = simulate_day(copy.deepcopy(fleet), demand, d, seed, chargers).priority
+                day = simulate_day(copy.deepcopy(fleet), demand, d, seed, chargers)
+                p = day.priority
                 stars[d] += p
+                breaches[d] += day.breaches
                 above += p > b
         n = args.days
         shares = ", ".join(f"{d} {stars[d] / n:.1f} ({stars[d] / bound:.1%})" for d in DISPATCHERS)
         print(f"{name}: {n} days from seed {args.seed}: stars/day {shares}; bound {bound / n:.1f}; "
-              f"days above the bound {above}; bound {bound_s / n:.2f} s/day")
+              f"days above the bound {above}; bound {bound_s / n:.2f} s/day; breaches "
+              + ", ".join(f"{d} {breaches[d]}" for d in DISPATCHERS))
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ the cell's own latest errors at the same load and ambient; the discharges are fi
 are the median times the quantiles of ``true / median`` over the training cells (every cell given but the scored
 one: leave one cell out) in the prediction's group: a cell's first
 :data:`~uam_studio.battery.real.nasa_predict.EARLY_ERRORS` predictions take those of the training cells' first
-predictions, the others those of their ambient band (cold, room, hot). The rows are
+predictions, the others those of all their later ones. The rows are
 :class:`~uam_studio.battery.real.nasa_eval.ScoredDischarge` s, as the history method's.
 
 Public API: :func:`belief_life` (one cell's raw predictions), :func:`evaluate_belief` (rows for a folder of cells).
@@ -37,7 +37,7 @@ from uam_studio.battery.parameters import NASA_IDENTIFIED, ZERO_C, Cell
 from uam_studio.battery.real.nasa_data import NasaCell, NasaDischarge, persistence_s, same_conditions
 from uam_studio.battery.real.nasa_eval import ScoredDischarge, condition_of, conservative_quantile, progpy_default_s
 from uam_studio.battery.real.nasa_physics import BIAS_WINDOW, fit_segment, grid_current, time_to_cutoff_s
-from uam_studio.battery.real.nasa_predict import EARLY_ERRORS, RISKS, ambient_band, known_before, own_error_factor
+from uam_studio.battery.real.nasa_predict import EARLY_ERRORS, RISKS, known_before, own_error_factor
 
 __all__ = ["FIT_ABOVE_V", "BeliefPrediction", "belief_life", "evaluate_belief"]
 
@@ -107,9 +107,10 @@ def belief_life(cell: NasaCell, cell_type: Cell = NASA_IDENTIFIED, cutoff_v: flo
 
 
 def _band(p: BeliefPrediction) -> str:
-    """The group whose errors set a prediction's interval: a cell's first predictions ('early'), else its ambient
-    band (cold, room, hot)."""
-    return "early" if p.early else ambient_band(p.discharge.ambient_c)
+    """The group whose errors set a prediction's interval: a cell's first predictions ('early'), else the rest
+    ('later'). (Per ambient band was tried: the room band's quantiles are too narrow for its heavy-tailed cells;
+    RESULTS.)"""
+    return "early" if p.early else "later"
 
 
 def _read_at(book: Logbook, logged: list[NasaDischarge], known) -> Logbook:
