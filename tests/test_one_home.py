@@ -96,3 +96,23 @@ def test_one_health_belief_and_its_views():
     view = classes["PackBelief"][1]
     assert "aged_belief(" in view and "combine(" in view
     assert "1.0 /" not in view and "** 2 +" not in view  # no weighting by precision of its own
+
+
+def test_a_planners_take_off_is_simulated_in_one_place():
+    """One cell's take-off is run on the physics model by planning.legs.fly_takeoff only: no other module hands the
+    take-off's current (takeoff_current() or its first 20 s) straight to a simulator, and the exact search's check,
+    the safety verdict and the environment's health observation all call fly_takeoff."""
+    sims = {"simulate", "simulate_cell", "fly_leg"}
+    offenders = []
+    for path in sorted(ROOT.rglob("*.py")):
+        rel = str(path.relative_to(ROOT))
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call) and getattr(node.func, "id", getattr(node.func, "attr", None)) in sims:
+                first = node.args[0] if node.args else None
+                takeoff = isinstance(first, ast.Call) and getattr(first.func, "id", None) in (
+                    "takeoff_current", "takeoff_context_current")
+                if takeoff and rel != "planning/legs.py":
+                    offenders.append(f"{rel}:{node.lineno}")
+    assert offenders == [], offenders
+    for rel in ("planning/solvers/setup.py", "planning/safety.py", "planning/env/backends.py"):
+        assert "fly_takeoff(" in (ROOT / rel).read_text(), rel

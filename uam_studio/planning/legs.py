@@ -18,6 +18,9 @@ import math
 
 import numpy as np
 
+from uam_studio.battery import SimulationResult
+from uam_studio.battery.parameters import Cell
+from uam_studio.battery.simulate import simulate_cell
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_charges_c, leg_profile, min_leg_distance_km
 from uam_studio.flight.profile import MAX_DISTANCE_KM
@@ -62,6 +65,14 @@ def takeoff_current() -> np.ndarray:
     cur = np.array(p.current_a[: math.ceil(end / DT_S)])
     cur.setflags(write=False)
     return cur
+
+
+def fly_takeoff(cell: Cell) -> SimulationResult:
+    """A fresh ``cell`` (its parameter set, q_max C, R0 ohm and cut-off V) on the take-off and climb to 500 m
+    (:func:`takeoff_current`, the least demanding start of any leg): the physics model's run. The one place a
+    planner's take-off is simulated (the exact search's take-off check, the safety verdict's failed take-off, the
+    environment's 20 s health observation)."""
+    return simulate_cell(takeoff_current(), cell, DT_S)
 
 
 class LegTable:

@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from uam_studio.planning.legs import fly_takeoff
 from uam_studio.planning.missions.mission import Mission
-from uam_studio.planning.solvers.setup import fly_takeoff
 
 __all__ = ["safety_verdict", "takeoff_attempt"]
 

@@ -22,7 +22,7 @@ from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE, Cell
 from uam_studio.battery.solver import integrate_current
 from uam_studio.errors import InputError
 from uam_studio.flight import TAKEOFF_CONTEXT_S
-from uam_studio.planning.legs import DT_S, takeoff_current
+from uam_studio.planning.legs import DT_S, fly_takeoff, takeoff_current
 from uam_studio.planning.voltage_predictor import VoltagePredictor
 
 CONTEXT_S = TAKEOFF_CONTEXT_S  # s of take-off observed to infer the health (uam_studio.flight.context)
@@ -58,15 +58,9 @@ def takeoff_health(predictor: Any, q_max: float, r0: float) -> tuple[float, floa
 
 @functools.lru_cache(maxsize=4096)
 def _takeoff_voltage(q_max: float, r0: float) -> np.ndarray:
-    # The environment's own leg solver (no per-call input checks): the same numbers as simulate(),
-    # which it falls back to for a cell that ends below the lowest cut-off within the window.
-    battery = PhysicsBattery()
-    battery.reset(Cell("take-off check", DEFAULT_CELL, q_max, r0, EOD_RANGE[0]))
-    out = battery.fly_leg(takeoff_context_current())
-    if out.eod:
-        v = np.array(simulate(takeoff_context_current(), DT_S, q_max, r0, eod_v=EOD_RANGE[0]).voltage_v)
-    else:
-        v = np.array(out.voltage_v)
+    # the planners' one take-off run (legs.fly_takeoff), down to the lowest cut-off, its first 20 s
+    res = fly_takeoff(Cell("take-off check", DEFAULT_CELL, q_max, r0, EOD_RANGE[0]))
+    v = np.array(res.voltage_v[:CONTEXT_S])
     v.setflags(write=False)
     return v
 

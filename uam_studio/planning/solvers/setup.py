@@ -14,12 +14,10 @@ from typing import Any
 
 import numpy as np
 
-from uam_studio.battery import SimulationResult
 from uam_studio.battery.parameters import Cell
-from uam_studio.battery.simulate import simulate_cell
 from uam_studio.errors import InputError
 from uam_studio.planning.episode import Episode
-from uam_studio.planning.legs import ALTITUDES_M, DT_S, MIN_LEG_KM, N_MAX, LegTable, takeoff_current
+from uam_studio.planning.legs import ALTITUDES_M, MIN_LEG_KM, N_MAX, LegTable, fly_takeoff
 from uam_studio.planning.missions.check import Plan, make_plan
 from uam_studio.planning.missions.mission import MAX_DESTINATIONS, Mission, as_mission
 from uam_studio.planning.missions.scenario import check_scenario
@@ -33,12 +31,6 @@ def _as_mission(mission: Any) -> tuple[Mission | None, list[str]]:
         return as_mission(mission), []
     except InputError as err:
         return None, [f"invalid mission: {err}"]
-
-
-def fly_takeoff(cell: Cell) -> SimulationResult:
-    """A fresh ``cell`` (its parameter set, q_max C, R0 ohm and cut-off V) on the take-off and climb
-    to 500 m (the least demanding start of any leg): the physics model's run."""
-    return simulate_cell(takeoff_current(), cell, DT_S)
 
 
 def takeoff_failure(cell: Cell) -> str | None:
