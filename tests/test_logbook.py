@@ -216,3 +216,13 @@ def test_cli_new_fly_and_save(tmp_path, capsys):
     rec = json.loads(out)
     assert rec["takeoff_belief"]["source"] == "logbook" and rec["takeoff_belief"]["flights"] == 2
     assert len(Logbook.load(path)) > 2
+
+
+def test_a_real_cells_scatter_and_walk_widen_the_logbooks_belief(book):
+    """A simulated pack's logbook (scatter and walk 0) against a real cell's: the flight-to-flight scatter and the
+    random walk per flight only widen the belief, each in both components."""
+    mean0, cov0 = logbook_belief(book)
+    mean1, cov1 = logbook_belief(book, scatter=0.015)
+    mean2, cov2 = logbook_belief(book, scatter=0.015, walk=0.0045)
+    assert np.all(np.diag(cov1) > np.diag(cov0)) and np.all(np.diag(cov2) > np.diag(cov1))
+    assert np.allclose(mean0, mean1, rtol=0.05) and np.all(np.isfinite(mean2))

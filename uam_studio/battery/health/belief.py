@@ -123,18 +123,26 @@ def aged_belief(mean: np.ndarray, cov: np.ndarray, delivered_c: float, charge_c:
 
 
 def logbook_belief(logbook: Logbook, prior: HealthPrior | None = None, aging: AgingLaw = NASA_AGING_LAW,
-                   process_sd: float = AGING_PROCESS_SD) -> tuple[np.ndarray, np.ndarray]:
+                   process_sd: float = AGING_PROCESS_SD, scatter: float = 0.0,
+                   walk: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """The belief ``(mean [2], cov [2, 2])`` in (w, R0) at the next take-off of the pack whose logbook is
     ``logbook``: ``prior`` (default: the default cell's fleet) times each flight's stored fit, aged by ``aging`` over
-    each flight's charge (at its ambient temperature where known). Reads the stored fits only: no refit."""
+    each flight's charge (at its ambient temperature where known). Reads the stored fits only: no refit.
+
+    A real cell's health also moves from one discharge to the next by more than its fit's std (a rest gives some
+    capacity back, a cold or hot run takes some): ``scatter`` (a share of the mean) is added to each fit's std in
+    both components, and ``walk`` (a share of the mean) is a random walk per flight. Both are 0 for a simulated
+    pack, which ages exactly by its law."""
     start = prior if prior is not None else fleet_prior()
     mean, cov = np.array(start.mean, dtype=float), np.array(start.cov, dtype=float)
     delivered = logbook.delivered_before_c
     for flight in logbook.flights:
         if flight.fit is not None:
-            mean, cov = combine([(mean, cov), (flight.fit.mean, flight.fit.cov)])
+            fit_cov = flight.fit.cov + np.diag((scatter * np.abs(flight.fit.mean)) ** 2)
+            mean, cov = combine([(mean, cov), (flight.fit.mean, fit_cov)])
         temp = flight.ambient_c if math.isfinite(flight.ambient_c) else T_REF_C
         mean, cov = aged_belief(mean, cov, delivered, flight.charge_c, logbook.q_nominal_c, aging, temp, process_sd)
+        cov = cov + np.diag((walk * np.abs(mean)) ** 2)
         delivered += flight.charge_c
     return mean, 0.5 * (cov + cov.T)
 
@@ -151,19 +159,21 @@ class HealthBelief:
     :param aging: the aging law between the logbook's flights.
     :param dt_s: the readings' step (s).
     :param cell: the parameter set this flight's readings are fitted, and its intervals simulated, on.
+    :param scatter: :func:`logbook_belief`'s flight-to-flight scatter (a share of the mean; 0: a simulated pack).
+    :param walk: :func:`logbook_belief`'s random walk per flight (a share of the mean).
     """
 
     def __init__(self, noise_v: float | None, eod_v: float, prior: HealthPrior | None = None,
                  logbook: Logbook | None = None, aging: AgingLaw = NASA_AGING_LAW, dt_s: float = 1.0,
-                 cell: CellParameters = DEFAULT_CELL) -> None:
+                 cell: CellParameters = DEFAULT_CELL, scatter: float = 0.0, walk: float = 0.0) -> None:
         self.noise_v = noise_v
         self.eod_v = eod_v
         self.dt_s = float(dt_s)
         self.cell = cell
         self.prior = prior if prior is not None else fleet_prior()
         self.logbook = logbook if logbook is not None else Logbook()
-        self.start = (HealthPrior(*logbook_belief(self.logbook, self.prior, aging)) if len(self.logbook)
-                      else self.prior)
+        self.start = (HealthPrior(*logbook_belief(self.logbook, self.prior, aging, scatter=scatter, walk=walk))
+                      if len(self.logbook) else self.prior)
         self.segment = ChargeReadings()
         self.charges: list[ChargeReadings] = []  # this flight's earlier charges, as read
         self.past: list[HealthEstimate] = []  # the fits of this flight's earlier charges

@@ -44,6 +44,11 @@ __all__ = ["FIT_ABOVE_V", "BeliefPrediction", "belief_life", "evaluate_belief"]
 FIT_ABOVE_V = 2.8  # V: a discharge's record is fitted down to here (the model is not run far below its cut-off)
 METHOD = "belief"
 MIN_BAND = 100  # a group with fewer training errors takes the pooled quantiles
+# A real cell's capacity scatters from one discharge to the next about its fade by about 0.027-0.030 Ah of its ~2 Ah
+# (the capacity belief's noise, fleet.nasa_aging._noise, fitted on the NASA lives: RESULTS 2026-11-29), and drifts by
+# 0.3 of that a discharge (its DRIFT): the same shares of q_max and R0 here
+SCATTER = 0.015
+WALK = 0.3 * SCATTER
 
 
 @dataclass(frozen=True)
@@ -87,7 +92,7 @@ def belief_life(cell: NasaCell, cell_type: Cell = NASA_IDENTIFIED, cutoff_v: flo
         known = known_before(d, context_s)
         params = replace(cell_type.params, t_ambient_k=ZERO_C + float(d.ambient_c))
         belief = HealthBelief(None, cutoff_v, prior, _read_at(book, [p for p, _ in past], known), NASA_AGING_LAW,
-                              cell=params)
+                              cell=params, scatter=SCATTER, walk=WALK)
         cur, volt, t0_k = _on_grid(d, context_s)
         belief.observe(cur, volt)
         h = belief.health()
