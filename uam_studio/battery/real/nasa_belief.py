@@ -16,7 +16,9 @@ the cell's own latest errors at the same load and ambient; the discharges are fi
 are the median times the quantiles of ``true / median`` over the training cells (every cell given but the scored
 one: leave one cell out) in the prediction's group: a cell's first
 :data:`~uam_studio.battery.real.nasa_predict.EARLY_ERRORS` predictions take those of the training cells' first
-predictions, the others those of all their later ones. The rows are
+predictions, the others those of all their later ones; once the cell has
+:data:`~uam_studio.battery.real.nasa_predict.SCALE_WINDOW` errors of its own (finished discharges), its interval and
+bounds are widened to its own latest errors' quantiles where those run wider. The rows are
 :class:`~uam_studio.battery.real.nasa_eval.ScoredDischarge` s, as the history method's.
 
 Public API: :func:`belief_life` (one cell's raw predictions), :func:`evaluate_belief` (rows for a folder of cells).
@@ -37,7 +39,13 @@ from uam_studio.battery.parameters import NASA_IDENTIFIED, ZERO_C, Cell
 from uam_studio.battery.real.nasa_data import NasaCell, NasaDischarge, persistence_s, same_conditions
 from uam_studio.battery.real.nasa_eval import ScoredDischarge, condition_of, conservative_quantile, progpy_default_s
 from uam_studio.battery.real.nasa_physics import BIAS_WINDOW, fit_segment, grid_current, time_to_cutoff_s
-from uam_studio.battery.real.nasa_predict import EARLY_ERRORS, RISKS, known_before, own_error_factor
+from uam_studio.battery.real.nasa_predict import (
+    EARLY_ERRORS,
+    RISKS,
+    SCALE_WINDOW,
+    known_before,
+    own_error_factor,
+)
 
 __all__ = ["FIT_ABOVE_V", "BeliefPrediction", "belief_life", "evaluate_belief"]
 
@@ -152,11 +160,19 @@ def evaluate_belief(cells: list[NasaCell], cutoff_v: float = 3.0, context_s: flo
         others = [n for n in lives if n != c.name] or [c.name]
         fit = "loco" if others != [c.name] else "in-sample"
         pooled = [e for n in others for errs in errors[n].values() for e in errs]
+        own: list[float] = []  # the cell's own errors on its finished discharges, in order
         for k, p in enumerate(lives[c.name]):
-            if k % every or p.true_s is None or p.true_s <= context_s:
+            if p.true_s is None or p.true_s <= context_s:
                 continue
             band = [e for n in others for e in errors[n].get(_band(p), [])]
-            b99, b95, _, hi = (p.median_s * math.exp(x) for x in _quantiles(band if len(band) >= MIN_BAND else pooled))
+            q = _quantiles(band if len(band) >= MIN_BAND else pooled)
+            if len(own) >= SCALE_WINDOW:  # a cell whose own errors run wider than the training cells' widens
+                mine = _quantiles(own[-SCALE_WINDOW:])
+                q = (min(q[0], mine[0]), min(q[1], mine[1]), q[2], max(q[3], mine[3]))
+            own.append(math.log(p.true_s / p.median_s))
+            if k % every:
+                continue
+            b99, b95, _, hi = (p.median_s * math.exp(x) for x in q)
             d = p.discharge
             rows.append(ScoredDischarge(
                 c.name, d.index, d.ambient_c, condition_of(d), context_s, p.true_s, p.median_s, min(b95, p.median_s),
