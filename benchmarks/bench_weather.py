@@ -85,32 +85,24 @@ class InformedOperator(Operator):
         return BelievedHealth(inverse_capacity=Q_REF_C / q_max, inverse_capacity_sd=0.0, r0_ohm=r0, r0_sd_ohm=0.0)
 
 
-def _fly_informed(job: tuple) -> tuple:
-    """``_fly``'s row of one flight by ``who`` (``"operator"``, ``"told the cell"``, ``"told the cell, checked
-    at take-off"``), the label ``who: weather``."""
-    who, label, mission, seed, event = job
-    operator: type[Operator] | functools.partial = Operator
-    if who != "operator":
-        operator = functools.partial(InformedOperator, q_max=mission.battery.q_max, r0=mission.battery.r0,
-                                     check_at_takeoff=who.endswith("take-off"))
-    rec = fly_mission(mission, seed=seed, events=[parse_event(event)] if event else [], operator=operator)
-    return f"{who}: {label}", WEATHER_RESERVE_KT, rec.reached_priority, rec.hindsight.priority, rec.breached, \
-        rec.breach_cause
+def _operator(who: str, mission) -> type[Operator] | functools.partial:
+    """The operator of ``who``: ``"told the cell"`` (:class:`InformedOperator`, its take-off plan searched as a new
+    pack's), ``"told the cell, checked at take-off"`` (the same, checked from the take-off on, as a pack with a
+    logbook is), else :class:`Operator` (``"new pack"``, ``"operator"``, ``"logbook"``)."""
+    if not who.startswith("told the cell"):
+        return Operator
+    return functools.partial(InformedOperator, q_max=mission.battery.q_max, r0=mission.battery.r0,
+                             check_at_takeoff=who.endswith("take-off"))
 
 
 def _fly(job: tuple) -> tuple | None:
     """(label, reserve, priority, hindsight priority, breached, breach cause, take-off belief, true q_max) of one
-    flight, or None when the change came after the flight ended. ``who``: ``"new pack"`` (the default operator,
-    no logbook), ``"logbook"`` (the operator with the pack's logbook ``book``) or ``"told the cell"``
-    (:class:`InformedOperator`)."""
+    flight, or None when the change came after the flight ended. ``who``: the operator (:func:`_operator`); with
+    ``"logbook"`` it flies the pack's logbook ``book``."""
     label, mission, seed, event, reserve, who, book = job
-    operator: type[Operator] | functools.partial = Operator
-    if who == "told the cell":  # it knows its cell at take-off, as a pack with a logbook does: checked from there
-        operator = functools.partial(InformedOperator, q_max=mission.battery.q_max, r0=mission.battery.r0,
-                                     check_at_takeoff=True)
     try:
         rec = fly_mission(mission, seed=seed, events=[parse_event(event)] if event else [], reserve_kt=reserve,
-                          operator=operator, logbook=book if who == "logbook" else None)
+                          operator=_operator(who, mission), logbook=book if who == "logbook" else None)
     except InputError as err:
         if err.field != "event":
             raise
@@ -196,7 +188,7 @@ def _event(label: str, t_s: float) -> str:
 def fresh(n: int, workers: int, logbook_flights: int = 3, without_reserve: bool = False) -> None:
     missions = study_missions(n, 56000, "single_charge")
     t0 = time.perf_counter()
-    who = ("new pack", "logbook", "told the cell")
+    who = ("new pack", "logbook", "told the cell, checked at take-off")
     with ProcessPoolExecutor(workers) as pool:
         times = _change_times(missions, pool)
         books = list(pool.map(_logbook, [(m, logbook_flights, 56300 + k) for k, m in enumerate(missions)]))
@@ -219,7 +211,7 @@ def fresh(n: int, workers: int, logbook_flights: int = 3, without_reserve: bool 
     _table(rows, labels, skipped, goals)
     for label in WEATHERS:
         ours = [r for r in rows if r[0] == f"logbook: {label}"]
-        told = [r for r in rows if r[0] == f"told the cell: {label}"]
+        told = [r for r in rows if r[0] == f"{who[2]}: {label}"]
         if ours and told:
             a = sum(r[2] for r in ours) / max(sum(r[3] for r in ours), 1)
             b = sum(r[2] for r in told) / max(sum(r[3] for r in told), 1)
@@ -237,9 +229,9 @@ def informed(n: int, workers: int) -> None:
     t0 = time.perf_counter()
     with ProcessPoolExecutor(workers) as pool:
         times = _change_times(missions, pool)
-        jobs = [(w, label, m, 56100 + k, _event(label, times[k])) for w in who for label in weathers
-                for k, m in enumerate(missions)]
-        rows = list(pool.map(_fly_informed, jobs))
+        jobs = [(f"{w}: {label}", m, 56100 + k, _event(label, times[k]), WEATHER_RESERVE_KT, w, None)
+                for w in who for label in weathers for k, m in enumerate(missions)]
+        rows = [r for r in pool.map(_fly, jobs) if r is not None]
     _table(rows, [f"{w}: {label}" for w in who for label in weathers], {},
            {f"{w}: {label}": goal for w in who for label, goal in zip(weathers, (0.85, 0.80, 0.80))})
     print(f"({time.perf_counter() - t0:.0f} s, {workers} processes)")

@@ -35,6 +35,7 @@ from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.legs import DT_S, N_MAX, takeoff_current
 from uam_studio.planning.missions.mission import VERTIPORT, Battery, Destination, Mission, check_destination_count
 from uam_studio.planning.operations.decision import Decision
+from uam_studio.planning.operations.defaults import fit_noise_v
 from uam_studio.planning.operations.operator import (
     HEALTH_Z,
     IN_FLIGHT_PLANNERS,
@@ -278,8 +279,7 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
 
     world = new_world()
     known = dataclasses.replace(mission, battery=Battery(DEFAULT_Q_MAX, DEFAULT_R0))  # the operator's view
-    book = logbook if logbook is not None else Logbook(noise_v=max(world.sensor_noise_mv, 0.5) * 1e-3,
-                                                       eod_v=mission.eod_v)
+    book = logbook if logbook is not None else Logbook(noise_v=fit_noise_v(world.sensor_noise_mv), eod_v=mission.eod_v)
     op = operator(known, scenario, world.forecast_sigma_kt, world.sensor_noise_mv, health_z, wind_z, plan_wind_z,
                   policy, reserve_kt, logbook=book)
     rec = FlightRecord(mission.name, scenario, int(seed), world.forecast_sigma_kt, world.sensor_noise_mv,

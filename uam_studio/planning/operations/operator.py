@@ -51,7 +51,7 @@ from uam_studio.planning.legs import ALTITUDES_M, DT_S, N_MAX, N_TARGETS, VERTIP
 from uam_studio.planning.missions.mission import VERTIPORT, Battery, Destination, Mission, check_destination_count
 from uam_studio.planning.missions.scenario import check_scenario
 from uam_studio.planning.operations.decision import Decision, LegObservation
-from uam_studio.planning.operations.defaults import DEFAULT_FORECAST_SIGMA_KT, WEATHER_RESERVE_KT
+from uam_studio.planning.operations.defaults import DEFAULT_FORECAST_SIGMA_KT, WEATHER_RESERVE_KT, fit_noise_v
 from uam_studio.planning.operations.wind_belief import WindBelief, wind_from_duration
 from uam_studio.planning.planners import IN_FLIGHT_PLANNERS, PLANNERS
 from uam_studio.planning.solvers.oracle import (
@@ -108,7 +108,7 @@ class Operator:
         self.wind_z = check_range("wind_z", wind_z, 0.0, 5.0)
         self.plan_wind_z = check_range("plan_wind_z", plan_wind_z, 0.0, 5.0)
         self.reserve_kt = check_range("reserve_kt", reserve_kt, *RESERVE_RANGE_KT)
-        self.noise_v = None if sensor_noise_mv is None else max(float(sensor_noise_mv), 0.5) * 1e-3
+        self.noise_v = None if sensor_noise_mv is None else fit_noise_v(sensor_noise_mv)
         self.health_belief = HealthBelief(self.noise_v, self.eod_v, logbook=logbook, dt_s=DT_S)  # the paper's box
         self.winds = WindBelief({n: mission.node(n).wind_kts for n in mission.node_names}, forecast_sigma_kt)
         self.names = tuple(d.name for d in mission.destinations)

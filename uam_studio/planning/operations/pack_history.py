@@ -23,6 +23,7 @@ from uam_studio.planning.operations.defaults import (
     DEFAULT_FORECAST_SIGMA_KT,
     DEFAULT_SENSOR_NOISE_MA,
     DEFAULT_SENSOR_NOISE_MV,
+    fit_noise_v,
 )
 from uam_studio.planning.operations.fly import fly_mission
 
@@ -56,7 +57,7 @@ def simulate_logbook(mission: Mission, flights: int, seed: int = 0, age_efc: flo
     """
     n = int(check_range("flights", flights, 0, MAX_LOGGED_FLIGHTS))
     seed = check_seed("seed", seed)
-    book = Logbook(noise_v=max(float(sensor_noise_mv), 0.5) * 1e-3, eod_v=mission.eod_v)
+    book = Logbook(noise_v=fit_noise_v(sensor_noise_mv), eod_v=mission.eod_v)
     if n == 0:
         return book
 
