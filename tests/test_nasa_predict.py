@@ -10,12 +10,23 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from nasa_synthetic import synthetic_cell, synthetic_rows, write_cell
 
 from uam_studio.battery.real.nasa_data import NasaCell
 from uam_studio.battery.real.nasa_eval import evaluate_nasa, fit_nasa_model, score_cell, summarise
 from uam_studio.battery.real.nasa_model import BUNDLED, bundled_model
-from uam_studio.battery.real.nasa_predict import EARLY_ERRORS, CellBelief, known_before
+from uam_studio.battery.real.nasa_predict import (
+    EARLY_ERRORS,
+    HORIZON_S,
+    CellBelief,
+    _interval,
+    high_cap_s,
+    known_before,
+    min_width_s,
+    seen_s,
+)
 from uam_studio.cli import main
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "nasa_pcoe"
@@ -28,32 +39,53 @@ def lives(tmp_path_factory) -> list[NasaCell]:
 
 
 
-def test_known_before_cuts_the_voltage_at_the_context(lives):
+def test_known_before_cuts_the_record_at_the_context(lives):
     d = lives[0].discharges[3]
     known = known_before(d, 300.0)
-    assert known.voltage_v.size < d.voltage_v.size
-    assert known.time_s[known.voltage_v.size - 1] <= d.load_time_s + 300.0 < known.time_s[known.voltage_v.size]
-    assert np.array_equal(known.current_a, d.current_a)
+    n = known.voltage_v.size
+    assert n < d.voltage_v.size and known.time_s.size == known.current_a.size == n
+    assert known.time_s[-1] <= d.load_time_s + 300.0 < d.time_s[n]
+    assert np.array_equal(known.current_a, d.current_a[:n])
 
 
-def test_a_prediction_never_reads_the_voltage_after_the_context(lives):
-    """Poison discharge k's voltage after its context: its own prediction must not change (the next ones
-    may: once finished, the discharge is read whole)."""
+def _after_context(d, how: str, rng: np.random.Generator):
+    """``d`` with its record after the context changed: cut just after it, extended by 2000 s more of load,
+    or its voltage and current there replaced by noise."""
+    end = known_before(d, 300.0).voltage_v.size
+    if how == "cut":
+        keep = slice(0, end + 1)
+        return replace(d, time_s=d.time_s[keep], voltage_v=d.voltage_v[keep], current_a=d.current_a[keep],
+                       temperature_c=d.temperature_c[keep])
+    if how == "extend":
+        extra = d.time_s[-1] + 10.0 * np.arange(1, 201)
+        return replace(d, time_s=np.r_[d.time_s, extra], voltage_v=np.r_[d.voltage_v, np.full(200, 2.5)],
+                       current_a=np.r_[d.current_a, np.full(200, 3.0)],
+                       temperature_c=np.r_[d.temperature_c, np.full(200, d.temperature_c[-1])])
+    n = d.time_s.size - end
+    return replace(d, voltage_v=np.r_[d.voltage_v[:end], rng.uniform(0.0, 4.2, n)],
+                   current_a=np.r_[d.current_a[:end], rng.uniform(0.0, 5.0, n)])
+
+
+@pytest.mark.parametrize("how", ["cut", "extend", "noise"])
+def test_a_prediction_never_reads_the_record_after_the_context(lives, how):
+    """Cut, extend or replace discharge k's record (voltage and current) after its context: its own
+    prediction must not change in any field (the next ones may: once finished, the discharge is read
+    whole). The record's end, which on these lives is where the rig stopped the load, is not known when
+    the prediction is made."""
     model = fit_nasa_model(lives[1:], 300.0, 3.0)
     cell = lives[0]
-    before = score_cell(cell, model, progpy=False)
-    for k in (0, 5, 20):
-        d = cell.discharges[k]
-        end = known_before(d, 300.0).voltage_v.size
-        poisoned = d.voltage_v.copy()
-        poisoned[end:] = np.linspace(4.2, 0.0, poisoned.size - end)  # a cheat would read a different end
-        cheat = replace(cell, discharges=cell.discharges[:k] + (replace(d, voltage_v=poisoned),)
-                        + cell.discharges[k + 1:])
-        after = score_cell(cheat, model, progpy=False)
-        row_before = next(r for r in before if r.discharge == k)
-        row_after = next(r for r in after if r.discharge == k)
-        assert (row_after.median_s, row_after.low_s, row_after.bound99_s) == \
-            (row_before.median_s, row_before.low_s, row_before.bound99_s)
+    before = {r.discharge: r for r in score_cell(cell, model, progpy=False)}
+    rng = np.random.default_rng(3)
+    for k in (0, 1, 5, 20):
+        changed = replace(cell, discharges=cell.discharges[:k] + (_after_context(cell.discharges[k], how, rng),)
+                          + cell.discharges[k + 1:])
+        belief = CellBelief(model)
+        for _ in belief.walk(changed.discharges[:k]):  # the earlier discharges, predicted and taken in
+            pass
+        pred = belief.predict(known_before(changed.discharges[k], 300.0))
+        row = before[k]
+        assert (pred.median_s, pred.low_s, pred.high_s, pred.bound95_s, pred.bound99_s, pred.method) == \
+            (row.median_s, row.low_s, row.high_s, row.bound95_s, row.bound99_s, row.method)
 
 
 def test_the_bounds_miss_at_their_risk_on_held_out_synthetic_lives(lives, tmp_path):
@@ -165,6 +197,33 @@ def test_the_cli_refuses_bad_data_in_one_line_with_exit_code_2(tmp_path, capsys,
     assert expected[case] in err, err
 
 
+def test_a_folder_with_nothing_to_score_says_why_in_one_line(tmp_path, capsys):
+    """Every run reaches the cut-off within a 3600 s context (longer than every synthetic discharge): no
+    empty table, but one line that says why, and exit 2."""
+    write_cell(tmp_path / "B0301.csv.gz", synthetic_rows(301, n=3))
+    assert main(["evaluate", "nasa", "--data", str(tmp_path), "--context-s", "3600"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "no discharge to score" in err and "3 reach the cut-off within the 3600 s" in err, err
+
+
+def test_the_rest_before_each_run_is_read_from_the_folders_start_times(tmp_path):
+    """discharges.csv beside the cell gives each run's start (MATLAB date vector): the rest is the time from
+    the previous run's last sample to this start; without the table it is unknown (NaN)."""
+    from uam_studio.battery.real.nasa_data import load_nasa_cell
+
+    path = write_cell(tmp_path / "B0302.csv.gz", synthetic_rows(302, n=3))
+    assert all(np.isnan(d.rest_s) for d in load_nasa_cell(path).discharges)
+    starts = ["[2008. 4. 2. 15. 25. 41.5]", "[2008. 4. 2. 19. 43. 48.4]", "[2008. 4. 5. 1. 0. 0.]"]
+    (tmp_path / "discharges.csv").write_text("battery_id,discharge,uid,start_time\n" + "".join(
+        f"B0302,{k},{k},{t}\n" for k, t in enumerate(starts)))
+    cell = load_nasa_cell(path)
+    d0, d1, d2 = cell.discharges
+    assert np.isnan(d0.rest_s)
+    assert d1.rest_s == pytest.approx((4 * 3600 + 18 * 60 + 6.9) - d0.time_s[-1], abs=1e-6)
+    assert d2.rest_s == pytest.approx((2 * 86400 + 5 * 3600 + 16 * 60 + 11.6) - d1.time_s[-1], abs=1e-6)
+    assert known_before(d2, 300.0).rest_s == d2.rest_s
+
+
 @pytest.mark.skipif(not DATA.is_dir(), reason="the NASA PCoE lives are not beside the checkout")
 def test_on_real_2a_lives_left_out_it_beats_persistence_and_its_bounds_hold():
     from uam_studio.battery.real.nasa_data import load_nasa_folder
@@ -175,6 +234,7 @@ def test_on_real_2a_lives_left_out_it_beats_persistence_and_its_bounds_hold():
     assert st["median_pct"] <= 1.0 and st["p95_pct"] <= 3.0, st
     assert st["median_pct"] < st["persistence_median_pct"], st
     assert st["miss95"] <= 0.08 and 0.82 <= st["coverage90"] <= 0.98, st
+    assert all(np.isfinite(r.high_s) and r.low_s < r.high_s <= 3 * r.median_s for r in rows)
 
 
 @pytest.mark.skipif(not DATA.is_dir(), reason="the NASA PCoE lives are not beside the checkout")
@@ -184,3 +244,22 @@ def test_the_bundled_default_model_is_what_identify_nasa_prints():
 
     refit = fit_nasa_model(load_nasa_folder(DATA), 300.0, 3.0)
     assert models_literal([refit]) == models_literal([BUNDLED[0]])
+
+
+_ANY = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.floats(-1e40, 1e40))
+
+
+@settings(max_examples=300, deadline=None)
+@given(q=st.lists(_ANY, min_size=4, max_size=4), k=st.integers(0, 39), context=st.sampled_from([60.0, 300.0]))
+def test_every_interval_is_finite_wide_and_capped(lives, q, k, context):
+    """Whatever quantiles a method produces (NaN, infinite, negative, 1e40, all equal), the prediction is an
+    interval: finite, low < high, none before the context's end, high at most the stated cap, bounds at
+    or below the low end and the median inside."""
+    known = known_before(lives[0].discharges[k], context)
+    p = _interval(known, np.array(q), "history", None)
+    vals = (p.bound99_s, p.bound95_s, p.low_s, p.median_s, p.high_s)
+    assert all(np.isfinite(vals))
+    assert seen_s(known) <= p.bound99_s <= p.bound95_s <= p.low_s <= p.median_s <= p.high_s
+    assert p.high_s - p.low_s >= min_width_s(known) - 1e-9 > 0
+    assert p.high_s <= high_cap_s(known, p.median_s) + 1e-9
+    assert high_cap_s(known, p.median_s) <= HORIZON_S + seen_s(known) + min_width_s(known)

@@ -37,6 +37,9 @@ def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", choices=["history", "belief"], default=None,
                    help="nasa: history (default: the history predictor, nasa_predict) or belief (the one health "
                         "belief over the cell's logbook of earlier discharges, on the identified NASA cell; slower)")
+    p.add_argument("--dynaformer", action="store_true",
+                   help="nasa: add the bundled NASA Dynaformer's prediction of the same discharges to each row (its "
+                        "history method, online; about 12 min for all 26 cells on 2 cores)")
     p.add_argument("--max-nfev", type=int, default=None,
                    help="lives: evaluations of each parameter set's identification (1-10000, default 100)")
     p.add_argument("--quick", action="store_true",
@@ -63,6 +66,7 @@ def _add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
 # Each option but --json, and the models that read it: any other model refuses it in one line.
 OPTION_MODELS = {"data": ("real", "lives", "nasa"), "quick": ("real",), "refit": ("real",), "cell": ("lives", "nasa"),
                  "every": ("lives", "nasa"), "context_s": ("nasa",), "cutoff_v": ("nasa",), "method": ("nasa",),
+                 "dynaformer": ("nasa",),
                  "max_nfev": ("lives",),
                  "weights": ("dynaformer",), "table": ("dynaformer",),
                  "n": ("dynaformer",), "compare": ("dynaformer",), "seed": ("dynaformer", "lives")}
@@ -126,8 +130,8 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 
 
 def _run_nasa(args: argparse.Namespace) -> int:
-    from ..battery.real.nasa_data import load_nasa_folder, nasa_folder
-    from ..battery.real.nasa_eval import evaluate_nasa, format_table
+    from ..battery.real.nasa_data import NasaDataError, load_nasa_folder, nasa_folder
+    from ..battery.real.nasa_eval import evaluate_nasa, format_table, skipped_summary
     from ..battery.real.nasa_model import bundled_model
 
     context_s = check_range("--context-s", 300.0 if args.context_s is None else args.context_s, 10.0, 3600.0, " s")
@@ -145,6 +149,13 @@ def _run_nasa(args: argparse.Namespace) -> int:
         if any(c.name in model.trained_on for c in cells):
             training = [c for c in load_nasa_folder(folder, None, cutoff_v) if c.name in model.trained_on]
         rows = evaluate_nasa(cells, model, training, every=every)
+    if not rows:
+        raise NasaDataError(folder, "data", f"no discharge to score at {cutoff_v:g} V after {context_s:g} s: "
+                                            + skipped_summary(cells, context_s))
+    if args.dynaformer:
+        from ..dynaformer.nasa_discharges import with_dynaformer
+
+        rows = with_dynaformer(rows, cells, context_s, cutoff_v, every)
     if args.json:
         print(json.dumps({"context_s": context_s, "cutoff_v": cutoff_v, "discharges": [r.as_dict() for r in rows]},
                          indent=1, allow_nan=False))

@@ -2,9 +2,10 @@
 :mod:`uam_studio.battery.real.nasa_predict`.
 
 What it reads: only a :class:`~uam_studio.battery.real.nasa_predict.KnownDischarge` per prediction, i.e. the
-discharge's sample times (s from its start), its whole planned current (A, + = discharge) and its voltage
-(V) up to ``context_s`` s after the first loaded sample. The measured discharge (all its voltage) is read
-only by :func:`score_dynaformer`, for the true time to the cut-off.
+discharge's samples (times s from its start, current A with + = discharge, voltage V) up to ``context_s`` s
+after the first loaded sample, and the load planned after it
+(:func:`~uam_studio.battery.real.nasa_predict.planned_load`: the context's load continued). The measured
+discharge (all its voltage) is read only by :func:`score_dynaformer`, for the true time to the cut-off.
 
 How (:func:`dynaformer_eod_s`): the context and the planned current are put on the predictor's 1 s grid
 (sample k covers [k, k + 1) s from the log's start; its current is the sample held there, its voltage is
@@ -13,10 +14,9 @@ the one at k + 1 s), and :meth:`~uam_studio.dynaformer.predictor.DynaformerPredi
 square-wave cells alternate 4 A / 0 A sample to sample); the voltage is interpolated linearly between two
 samples at the same load and held where the load changes between them (it belongs to the held current).
 
-The planned current of a NASA record drops to 0 A when the cell reaches its own, lower cut-off (2.0-2.7
-V): that end tells when the cell got there. With ``extend_load`` (default), the profile after the last
-loaded sample is replaced by its last two samples repeated (a constant load goes on, a square wave keeps
-its phase) up to :data:`HORIZON_S`, so a prediction never reads when the load ended. By default the log
+The planned current is the context's load continued to :data:`HORIZON_S` (a constant load goes on, a
+square wave keeps its phase): a NASA record's load drops to 0 A when the cell reaches the rig's own, lower
+cut-off (2.0-2.7 V), and that end is never read. By default the log
 starts at the rest sample before the load (``start_at_rest``); starting at the first loaded sample instead
 (the fit then looks for a pre-roll) scored worse on these cells (median error 27% against 21%).
 
@@ -53,7 +53,14 @@ import torch
 from uam_studio.battery.health.estimate import HealthEstimate
 from uam_studio.battery.health.intervals import with_preroll
 from uam_studio.battery.real.nasa_data import LOADED_A, NasaCell, NasaDischarge, RunConditions, same_conditions
-from uam_studio.battery.real.nasa_predict import OWN_ERROR_WINDOW, KnownDischarge, known_before, own_error_factor
+from uam_studio.battery.real.nasa_predict import (
+    HORIZON_S,
+    OWN_ERROR_WINDOW,
+    KnownDischarge,
+    known_before,
+    own_error_factor,
+    planned_load,
+)
 from uam_studio.dynaformer.model import Dynaformer
 from uam_studio.dynaformer.predictor import DynaformerPredictor, load_pretrained
 from uam_studio.dynaformer.predictor_inputs import leading_rest
@@ -61,24 +68,9 @@ from uam_studio.errors import InputError
 
 __all__ = ["COVER", "HISTORY", "HORIZON_S", "MATCH_STEPS", "MATCH_TOL_S", "MIN_OWN_ERRORS", "NASA_DATA_CELL",
            "Example", "dynaformer_eod_s", "finetune_dynaformer", "finished_health", "history_examples",
-           "score_dynaformer", "summarise_dynaformer", "training_example"]
+           "score_dynaformer", "summarise_dynaformer", "training_example", "with_dynaformer"]
 
-HORIZON_S = 12000.0  # s from the log's start: the extended profile's length (NASA runs end before 7000 s)
 NASA_DATA_CELL = "nasa18650_4a"  # the bundled weights for these discharges: trained up to 4.5 A (cells.py)
-
-
-def _planned(known: KnownDischarge, start: int, extend_load: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Sample times (s from the discharge's start) and currents (A) of the planned load from sample
-    ``start`` on; with ``extend_load``, the samples after the last loaded one replaced by its last two
-    repeated at the median sample step, up to :data:`HORIZON_S` s after sample ``start``."""
-    t, i = known.time_s, known.current_a
-    if not extend_load:
-        return t[start:], i[start:]
-    last = int(np.flatnonzero(i > LOADED_A)[-1])
-    step = float(np.median(np.diff(t[known.load_start:last + 1]))) if last > known.load_start else 10.0
-    m = np.arange(1, int((t[start] + HORIZON_S - t[last]) / step) + 2)
-    pattern = i[[max(last - 1, known.load_start), last]]
-    return np.r_[t[start:last + 1], t[last] + m * step], np.r_[i[start:last + 1], pattern[(m + 1) % 2]]
 
 
 def _grid_voltage(t: np.ndarray, i: np.ndarray, v: np.ndarray, at: np.ndarray, first: int) -> np.ndarray:
@@ -99,7 +91,7 @@ def _context_voltage(known: KnownDischarge, start: int, n_grid: int) -> np.ndarr
 
 
 def dynaformer_eod_s(predictor: DynaformerPredictor, known: KnownDischarge, cutoff_v: float = 3.0, *,
-                     start_at_rest: bool = True, extend_load: bool = True,
+                     start_at_rest: bool = True,
                      estimate: HealthEstimate | None = None) -> tuple[float, float, float] | None:
     """(low, median, high) of the 90% interval of the time (s, from the first loaded sample) to the first
     predicted voltage below ``cutoff_v`` (V), from ``known`` only; None where the median never crosses
@@ -108,13 +100,12 @@ def dynaformer_eod_s(predictor: DynaformerPredictor, known: KnownDischarge, cuto
 
     :param start_at_rest: start the log at the rest sample before the load (0 A held until the first
         loaded sample); else at the first loaded sample (the fit then looks for a pre-roll).
-    :param extend_load: replace the rest after the last loaded sample by the load going on (see module).
     """
     start = known.load_start - 1 if start_at_rest else known.load_start
     t0 = float(known.time_s[start])
     n_ctx = int(math.floor(float(known.time_s[known.voltage_v.size - 1]) - t0 + 1e-9))
-    times, current = _planned(known, start, extend_load)
-    n_grid = int(math.floor(float(times[-1]) - t0 + 1e-9)) if not extend_load else int(HORIZON_S)
+    times, current = planned_load(known, start, HORIZON_S)
+    n_grid = int(HORIZON_S)
     if n_ctx < 20 or n_grid <= n_ctx:
         return None
     held = np.clip(np.searchsorted(times, t0 + np.arange(n_grid) + 0.5, side="right") - 1, 0, times.size - 1)
@@ -268,6 +259,14 @@ def score_dynaformer(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: 
                 # finished: its whole record is history now
                 latest.append((d, finished_health(predictor, d, context_s, cutoff_v, **options)))
     return rows
+
+
+def with_dynaformer(rows: list, cells: list[NasaCell], context_s: float = 300.0, cutoff_v: float = 3.0,
+                    every: int = 1) -> list:
+    """``rows`` (``nasa_eval.ScoredDischarge``) with ``dynaformer_s`` set to :func:`score_dynaformer`'s
+    median (its default history method) on the same discharge; None where it never crosses."""
+    dyn = {(r["cell"], r["discharge"]): r["median_s"] for r in score_dynaformer(cells, context_s, cutoff_v, every)}
+    return [replace(r, dynaformer_s=dyn.get((r.cell, r.discharge))) for r in rows]
 
 
 def _latest_health(latest: list[tuple[NasaDischarge, HealthEstimate]], d: RunConditions) -> HealthEstimate | None:

@@ -7,7 +7,9 @@ holds every discharge of that cell in order, with the columns ``discharge, uid, 
 voltage_V, current_A (negative = discharge), temperature_C, current_load_A, voltage_load_V``.
 
 A discharge comes back as a :class:`NasaDischarge` (time s from the discharge's start, voltage V, current
-A with + = discharge, cell temperature C, ambient C), a cell as a :class:`NasaCell`. Runs that cannot be
+A with + = discharge, cell temperature C, ambient C, and the rest before it, s), a cell as a :class:`NasaCell`.
+The rest before each run is read from the folder's ``discharges.csv`` (column ``start_time``, a MATLAB date
+vector) where it is there: the time from the end of the cell's previous run to this run's start. Runs that cannot be
 scored (too short, never under load, already under load at the first sample, never below the cut-off)
 (or below it at the first sample under load) are listed in ``NasaCell.skipped`` with their reason,
 never raised. :func:`persistence_s` is the baseline
@@ -18,8 +20,11 @@ no discharge at all) raises :class:`NasaDataError`: one line naming the file and
 
 from __future__ import annotations
 
+import csv
+import datetime
 import gzip
 import io
+import math
 import os
 import zlib
 from dataclasses import dataclass
@@ -54,7 +59,9 @@ class NasaDischarge:
     the dataset), ``ambient_c`` (C), and at each sample ``time_s`` (s from the discharge's start),
     ``voltage_v`` (V at the cell), ``current_a`` (A, + = discharge), ``temperature_c`` (C, the cell's
     surface); ``load_start`` is the index of the first sample under load (current above
-    :data:`LOADED_A`)."""
+    :data:`LOADED_A`); ``rest_s`` (s) the time from the end of the cell's previous run (charges and
+    impedance tests between them included) to this one's start, NaN where unknown (no start times, or
+    the cell's first run)."""
 
     cell: str
     index: int
@@ -65,6 +72,7 @@ class NasaDischarge:
     current_a: np.ndarray
     temperature_c: np.ndarray
     load_start: int
+    rest_s: float = math.nan
 
     @property
     def load_time_s(self) -> float:
@@ -73,16 +81,20 @@ class NasaDischarge:
 
     def time_to_cutoff_s(self, cutoff_v: float = DEFAULT_EOD_V) -> float | None:
         """Time (s) from the first sample under load to the first later sample below ``cutoff_v`` (V); None
-        if the voltage never falls below it."""
-        below = np.flatnonzero(self.voltage_v[self.load_start:] < cutoff_v)
-        if below.size == 0:
-            return None
-        return float(self.time_s[self.load_start + below[0]] - self.time_s[self.load_start])
+        if the voltage never falls below it (computed once per cut-off)."""
+        cache = self.__dict__.setdefault("_time_to_cutoff", {})
+        if cutoff_v not in cache:
+            below = np.flatnonzero(self.voltage_v[self.load_start:] < cutoff_v)
+            cache[cutoff_v] = (None if below.size == 0 else
+                               float(self.time_s[self.load_start + below[0]] - self.time_s[self.load_start]))
+        return cache[cutoff_v]
 
     def mean_load_a(self) -> float:
-        """Mean current (A) over the samples under load."""
-        on = self.current_a > LOADED_A
-        return float(self.current_a[on].mean()) if on.any() else 0.0
+        """Mean current (A) over the samples under load (computed once)."""
+        if "_mean_load_a" not in self.__dict__:
+            on = self.current_a > LOADED_A
+            self.__dict__["_mean_load_a"] = float(self.current_a[on].mean()) if on.any() else 0.0
+        return self.__dict__["_mean_load_a"]
 
 
 @dataclass(frozen=True)
@@ -127,8 +139,29 @@ def _read(path: Path) -> np.ndarray:
     return rows
 
 
+def _start_times(path: Path, name: str) -> dict[int, float]:
+    """Start time (s since 1970, UTC taken as the lab's clock) of each of cell ``name``'s runs, by index,
+    from the ``discharges.csv`` beside ``path``; empty where there is none or it cannot be read."""
+    table = path.parent / "discharges.csv"
+    out: dict[int, float] = {}
+    try:
+        with open(table, newline="") as fh:
+            for row in csv.DictReader(fh):
+                if row.get("battery_id") != name:
+                    continue
+                v = [float(x) for x in row["start_time"].strip("[] ").split()]
+                whole = datetime.datetime(int(v[0]), int(v[1]), int(v[2]), int(v[3]), int(v[4]),
+                                          tzinfo=datetime.timezone.utc)
+                out[int(row["discharge"])] = whole.timestamp() + v[5]
+    except (OSError, KeyError, ValueError, IndexError, TypeError):
+        return {}
+    return out
+
+
 def load_nasa_cell(path: str | os.PathLike, cutoff_v: float = DEFAULT_EOD_V) -> NasaCell:
     """Load one cell file; runs that cannot be scored at ``cutoff_v`` (V) are listed in ``skipped``.
+    Each run's rest before it comes from the folder's ``discharges.csv`` where that holds the cell's start
+    times (else NaN).
 
     :raises NasaDataError: the file is missing, not a complete gzip CSV of this format, holds NaN or a
         time that does not increase within a discharge, or no discharge.
@@ -146,10 +179,15 @@ def load_nasa_cell(path: str | os.PathLike, cutoff_v: float = DEFAULT_EOD_V) -> 
     starts = np.flatnonzero(np.r_[True, np.diff(index) != 0])
     ends = np.r_[starts[1:], index.size]
     name = path.name.split(".")[0]
+    started = _start_times(path, name)
     out, skipped = [], []
+    ended = math.nan  # s since 1970: the end of the previous run
     for a, b in zip(starts, ends):
         k = int(index[a])
         t = col["time_s"][a:b]
+        begun = started.get(k, math.nan)
+        rest = begun - ended
+        ended = begun + float(t[-1])
         if np.any(np.diff(t) <= 0):
             raise NasaDataError(path, "time_s", f"does not increase within discharge {k}")
         v, i = col["voltage_V"][a:b], -col["current_A"][a:b]
@@ -164,7 +202,7 @@ def load_nasa_cell(path: str | os.PathLike, cutoff_v: float = DEFAULT_EOD_V) -> 
             skipped.append((k, f"already under load at the first sample ({i[0]:.2f} A): no rest voltage"))
             continue
         d = NasaDischarge(name, k, int(col["uid"][a]), float(col["ambient_C"][a]), t.copy(), v.copy(), i.copy(),
-                          col["temperature_C"][a:b].copy(), int(on[0]))
+                          col["temperature_C"][a:b].copy(), int(on[0]), rest if rest >= 0 else math.nan)
         t_cut = d.time_to_cutoff_s(cutoff_v)
         if t_cut is None:
             skipped.append((k, f"never below the cut-off {cutoff_v:g} V (lowest {v[on[0]:].min():.3f} V)"))

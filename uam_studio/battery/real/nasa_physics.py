@@ -9,9 +9,9 @@
   q_max fitted to its voltage above the cut-off, then q_max moved so that the model reaches the cut-off
   (V) when the cell did.
 - :func:`predict_life`: the physics method, online. Discharge k is predicted from discharges 0..k-1 whole
-  and discharge k's planned current only (a :class:`KnownDischarge` with no voltage after its context is
-  enough, and is all it is given): the model at the health of the cell's last finished discharge at the
-  same load and ambient (else its last discharge), run along the planned current, divided by one plus the
+  and a :class:`KnownDischarge` of discharge k (nothing after its context): the model at the health of the
+  cell's last finished discharge at the same load and ambient (else its last discharge), run along the
+  planned current (``nasa_predict.planned_load``: the context's load continued), divided by one plus the
   median of the method's own relative errors on that cell's last :data:`BIAS_WINDOW` discharges at the
   same load and ambient (``nasa_data.same_conditions``; a cell's drift between discharges: fade and rest
   recovery).
@@ -44,7 +44,13 @@ from uam_studio.battery.real.nasa_data import (
     nasa_folder,
     same_conditions,
 )
-from uam_studio.battery.real.nasa_predict import OWN_ERROR_WINDOW, KnownDischarge, known_before, own_error_factor
+from uam_studio.battery.real.nasa_predict import (
+    OWN_ERROR_WINDOW,
+    KnownDischarge,
+    known_before,
+    own_error_factor,
+    planned_load,
+)
 from uam_studio.battery.simulate import simulate
 
 __all__ = ["BIAS_WINDOW", "IDENTIFY_CELL", "IDENTIFY_DISCHARGES", "LifePrediction", "discharge_health",
@@ -172,7 +178,8 @@ class LifePrediction:
 
 def _predict(known: KnownDischarge, health: tuple[float, float], params: CellParameters, t0_k: float,
              cutoff_v: float) -> float:
-    cur = grid_current(known.time_s, known.current_a, known.load_start, extend=True)
+    t, i = planned_load(known, known.load_start)
+    cur = grid_current(t, i, 0, extend=False)
     return time_to_cutoff_s(cur, health[0], health[1], params, t0_k, cutoff_v)
 
 

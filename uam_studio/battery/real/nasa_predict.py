@@ -1,29 +1,36 @@
 """Online prediction of a real NASA cell's end of discharge, from what an operator has before the end.
 
 The protocol (:func:`known_before`): to predict discharge k of a cell, the predictor reads the same cell's
-discharges 0..k-1 whole, discharge k's first ``context_s`` (s, from its first loaded sample) of voltage,
-and discharge k's whole current profile (the planned load). A :class:`KnownDischarge` holds exactly that:
-its voltage array stops at the prediction instant, so nothing later can be read.
+discharges 0..k-1 whole, the rest before discharge k (from the run's start time) and discharge k's
+samples (time, current, voltage) up to ``context_s`` (s) after its first loaded sample. A
+:class:`KnownDischarge` holds exactly that; the load after the context is :func:`planned_load`, the
+context's load continued (the record's own end, where the rig stopped the load, is never read).
 
 What it predicts: the time (s, from the first loaded sample) to the first sample below a cut-off (V), as
-a median, a 90% interval and one-sided lower bounds at 5% and 1% risk (:class:`EodPrediction`).
+a median, a 90% interval and one-sided lower bounds at 5% and 1% risk (:class:`EodPrediction`). Every
+interval is finite, at least :func:`min_width_s` wide, and its high end at most
+:func:`high_cap_s` (:data:`CAP_RATIO` times the median, the time to deliver :data:`CAP_AH`, :data:`HORIZON_S`).
 
 How (:class:`CellBelief`, one per cell, carried along its life):
 
-- **history**: the latest finished discharge of the same cell at the same load and ambient (``p``) ended
-  at ``T_p``. Discharge k's context is compared with ``p``'s at the same time since the load and the same
-  current: a mean voltage shift ``dv`` (V). A cell that rested long recovers capacity and shows it as a
-  higher voltage; one that faded shows a lower one. The median is ``T_p (1 + a + b dv + bias)``, with
-  ``a`` (fade per discharge) and ``b`` (1/V) fitted across training cells, and ``bias`` the cell's own
-  running mean error (its belief of its own fade). The spread is the cell's own running scale of
-  relative error, shrunk to a prior scale for its ambient band, times studentized quantiles fitted
-  across training cells: those of its ambient band, or, for a cell's first :data:`EARLY_ERRORS`
-  predictions, those of the training cells' first predictions (heavier tailed: a new cell changes most).
-- **prior** (a first discharge, or a load or ambient the cell has not run before): the charge the cell
-  will deliver to the cut-off (Ah) is its latest discharge's, scaled by the training cells' median charge
-  at the new and the old condition, or the young training cells' median at a first discharge; the time
-  is when the planned current has delivered that charge. Its interval is the training cells' log-ratio
-  quantiles for such predictions: wide, as it should be.
+- **history**: a finished discharge of the same cell at the same load and ambient (``p``, ended at
+  ``T_p``; :meth:`CellBelief.previous`: the latest of the last :data:`LOOKBACK` whose context is within
+  :data:`DV_PLAUSIBLE_V` of this one's, so that one outlying discharge is not the reference). Discharge
+  k's context is compared with ``p``'s at the same time since the load and the same current: a mean
+  voltage shift ``dv`` (V). A cell that rested long recovers capacity and shows it as a higher voltage;
+  one that faded shows a lower one. The median is ``T_p exp(a + b dv + c dr + bias)``, with ``(a, b, c)``
+  fitted across training cells per ambient band (``dr``: the change of :func:`rest_feature` from ``p``'s
+  rest to this one's; shrunk towards persistence where a band's data are thin) and ``bias`` the cell's
+  own running median error (its belief of its own fade; errors enter clipped at :data:`CLIP_SPREADS` spreads).
+  The spread is the cell's own running scale of log error, shrunk to a prior scale for its ambient
+  band, times studentized quantiles fitted across training cells: those of its ambient band, or, for a
+  cell's first :data:`EARLY_ERRORS` predictions, those of the training cells' first predictions (heavier
+  tailed: a new cell changes most).
+- **prior** (a first discharge, or a load or ambient the cell has not run before): the charge (Ah) the
+  training cells delivered to the cut-off at the nearest condition, moved along that condition's fitted
+  dependence on the context voltage (:func:`context_voltage_v`: what the cell's first seconds show of its
+  health); the time is when the planned load has delivered that charge. Its interval is the training
+  cells' log-ratio quantiles for such predictions: wide, as it should be.
 
 A condition outside what the training cells cover (a load or ambient with no training discharge near
 it) is flagged, and its interval widened by :data:`UNSEEN_WIDEN`. The fitted numbers live in one
@@ -40,9 +47,10 @@ import numpy as np
 
 from uam_studio.battery.real.nasa_data import LOADED_A, NasaDischarge, RunConditions, same_conditions
 
-__all__ = ["EARLY_ERRORS", "OWN_ERROR_WINDOW", "RISKS", "UNSEEN_WIDEN", "CellBelief", "charge_to_cutoff_ah",
-           "EodPrediction", "KnownDischarge", "NasaEodModel", "ambient_band", "known_before", "own_error_factor",
-           "voltage_shift_v"]
+__all__ = ["CAP_AH", "CAP_RATIO", "EARLY_ERRORS", "HORIZON_S", "OWN_ERROR_WINDOW", "RISKS", "UNSEEN_WIDEN",
+           "CellBelief", "EodPrediction", "KnownDischarge", "NasaEodModel", "ambient_band", "charge_to_cutoff_ah",
+           "context_voltage_v", "high_cap_s", "known_before", "min_width_s", "own_error_factor", "planned_load",
+           "rest_feature", "seen_s", "time_for_charge_s", "voltage_shift_v"]
 
 RISKS = (0.01, 0.05, 0.5, 0.95)  # the quantiles every prediction carries: bound99, bound95/low, median, high
 Z_LEVELS = (0.001, 0.0025, 0.005, 0.01, 0.02, 0.035, 0.05, 0.075, 0.1, 0.15, 0.25, 0.5, 0.75, 0.85, 0.9, 0.925,
@@ -55,6 +63,16 @@ N0_BIAS = 10.0  # weight (discharges) of zero bias against the cell's own mean e
 SCALE_WINDOW = 20  # the cell's own scale reads its latest this many errors
 EARLY_ERRORS = 5  # until a cell has this many errors of its own, its prior scale is at least the 'early' one
 OWN_ERROR_WINDOW = 10  # discharges: a method's running bias on a cell is the median of this many last errors
+HORIZON_S = 12000.0  # s: how far a planned load is continued (the NASA runs end before 7000 s)
+CAP_AH = 2.2  # Ah: no interval reaches past the time the planned load delivers this (the cells are rated 2 Ah;
+# the most any of the 26 lives delivers to 3.0 V is 1.86 Ah)
+CAP_RATIO = 3.0  # and none reaches past this many times its own median
+MIN_WIDTH = 0.01  # an interval is at least this share of the context's length wide (and 1 s)
+DV_PLAUSIBLE_V = 0.05  # V: a previous discharge whose context differs by more is not a reference while a
+# nearer one is (about the 95th percentile of |shift| between consecutive discharges at one condition)
+LOOKBACK = 4  # the latest this many finished discharges at a condition are a prediction's candidate references
+CLIP_SPREADS = 4.0  # a history error enters the cell's bias and scale clipped at this many of its spreads
+N0_SLOPE = 30.0  # weight (pairs) of persistence (no change) against a band's fitted slopes
 
 
 def ambient_band(ambient_c: float) -> str:
@@ -66,10 +84,10 @@ def ambient_band(ambient_c: float) -> str:
 
 @dataclass(frozen=True)
 class KnownDischarge:
-    """What an operator knows of a discharge at the prediction instant: its planned current (A, + =
-    discharge) at every sample time (s from the discharge's start), its ambient (C), and its voltage (V)
-    only up to ``context_s`` after the first loaded sample (``voltage_v`` is that much shorter than
-    ``time_s``)."""
+    """What an operator knows of a discharge at the prediction instant: its samples (time s from the
+    discharge's start, current A with + = discharge, voltage V) up to ``context_s`` after the first loaded
+    sample and nothing later, its ambient (C) and the rest before it (``rest_s``, s; NaN where unknown).
+    The load it will go on drawing is :func:`planned_load`: the context's load continued."""
 
     cell: str
     index: int
@@ -80,6 +98,7 @@ class KnownDischarge:
     load_start: int
     context_s: float
     voltage_v: np.ndarray
+    rest_s: float = math.nan
 
     @property
     def load_time_s(self) -> float:
@@ -87,17 +106,32 @@ class KnownDischarge:
         return float(self.time_s[self.load_start])
 
     def mean_load_a(self) -> float:
-        """Mean planned current (A) over the samples under load."""
+        """Mean current (A) over the context's samples under load."""
         on = self.current_a > LOADED_A
         return float(self.current_a[on].mean()) if on.any() else 0.0
 
 
 def known_before(d: NasaDischarge, context_s: float) -> KnownDischarge:
-    """The view of ``d`` an operator has ``context_s`` (s) after its first loaded sample: the voltage is
-    cut there (a copy), the current and times are whole."""
+    """The view of ``d`` an operator has ``context_s`` (s) after its first loaded sample: its samples
+    (times, current, voltage) up to there, copied; nothing of the record after it."""
     end = int(np.searchsorted(d.time_s, d.load_time_s + context_s, side="right"))
-    return KnownDischarge(d.cell, d.index, d.uid, d.ambient_c, d.time_s.copy(), d.current_a.copy(), d.load_start,
-                          float(context_s), d.voltage_v[:end].copy())
+    return KnownDischarge(d.cell, d.index, d.uid, d.ambient_c, d.time_s[:end].copy(), d.current_a[:end].copy(),
+                          d.load_start, float(context_s), d.voltage_v[:end].copy(), float(d.rest_s))
+
+
+def planned_load(known: KnownDischarge, start: int, horizon_s: float = HORIZON_S) -> tuple[np.ndarray, np.ndarray]:
+    """The load ``known`` will draw as its operator plans it: sample times (s from the discharge's start)
+    and currents (A) from sample ``start``: the context's samples, then its last two samples repeated at the
+    context's median loaded step (a constant load goes on; the square wave, whose samples alternate on and
+    off, keeps its phase) up to ``horizon_s`` s after sample ``start``. It reads nothing after the context,
+    so it never knows when the record ends."""
+    t, i = known.time_s, known.current_a
+    last = t.size - 1
+    loaded = t[known.load_start:]
+    step = float(np.median(np.diff(loaded))) if loaded.size > 1 else 10.0
+    m = np.arange(1, max(int((t[start] + horizon_s - t[last]) / step), 0) + 2)
+    pattern = i[[max(last - 1, known.load_start), last]]
+    return np.r_[t[start:], t[last] + m * step], np.r_[i[start:], pattern[(m + 1) % 2]]
 
 
 def own_error_factor(past: Iterable[tuple[RunConditions, float | None]], target: RunConditions,
@@ -150,34 +184,69 @@ def charge_to_cutoff_ah(d: NasaDischarge, cutoff_v: float) -> float | None:
     return float(np.interp(t, d.time_s[d.load_start:] - d.load_time_s, charge_ah(d.time_s, d.current_a, d.load_start)))
 
 
-def time_for_charge_s(time_s: np.ndarray, current_a: np.ndarray, start: int, target_ah: float) -> float:
-    """Time (s from sample ``start``) at which the current delivers ``target_ah`` (Ah); past the profile's
-    end, its last loaded current carries on."""
-    q = charge_ah(time_s, current_a, start)
-    t = time_s[start:] - time_s[start]
+def time_for_charge_s(known: KnownDischarge, target_ah: float) -> float:
+    """Time (s from the first loaded sample) at which :func:`planned_load` has delivered ``target_ah``
+    (Ah); past its horizon, its mean current carries on."""
+    t, i = planned_load(known, known.load_start)
+    q = charge_ah(t, i, 0)
+    t = t - t[0]
     if target_ah <= q[-1]:
         return float(np.interp(target_ah, q, t))
-    on = current_a[start:] > LOADED_A
-    last = float(current_a[start:][on][-1]) if on.any() else 1.0
-    return float(t[-1] + (target_ah - q[-1]) * 3600.0 / max(last, LOADED_A))
+    rate = max(q[-1] * 3600.0 / max(t[-1], 1.0), LOADED_A)
+    return float(t[-1] + (target_ah - q[-1]) * 3600.0 / rate)
+
+
+def rest_feature(rest_s: float) -> float:
+    """log(1 + rest in hours), the rest's term in a history prediction; 0 where the rest is unknown (NaN)."""
+    return math.log1p(max(rest_s, 0.0) / 3600.0) if math.isfinite(rest_s) else 0.0
+
+
+def context_voltage_v(known: KnownDischarge) -> float:
+    """Mean voltage (V) of ``known``'s loaded context samples: a fresh cell holds a higher one."""
+    on = known.current_a[known.load_start:] > LOADED_A
+    v = known.voltage_v[known.load_start:][on]
+    return float(v.mean()) if v.size else float("nan")
+
+
+def seen_s(known: KnownDischarge) -> float:
+    """How long (s) ``known`` has run under load without reaching the cut-off: its context's end."""
+    return float(known.time_s[-1] - known.load_time_s)
+
+
+def min_width_s(known: KnownDischarge) -> float:
+    """The narrowest 90% interval (s): :data:`MIN_WIDTH` of the context's length, and 1 s."""
+    return max(MIN_WIDTH * seen_s(known), 1.0)
+
+
+def high_cap_s(known: KnownDischarge, median_s: float) -> float:
+    """The most an interval's high end may be (s from the first loaded sample): the least of
+    :data:`CAP_RATIO` times its median, the time :func:`planned_load` takes to deliver :data:`CAP_AH`, and
+    :data:`HORIZON_S`; never less than the context's end plus :func:`min_width_s`."""
+    return max(min(CAP_RATIO * median_s, time_for_charge_s(known, CAP_AH), HORIZON_S),
+               seen_s(known) + min_width_s(known))
 
 
 @dataclass(frozen=True)
 class NasaEodModel:
     """The numbers fitted across training cells, for one context (s) and cut-off (V).
 
-    :param a: mean relative change of the time to cut-off from one discharge to the next at the same
-        conditions (fade per discharge, -).
-    :param b: relative change per volt of context shift (1/V).
+    :param a: mean log change of the time to cut-off from one discharge to the next at the same
+        conditions (fade per discharge, -), pooled over ambient bands.
+    :param b: log change per volt of context shift (1/V), pooled.
     :param scale: prior scale of the log error of a history prediction, per ambient band, and 'early': that
         of a cell's first :data:`EARLY_ERRORS` history predictions (a new cell's first cycles change most).
     :param z: studentized quantiles of that error at :data:`Z_LEVELS`, per ambient band, 'all' (the
         quantiles of a band with few training errors) and 'early' (of the training cells' first
         :data:`EARLY_ERRORS` predictions each, where there are enough).
-    :param charge: (load A, ambient C, median charge to the cut-off Ah over all discharges, over the first
-        five of each cell) per training condition.
+    :param charge: per training condition: (load A, ambient C, median charge to the cut-off Ah over all
+        discharges, over the first five of each cell, median context voltage V, d log(charge) / d context
+        voltage 1/V).
     :param prior_log: quantiles at :data:`RISKS` of log(true / predicted) of a prior prediction.
     :param trained_on: the training cells' names.
+    :param slope: per ambient band, (a, b, c): a history prediction's log change is ``a + b dv + c dr``,
+        with ``dv`` the context shift (V) and ``dr`` the change of :func:`rest_feature` from the
+        reference's rest to this one's; each fitted in the band and shrunk towards persistence (0) by
+        :data:`N0_SLOPE`. A band not here takes (``a``, ``b``, 0).
     """
 
     context_s: float
@@ -186,26 +255,39 @@ class NasaEodModel:
     b: float
     scale: dict[str, float]
     z: dict[str, tuple[float, ...]]
-    charge: tuple[tuple[float, float, float, float], ...]
+    charge: tuple[tuple[float, ...], ...]
     prior_log: tuple[float, ...]
     trained_on: tuple[str, ...] = ()
+    slope: dict[str, tuple[float, float, float]] = field(default_factory=dict)
 
-    def condition_charge_ah(self, load_a: float, ambient_c: float, young: bool) -> tuple[float, bool]:
-        """The training median charge (Ah) to the cut-off at the nearest training condition, and whether
-        that condition is near (within 0.5 A and 6 C)."""
-        rows = np.array(self.charge)
+    def coefficients(self, band: str) -> tuple[float, float, float]:
+        """(a, b, c) of a history prediction in ambient ``band``."""
+        return self.slope.get(band, (self.a, self.b, 0.0))
+
+    def condition_charge_ah(self, load_a: float, ambient_c: float, young: bool,
+                            context_v: float | None = None) -> tuple[float, bool]:
+        """The training charge (Ah) to the cut-off at the nearest training condition, and whether that
+        condition is near (within 0.5 A and 6 C): with ``context_v`` (V, :func:`context_voltage_v`), the
+        condition's median moved along its fitted dependence on the context voltage; else its median
+        (over the first five discharges of each cell where ``young``)."""
+        rows = np.array([r[:4] for r in self.charge])
         dist = np.abs(rows[:, 0] - load_a) / 0.5 + np.abs(rows[:, 1] - ambient_c) / 6.0
         k = int(np.argmin(dist))
         near = abs(rows[k, 0] - load_a) <= 0.5 and abs(rows[k, 1] - ambient_c) <= 6.0
+        row = self.charge[k]
+        if context_v is not None and math.isfinite(context_v) and len(row) >= 6:
+            shift = float(np.clip(row[5] * (context_v - row[4]), -1.0, 1.0))
+            return float(row[2] * math.exp(shift)), near
         return float(rows[k, 3] if young else rows[k, 2]), near
 
 
 @dataclass(frozen=True)
 class EodPrediction:
     """A prediction of the time (s, from the first loaded sample) to the first sample below the cut-off:
-    ``median_s``, a 90% interval (``low_s``, ``high_s``), lower bounds at 5% (``bound95_s``) and 1%
-    (``bound99_s``) risk, how it was made (``method``: 'history' or 'prior') and ``flag`` (None, or why
-    the model has no evidence for this discharge)."""
+    ``median_s``, a 90% interval (``low_s``, ``high_s``; finite, ``low_s < high_s`` and ``high_s`` at
+    most :func:`high_cap_s`), lower bounds at 5% (``bound95_s``) and 1% (``bound99_s``) risk, how it was
+    made (``method``: 'history' or 'prior') and ``flag`` (None, or why the model has no evidence for this
+    discharge)."""
 
     median_s: float
     low_s: float
@@ -219,13 +301,15 @@ class EodPrediction:
 @dataclass
 class CellBelief:
     """What one cell's operator believes of it, updated from each finished discharge: the discharges run
-    (whole, once finished) and the cell's own record of its history-prediction errors (relative, -)."""
+    (whole, once finished) and the cell's own record of its history-prediction errors (log, -, each
+    clipped at :data:`CLIP_SPREADS` of the spread it was predicted with)."""
 
     model: NasaEodModel
     finished: list[NasaDischarge] = field(default_factory=list)
     errors: list[float] = field(default_factory=list)
     levels: list[float] = field(default_factory=lambda: list(RISKS))
     _centres: dict[tuple[int, int, float], float] = field(default_factory=dict, repr=False)
+    _shifts: dict[tuple[int, int, float], float] = field(default_factory=dict, repr=False)
 
     def bias(self) -> float:
         """The median of the cell's latest log errors, shrunk to zero (its fade beyond the training mean)."""
@@ -248,12 +332,31 @@ class CellBelief:
         gap = sum(1 for q in self.finished if q.index > p.index) + 1
         return self.scale(ambient_band(known.ambient_c)) * math.sqrt(gap)
 
+    def shift_v(self, known: KnownDischarge, p: NasaDischarge) -> float:
+        """:func:`voltage_shift_v` of ``known`` from ``p`` (V), computed once."""
+        key = (known.index, p.index, known.context_s)
+        if key not in self._shifts:
+            self._shifts[key] = voltage_shift_v(known, p)
+        return self._shifts[key]
+
     def previous(self, known: KnownDischarge) -> NasaDischarge | None:
-        """The latest finished discharge at ``known``'s load and ambient that reached the cut-off."""
+        """The reference of a history prediction: among the latest :data:`LOOKBACK` finished discharges at
+        ``known``'s load and ambient that reached the cut-off after the context (``known`` has not), the
+        latest whose context differs from ``known``'s by at most :data:`DV_PLAUSIBLE_V`, else the one that
+        differs least; None if there is none."""
+        cut = self.model.cutoff_v
+        same: list[NasaDischarge] = []
         for p in reversed(self.finished):
-            if same_conditions(p, known) and p.time_to_cutoff_s(self.model.cutoff_v) is not None:
-                return p
-        return None
+            if len(same) == LOOKBACK:
+                break
+            t_p = p.time_to_cutoff_s(cut)
+            if same_conditions(p, known) and t_p is not None and t_p > known.context_s:
+                same.append(p)
+        if not same:
+            return None
+        shifts = [abs(self.shift_v(known, p)) for p in same]
+        plausible = [p for p, dv in zip(same, shifts) if dv <= DV_PLAUSIBLE_V]
+        return plausible[0] if plausible else same[int(np.argmin(shifts))]
 
     def centre_s(self, known: KnownDischarge, p: NasaDischarge) -> float:
         """The history prediction of ``known`` from ``p`` before the cell's own bias (s)."""
@@ -261,7 +364,9 @@ class CellBelief:
         if key not in self._centres:
             t_p = p.time_to_cutoff_s(self.model.cutoff_v)
             assert t_p is not None  # previous() returns only discharges that reached the cut-off
-            self._centres[key] = t_p * max(1.0 + self.model.a + self.model.b * voltage_shift_v(known, p), 0.05)
+            a, b, c = self.model.coefficients(ambient_band(known.ambient_c))
+            dr = rest_feature(known.rest_s) - rest_feature(p.rest_s)
+            self._centres[key] = t_p * math.exp(float(np.clip(a + b * self.shift_v(known, p) + c * dr, -1.0, 1.0)))
         return self._centres[key]
 
     def _history(self, known: KnownDischarge, p: NasaDischarge) -> np.ndarray:
@@ -273,20 +378,12 @@ class CellBelief:
         return self.centre_s(known, p) * np.exp(self.bias() + self.spread(known, p) * np.array(z))
 
     def _prior(self, known: KnownDischarge) -> tuple[np.ndarray, str | None]:
-        cut = self.model.cutoff_v
+        """A prediction with no reference: the charge the training cells delivered at the nearest condition,
+        moved along that condition's dependence on the context voltage to what ``known``'s first seconds
+        show, delivered by the planned load."""
         load = known.mean_load_a()
-        last = next((p for p in reversed(self.finished) if p.time_to_cutoff_s(cut) is not None), None)
-        target, near = self.model.condition_charge_ah(load, known.ambient_c, young=last is None)
-        if last is None:
-            charge = target
-        else:
-            reached = charge_to_cutoff_ah(last, cut)
-            assert reached is not None  # ``last`` reached the cut-off
-            delivered = float(reached)
-            then, near_then = self.model.condition_charge_ah(last.mean_load_a(), last.ambient_c, young=False)
-            charge = delivered * target / then
-            near = near and near_then
-        centre = time_for_charge_s(known.time_s, known.current_a, known.load_start, charge)
+        charge, near = self.model.condition_charge_ah(load, known.ambient_c, True, context_voltage_v(known))
+        centre = time_for_charge_s(known, charge)
         logs = np.array(self.model.prior_log)
         flag = None
         if not near:
@@ -309,11 +406,7 @@ class CellBelief:
             q, unseen = self._prior(known)
             flag = unseen or flag
             method = "prior"
-        # the cut-off was not reached within the context: the true time is at least the context's end
-        n = known.voltage_v.size
-        seen = float(known.time_s[n - 1] - known.load_time_s) if n > known.load_start else 0.0
-        q = np.maximum(np.sort(q), seen)
-        return EodPrediction(float(q[2]), float(q[1]), float(q[3]), float(q[1]), float(q[0]), method, flag)
+        return _interval(known, q, method, flag)
 
     def walk(self, discharges: Iterable[NasaDischarge]) -> Iterator[tuple[int, NasaDischarge, KnownDischarge,
                                                                            EodPrediction, float]]:
@@ -333,12 +426,14 @@ class CellBelief:
 
     def observe(self, d: NasaDischarge, prediction: EodPrediction | None = None,
                 known: KnownDischarge | None = None) -> None:
-        """Take a finished discharge in; with the history prediction made for it, record its error."""
+        """Take a finished discharge in; with the history prediction made for it, record its error
+        (clipped at :data:`CLIP_SPREADS` spreads, so that one outlying discharge does not set the cell's bias)."""
         t = d.time_to_cutoff_s(self.model.cutoff_v)
         if known is not None and prediction is not None and prediction.method == "history" and t is not None:
             p = self.previous(known)
             if p is not None:
-                self.errors.append(math.log(t / self.centre_s(known, p)))
+                limit = CLIP_SPREADS * self.spread(known, p)
+                self.errors.append(float(np.clip(math.log(t / self.centre_s(known, p)), -limit, limit)))
             # adaptive conformal levels: each quantile's level moves towards the miss rate it declares
             for k, (risk, q) in enumerate(zip(RISKS, (prediction.bound99_s, prediction.bound95_s, None,
                                                         prediction.high_s))):
@@ -346,3 +441,19 @@ class CellBelief:
                     level = self.levels[k] + ACI_GAIN * (risk - float(t < q))
                     self.levels[k] = float(np.clip(level, Z_LEVELS[0], Z_LEVELS[-1]))
         self.finished.append(d)
+
+
+def _interval(known: KnownDischarge, q: np.ndarray, method: str, flag: str | None) -> EodPrediction:
+    """The quantiles ``q`` (s, at :data:`RISKS`) as a prediction that is an interval: none before the
+    context's end (the cut-off was not reached within it), the high end at most :func:`high_cap_s`, every
+    value finite, and the 90% interval at least :func:`min_width_s` wide."""
+    seen, width = seen_s(known), min_width_s(known)
+    q = np.sort(np.nan_to_num(np.asarray(q, dtype=float), nan=seen, posinf=HORIZON_S, neginf=seen))
+    q = np.clip(q, seen, HORIZON_S)
+    q = np.minimum(q, high_cap_s(known, float(q[2])))
+    cap = high_cap_s(known, float(q[2]))
+    if q[3] - q[1] < width:  # widen upwards where the cap leaves room, else downwards to the context's end
+        q[3] = min(q[1] + width, cap)
+        q[1] = max(q[3] - width, seen)
+    q[0], q[2] = min(q[0], q[1]), float(np.clip(q[2], q[1], q[3]))
+    return EodPrediction(float(q[2]), float(q[1]), float(q[3]), float(q[1]), float(q[0]), method, flag)
