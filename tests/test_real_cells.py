@@ -174,10 +174,13 @@ def test_unknown_suffix_and_missing_folder(tmp_path, monkeypatch):
         load_cell_log(tmp_path / "x.txt")
     monkeypatch.delenv("UAM_STUDIO_CMU_DATA", raising=False)
     monkeypatch.setattr("uam_studio.battery.real.cmu_data.BESIDE_CHECKOUT", tmp_path / "nowhere")
-    with pytest.raises(ValueError, match="data: no dataset folder") as err:
-        data_folder(None)
-    text = str(err.value)  # one line, saying where it looked and how to point at the data from a notebook
-    assert "\n" not in text and "nowhere" in text and "os.environ['UAM_STUDIO_CMU_DATA']" in text
+    from uam_studio.battery.real.cmu_data import SAMPLE
+
+    assert data_folder(None) == SAMPLE  # the mission ships as a sample; a life other than VAH27 does not
+    with pytest.raises(ValueError, match="data: no dataset folder holds VAH07.csv.mat") as err:
+        data_folder(None, needs="VAH07.csv.mat")
+    text = str(err.value)  # one line, saying what the sample has and how to point at the data from a notebook
+    assert "\n" not in text and "uam-studio data" in text and "os.environ['UAM_STUDIO_CMU_DATA']" in text
 
 
 @pytest.mark.parametrize("name", ["VAH27.csv.mat", "VAH01_20.csv"])

@@ -54,6 +54,8 @@ _LAZY = {
     "NasaDataError": "uam_studio.battery.real.nasa_data",
     "load_nasa_folder": "uam_studio.battery.real.nasa_data",
     "nasa_folder": "uam_studio.battery.real.nasa_data",
+    "available_cells": "uam_studio.battery.real.nasa_data",
+    "sample_note": "uam_studio.battery.real.nasa_data",
     "score_cell": "uam_studio.battery.real.nasa_eval",
     "summarise": "uam_studio.battery.real.nasa_eval",
     "model_for": "uam_studio.battery.real.nasa_replay",

@@ -9,7 +9,7 @@ Commands: ``serve`` (start the Panel app), ``simulate`` (fly a route of a missio
 ``plan`` (plan a mission with the attention planner (default), the DQN agent, the oracle or the greedy baseline;
 physics-checked), ``fly`` (fly it in
 a world the operator cannot see, re-planning from its sensors, from its pack's logbook), ``logbook`` (make or read
-a pack's logbook), ``fleet`` (a fleet's day or life under
+a pack's logbook), ``data`` (the real data sets, and NASA's own files imported), ``fleet`` (a fleet's day or life under
 three dispatchers), ``findings`` (the paper's four findings, agents trained on the Dask engine), ``train``
 (``dynaformer``, ``dqn`` or ``attention``; never into ``pretrained/``), ``evaluate`` (``dynaformer``: a
 model on held-out data; ``real``: the models on the CMU eVTOL dataset's real cells; ``lives``: leave one
@@ -25,7 +25,7 @@ import sys
 from collections.abc import Sequence
 
 from uam_studio import __version__
-from uam_studio.cli import evaluate, findings, fleet, fly, identify, logbook, plan, serve, simulate, train
+from uam_studio.cli import data, evaluate, findings, fleet, fly, identify, logbook, plan, serve, simulate, train
 from uam_studio.cli.common import EXIT_BROKEN_PIPE, EXIT_INPUT, EXIT_INTERRUPTED, CliExit, Command, Parser
 from uam_studio.errors import InputError
 
@@ -34,6 +34,7 @@ COMMANDS: dict[str, Command] = {
     "plan": plan.COMMAND,
     "fly": fly.COMMAND,
     "logbook": logbook.COMMAND,
+    "data": data.COMMAND,
     "fleet": fleet.COMMAND,
     "findings": findings.COMMAND,
     "train": train.COMMAND,

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 from uam_studio.cli.common import EXIT_INPUT, EXIT_OK, CliExit, Command, seed_arg
 from uam_studio.errors import check_range
@@ -104,7 +105,11 @@ def _run_evaluate(args: argparse.Namespace) -> int:
             print(totals_line(scores))
         return EXIT_OK
     if args.model == "real":
+        from ..battery.real.cmu_data import data_folder
+        from ..battery.real.cmu_data import sample_note as cmu_note
         from ..studies.real_cells import format_report as format_real
+
+        _note(cmu_note(data_folder(args.data)))
         from ..studies.real_cells import real_cell_report
 
         report = real_cell_report(args.data, held_out=not args.quick, refit=args.refit)
@@ -129,8 +134,14 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _note(line: str | None) -> None:
+    """Say on stderr (so that --json stays clean) which data the command runs on, where it is the sample."""
+    if line:
+        print(f"note: {line}", file=sys.stderr)
+
+
 def _run_nasa(args: argparse.Namespace) -> int:
-    from ..battery.real.nasa_data import NasaDataError, load_nasa_folder, nasa_folder
+    from ..battery.real.nasa_data import NasaDataError, load_nasa_folder, nasa_folder, sample_note
     from ..battery.real.nasa_eval import evaluate_nasa, format_table, skipped_summary
     from ..battery.real.nasa_model import bundled_model
 
@@ -138,6 +149,7 @@ def _run_nasa(args: argparse.Namespace) -> int:
     cutoff_v = check_range("--cutoff-v", 3.0 if args.cutoff_v is None else args.cutoff_v, 2.5, 3.6, " V")
     every = int(check_range("--every", 1 if args.every is None else args.every, 1, 1000))
     folder = nasa_folder(args.data)
+    _note(sample_note(folder))
     cells = load_nasa_folder(folder, args.cell, cutoff_v)
     if args.method == "belief":
         from ..battery.real.nasa_belief import evaluate_belief

@@ -23,7 +23,14 @@ import param
 from uam_studio.app.services import LatestWorker, one_line
 from uam_studio.app.session import ensure_bokeh_backend
 from uam_studio.app.style import heading, no_scroll_zoom, window_height
-from uam_studio.battery.real.nasa_data import DATA_ENV, NasaCell, NasaDataError, nasa_cell_files, nasa_folder
+from uam_studio.battery.real.nasa_data import (
+    DATA_ENV,
+    NasaCell,
+    NasaDataError,
+    nasa_cell_files,
+    nasa_folder,
+    sample_note,
+)
 from uam_studio.errors import InputError
 
 __all__ = ["NASA_COLORS", "NasaLabState", "NasaLabView"]
@@ -34,6 +41,10 @@ METHODS = {"history": "the cell's own history at this load",
            "prior": "no history at this load and ambient: the training cells' charge, a wide interval"}
 FIRST_POSITION = 84  # the discharge shown first: mid-life of B0005, where the cell's history speaks
 PLOT_HEIGHT_CSS = "max(300px, calc((100vh - 230px) * 0.55))"
+
+
+FIT_WORDS = {"loco": "fitted without this cell", "bundled": "bundled, never read this cell",
+             "in-sample": "bundled, which read this cell (in-sample)", "given": "given"}
 
 
 class NasaLabState(param.Parameterized):
@@ -52,6 +63,7 @@ class NasaLabState(param.Parameterized):
     result = param.Dict(default=None, allow_None=True)
     busy = param.Boolean(default=False)
     missing = param.String(default="", doc="one line: where the data should be, when they are not there")
+    source = param.String(default="", doc="one line: the data shown are the bundled sample (empty otherwise)")
 
     def __init__(self, folder: str | None = None, background: bool = False,
                  dispatch: Callable[[Callable[[], None]], None] | None = None, **params: Any) -> None:
@@ -63,10 +75,11 @@ class NasaLabState(param.Parameterized):
         try:
             self.folder: Path | None = nasa_folder(folder)
             names = [f.name.split(".")[0] for f in nasa_cell_files(self.folder)]
+            self.source = sample_note(self.folder) or ""
         except NasaDataError as err:
             self.folder, names = None, []
-            self.missing = (f"No NASA PCoE data ({one_line(err)}): put the folder of BXXXX.csv.gz files at "
-                            f"../shared/data/nasa_pcoe beside the checkout, or set ${DATA_ENV}.")
+            self.missing = (f"No NASA PCoE data ({one_line(err)}): set ${DATA_ENV} to a folder of BXXXX.csv.gz "
+                            "files (see `uam-studio data`).")
         self.param.cell.objects = names
         if names:
             with param.parameterized.discard_events(self):
@@ -179,7 +192,9 @@ class NasaLabView(pn.viewable.Viewer):
         if self.state.missing:
             return pn.Column(title, pn.pane.Alert(html.escape(self.state.missing), alert_type="info",
                                                   css_classes=["uam-nasa-missing"]), sizing_mode="stretch_width")
-        controls = pn.Column(self.cell, self.position, self.text, width=290)
+        note = [pn.pane.HTML(f"<div class='uam-nasa-source'>{html.escape(self.state.source)}</div>",
+                             sizing_mode="stretch_width")] if self.state.source else []
+        controls = pn.Column(self.cell, self.position, self.text, *note, width=290)
         plot = pn.Column(window_height(self.plot, PLOT_HEIGHT_CSS), min_width=560, sizing_mode="stretch_width",
                          styles={"flex": "1 1 560px"})
         return pn.Column(title, pn.FlexBox(controls, plot, flex_wrap="wrap", gap="10px", sizing_mode="stretch_width"),
@@ -209,7 +224,7 @@ class NasaLabView(pn.viewable.Viewer):
                  "progpy's default cell: " + (f"{r.progpy_s:,.0f} s." if r.progpy_s is not None else "never.")
                  + " It knows nothing of this cell's health.",
                  f"Method: {METHODS[p.method]}; model "
-                 + ("fitted without this cell" if r.fit == "loco" else "bundled, never read this cell") + "."]
+                 + FIT_WORDS.get(r.fit, r.fit) + "."]
         if p.flag:
             lines.append(f"<span class='uam-nasa-flag'>&#9888; {html.escape(p.flag)}</span>")
         self.text.object = ("<div class='uam-nasa-summary'>"

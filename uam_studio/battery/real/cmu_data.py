@@ -30,8 +30,12 @@ from uam_studio.errors import DataFileError, InputError
 DATA_ENV = "UAM_STUDIO_CMU_DATA"  # environment variable: the dataset's folder
 DATASET_DOI = "10.1184/R1/14226830"
 MISSION_FILE = "VAH01_20.csv"  # the 1 Hz baseline mission (cell VAH01, cycle 20)
-# Where a source checkout finds the dataset without being told: ../shared/data/cmu_evtol beside it.
-BESIDE_CHECKOUT = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "cmu_evtol"
+# Where a source checkout finds the dataset without being told: a shared/data/cmu_evtol folder beside it.
+_CHECKOUT = Path(__file__).resolve().parents[3]
+BESIDE_CHECKOUT = _CHECKOUT.parent / "shared" / "data" / "cmu_evtol"
+# The sample that ships with the package: the 1 Hz mission and one resampled life (VAH27).
+SAMPLE = Path(__file__).resolve().parents[2] / "data" / "samples" / "cmu_evtol"
+SAMPLE_NOTE = "the bundled sample: the 1 Hz mission and 1 resampled life (VAH27); for all, see `uam-studio data`"
 LIFE_FILES = ("VAH07.csv.mat", "VAH09.csv.mat", "VAH27.csv.mat", "VAH30.csv.mat")
 
 # Segment codes (Ns) of a mission cycle in the dataset.
@@ -229,20 +233,24 @@ def load_cell_log(path: str | os.PathLike) -> CellLog:
 
 
 def data_folder(path: str | os.PathLike | None = None, needs: str = MISSION_FILE) -> Path:
-    """The dataset's folder: ``path`` if given, else ``$UAM_STUDIO_CMU_DATA``, else
-    :data:`BESIDE_CHECKOUT` (``shared/data/cmu_evtol`` beside a source checkout) if it is there.
+    """The dataset's folder: ``path`` if given, else ``$UAM_STUDIO_CMU_DATA``, else :data:`BESIDE_CHECKOUT`
+    where a source checkout has it, else the bundled :data:`SAMPLE` if it holds ``needs``
+    (:func:`sample_note` says so).
 
     :param needs: the file the folder must hold (default the 1 Hz mission, :data:`MISSION_FILE`; a
         study of the resampled lives passes one of :data:`LIFE_FILES`).
-    :raises InputError: none found, or the folder lacks ``needs``. The message says where it
-        looked and how to point at the data from a notebook, a shell or the CLI.
+    :raises InputError: none found, or the folder lacks ``needs``. The message says how to get the data
+        (``uam-studio data``) and point at it from a notebook, a shell or the CLI.
     """
     text = str(path) if path is not None else os.environ.get(DATA_ENV, "")
-    if not text and (BESIDE_CHECKOUT / needs).is_file():
+    if not text and (_CHECKOUT / "pyproject.toml").is_file() and (BESIDE_CHECKOUT / needs).is_file():
         text = str(BESIDE_CHECKOUT)
+    if not text and (SAMPLE / needs).is_file():
+        text = str(SAMPLE)
     if not text:
-        raise InputError("data", f"no dataset folder: the CMU eVTOL dataset (DOI {DATASET_DOI}) is not at "
-                         f"${DATA_ENV} nor at {BESIDE_CHECKOUT}; point at it with "
+        raise InputError("data", f"no dataset folder holds {needs}: the bundled sample has only "
+                         f"{', '.join(sorted(p.name for p in SAMPLE.glob('VAH*')))}; get the CMU eVTOL dataset (DOI "
+                         f"{DATASET_DOI}, see `uam-studio data`) and point at it with "
                          f"os.environ['{DATA_ENV}'] = '/path/to/cmu_evtol' in a notebook's first cell, "
                          f"export {DATA_ENV}=/path/to/cmu_evtol in a shell, or --data PATH on the command line")
     folder = Path(text).expanduser()
@@ -269,6 +277,11 @@ class MissionLog:
 
     def phase_mask(self, *codes: int) -> np.ndarray:
         return np.isin(self.log.segment, codes)
+
+
+def sample_note(folder: str | os.PathLike) -> str | None:
+    """:data:`SAMPLE_NOTE` if ``folder`` is the bundled sample, else None."""
+    return SAMPLE_NOTE if Path(folder).resolve() == SAMPLE.resolve() else None
 
 
 def mission_cycle(log: CellLog) -> MissionLog:

@@ -4,7 +4,8 @@ progpy's default model. The Battery lab and notebook 12 draw this; nothing here 
 
 - :func:`replay_discharge`: a :class:`NasaReplay` of one discharge of a cell.
 - :func:`model_for`: the model a cell is replayed with: for one of the bundled model's training cells, a
-  model fitted without it (leave one cell out; cached), else the bundled one.
+  model fitted without it (leave one cell out; cached) where the folder holds the other training cells,
+  else the bundled one (labelled in-sample for a cell it read, as the bundled sample's B0005 is).
 """
 
 from __future__ import annotations
@@ -30,7 +31,8 @@ class NasaReplay:
     """One discharge replayed. Times are s from the first loaded sample; ``time_s``/``voltage_v``/
     ``current_a`` are the measurement (whole: for showing what happened, never read by the prediction),
     ``progpy_time_s``/``progpy_voltage_v`` progpy's default cell along the same current. ``fit`` says which
-    model predicted ('loco': fitted without this cell; 'bundled': the bundled one, which never read it)."""
+    model predicted ('loco': fitted without this cell; 'bundled': the bundled one, which never read it;
+    'in-sample': the bundled one, which read it)."""
 
     cell: str
     discharge: int
@@ -65,20 +67,26 @@ class NasaReplay:
 
 
 @functools.lru_cache(maxsize=8)
-def _loco(folder: str, name: str, context_s: float, cutoff_v: float) -> NasaEodModel:
+def _loco(folder: str, name: str, context_s: float, cutoff_v: float) -> NasaEodModel | None:
+    """A model fitted on the other training cells of ``folder``; None where it holds fewer than half of them
+    (the bundled sample: one cell)."""
     bundled = bundled_model(context_s, cutoff_v)
     others = [c for c in load_nasa_folder(folder, None, cutoff_v) if c.name in bundled.trained_on and c.name != name]
+    if len(others) < len(bundled.trained_on) / 2:
+        return None
     return fit_nasa_model(others, context_s, cutoff_v)
 
 
 def model_for(cell: NasaCell, context_s: float = 300.0) -> tuple[NasaEodModel, str]:
-    """(model, 'loco' or 'bundled'): a model that never read ``cell``. For one of the bundled model's
-    training cells, refitted on the other training cells in the same folder (cached per folder, cell and
-    setting)."""
+    """(model, 'loco', 'bundled' or 'in-sample'): a model that never read ``cell`` where there is one. For
+    one of the bundled model's training cells, refitted on the other training cells in the same folder
+    (cached per folder, cell and setting); where the folder holds fewer than half of them (the bundled
+    sample), the bundled model, which read this cell: 'in-sample'."""
     bundled = bundled_model(context_s, cell.cutoff_v)
     if cell.name not in bundled.trained_on:
         return bundled, "bundled"
-    return _loco(str(Path(cell.path).parent), cell.name, float(context_s), float(cell.cutoff_v)), "loco"
+    loco = _loco(str(Path(cell.path).parent), cell.name, float(context_s), float(cell.cutoff_v))
+    return (bundled, "in-sample") if loco is None else (loco, "loco")
 
 
 def replay_discharge(cell: NasaCell | str | Path, position: int, context_s: float = 300.0,
