@@ -46,6 +46,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from uam_studio.battery.real.nasa_data import LOADED_A, NasaDischarge, RunConditions, same_conditions
+from uam_studio.battery.real.nasa_known import (
+    HORIZON_S,
+    KnownDischarge,
+    charge_to_cutoff_ah,
+    known_before,
+    planned_load,
+    time_for_charge_s,
+)
 
 __all__ = ["CAP_AH", "CAP_RATIO", "EARLY_ERRORS", "HORIZON_S", "OWN_ERROR_WINDOW", "RISKS", "UNSEEN_WIDEN",
            "CellBelief", "EodPrediction", "KnownDischarge", "NasaEodModel", "ambient_band", "charge_to_cutoff_ah",
@@ -63,7 +71,6 @@ N0_BIAS = 10.0  # weight (discharges) of zero bias against the cell's own mean e
 SCALE_WINDOW = 20  # the cell's own scale reads its latest this many errors
 EARLY_ERRORS = 5  # until a cell has this many errors of its own, its prior scale is at least the 'early' one
 OWN_ERROR_WINDOW = 10  # discharges: a method's running bias on a cell is the median of this many last errors
-HORIZON_S = 12000.0  # s: how far a planned load is continued (the NASA runs end before 7000 s)
 CAP_AH = 2.2  # Ah: no interval reaches past the time the planned load delivers this (the cells are rated 2 Ah;
 # the most any of the 26 lives delivers to 3.0 V is 1.86 Ah)
 CAP_RATIO = 3.0  # and none reaches past this many times its own median
@@ -80,58 +87,6 @@ def ambient_band(ambient_c: float) -> str:
     if ambient_c < BAND_EDGES_C[0]:
         return "cold"
     return "hot" if ambient_c > BAND_EDGES_C[1] else "room"
-
-
-@dataclass(frozen=True)
-class KnownDischarge:
-    """What an operator knows of a discharge at the prediction instant: its samples (time s from the
-    discharge's start, current A with + = discharge, voltage V) up to ``context_s`` after the first loaded
-    sample and nothing later, its ambient (C) and the rest before it (``rest_s``, s; NaN where unknown).
-    The load it will go on drawing is :func:`planned_load`: the context's load continued."""
-
-    cell: str
-    index: int
-    uid: int
-    ambient_c: float
-    time_s: np.ndarray
-    current_a: np.ndarray
-    load_start: int
-    context_s: float
-    voltage_v: np.ndarray
-    rest_s: float = math.nan
-
-    @property
-    def load_time_s(self) -> float:
-        """Time (s from the discharge's start) of the first loaded sample."""
-        return float(self.time_s[self.load_start])
-
-    def mean_load_a(self) -> float:
-        """Mean current (A) over the context's samples under load."""
-        on = self.current_a > LOADED_A
-        return float(self.current_a[on].mean()) if on.any() else 0.0
-
-
-def known_before(d: NasaDischarge, context_s: float) -> KnownDischarge:
-    """The view of ``d`` an operator has ``context_s`` (s) after its first loaded sample: its samples
-    (times, current, voltage) up to there, copied; nothing of the record after it."""
-    end = int(np.searchsorted(d.time_s, d.load_time_s + context_s, side="right"))
-    return KnownDischarge(d.cell, d.index, d.uid, d.ambient_c, d.time_s[:end].copy(), d.current_a[:end].copy(),
-                          d.load_start, float(context_s), d.voltage_v[:end].copy(), float(d.rest_s))
-
-
-def planned_load(known: KnownDischarge, start: int, horizon_s: float = HORIZON_S) -> tuple[np.ndarray, np.ndarray]:
-    """The load ``known`` will draw as its operator plans it: sample times (s from the discharge's start)
-    and currents (A) from sample ``start``: the context's samples, then its last two samples repeated at the
-    context's median loaded step (a constant load goes on; the square wave, whose samples alternate on and
-    off, keeps its phase) up to ``horizon_s`` s after sample ``start``. It reads nothing after the context,
-    so it never knows when the record ends."""
-    t, i = known.time_s, known.current_a
-    last = t.size - 1
-    loaded = t[known.load_start:]
-    step = float(np.median(np.diff(loaded))) if loaded.size > 1 else 10.0
-    m = np.arange(1, max(int((t[start] + horizon_s - t[last]) / step), 0) + 2)
-    pattern = i[[max(last - 1, known.load_start), last]]
-    return np.r_[t[start:], t[last] + m * step], np.r_[i[start:], pattern[(m + 1) % 2]]
 
 
 def own_error_factor(past: Iterable[tuple[RunConditions, float | None]], target: RunConditions,
@@ -167,33 +122,6 @@ def voltage_shift_v(known: KnownDischarge, prev: NasaDischarge) -> float:
             continue
         diffs.append(v[at] - np.interp(tau[at], ptau[near], pv[near]))
     return float(np.mean(np.concatenate(diffs))) if diffs else 0.0
-
-
-def charge_ah(time_s: np.ndarray, current_a: np.ndarray, start: int) -> np.ndarray:
-    """Cumulative charge (Ah) delivered from sample ``start`` at each later sample (trapezoids)."""
-    t, i = time_s[start:], np.clip(current_a[start:], 0.0, None)
-    return np.r_[0.0, np.cumsum(0.5 * (i[1:] + i[:-1]) * np.diff(t))] / 3600.0
-
-
-def charge_to_cutoff_ah(d: NasaDischarge, cutoff_v: float) -> float | None:
-    """The charge (Ah) ``d`` delivered from its first loaded sample to its first sample below ``cutoff_v``
-    (V); None if it never got there."""
-    t = d.time_to_cutoff_s(cutoff_v)
-    if t is None:
-        return None
-    return float(np.interp(t, d.time_s[d.load_start:] - d.load_time_s, charge_ah(d.time_s, d.current_a, d.load_start)))
-
-
-def time_for_charge_s(known: KnownDischarge, target_ah: float) -> float:
-    """Time (s from the first loaded sample) at which :func:`planned_load` has delivered ``target_ah``
-    (Ah); past its horizon, its mean current carries on."""
-    t, i = planned_load(known, known.load_start)
-    q = charge_ah(t, i, 0)
-    t = t - t[0]
-    if target_ah <= q[-1]:
-        return float(np.interp(target_ah, q, t))
-    rate = max(q[-1] * 3600.0 / max(t[-1], 1.0), LOADED_A)
-    return float(t[-1] + (target_ah - q[-1]) * 3600.0 / rate)
 
 
 def rest_feature(rest_s: float) -> float:
