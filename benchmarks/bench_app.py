@@ -7,6 +7,7 @@ training session beside a planning one.
     python benchmarks/bench_app.py lab          # browser: Battery lab slider key -> its table redrawn
     python benchmarks/bench_app.py concurrency  # browser: two sessions, one retraining, the other replanning
     python benchmarks/bench_app.py flytick      # the Fly tab's playback tick, in process (server side)
+    python benchmarks/bench_app.py steps        # browser: 40 slider steps of the Planner against a bare Panel page
     python benchmarks/bench_app.py all --append benchmarks/RESULTS.md
 
 latency: the 8-destination single-charge mission below, the Planner's state and views built on a
@@ -324,6 +325,102 @@ def _replan_times(page, k: int, pause_s: float = 0.0) -> tuple[list[float], list
     return in_page, polled
 
 
+_CHANGED_JS = """([el, old]) => {
+  // The page's own clock: from the key's keydown to the first frame painted after the summary shows a
+  // finished result (data-busy false) for inputs other than ``old``.
+  const root = el.getRootNode();
+  window.__uamKey = null; window.__uamPainted = null;
+  document.addEventListener('keydown', () => { if (window.__uamKey === null) window.__uamKey = performance.now(); },
+                            {capture: true, once: true});
+  const check = () => {
+    const s = root.querySelector(".uam-plan-summary[data-busy='false']");
+    if (!s || s.getAttribute('data-inputs') === old) return;
+    obs.disconnect();
+    requestAnimationFrame(() => setTimeout(() => { window.__uamPainted = performance.now(); }, 0));
+  };
+  const obs = new MutationObserver(check);
+  obs.observe(root, {subtree: true, childList: true, attributes: true, characterData: true});
+}"""
+
+
+def _slider_steps(page, label: str, pattern: list[str]) -> list[float]:
+    """Press each key of ``pattern`` on the slider labelled ``label`` and time (s, the page's clock) until
+    the summary shows a finished result for the new input."""
+    handle = page.locator(".bk-input-group", has=page.get_by_text(label, exact=True)).locator(".noUi-handle")
+    out = []
+    for key in pattern:
+        summary = page.locator(".uam-plan-summary")
+        old = summary.get_attribute("data-inputs")
+        page.evaluate(_CHANGED_JS, [summary.element_handle(), old])
+        handle.focus()
+        handle.press(key)
+        page.wait_for_function("() => window.__uamPainted !== null", timeout=120_000)
+        out.append(page.evaluate("() => (window.__uamPainted - window.__uamKey) / 1000"))
+    return out
+
+
+def _serve_bare(port: int):
+    """The bare page (benchmarks/bare_page.py) served by ``panel serve`` in a subprocess."""
+    import subprocess
+    import sys
+    import urllib.request
+
+    script = Path(__file__).with_name("bare_page.py")
+    proc = subprocess.Popen([sys.executable, "-m", "panel", "serve", str(script), "--port", str(port),
+                             "--allow-websocket-origin", f"127.0.0.1:{port}"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    url = f"http://127.0.0.1:{port}/bare_page"
+    for _ in range(300):
+        try:
+            urllib.request.urlopen(url, timeout=2).read()
+            return proc, url
+        except OSError:
+            time.sleep(0.2)
+    proc.kill()
+    raise RuntimeError("the bare page did not start")
+
+
+def bench_steps(per_slider: int) -> list[str]:
+    """Slider steps in the browser: the app's Planner (q_max, R0, EOD, wind home; half the steps one way, then
+    back: new values first, then values seen) against a bare Panel page of the same shape, in the same run.
+    The first step after each page opens is included."""
+    from playwright.sync_api import sync_playwright
+
+    half = max(per_slider // 2, 1)
+    pattern = ["ArrowRight"] * half + ["ArrowLeft"] * half
+    sliders = ("q_max (C)", "R0 (ohm)", "EOD cut-off (V)", "Wind home (kt, - = tail)")
+    lines = [f"steps (browser, key -> finished result painted; {len(pattern)} per slider): load average {_load()}"]
+    proc, bare_url = _serve_bare(5899)
+    try:
+        with Served() as srv, sync_playwright() as p:
+            browser = _browser(p)
+            page = browser.new_page(viewport={"width": 1366, "height": 768})
+            page.goto(bare_url)
+            page.locator(".uam-plan-summary").wait_for(timeout=60_000)
+            bare = [t for _ in sliders for t in _slider_steps(page, "R0 (ohm)", pattern)]
+            page = browser.new_page(viewport={"width": 1366, "height": 768})
+            page.goto(srv.url)
+            _first_plan(page)
+            app: dict[str, list[float]] = {name: _slider_steps(page, name, pattern) for name in sliders}
+            browser.close()
+    finally:
+        proc.kill()
+    every = [t for ts in app.values() for t in ts]
+
+    def q(x: list[float], p: float) -> float:
+        return float(np.percentile(np.array(x) * 1000.0, p))
+
+    lines.append(f"  bare page: p50 {q(bare, 50):.0f} ms, p95 {q(bare, 95):.0f} ms, max {max(bare) * 1000:.0f} ms "
+                 f"(n={len(bare)})")
+    for name, ts in app.items():
+        lines.append(f"  app, {name}: p50 {q(ts, 50):.0f} ms, p95 {q(ts, 95):.0f} ms, max {max(ts) * 1000:.0f} ms; "
+                     f"each: {', '.join(f'{t * 1000:.0f}' for t in ts)}")
+    lines.append(f"  app, all {len(every)}: p50 {q(every, 50):.0f} ms, p95 {q(every, 95):.0f} ms, max "
+                 f"{max(every) * 1000:.0f} ms; p95 / bare p95 {q(every, 95) / q(bare, 95):.2f} (goal <= 2), max / "
+                 f"bare max {max(every) / max(bare):.2f} (goal <= 3)")
+    return lines
+
+
 def bench_concurrency(k: int, steps: int, runner: str) -> list[str]:
     from playwright.sync_api import sync_playwright
 
@@ -400,7 +497,7 @@ def bench_flytick(n: int) -> list[str]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=["latency", "pageload", "replan", "lab", "concurrency", "flytick", "all"],
+    ap.add_argument("what", choices=["latency", "pageload", "replan", "lab", "concurrency", "flytick", "steps", "all"],
                     nargs="?", default="all")
     ap.add_argument("--n", type=int, default=40, help="slider changes per policy (latency)")
     ap.add_argument("--n-oracle", type=int, default=8, help="slider changes for the oracle (seconds each)")
@@ -418,6 +515,8 @@ def main() -> None:
     compares = args.compare.split(",")
     if args.what in ("latency", "all"):
         lines += bench_latency(args.n, args.n_oracle, compares)
+    if args.what in ("steps", "all"):
+        lines += bench_steps(10)
     if args.what in ("pageload", "all"):
         lines += bench_pageload(args.loads, compares)
     if args.what in ("replan", "all"):

@@ -57,11 +57,11 @@ def test_bad_temperature_and_fraction_name_the_field():
 
 @pytest.fixture(scope="module")
 def lives():
-    from uam_studio.battery.real.cmu_data import data_folder
+    from uam_studio.battery.real.cmu_data import LIFE_FILES, data_folder
     from uam_studio.fleet import life_points
 
     try:
-        data_folder()
+        data_folder(needs=LIFE_FILES[0])  # the four lives, not the sample's one
     except InputError as err:
         pytest.skip(f"the CMU eVTOL dataset is not found ($UAM_STUDIO_CMU_DATA): {err}")
     return life_points()
