@@ -325,16 +325,17 @@ def _replan_times(page, k: int, pause_s: float = 0.0) -> tuple[list[float], list
     return in_page, polled
 
 
-_CHANGED_JS = """([el, old]) => {
-  // The page's own clock: from the key's keydown to the first frame painted after the summary shows a
-  // finished result (data-busy false) for inputs other than ``old``.
+_CHANGED_JS = """([el, old, evt, last, want]) => {
+  // The page's own clock: from the action (the first ``evt``, or with ``last`` the latest one) to the first
+  // frame painted after the summary shows a finished result (data-busy false) for inputs other than ``old``
+  // (and, with ``want``, holding that text).
   const root = el.getRootNode();
   window.__uamKey = null; window.__uamPainted = null;
-  document.addEventListener('keydown', () => { if (window.__uamKey === null) window.__uamKey = performance.now(); },
-                            {capture: true, once: true});
+  document.addEventListener(evt, () => { if (last || window.__uamKey === null) window.__uamKey = performance.now(); },
+                            {capture: true, once: !last});
   const check = () => {
     const s = root.querySelector(".uam-plan-summary[data-busy='false']");
-    if (!s || s.getAttribute('data-inputs') === old) return;
+    if (!s || s.getAttribute('data-inputs') === old || (want && !s.getAttribute('data-inputs').includes(want))) return;
     obs.disconnect();
     requestAnimationFrame(() => setTimeout(() => { window.__uamPainted = performance.now(); }, 0));
   };
@@ -343,20 +344,73 @@ _CHANGED_JS = """([el, old]) => {
 }"""
 
 
+def _watch(page, evt: str = "keydown", last: bool = False, want: str = "") -> None:
+    summary = page.locator(".uam-plan-summary")
+    page.evaluate(_CHANGED_JS, [summary.element_handle(), summary.get_attribute("data-inputs"), evt, last, want])
+
+
+def _watched(page) -> float:
+    page.wait_for_function("() => window.__uamPainted !== null", timeout=120_000)
+    return float(page.evaluate("() => (window.__uamPainted - window.__uamKey) / 1000"))
+
+
 def _slider_steps(page, label: str, pattern: list[str]) -> list[float]:
     """Press each key of ``pattern`` on the slider labelled ``label`` and time (s, the page's clock) until
     the summary shows a finished result for the new input."""
-    handle = page.locator(".bk-input-group", has=page.get_by_text(label, exact=True)).locator(".noUi-handle")
+    handle = page.locator(".bk-input-group", has=page.get_by_text(label)).locator(".noUi-handle").first
     out = []
     for key in pattern:
-        summary = page.locator(".uam-plan-summary")
-        old = summary.get_attribute("data-inputs")
-        page.evaluate(_CHANGED_JS, [summary.element_handle(), old])
+        _watch(page)
         handle.focus()
         handle.press(key)
-        page.wait_for_function("() => window.__uamPainted !== null", timeout=120_000)
-        out.append(page.evaluate("() => (window.__uamPainted - window.__uamKey) / 1000"))
+        out.append(_watched(page))
     return out
+
+
+_MAP_FRAME_JS = """(title) => {
+  for (const v of window.Bokeh.index.all_views()) {
+    const m = v.model;
+    if ((m.type === 'Figure' || m.type === 'Plot') && m.title && m.title.text.startsWith(title)) {
+      v.el.scrollIntoView({block: 'center'});  // a table edit may have scrolled it away
+      const f = v.frame.bbox, r = v.el.getBoundingClientRect();
+      return {left: r.left + f.left, top: r.top + f.top, width: f.width, height: f.height,
+              x0: m.x_range.start, x1: m.x_range.end, y0: m.y_range.start, y1: m.y_range.end};
+    }
+  }
+  return null;
+}"""
+
+
+def _edits(page, n: int) -> tuple[list[float], list[float], list[float]]:
+    """(map clicks, wind edits of the destination each click added, quick drags) times (s): a click on an
+    empty point of the map adds a destination; its wind cell is set (number editor, Enter); a quick drag is
+    10 q_max key presses without waiting, timed from the last one to the plan of the last value."""
+    clicks, winds, drags = [], [], []
+    for k in range(n):
+        fr = page.evaluate(_MAP_FRAME_JS, "Map")
+        x = fr["left"] + (-70 - fr["x0"]) / (fr["x1"] - fr["x0"]) * fr["width"]  # a column of the map's west
+        y = fr["top"] + (fr["y1"] - (-60 + 30 * k)) / (fr["y1"] - fr["y0"]) * fr["height"]  # with no place on it
+        _watch(page, "pointerdown")
+        page.mouse.click(x, y)
+        clicks.append(_watched(page))
+        name = f"D{k + 1}"
+        row = page.locator(".tabulator-row", has=page.locator('.tabulator-cell[tabulator-field="name"]',
+                                                               has_text=name))
+        row.locator('.tabulator-cell[tabulator-field="wind_kts"]').click()
+        editing = page.locator(".tabulator-cell.tabulator-editing input")
+        editing.fill(str(-5 - k))
+        _watch(page, want=f"|{name}:")
+        editing.press("Enter")
+        winds.append(_watched(page))
+    handle = page.locator(".bk-input-group", has=page.get_by_text("q_max (C)")).locator(".noUi-handle").first
+    for _ in range(n):
+        q = float(page.locator(".uam-plan-summary").get_attribute("data-inputs").split(";q_max=")[1].split(";")[0])
+        _watch(page, last=True, want=f";q_max={q - 500:g};")
+        handle.focus()
+        for _ in range(10):
+            handle.press("ArrowLeft")
+        drags.append(_watched(page))
+    return clicks, winds, drags
 
 
 def _serve_bare(port: int):
@@ -380,7 +434,7 @@ def _serve_bare(port: int):
     raise RuntimeError("the bare page did not start")
 
 
-def bench_steps(per_slider: int) -> list[str]:
+def bench_steps(per_slider: int, compare: str | None = None) -> list[str]:
     """Slider steps in the browser: the app's Planner (q_max, R0, EOD, wind home; half the steps one way, then
     back: new values first, then values seen) against a bare Panel page of the same shape, in the same run.
     The first step after each page opens is included."""
@@ -389,10 +443,11 @@ def bench_steps(per_slider: int) -> list[str]:
     half = max(per_slider // 2, 1)
     pattern = ["ArrowRight"] * half + ["ArrowLeft"] * half
     sliders = ("q_max (C)", "R0 (ohm)", "EOD cut-off (V)", "Wind home (kt, - = tail)")
-    lines = [f"steps (browser, key -> finished result painted; {len(pattern)} per slider): load average {_load()}"]
+    lines = [f"steps (browser, key -> finished result painted; {len(pattern)} per slider; comparison "
+             f"{compare or 'default'}): load average {_load()}"]
     proc, bare_url = _serve_bare(5899)
     try:
-        with Served() as srv, sync_playwright() as p:
+        with Served(**({"UAM_STUDIO_COMPARE": compare} if compare else {})) as srv, sync_playwright() as p:
             browser = _browser(p)
             page = browser.new_page(viewport={"width": 1366, "height": 768})
             page.goto(bare_url)
@@ -402,6 +457,7 @@ def bench_steps(per_slider: int) -> list[str]:
             page.goto(srv.url)
             _first_plan(page)
             app: dict[str, list[float]] = {name: _slider_steps(page, name, pattern) for name in sliders}
+            clicks, winds, drags = _edits(page, 5)
             browser.close()
     finally:
         proc.kill()
@@ -418,6 +474,12 @@ def bench_steps(per_slider: int) -> list[str]:
     lines.append(f"  app, all {len(every)}: p50 {q(every, 50):.0f} ms, p95 {q(every, 95):.0f} ms, max "
                  f"{max(every) * 1000:.0f} ms; p95 / bare p95 {q(every, 95) / q(bare, 95):.2f} (goal <= 2), max / "
                  f"bare max {max(every) / max(bare):.2f} (goal <= 3)")
+    for name, ts in (("map click (a destination added)", clicks), ("table edit (its wind)", winds)):
+        lines.append(f"  app, {name}: p50 {q(ts, 50):.0f} ms, p95 {q(ts, 95):.0f} ms, max {max(ts) * 1000:.0f} ms; "
+                     f"p95 / bare p95 {q(ts, 95) / q(bare, 95):.2f} (goal <= 3)")
+    lines.append(f"  app, quick drag of 10 q_max steps, last key -> last value's plan: "
+                 f"{', '.join(f'{t * 1000:.0f}' for t in drags)} ms; max / bare p95 "
+                 f"{max(drags) * 1000 / q(bare, 95):.2f} (goal <= 3)")
     return lines
 
 
@@ -515,7 +577,10 @@ def main() -> None:
     compares = args.compare.split(",")
     if args.what in ("latency", "all"):
         lines += bench_latency(args.n, args.n_oracle, compares)
-    if args.what in ("steps", "all"):
+    if args.what == "steps":
+        for compare in (None, *compares):
+            lines += bench_steps(10, compare)
+    elif args.what == "all":
         lines += bench_steps(10)
     if args.what in ("pageload", "all"):
         lines += bench_pageload(args.loads, compares)

@@ -486,3 +486,23 @@ def test_the_glossary_defines_what_the_app_shows_and_is_a_tab():
     build = dict(TABS)["Glossary"]
     pane = build(None)
     assert pane.object.count("**") == 2 * len(GLOSSARY) and glossary_markdown() in pane.object
+
+
+def test_the_busy_mark_changes_its_content_only_never_the_layout():
+    """Showing "planning..." beside "Plan" must not make the browser lay the page out again: the mark is a
+    fixed-size pane whose visibility and size never change, only its content (a visibility change cost about
+    300 ms a slider step in chromium; ``bench_app.py steps``)."""
+    from uam_studio.app.planner.view import BUSY_WIDTH_PX
+
+    state = PlannerState()
+    view = PlannerView(state)
+    mark = view.busy
+    fixed = (mark.visible, mark.width, mark.height)
+    assert "planning..." not in mark.object and "data-busy='false'" in mark.object
+    state.busy = True
+    view._show_busy()
+    assert "planning..." in mark.object and "data-busy='true'" in mark.object
+    assert "data-busy='true'" in view.summary.object
+    state.busy = False
+    assert "planning..." not in mark.object and "data-busy='false'" in view.summary.object
+    assert (mark.visible, mark.width, mark.height) == fixed == (True, BUSY_WIDTH_PX, 22)
