@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import csv
 import datetime
+import functools
 import gzip
 import io
 import math
@@ -150,16 +151,24 @@ def _start_times(path: Path, name: str) -> dict[int, float]:
     """Start time (s since 1970, UTC taken as the lab's clock) of each of cell ``name``'s runs, by index,
     from the ``discharges.csv`` beside ``path``; empty where there is none or it cannot be read."""
     table = path.parent / "discharges.csv"
-    out: dict[int, float] = {}
+    try:
+        stamp = table.stat().st_mtime_ns
+    except OSError:
+        return {}
+    return _start_table(str(table), stamp).get(name, {})
+
+
+@functools.lru_cache(maxsize=4)
+def _start_table(table: str, stamp: int) -> dict[str, dict[int, float]]:
+    """Every cell's start times in ``table`` (read once per file version ``stamp``)."""
+    out: dict[str, dict[int, float]] = {}
     try:
         with open(table, newline="") as fh:
             for row in csv.DictReader(fh):
-                if row.get("battery_id") != name:
-                    continue
                 v = [float(x) for x in row["start_time"].strip("[] ").split()]
                 whole = datetime.datetime(int(v[0]), int(v[1]), int(v[2]), int(v[3]), int(v[4]),
                                           tzinfo=datetime.timezone.utc)
-                out[int(row["discharge"])] = whole.timestamp() + v[5]
+                out.setdefault(row["battery_id"], {})[int(row["discharge"])] = whole.timestamp() + v[5]
     except (OSError, KeyError, ValueError, IndexError, TypeError):
         return {}
     return out
