@@ -413,6 +413,36 @@ def _edits(page, n: int) -> tuple[list[float], list[float], list[float]]:
     return clicks, winds, drags
 
 
+_FLY_CHANGES_JS = """() => { for (const v of window.Bokeh.index.all_views()) { const m = v.model;
+    if (m.type !== 'Figure' || !m.title || !m.title.text.startsWith('voltage: measured')) continue;
+    for (const r of m.renderers) if (r.glyph && r.glyph.type === 'Text' && r.data_source.data.text)
+      return r.data_source.data.text.length; }
+  return 0; }"""
+
+
+def _fly_controls(page, n: int) -> dict[str, list[float]]:
+    """The Fly tab's controls, each timed (s, Python's clock around playwright's raf polling) until the page
+    shows its result: 'Fly the mission' until the status says "flying:", 'Inject wind change now' until the
+    change is marked on the voltage figure, 'Clear wind changes' until it is gone."""
+    out: dict[str, list[float]] = {"fly (until 'flying:')": [], "inject a wind change": [], "clear it": []}
+    page.locator(".bk-tab", has_text="Fly").click()
+    status = page.locator(".uam-fly-status")
+    for _ in range(n):
+        t0 = time.perf_counter()
+        page.locator("button", has_text="Fly the mission").click()
+        status.get_by_text("flying:").wait_for(timeout=120_000)
+        out["fly (until 'flying:')"].append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        page.locator("button", has_text="Inject wind change now").click()
+        page.wait_for_function(f"() => ({_FLY_CHANGES_JS})() === 1", polling="raf", timeout=120_000)
+        out["inject a wind change"].append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        page.locator("button", has_text="Clear wind changes").click()
+        page.wait_for_function(f"() => ({_FLY_CHANGES_JS})() === 0", polling="raf", timeout=120_000)
+        out["clear it"].append(time.perf_counter() - t0)
+    return out
+
+
 def _serve_bare(port: int):
     """The bare page (benchmarks/bare_page.py) served by ``panel serve`` in a subprocess."""
     import subprocess
@@ -458,6 +488,9 @@ def bench_steps(per_slider: int, compare: str | None = None) -> list[str]:
             _first_plan(page)
             app: dict[str, list[float]] = {name: _slider_steps(page, name, pattern) for name in sliders}
             clicks, winds, drags = _edits(page, 5)
+            page.locator("button", has_text="Reset to the example").click()  # the Fly tab flies the example
+            page.locator(".uam-plan-summary[data-busy='false']:not([data-inputs*='|D1:'])").wait_for(timeout=120_000)
+            fly = _fly_controls(page, 4)
             browser.close()
     finally:
         proc.kill()
@@ -480,6 +513,9 @@ def bench_steps(per_slider: int, compare: str | None = None) -> list[str]:
     lines.append(f"  app, quick drag of 10 q_max steps, last key -> last value's plan: "
                  f"{', '.join(f'{t * 1000:.0f}' for t in drags)} ms; max / bare p95 "
                  f"{max(drags) * 1000 / q(bare, 95):.2f} (goal <= 3)")
+    for name, ts in fly.items():
+        lines.append(f"  app, Fly tab, {name}: {', '.join(f'{t * 1000:.0f}' for t in ts)} ms (click -> shown, "
+                     "playwright's clock; no goal)")
     return lines
 
 
