@@ -175,3 +175,11 @@ def test_the_samples_cell_is_the_shared_folders_cell():
             assert (sample / n).read_bytes() == (full / n).read_bytes(), n
     rows = [r for r in (shared / "nasa_pcoe" / "discharges.csv").read_text().splitlines() if r.startswith("B0005,")]
     assert (nasa_data.SAMPLE / "discharges.csv").read_text().splitlines()[1:] == rows
+
+
+def test_evaluate_real_runs_on_the_sample_with_the_lives_it_has(new_user, capsys):
+    assert main(["evaluate", "real", "--quick"]) == 0
+    cap = capsys.readouterr()
+    assert cap.err.strip() == f"note: {cmu_data.SAMPLE_NOTE}"
+    rows = [line for line in cap.out.splitlines() if line.startswith("VAH")]
+    assert [r.split()[0] for r in rows] == ["VAH27"], rows  # the capacity rows of the one life the sample has

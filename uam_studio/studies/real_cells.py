@@ -178,9 +178,12 @@ def dynaformer_rows(mission: MissionLog, cell: str = "nasa18650") -> list[dict]:
 
 
 def capacity_rows(folder: Path, cell: Cell) -> list[dict]:
-    """q_max fitted to each C/5 reference discharge above 3.4 V, its capacity to 2.5 V against the data's."""
+    """q_max fitted to each C/5 reference discharge above 3.4 V, its capacity to 2.5 V against the data's, over
+    the lives of :data:`LIFE_FILES` that ``folder`` holds (the bundled sample: VAH27 only)."""
     rows = []
     for name in LIFE_FILES:
+        if not (folder / name).is_file():
+            continue
         log = load_cell_log(folder / name)
         params = cell.params
         for k, ref in enumerate(reference_discharges(log)):
