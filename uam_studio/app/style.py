@@ -37,6 +37,29 @@ def heading(text: str, **params: Any) -> pn.pane.HTML:
     return pn.pane.HTML(f"<div style='font-size:15px;font-weight:600'>{html.escape(text)}</div>", **params)
 
 
+BUSY_HEIGHT_PX = 22
+BUSY_CSS = """
+.uam-busy { display: flex; align-items: center; gap: 6px; font-size: 12px; color: #555; height: 22px; }
+.uam-busy-ring { width: 14px; height: 14px; border: 2px solid #c8d3e0; border-top-color: #1f4e79;
+                 border-radius: 50%; animation: uam-spin 0.8s linear infinite; }
+@keyframes uam-spin { to { transform: rotate(360deg); } }
+"""
+
+
+def busy_html(busy: bool, label: str = "planning...") -> str:
+    """A busy mark's content: a turning ring and ``label`` while busy, else empty (``data-busy`` says which)."""
+    body = f"<span class='uam-busy-ring'></span>{html.escape(label)}" if busy else ""
+    return f"<div class='uam-busy' data-busy='{str(busy).lower()}'>{body}</div>"
+
+
+def busy_mark(busy: bool, width_px: int, label: str = "planning...") -> pn.pane.HTML:
+    """A fixed-size pane for :func:`busy_html`: showing or hiding the mark changes its content only, never its
+    size or visibility, so the browser does not lay the page out again (a spinner made visible and hidden
+    cost about 300 ms a step on a 2-core laptop; ``bench_app.py steps``)."""
+    return pn.pane.HTML(busy_html(busy, label), width=width_px, height=BUSY_HEIGHT_PX, margin=(0, 5),
+                        stylesheets=[BUSY_CSS])
+
+
 def intro(text: str) -> pn.pane.Markdown:
     """A tab's introduction: Markdown at one size across the tabs, the tab's whole width."""
     return pn.pane.Markdown(text, sizing_mode="stretch_width", styles={"font-size": "13px"})

@@ -26,6 +26,8 @@ from uam_studio.app.style import (
     NAME_OFFSET_PX,
     PHYSICS_COLOR,
     PREDICTED_COLOR,
+    busy_html,
+    busy_mark,
     derived_looks,
     legend_above,
     page_figure,
@@ -96,7 +98,7 @@ class FlyView(pn.viewable.Viewer):
         self.clock = pn.widgets.FloatSlider(name="Playback time (s)", start=0, end=1, value=0, width=w)
         self.status = pn.pane.Markdown("", css_classes=["uam-fly-status"], sizing_mode="stretch_width")
         self.error = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width")
-        self.progress = pn.indicators.LoadingSpinner(value=False, size=24, name="flying...", visible=False)
+        self.progress = busy_mark(bool(s.running), 110, "flying...")  # its content alone changes: no new layout
         self.log = pn.widgets.Tabulator(pd.DataFrame(columns=["t (s)", "at", "belief from", "q_max (C)", "R0 (ohm)",
                                                               "fit flags", "leg wind vs forecast (kt)",
                                                               "common shift (kt)",
@@ -129,7 +131,7 @@ class FlyView(pn.viewable.Viewer):
         s.param.watch(self._on_record, "record")
         s.param.watch(self._on_time, "t_s")
         s.param.watch(lambda e: setattr(self.play, "value", e.new), "playing")
-        s.param.watch(lambda e: self.progress.param.update(value=e.new, visible=e.new), "running")
+        s.param.watch(lambda e: setattr(self.progress, "object", busy_html(bool(e.new), "flying...")), "running")
         s.param.watch(self._on_text, ["status", "error"])
         self._callback: pn.io.PeriodicCallback | None = None
         self._layout = pn.Row(

@@ -31,7 +31,7 @@ from uam_studio.app.session import (
     respond_at_once,
     session_dispatcher,
 )
-from uam_studio.app.style import NOTE_STYLE, heading
+from uam_studio.app.style import NOTE_STYLE, busy_html, busy_mark, heading
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.missions.mission import COORD_RANGE_KM, SCENARIOS
 from uam_studio.planning.planner import plan_csv  # its module: mypy reads uam_studio.planning's lazy names as object
@@ -74,18 +74,6 @@ def _same_frame(a: pd.DataFrame, b: pd.DataFrame) -> bool:
 
 BUSY_AFTER_MS = 150  # served: a plan taking longer than this shows the busy state
 BUSY_WIDTH_PX = 120
-BUSY_CSS = """
-.uam-busy { display: flex; align-items: center; gap: 6px; font-size: 12px; color: #555; height: 22px; }
-.uam-busy-ring { width: 14px; height: 14px; border: 2px solid #c8d3e0; border-top-color: #1f4e79;
-                 border-radius: 50%; animation: uam-spin 0.8s linear infinite; }
-@keyframes uam-spin { to { transform: rotate(360deg); } }
-"""
-
-
-def busy_html(busy: bool) -> str:
-    """The busy mark beside "Plan": a turning ring and "planning..." while a plan is computed, else empty."""
-    body = "<span class='uam-busy-ring'></span>planning..." if busy else ""
-    return f"<div class='uam-busy' data-busy='{str(busy).lower()}'>{body}</div>"
 CONTROLS_WIDTH = 260
 MAP_FRAME_PX = 440  # the map's square frame (data area)
 
@@ -187,10 +175,7 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
         # ".uam-plan-summary" finds exactly one element whose text is the summary.
         self.summary = pn.pane.HTML(summary_html(s), sizing_mode="stretch_width", margin=(0, 10))
         self.compare = pn.pane.HTML(comparison_html(s), sizing_mode="stretch_width", margin=(0, 10))
-        # A fixed-size pane whose content alone changes: showing or hiding the busy mark must not make the
-        # browser lay the page out again (a visibility change did: about 300 ms a step on a 2-core laptop).
-        self.busy = pn.pane.HTML(busy_html(bool(s.busy)), width=BUSY_WIDTH_PX, height=22, margin=(0, 5),
-                                 stylesheets=[BUSY_CSS])
+        self.busy = busy_mark(bool(s.busy), BUSY_WIDTH_PX)  # its content alone changes: no new layout
         # onlychanged=False: param's own equality test walks every sample of a plan (tens of ms);
         # _send compares the plot data itself
         s.param.watch(self._on_plan, ["plan", "plan_error", "plan_request", "band", "takeoff"], onlychanged=False)
