@@ -35,6 +35,7 @@ from uam_studio.battery.real.nasa_predict import (
     ambient_band,
     charge_to_cutoff_ah,
     context_voltage_v,
+    history_log_change,
     known_before,
     rest_feature,
 )
@@ -230,13 +231,11 @@ def fit_nasa_model(cells: list[NasaCell], context_s: float = 300.0, cutoff_v: fl
         if m.any():
             sa, sb, sc = (float(x) for x in _slopes(y[m], dv[m], dr[m]))
             slope[name] = (sa, sb, sc)
-    centre = np.array([sum(k * x for k, x in zip(slope.get(n, (a, b, 0.0)), (1.0, v, r)))
-                       for n, v, r in zip(bands, dv, dr)])
-    res = y - np.clip(centre, -1.0, 1.0)
-    band = kind
+    coefficients = [slope.get(n, (float(a), float(b), 0.0)) for n in bands]  # NasaEodModel.coefficients
+    res = y - np.array([history_log_change(c, v, r) for c, v, r in zip(coefficients, dv, dr)])
     scale = {}
     for name in ("cold", "room", "hot", "early"):
-        r = res[[k for k, n in enumerate(band) if n == name]]
+        r = res[[k for k, n in enumerate(kind) if n == name]]
         if r.size >= 5:
             scale[name] = float(1.4826 * np.median(np.abs(r - np.median(r))))
     if not scale:

@@ -57,8 +57,8 @@ from uam_studio.battery.real.nasa_known import (
 
 __all__ = ["CAP_AH", "CAP_RATIO", "EARLY_ERRORS", "HORIZON_S", "OWN_ERROR_WINDOW", "RISKS", "UNSEEN_WIDEN",
            "CellBelief", "EodPrediction", "KnownDischarge", "NasaEodModel", "ambient_band", "charge_to_cutoff_ah",
-           "context_voltage_v", "high_cap_s", "known_before", "min_width_s", "own_error_factor", "planned_load",
-           "rest_feature", "seen_s", "time_for_charge_s", "voltage_shift_v"]
+           "context_voltage_v", "high_cap_s", "history_log_change", "known_before", "min_width_s", "own_error_factor",
+           "planned_load", "rest_feature", "seen_s", "time_for_charge_s", "voltage_shift_v"]
 
 RISKS = (0.01, 0.05, 0.5, 0.95)  # the quantiles every prediction carries: bound99, bound95/low, median, high
 Z_LEVELS = (0.001, 0.0025, 0.005, 0.01, 0.02, 0.035, 0.05, 0.075, 0.1, 0.15, 0.25, 0.5, 0.75, 0.85, 0.9, 0.925,
@@ -146,12 +146,22 @@ def min_width_s(known: KnownDischarge) -> float:
     return max(MIN_WIDTH * seen_s(known), 1.0)
 
 
-def high_cap_s(known: KnownDischarge, median_s: float) -> float:
+def high_cap_s(known: KnownDischarge, median_s: float, cap_charge_s: float | None = None) -> float:
     """The most an interval's high end may be (s from the first loaded sample): the least of
-    :data:`CAP_RATIO` times its median, the time :func:`planned_load` takes to deliver :data:`CAP_AH`, and
-    :data:`HORIZON_S`; never less than the context's end plus :func:`min_width_s`."""
-    return max(min(CAP_RATIO * median_s, time_for_charge_s(known, CAP_AH), HORIZON_S),
-               seen_s(known) + min_width_s(known))
+    :data:`CAP_RATIO` times its median, the time :func:`planned_load` takes to deliver :data:`CAP_AH`
+    (``cap_charge_s`` where the caller has it already), and :data:`HORIZON_S`; never less than the context's
+    end plus :func:`min_width_s`."""
+    if cap_charge_s is None:
+        cap_charge_s = time_for_charge_s(known, CAP_AH)
+    return max(min(CAP_RATIO * median_s, cap_charge_s, HORIZON_S), seen_s(known) + min_width_s(known))
+
+
+def history_log_change(coefficients: tuple[float, float, float], shift_v: float, rest_change: float) -> float:
+    """A history prediction's log change of the time to the cut-off from its reference's: ``a + b dv + c dr``
+    of ``coefficients`` (a, b, c), the context shift ``shift_v`` (V) and the :func:`rest_feature` change
+    ``rest_change``, clipped to +-1."""
+    a, b, c = coefficients
+    return float(np.clip(a + b * shift_v + c * rest_change, -1.0, 1.0))
 
 
 @dataclass(frozen=True)
@@ -192,21 +202,20 @@ class NasaEodModel:
         """(a, b, c) of a history prediction in ambient ``band``."""
         return self.slope.get(band, (self.a, self.b, 0.0))
 
-    def condition_charge_ah(self, load_a: float, ambient_c: float, young: bool,
-                            context_v: float | None = None) -> tuple[float, bool]:
+    def condition_charge_ah(self, load_a: float, ambient_c: float, context_v: float) -> tuple[float, bool]:
         """The training charge (Ah) to the cut-off at the nearest training condition, and whether that
-        condition is near (within 0.5 A and 6 C): with ``context_v`` (V, :func:`context_voltage_v`), the
-        condition's median moved along its fitted dependence on the context voltage; else its median
-        (over the first five discharges of each cell where ``young``)."""
+        condition is near (within 0.5 A and 6 C): the condition's median moved along its fitted dependence
+        on the context voltage ``context_v`` (V, :func:`context_voltage_v`); where that is not a number, or
+        the model holds no such dependence, the median over the first five discharges of each cell."""
         rows = np.array([r[:4] for r in self.charge])
         dist = np.abs(rows[:, 0] - load_a) / 0.5 + np.abs(rows[:, 1] - ambient_c) / 6.0
         k = int(np.argmin(dist))
         near = abs(rows[k, 0] - load_a) <= 0.5 and abs(rows[k, 1] - ambient_c) <= 6.0
         row = self.charge[k]
-        if context_v is not None and math.isfinite(context_v) and len(row) >= 6:
+        if math.isfinite(context_v) and len(row) >= 6:
             shift = float(np.clip(row[5] * (context_v - row[4]), -1.0, 1.0))
             return float(row[2] * math.exp(shift)), near
-        return float(rows[k, 3] if young else rows[k, 2]), near
+        return float(rows[k, 3]), near
 
 
 @dataclass(frozen=True)
@@ -292,9 +301,10 @@ class CellBelief:
         if key not in self._centres:
             t_p = p.time_to_cutoff_s(self.model.cutoff_v)
             assert t_p is not None  # previous() returns only discharges that reached the cut-off
-            a, b, c = self.model.coefficients(ambient_band(known.ambient_c))
             dr = rest_feature(known.rest_s) - rest_feature(p.rest_s)
-            self._centres[key] = t_p * math.exp(float(np.clip(a + b * self.shift_v(known, p) + c * dr, -1.0, 1.0)))
+            change = history_log_change(self.model.coefficients(ambient_band(known.ambient_c)),
+                                        self.shift_v(known, p), dr)
+            self._centres[key] = t_p * math.exp(change)
         return self._centres[key]
 
     def _history(self, known: KnownDischarge, p: NasaDischarge) -> np.ndarray:
@@ -310,7 +320,7 @@ class CellBelief:
         moved along that condition's dependence on the context voltage to what ``known``'s first seconds
         show, delivered by the planned load."""
         load = known.mean_load_a()
-        charge, near = self.model.condition_charge_ah(load, known.ambient_c, True, context_voltage_v(known))
+        charge, near = self.model.condition_charge_ah(load, known.ambient_c, context_voltage_v(known))
         centre = time_for_charge_s(known, charge)
         logs = np.array(self.model.prior_log)
         flag = None
@@ -378,8 +388,9 @@ def _interval(known: KnownDischarge, q: np.ndarray, method: str, flag: str | Non
     seen, width = seen_s(known), min_width_s(known)
     q = np.sort(np.nan_to_num(np.asarray(q, dtype=float), nan=seen, posinf=HORIZON_S, neginf=seen))
     q = np.clip(q, seen, HORIZON_S)
-    q = np.minimum(q, high_cap_s(known, float(q[2])))
-    cap = high_cap_s(known, float(q[2]))
+    cap_charge_s = time_for_charge_s(known, CAP_AH)  # the planned load's charge curve, walked once
+    q = np.minimum(q, high_cap_s(known, float(q[2]), cap_charge_s))
+    cap = high_cap_s(known, float(q[2]), cap_charge_s)
     if q[3] - q[1] < width:  # widen upwards where the cap leaves room, else downwards to the context's end
         q[3] = min(q[1] + width, cap)
         q[1] = max(q[3] - width, seen)
