@@ -22,8 +22,7 @@ def new_user(monkeypatch, tmp_path):
     """No data folder anywhere: no environment variable, and not a source checkout."""
     monkeypatch.delenv(nasa_data.DATA_ENV, raising=False)
     monkeypatch.delenv(cmu_data.DATA_ENV, raising=False)
-    monkeypatch.setattr(nasa_data, "_CHECKOUT", tmp_path / "site-packages")
-    monkeypatch.setattr(cmu_data, "_CHECKOUT", tmp_path / "site-packages")
+    monkeypatch.setattr("uam_studio.battery.real.places.CHECKOUT", tmp_path / "site-packages")
 
 
 def test_with_no_data_folder_the_sample_is_found_and_its_checksums_hold(new_user, capsys):

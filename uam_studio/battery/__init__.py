@@ -55,7 +55,7 @@ _LAZY = {
     "load_nasa_folder": "uam_studio.battery.real.nasa_data",
     "nasa_folder": "uam_studio.battery.real.nasa_data",
     "available_cells": "uam_studio.battery.real.nasa_data",
-    "sample_note": "uam_studio.battery.real.nasa_data",
+    "sample_note": "uam_studio.battery.real.places",
     "score_cell": "uam_studio.battery.real.nasa_eval",
     "summarise": "uam_studio.battery.real.nasa_eval",
     "model_for": "uam_studio.battery.real.nasa_replay",

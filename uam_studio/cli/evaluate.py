@@ -106,10 +106,10 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         return EXIT_OK
     if args.model == "real":
         from ..battery.real.cmu_data import data_folder
-        from ..battery.real.cmu_data import sample_note as cmu_note
+        from ..battery.real.places import sample_note
         from ..studies.real_cells import format_report as format_real
 
-        _note(cmu_note(data_folder(args.data)))
+        _note(sample_note(data_folder(args.data)))
         from ..studies.real_cells import real_cell_report
 
         report = real_cell_report(args.data, held_out=not args.quick, refit=args.refit)
@@ -141,9 +141,10 @@ def _note(line: str | None) -> None:
 
 
 def _run_nasa(args: argparse.Namespace) -> int:
-    from ..battery.real.nasa_data import NasaDataError, load_nasa_folder, nasa_folder, sample_note
+    from ..battery.real.nasa_data import NasaDataError, load_nasa_folder, nasa_folder
     from ..battery.real.nasa_eval import evaluate_nasa, format_table, skipped_summary
     from ..battery.real.nasa_model import bundled_model
+    from ..battery.real.places import sample_note
 
     context_s = check_range("--context-s", 300.0 if args.context_s is None else args.context_s, 10.0, 3600.0, " s")
     cutoff_v = check_range("--cutoff-v", 3.0 if args.cutoff_v is None else args.cutoff_v, 2.5, 3.6, " V")

@@ -29,8 +29,8 @@ from uam_studio.battery.real.nasa_data import (
     NasaDataError,
     nasa_cell_files,
     nasa_folder,
-    sample_note,
 )
+from uam_studio.battery.real.places import sample_note
 from uam_studio.errors import InputError
 
 __all__ = ["NASA_COLORS", "NasaLabState", "NasaLabView"]

@@ -25,17 +25,17 @@ from pathlib import Path
 
 import numpy as np
 
+from uam_studio.battery.real.places import SAMPLE_NOTES, SAMPLES, beside_checkout, in_checkout
 from uam_studio.errors import DataFileError, InputError
 
 DATA_ENV = "UAM_STUDIO_CMU_DATA"  # environment variable: the dataset's folder
 DATASET_DOI = "10.1184/R1/14226830"
 MISSION_FILE = "VAH01_20.csv"  # the 1 Hz baseline mission (cell VAH01, cycle 20)
 # Where a source checkout finds the dataset without being told: a shared/data/cmu_evtol folder beside it.
-_CHECKOUT = Path(__file__).resolve().parents[3]
-BESIDE_CHECKOUT = _CHECKOUT.parent / "shared" / "data" / "cmu_evtol"
+BESIDE_CHECKOUT = beside_checkout("cmu_evtol")
 # The sample that ships with the package: the 1 Hz mission and one resampled life (VAH27).
-SAMPLE = Path(__file__).resolve().parents[2] / "data" / "samples" / "cmu_evtol"
-SAMPLE_NOTE = "the bundled sample: the 1 Hz mission and 1 resampled life (VAH27); for all, see `uam-studio data`"
+SAMPLE = SAMPLES / "cmu_evtol"
+SAMPLE_NOTE = SAMPLE_NOTES["cmu_evtol"]
 LIFE_FILES = ("VAH07.csv.mat", "VAH09.csv.mat", "VAH27.csv.mat", "VAH30.csv.mat")
 
 # Segment codes (Ns) of a mission cycle in the dataset.
@@ -235,7 +235,7 @@ def load_cell_log(path: str | os.PathLike) -> CellLog:
 def data_folder(path: str | os.PathLike | None = None, needs: str = MISSION_FILE) -> Path:
     """The dataset's folder: ``path`` if given, else ``$UAM_STUDIO_CMU_DATA``, else :data:`BESIDE_CHECKOUT`
     where a source checkout has it, else the bundled :data:`SAMPLE` if it holds ``needs``
-    (:func:`sample_note` says so).
+    (``places.sample_note`` says so).
 
     :param needs: the file the folder must hold (default the 1 Hz mission, :data:`MISSION_FILE`; a
         study of the resampled lives passes one of :data:`LIFE_FILES`).
@@ -243,7 +243,7 @@ def data_folder(path: str | os.PathLike | None = None, needs: str = MISSION_FILE
         (``uam-studio data``) and point at it from a notebook, a shell or the CLI.
     """
     text = str(path) if path is not None else os.environ.get(DATA_ENV, "")
-    if not text and (_CHECKOUT / "pyproject.toml").is_file() and (BESIDE_CHECKOUT / needs).is_file():
+    if not text and in_checkout() and (BESIDE_CHECKOUT / needs).is_file():
         text = str(BESIDE_CHECKOUT)
     if not text and (SAMPLE / needs).is_file():
         text = str(SAMPLE)
@@ -277,11 +277,6 @@ class MissionLog:
 
     def phase_mask(self, *codes: int) -> np.ndarray:
         return np.isin(self.log.segment, codes)
-
-
-def sample_note(folder: str | os.PathLike) -> str | None:
-    """:data:`SAMPLE_NOTE` if ``folder`` is the bundled sample, else None."""
-    return SAMPLE_NOTE if Path(folder).resolve() == SAMPLE.resolve() else None
 
 
 def mission_cycle(log: CellLog) -> MissionLog:

@@ -36,11 +36,12 @@ from typing import Protocol
 import numpy as np
 
 from uam_studio.battery.parameters import DEFAULT_EOD_V
+from uam_studio.battery.real.places import SAMPLE_NOTES, SAMPLES, beside_checkout, in_checkout
 from uam_studio.errors import DataFileError
 
 __all__ = ["COLUMNS", "LOADED_A", "MIN_SAMPLES", "SAMPLE", "SAMPLE_NOTE", "NasaCell", "NasaDataError",
            "NasaDischarge", "RunConditions", "load_nasa_cell", "load_nasa_folder", "nasa_cell_files", "nasa_folder",
-           "persistence_s", "same_conditions", "sample_note", "available_cells"]
+           "persistence_s", "same_conditions", "available_cells"]
 
 COLUMNS = ("discharge", "uid", "ambient_C", "time_s", "voltage_V", "current_A", "temperature_C",
            "current_load_A", "voltage_load_V")
@@ -48,13 +49,12 @@ LOADED_A = 0.1  # A: a sample drawing more discharge current than this is under 
 MIN_SAMPLES = 10  # a discharge with fewer samples is too short to score
 CELL_GLOB = "B*.csv.gz"
 DATA_ENV = "UAM_STUDIO_NASA_DATA"
-_CHECKOUT = Path(__file__).resolve().parents[3]
-BESIDE_CHECKOUT = _CHECKOUT.parent / "shared" / "data" / "nasa_pcoe"
+BESIDE_CHECKOUT = beside_checkout("nasa_pcoe")
 """Where the data sit beside a source checkout (a ``shared/data/nasa_pcoe`` folder next to the repository);
 looked at only when the package runs from a source checkout."""
-SAMPLE = Path(__file__).resolve().parents[2] / "data" / "samples" / "nasa_pcoe"
+SAMPLE = SAMPLES / "nasa_pcoe"
 """The sample that ships with the package: cell B0005's whole life (24 C, 2 A), with its start times."""
-SAMPLE_NOTE = "the bundled sample: 1 cell (B0005); for all 34, see `uam-studio data`"
+SAMPLE_NOTE = SAMPLE_NOTES["nasa_pcoe"]
 
 
 class NasaDataError(DataFileError):
@@ -230,18 +230,14 @@ def load_nasa_cell(path: str | os.PathLike, cutoff_v: float = DEFAULT_EOD_V) -> 
     return NasaCell(name, str(path), tuple(out), tuple(skipped), float(cutoff_v))
 
 
-def _in_checkout() -> bool:
-    return (_CHECKOUT / "pyproject.toml").is_file()
-
-
 def nasa_folder(path: str | os.PathLike | None = None) -> Path:
     """The data's folder: ``path`` if given, else ``$UAM_STUDIO_NASA_DATA``, else :data:`BESIDE_CHECKOUT`
-    where a source checkout has it, else the bundled :data:`SAMPLE` (one cell; :func:`sample_note` says so).
+    where a source checkout has it, else the bundled :data:`SAMPLE` (one cell; ``places.sample_note`` says so).
 
     :raises NasaDataError: none found (the package's sample removed); the message says what to do.
     """
     text = str(path) if path is not None else os.environ.get(DATA_ENV, "")
-    if not text and _in_checkout() and any(BESIDE_CHECKOUT.glob(CELL_GLOB)):
+    if not text and in_checkout() and any(BESIDE_CHECKOUT.glob(CELL_GLOB)):
         text = str(BESIDE_CHECKOUT)
     if not text and any(SAMPLE.glob(CELL_GLOB)):
         text = str(SAMPLE)
@@ -256,11 +252,6 @@ def available_cells(folder: str | os.PathLike, wanted: list[str]) -> list[str]:
     none of them, every cell it holds (the sample: B0005)."""
     held = [f.name.split(".")[0] for f in sorted(Path(folder).glob(CELL_GLOB))]
     return [c for c in wanted if c in held] or held
-
-
-def sample_note(folder: str | os.PathLike) -> str | None:
-    """:data:`SAMPLE_NOTE` if ``folder`` is the bundled sample, else None."""
-    return SAMPLE_NOTE if Path(folder).resolve() == SAMPLE.resolve() else None
 
 
 def nasa_cell_files(folder: str | os.PathLike, cells: list[str] | None = None) -> list[Path]:
