@@ -13,6 +13,7 @@ import asyncio
 import collections
 import shutil
 import sys
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -37,31 +38,54 @@ def _built(log: Path, skip: int) -> dict[str, list[str]]:
     return dict(built)
 
 
-def _builds(tmp_path: Path, num_procs: int) -> dict[str, list[str]]:
-    """Session id -> the processes that built its document, over :data:`LOADS` first loads."""
-    log = tmp_path / "builds.log"
-    with ServedApp(tmp_path, args=["--num-procs", str(num_procs)], PYTHONPATH=str(HERE / "server_hooks"),
-                   UAM_TEST_BUILD_LOG=str(log)) as app:
-        warm = len(log.read_text().splitlines()) if log.exists() else 0  # the liveness checks' builds
-
-        async def loads() -> None:
-            with ThreadPoolExecutor(2) as pool:
-                for _ in range(LOADS):
-                    _, conn = await first_load(app.url, pool)
-                    conn.close()
-
-        with ThreadPoolExecutor(1) as runner:  # its own event loop: another test may leave one running here
-            runner.submit(asyncio.run, loads()).result()
-        return _built(log, warm)
+def _serve(home: Path, num_procs: int) -> ServedApp:
+    """``uam-studio serve --num-procs N`` with the build-logging hook; its log is ``home / "builds.log"``."""
+    return ServedApp(home, args=["--num-procs", str(num_procs)], PYTHONPATH=str(HERE / "server_hooks"),
+                     UAM_TEST_BUILD_LOG=str(home / "builds.log"))
 
 
-@pytest.mark.parametrize("num_procs", [1, 2])
-def test_each_session_is_built_once(tmp_path, num_procs):
-    built = _builds(tmp_path, num_procs)
+def _lines(log: Path) -> int:
+    return len(log.read_text().splitlines()) if log.exists() else 0
+
+
+@pytest.fixture(scope="module")
+def two_procs(tmp_path_factory) -> Iterator[ServedApp]:
+    """One ``--num-procs 2`` server for this module's tests of it, in file order: first loads, pages in
+    Chromium, then one app process killed (the last, as it ends a process). Each reads the log past the
+    lines written before it."""
+    with _serve(tmp_path_factory.mktemp("two_procs"), 2) as app:
+        yield app
+
+
+def _builds(app: ServedApp) -> dict[str, list[str]]:
+    """Session id -> the processes that built its document, over :data:`LOADS` first loads of ``app``."""
+    log = app.home / "builds.log"
+    warm = _lines(log)  # the liveness checks' builds, and the earlier tests' on a shared server
+
+    async def loads() -> None:
+        with ThreadPoolExecutor(2) as pool:
+            for _ in range(LOADS):
+                _, conn = await first_load(app.url, pool)
+                conn.close()
+
+    with ThreadPoolExecutor(1) as runner:  # its own event loop: another test may leave one running here
+        runner.submit(asyncio.run, loads()).result()
+    return _built(log, warm)
+
+
+def test_each_session_is_built_once_by_one_process(tmp_path):
+    with _serve(tmp_path, 1) as app:
+        built = _builds(app)
+    assert len(built) == LOADS, built
+    assert all(len(pids) == 1 for pids in built.values()), built
+
+
+def test_each_session_is_built_once_behind_the_front(two_procs):
+    built = _builds(two_procs)
     assert len(built) == LOADS, built
     assert all(len(pids) == 1 for pids in built.values()), built
     # behind the front, the pages go to the app processes in turn
-    assert len({pids[0] for pids in built.values()}) == num_procs, built
+    assert len({pids[0] for pids in built.values()}) == 2, built
 
 
 def test_the_front_remembers_which_process_built_a_session_and_skips_an_ended_one():
@@ -89,7 +113,7 @@ CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 
 
 @pytest.mark.skipif(not Path(CHROMIUM).exists(), reason="chromium is not installed")
-def test_pages_behind_a_two_process_front_are_built_once_and_draw_styled(tmp_path):
+def test_pages_behind_a_two_process_front_are_built_once_and_draw_styled(two_procs):
     """Three pages in Chromium through ``--num-procs 2``: each session is built once, in the process the front
     sent its page to (both processes serve pages), every request stays on the server, and each page draws its
     plan, its destinations table and its voltage figure."""
@@ -118,18 +142,16 @@ def test_pages_behind_a_two_process_front_are_built_once_and_draw_styled(tmp_pat
             finally:
                 browser.close()
 
-    log = tmp_path / "builds.log"
-    with ServedApp(tmp_path, args=["--num-procs", "2"], PYTHONPATH=str(HERE / "server_hooks"),
-                   UAM_TEST_BUILD_LOG=str(log)) as app:
-        warm = len(log.read_text().splitlines())
-        with ThreadPoolExecutor(1) as runner:
-            runner.submit(pages, app.url).result()
-        built = _built(log, warm)
+    log = two_procs.home / "builds.log"
+    warm = _lines(log)
+    with ThreadPoolExecutor(1) as runner:
+        runner.submit(pages, two_procs.url).result()
+    built = _built(log, warm)
     assert len(built) == 3 and all(len(pids) == 1 for pids in built.values()), built
     assert len({pids[0] for pids in built.values()}) == 2, built
 
 
-def test_the_front_keeps_serving_when_an_app_process_ends(tmp_path):
+def test_the_front_keeps_serving_when_an_app_process_ends(two_procs):
     """One of two app processes is killed: the front notices within its check (1 s), logs it, and sends
     every new page to the process left; the front itself keeps running."""
     import os
@@ -141,30 +163,30 @@ def test_the_front_keeps_serving_when_an_app_process_ends(tmp_path):
     def cmdline(pid: int) -> str:
         return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
 
-    with ServedApp(tmp_path, args=["--num-procs", "2"]) as app:
-        children = child_pids(app.proc.pid)
-        workers = [pid for pid in children if "uam_studio.cli" in cmdline(pid)]
-        assert len(workers) == 2, workers
-        # the app processes share the front's one comparison worker and start no comparison process of
-        # their own (each did before, at its warm-up)
-        assert sum("multiprocessing.spawn" in cmdline(pid) for pid in children) == 1, children
-        time.sleep(3.0)
-        assert [pid for w in workers for pid in child_pids(w)] == []
-        os.kill(workers[0], signal.SIGKILL)
-        time.sleep(3.0)
+    app = two_procs
+    children = child_pids(app.proc.pid)
+    workers = [pid for pid in children if "uam_studio.cli" in cmdline(pid)]
+    assert len(workers) == 2, workers
+    # the app processes share the front's one comparison worker and start no comparison process of
+    # their own (each did before, at its warm-up)
+    assert sum("multiprocessing.spawn" in cmdline(pid) for pid in children) == 1, children
+    time.sleep(3.0)
+    assert [pid for w in workers for pid in child_pids(w)] == []
+    os.kill(workers[0], signal.SIGKILL)
+    time.sleep(3.0)
 
-        async def loads() -> list[float]:
-            out = []
-            with ThreadPoolExecutor(2) as pool:
-                for _ in range(3):
-                    seconds, conn = await first_load(app.url, pool)
-                    conn.close()
-                    out.append(seconds)
-            return out
+    async def loads() -> list[float]:
+        out = []
+        with ThreadPoolExecutor(2) as pool:
+            for _ in range(3):
+                seconds, conn = await first_load(app.url, pool)
+                conn.close()
+                out.append(seconds)
+        return out
 
-        with ThreadPoolExecutor(1) as runner:
-            times = runner.submit(asyncio.run, loads()).result()
-        assert app.proc.poll() is None
+    with ThreadPoolExecutor(1) as runner:
+        times = runner.submit(asyncio.run, loads()).result()
+    assert app.proc.poll() is None
     assert len(times) == 3
     log = app.log_path.read_text()
     assert f"(pid {workers[0]}) ended" in log and "gets no new pages" in log, log[-2000:]
