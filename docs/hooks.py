@@ -1,0 +1,81 @@
+"""MkDocs hooks of the course site (``mkdocs.yml``, ``hooks:``).
+
+- The checkout's ``uam_studio`` comes first on ``sys.path`` and on ``PYTHONPATH`` (the executed build's
+  notebook kernels inherit it), so the site documents this tree whatever is installed.
+- The Results pages are generated from ``benchmarks/RESULTS.md`` and ``benchmarks/README.md``
+  (``docs/site_results.py``); nothing of them is committed under ``docs/``.
+- ``docs/cli.md``'s markers ``<!-- cli: options -->`` and ``<!-- cli: errors -->`` become the parser's
+  options and the bad-input examples run at build time (``docs/site_cli.py``).
+- The notebook pages load nothing from the network: the MathJax and Mermaid script tags that nbconvert's
+  template adds are dropped (the notebooks hold no formulas and no diagrams), and Bokeh/Panel output of an
+  executed notebook is inline (``BOKEH_RESOURCES=inline`` for the kernels).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+for _path in (str(ROOT / "docs"), str(ROOT)):
+    if _path not in sys.path:
+        sys.path.insert(0, _path)
+os.environ["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH")] if p])
+os.environ["BOKEH_RESOURCES"] = "inline"  # an executed notebook's figures carry BokehJS, not a CDN link
+os.environ.setdefault("COLUMNS", "100")  # argparse's usage lines wrap at this width on every machine
+
+import site_cli  # noqa: E402
+import site_results  # noqa: E402
+from mkdocs.structure.files import File, Files  # noqa: E402
+
+# a <script> (with its body) whose src is on the network: nbconvert's MathJax and Mermaid loaders
+_REMOTE_SCRIPT = re.compile(r'<script[^>]*\ssrc="https?://[^"]*"[^>]*>\s*</script>', re.I)
+_MATHJAX_CONFIG = re.compile(r'<script type="text/x-mathjax-config">.*?</script>', re.S)
+_API = re.compile(r"<!-- api: ([\w.]+) -->")
+_MERMAID = re.compile(r'<script type="module">\s*import mermaid from "https?://.*?</script>', re.S)
+
+
+def on_files(files: Files, config: Any) -> Files:
+    """Add the generated Results pages."""
+    for path, text in site_results.pages().items():
+        files.append(File.generated(config, path, content=text))
+    return files
+
+
+def api_modules(package: str) -> list[str]:
+    """``package`` and every module under it (read from the tree, not imported), package first, then each
+    module or subpackage in name order; ``__main__`` modules are left out."""
+    folder = ROOT.joinpath(*package.split("."))
+    if not folder.is_dir():
+        return [package]
+    out = [package]
+    for child in sorted(folder.iterdir()):
+        if child.suffix == ".py" and child.stem not in ("__init__", "__main__"):
+            out.append(f"{package}.{child.stem}")
+        elif child.is_dir() and (child / "__init__.py").exists():
+            out += api_modules(f"{package}.{child.name}")
+    return out
+
+
+def _api_block(match: re.Match[str]) -> str:
+    return "\n".join(f"::: {name}\n" for name in api_modules(match.group(1)))
+
+
+def on_page_markdown(markdown: str, page: Any, config: Any, files: Files) -> str:
+    """Fill the Command line page's generated parts, and each library page's ``<!-- api: PACKAGE -->``
+    with one mkdocstrings block per module of the package (a new module gets its reference unasked)."""
+    markdown = _API.sub(_api_block, markdown)
+    if page.file.src_uri == "cli.md":
+        markdown = markdown.replace("<!-- cli: options -->", site_cli.options_markdown())
+        markdown = markdown.replace("<!-- cli: errors -->", site_cli.errors_markdown())
+    return markdown
+
+
+def on_post_page(output: str, page: Any, config: Any) -> str:
+    """Drop the notebook template's network scripts (MathJax, Mermaid) from a notebook's page."""
+    if page.file.src_uri.endswith(".ipynb"):
+        output = _MERMAID.sub("", _MATHJAX_CONFIG.sub("", _REMOTE_SCRIPT.sub("", output)))
+    return output
