@@ -157,11 +157,9 @@ class UAMPlanningEnv(EpisodeQueries, gym.Env):
     :param alpha: reward weight of a destination's priority (>= 0).
     :param beta: penalty of a charging stop at the vertiport (>= 0).
     :param gamma: penalty of an end of discharge (>= 0).
-    :param randomize_battery: with a fixed mission, draw q_max and r0 from ``q_range``/``r0_range``
-        each episode.
+    :param randomize_battery: with a fixed mission, draw q_max and r0 from ``q_range``/``r0_range`` each episode.
     :param randomize_wind: with a fixed mission, draw every node's wind from U[-39, 39] kt each episode.
-    :param r0_range: range of a random cell's R0 (ohm; :mod:`uam_studio.planning.missions.generate` explains
-        the 0.35 ohm default).
+    :param r0_range: a random cell's R0 range (ohm; :mod:`uam_studio.planning.missions.generate` on the 0.35 default).
     :param q_range: range of a random cell's q_max (C).
     :param radius_km: how far from the vertiport a random mission's destinations lie (km).
     :param max_steps: truncation length.
