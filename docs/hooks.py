@@ -6,9 +6,11 @@
   (``docs/site_results.py``); nothing of them is committed under ``docs/``.
 - ``docs/cli.md``'s markers ``<!-- cli: options -->`` and ``<!-- cli: errors -->`` become the parser's
   options and the bad-input examples run at build time (``docs/site_cli.py``).
-- The notebook pages load nothing from the network: the MathJax and Mermaid script tags that nbconvert's
-  template adds are dropped (the notebooks hold no formulas and no diagrams), and Bokeh/Panel output of an
-  executed notebook is inline (``BOKEH_RESOURCES=inline`` for the kernels).
+- The notebook pages load nothing from the network: the MathJax and Mermaid loaders that nbconvert's template
+  adds are dropped (the notebooks hold no formulas and no diagrams); an executed notebook's figures carry
+  BokehJS inline (``BOKEH_RESOURCES=inline``, ``PANEL_INLINE=1`` for the kernels), and the Bokeh and Panel
+  files its output still names on cdn.bokeh.org / cdn.holoviz.org are copied from the installed bokeh and
+  panel packages into ``site/assets/vendor/`` and the page points at them.
 """
 
 from __future__ import annotations
@@ -25,7 +27,10 @@ for _path in (str(ROOT / "docs"), str(ROOT)):
         sys.path.insert(0, _path)
 os.environ["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH")] if p])
 os.environ["BOKEH_RESOURCES"] = "inline"  # an executed notebook's figures carry BokehJS, not a CDN link
+os.environ["PANEL_INLINE"] = "1"  # and Panel's notebook loader inlines its JS and CSS
 os.environ.setdefault("COLUMNS", "100")  # argparse's usage lines wrap at this width on every machine
+
+import shutil  # noqa: E402
 
 import site_cli  # noqa: E402
 import site_results  # noqa: E402
@@ -35,7 +40,11 @@ from mkdocs.structure.files import File, Files  # noqa: E402
 _REMOTE_SCRIPT = re.compile(r'<script[^>]*\ssrc="https?://[^"]*"[^>]*>\s*</script>', re.I)
 _MATHJAX_CONFIG = re.compile(r'<script type="text/x-mathjax-config">.*?</script>', re.S)
 _API = re.compile(r"<!-- api: ([\w.]+) -->")
-_MERMAID = re.compile(r'<script type="module">\s*import mermaid from "https?://.*?</script>', re.S)
+_MERMAID = re.compile(r'<script type="module">(?:(?!</script>).)*?mermaid.*?</script>', re.S)
+# Bokeh's and Panel's CDN files, and where the installed packages hold the same files
+_BOKEH_CDN = re.compile(r"https?://cdn\.bokeh\.org/bokeh/(?:release|dev)/(bokeh(?:-[a-z]+)?)-[\w.]+?(\.min)?\.js")
+_PANEL_CDN = re.compile(r"https?://cdn\.holoviz\.org/panel/[\w.]+/dist/([\w./@^+-]+)")
+_VENDOR: dict[str, Path] = {}  # site path under assets/vendor/ -> the installed file it is copied from
 
 
 def on_files(files: Files, config: Any) -> Files:
@@ -74,8 +83,38 @@ def on_page_markdown(markdown: str, page: Any, config: Any, files: Files) -> str
     return markdown
 
 
+def _vendor(kind: str, name: str, source: Path, up: str) -> str:
+    """Record ``source`` to be shipped as ``assets/vendor/KIND/NAME``; the link to it from the page."""
+    if not source.is_file():
+        raise FileNotFoundError(f"{source}: the installed file behind a notebook's CDN link is missing")
+    _VENDOR[f"{kind}/{name}"] = source
+    return f"{up}assets/vendor/{kind}/{name}"
+
+
+def localize(output: str, up: str) -> str:
+    """A notebook page's HTML without network scripts: MathJax and Mermaid dropped, Bokeh's and Panel's CDN
+    links sent to the copies in ``assets/vendor/`` (``up`` is the way from the page to the site's root)."""
+    import bokeh
+    import panel
+
+    bokeh_js = Path(bokeh.__file__).parent / "server" / "static" / "js"
+    panel_dist = Path(panel.__file__).parent / "dist"
+    output = _MERMAID.sub("", _MATHJAX_CONFIG.sub("", _REMOTE_SCRIPT.sub("", output)))
+    output = _BOKEH_CDN.sub(lambda m: _vendor("bokeh", f"{m[1]}{m[2] or ''}.js",
+                                              bokeh_js / f"{m[1]}{m[2] or ''}.js", up), output)
+    return _PANEL_CDN.sub(lambda m: _vendor("panel", m[1], panel_dist / m[1], up), output)
+
+
 def on_post_page(output: str, page: Any, config: Any) -> str:
-    """Drop the notebook template's network scripts (MathJax, Mermaid) from a notebook's page."""
+    """A notebook's page loads nothing from the network (:func:`localize`)."""
     if page.file.src_uri.endswith(".ipynb"):
-        output = _MERMAID.sub("", _MATHJAX_CONFIG.sub("", _REMOTE_SCRIPT.sub("", output)))
+        output = localize(output, "../" * page.url.count("/"))
     return output
+
+
+def on_post_build(config: Any) -> None:
+    """Ship the Bokeh and Panel files the notebook pages point at."""
+    for name, source in _VENDOR.items():
+        target = Path(config["site_dir"]) / "assets" / "vendor" / name
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(source, target)
