@@ -28,7 +28,6 @@ for _path in (str(ROOT / "docs"), str(ROOT)):
 os.environ["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH")] if p])
 os.environ["BOKEH_RESOURCES"] = "inline"  # an executed notebook's figures carry BokehJS, not a CDN link
 os.environ["PANEL_INLINE"] = "1"  # and Panel's notebook loader inlines its JS and CSS
-os.environ.setdefault("COLUMNS", "100")  # argparse's usage lines wrap at this width on every machine
 
 import shutil  # noqa: E402
 
@@ -40,6 +39,8 @@ from mkdocs.structure.files import File, Files  # noqa: E402
 _REMOTE_SCRIPT = re.compile(r'<script[^>]*\ssrc="https?://[^"]*"[^>]*>\s*</script>', re.I)
 _MATHJAX_CONFIG = re.compile(r'<script type="text/x-mathjax-config">.*?</script>', re.S)
 _API = re.compile(r"<!-- api: ([\w.]+) -->")
+# a Sphinx role as mkdocstrings renders it, e.g. :func:<code>~uam_studio.battery.simulate</code>
+_ROLE = re.compile(r":(?:mod|func|class|data|meth|attr|exc|obj|const):<code>(~?)([\w.]+)</code>")
 _MERMAID = re.compile(r'<script type="module">(?:(?!</script>).)*?mermaid.*?</script>', re.S)
 # Bokeh's and Panel's CDN files, and where the installed packages hold the same files
 _BOKEH_CDN = re.compile(r"https?://cdn\.bokeh\.org/bokeh/(?:release|dev)/(bokeh(?:-[a-z]+)?)-[\w.]+?(\.min)?\.js")
@@ -106,10 +107,18 @@ def localize(output: str, up: str) -> str:
 
 
 def on_post_page(output: str, page: Any, config: Any) -> str:
-    """A notebook's page loads nothing from the network (:func:`localize`)."""
+    """A notebook's page loads nothing from the network (:func:`localize`); a library page shows the
+    docstrings' Sphinx roles as plain code (:func:`plain_roles`)."""
     if page.file.src_uri.endswith(".ipynb"):
         output = localize(output, "../" * page.url.count("/"))
+    if page.file.src_uri.startswith("library/"):
+        output = plain_roles(output)
     return output
+
+
+def plain_roles(output: str) -> str:
+    """The docstrings' Sphinx roles shown as code: ``:func:`~a.b.c``` -> ``c``, ``:mod:`a.b``` -> ``a.b``."""
+    return _ROLE.sub(lambda m: f"<code>{m[2].rsplit('.', 1)[-1] if m[1] else m[2]}</code>", output)
 
 
 def on_post_build(config: Any) -> None:

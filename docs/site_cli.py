@@ -68,7 +68,7 @@ def _options_table(parser: argparse.ArgumentParser) -> str:
         for action in group._group_actions:
             if isinstance(action, (argparse._HelpAction, argparse._SubParsersAction)):
                 continue
-            helptext = (action.help or "").replace("%(default)s", str(action.default))
+            helptext = parser._get_formatter()._expand_help(action) if action.help else ""
             section = group.title if group.title not in ("options", "positional arguments") else ""
             what = f"*{section}*: {helptext}" if section and helptext else (helptext or section)
             rows.append(f"| {_flags(action)} | {_cell(what)} | {_default(action)} |")
@@ -92,6 +92,7 @@ def options_markdown() -> str:
     """One section per command (and sub-command): its summary, usage and options, from the parser."""
     from uam_studio.cli import build_parser
 
+    os.environ["COLUMNS"] = "80"  # usage lines wrapped at the same width on every machine
     top = build_parser()
     out = []
     for name, parser in _subparsers(top).items():
