@@ -97,7 +97,8 @@ GLOSSARY: dict[str, str] = {
                                 "health-aware prediction must beat it where the load repeats.",
     "Bound at 5% risk": "A time the discharge should outlast 95 times in 100: the one-sided lower bound of a "
                         "NASA prediction. A plan that finishes before it accepts that risk; on cells the "
-                        "model never read it is missed about 5% of the time (benchmarks/RESULTS.md).",
+                        "model never read it is missed about 5% of the time (benchmarks/RESULTS.md, \"The "
+                        "paper's own cells, for real\").",
 }
 
 

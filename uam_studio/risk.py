@@ -7,7 +7,7 @@ A level is the standard-normal quantile (std) of a one-sided bound; a safety che
   one-sided 5%): the operator's safety check and the fleet's health-aware dispatcher.
 - :data:`WIND_Z`: the operator's joint one-sided bound on the next leg's and the way home's winds (5%).
 - :data:`DISPATCH_WIND_Z`: the fleet dispatcher's wind to the head side on each leg of a round trip (1%;
-  tuned, ``benchmarks/RESULTS.md``).
+  tuned, ``benchmarks/RESULTS.md``, "A fleet's life").
 - :data:`INTERVAL_Z`: the half-width of a two-sided 90% interval (the take-off belief's q_max interval).
 """
 

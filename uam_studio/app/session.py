@@ -33,7 +33,8 @@ def configure_server_threads() -> None:
 
     The sessions, the planning pool and any retraining share the machine's cores. With torch's
     default intra-op threads, a Dynaformer prediction on a busy machine waits on threads spinning
-    against each other (many times its single-thread time; ``benchmarks/RESULTS.md``), so the served
+    against each other (many times its single-thread time; the app is measured with one torch thread,
+    ``benchmarks/RESULTS.md``, "App (python benchmarks/bench_app.py all"), so the served
     app runs torch single-threaded and gets its parallelism from the sessions instead.
     """
     import torch

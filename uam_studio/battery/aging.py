@@ -9,7 +9,8 @@ With ``efc`` the equivalent full cycles delivered (discharge throughput over the
 
 :data:`AGING_LAW` is fitted to the CMU eVTOL lives (VTC6 cells; ``python -m uam_studio.fleet.aging``),
 :data:`NASA_AGING_LAW` to the NASA PCoE lives of the paper's cell (``python -m uam_studio.fleet.nasa_aging``):
-both fits read all their lives (in-sample numbers; each life's held-out error is in ``benchmarks/RESULTS.md``).
+both fits read all their lives (in-sample numbers; each life's held-out error is in ``benchmarks/RESULTS.md``,
+"Packs that age" and "NASA lives in the fleet's aging law").
 The fitting lives in :mod:`uam_studio.fleet`; the health belief (:mod:`uam_studio.battery.health.belief`) ages a
 pack's belief by these laws between flights.
 """
@@ -64,7 +65,7 @@ class AgingLaw:
 
 
 # Fitted by `python -m uam_studio.fleet.aging` on the four CMU lives (all of them: in-sample numbers;
-# the held-out error of each cell is the leave-one-cell-out fit, benchmarks/RESULTS.md).
+# the held-out error of each cell is the leave-one-cell-out fit, benchmarks/RESULTS.md, "Packs that age").
 AGING_LAW = AgingLaw(a=0.00365567, b=0.646114, ea_k=175.433, k_r=0.00204851)
 # Fitted by uam_studio.fleet.nasa_aging.fit_nasa_law on all 25 NASA lives of the paper's cell (in-sample).
 NASA_AGING_LAW = AgingLaw(a=0.0213434, b=0.49731, ea_k=-778.876, k_r=0.00145988)

@@ -8,8 +8,8 @@ Every notebook reads the mode once, at the top::
 
 ``UAM_FAST=1`` (also ``true``, ``yes``, ``on``) selects fast mode: small sweeps and short
 training runs, so that each notebook runs within 2 minutes on 2 CPU cores (this is what CI
-runs; the measured times are in ``benchmarks/RESULTS.md``). Unset, empty or ``0``/``false``/``no``/``off`` selects full
-mode, which reproduces the paper-like figures and takes longer.
+runs; the measured times are in ``benchmarks/RESULTS.md``, "The test suite in minutes"). Unset, empty or
+``0``/``false``/``no``/``off`` selects full mode, which reproduces the paper-like figures and takes longer.
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ def _add_plan_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lookahead", type=int, default=0, metavar="K",
                    help="dqn: improve the agent by policy rollout over its K best safe actions and the "
                         "greedy rule's action per step, each continued by the agent and by the greedy rule "
-                        "(0 = off, default; 6 is what benchmarks/RESULTS.md measures; costs up to "
+                        "(0 = off, default; 6 is what benchmarks/RESULTS.md, \"Planning\", measures; costs up to "
                         "2(K + 1) extra episodes per step)")
     p.add_argument("--q-max", type=float, default=None, help="override the mission's q_max (C)")
     p.add_argument("--r0", type=float, default=None, help="override the mission's r0 (ohm)")

@@ -8,7 +8,7 @@
     health embedding and the decoder's latent. Unlike the transformer encoder, whose
     q_max estimate saturated at the edges of the training range, it extrapolates (median
     q_max error +48 / +18 C at 4000-5000 / 8000-9000 C on noise-free flights), but it is
-    fragile to sensor noise (benchmarks/RESULTS.md).
+    fragile to sensor noise (benchmarks/RESULTS.md, "Dynaformer health from noisy sensors").
   - ``"transformer"``:
 
 * Encoder (``"transformer"`` only): the observed context (20 s by default, up to ``max_context`` samples) is

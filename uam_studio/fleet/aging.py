@@ -189,7 +189,7 @@ class PackHealth:
         return replace(self, delivered_c=self.delivered_c + c)
 
 
-def _main() -> None:  # pragma: no cover - the fitting command, printed numbers go to RESULTS.md
+def _main() -> None:  # pragma: no cover - the fitting command (RESULTS.md, "Packs that age")
     lives = life_points()
     law = fit_aging_law(lives)
     print(f"AgingLaw(a={law.a:.6g}, b={law.b:.6g}, ea_k={law.ea_k:.6g}, k_r={law.k_r:.6g})  (fitted on all four lives)")

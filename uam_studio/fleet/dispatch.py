@@ -40,7 +40,7 @@ ALTITUDE_M = 500.0  # m: every leg's cruise
 NOMINAL = (DEFAULT_Q_MAX, DEFAULT_R0)  # a new NASA pack: q_max (C), R0 (ohm)
 NEW_PACK_SD = (300.0, 0.02)  # the spread of new packs around it: q_max (C), R0 (ohm)
 EOD_V = DEFAULT_EOD_V  # V: the cut-off
-BLIND_RESERVE_V = 0.5  # V: the health-blind rule's reserve above the cut-off (tuned: RESULTS.md)
+BLIND_RESERVE_V = 0.5  # V: the health-blind rule's reserve above the cut-off (tuned: RESULTS.md, "A fleet's life")
 DISPATCHERS = ("aware", "blind", "hindsight")
 
 

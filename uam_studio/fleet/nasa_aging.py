@@ -345,7 +345,7 @@ def forecast_score(lives: list[LifePoints], horizon: int = 20, start: int = 5,
     return out
 
 
-def _main() -> None:  # pragma: no cover - the fitting command; its numbers go to RESULTS.md
+def _main() -> None:  # pragma: no cover - the fitting command (RESULTS.md, "NASA lives in the fleet's aging law")
     lives = nasa_life_points()
     law = fit_nasa_law(lives)
     print(f"AgingLaw(a={law.a:.6g}, b={law.b:.6g}, ea_k={law.ea_k:.6g}, k_r={law.k_r:.6g})  (all {len(lives)} lives)")

@@ -1,6 +1,6 @@
 """Studies of flying with surprises: many seeded flights, summaries and the sweep over forecast
-error and sensor noise. The notebook "09 Flying with surprises", the benchmarks and RESULTS.md
-call these.
+error and sensor noise. The notebook "09 Flying with surprises" and the benchmarks call these
+(their numbers: benchmarks/RESULTS.md, "Flying the mission").
 """
 
 from __future__ import annotations

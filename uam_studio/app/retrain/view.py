@@ -157,7 +157,7 @@ class RetrainView(pn.viewable.Viewer):
             "destinations and the network learns to rank the oracle's choice first. After each epoch it "
             "plans the *current map*.\n"
             "- *Fine-tune bundled* starts from the bundled agent (DQN: it reached the oracle on an "
-            "8-destination map in 3 minutes where random weights did not, `benchmarks/RESULTS.md`).\n"
+            "8-destination map in 3 minutes where random weights did not: `benchmarks/RESULTS.md`, \"Planning\").\n"
             f"- Saved in `{html.escape(str(agents_dir()))}` (`UAM_STUDIO_HOME` moves it), never over the bundled "
             "ones; they appear in every session's Planner policy list. The full recipe is "
             "`uam-studio train attention`.")

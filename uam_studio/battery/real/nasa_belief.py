@@ -5,7 +5,7 @@ discharge on a 1 s grid from its first loaded sample (the current held between s
 between them, down to :data:`FIT_ABOVE_V`), its ambient, and its whole-record likelihood fit on the identified NASA cell
 (``NASA_IDENTIFIED``, fitted on B0005's first three discharges only) at that ambient. (The physics method's health,
 its end matched to the cut-off, with this fit's covariance, was tried: no better on B0007, B0018, B0029 and B0033,
-at twice the time; RESULTS.) Discharge k is predicted from
+at twice the time; RESULTS.md, "A pack's logbook and one health belief".) Discharge k is predicted from
 the :class:`~uam_studio.battery.health.belief.HealthBelief` over that logbook (the NASA cell's fleet prior, each
 discharge's fit, aged between discharges by the NASA aging law; where the cell has run at the discharge's load and
 ambient before, only those discharges' fits are read, as the physics method reads its last one), sharpened by
@@ -53,8 +53,8 @@ FIT_ABOVE_V = 2.8  # V: a discharge's record is fitted down to here (the model i
 METHOD = "belief"
 MIN_BAND = 100  # a group with fewer training errors takes the pooled quantiles
 # A real cell's capacity scatters from one discharge to the next about its fade by about 0.027-0.030 Ah of its ~2 Ah
-# (the capacity belief's noise, fleet.nasa_aging._noise, fitted on the NASA lives: RESULTS 2026-11-29), and drifts by
-# 0.3 of that a discharge (its DRIFT): the same shares of q_max and R0 here
+# (the capacity belief's noise, fleet.nasa_aging._noise, fitted on the NASA lives: RESULTS.md, "The capacity
+# belief's own floor"), and drifts by 0.3 of that a discharge (its DRIFT): the same shares of q_max and R0 here
 SCATTER = 0.015
 WALK = 0.3 * SCATTER
 
@@ -122,7 +122,7 @@ def belief_life(cell: NasaCell, cell_type: Cell = NASA_IDENTIFIED, cutoff_v: flo
 def _band(p: BeliefPrediction) -> str:
     """The group whose errors set a prediction's interval: a cell's first predictions ('early'), else the rest
     ('later'). (Per ambient band was tried: the room band's quantiles are too narrow for its heavy-tailed cells;
-    RESULTS.)"""
+    RESULTS.md, "A pack's logbook and one health belief".)"""
     return "early" if p.early else "later"
 
 

@@ -2,7 +2,7 @@
 
 SB3's ``SubprocVecEnv`` runs one environment per process, so every env step pays one pipe round
 trip for about as much physics: on 2 cores it is no faster than one
-in-process env (``benchmarks/RESULTS.md``). :class:`GroupedSubprocVecEnv` gives each of
+in-process env (``benchmarks/RESULTS.md``, "Planning"). :class:`GroupedSubprocVecEnv` gives each of
 ``n_workers`` processes a group of environments and steps the whole group per round trip, so the
 pipe cost is shared by the group and both cores do physics.
 

@@ -154,12 +154,14 @@ class UAMPlanningEnv(EpisodeQueries, gym.Env):
     :param predictor: the Dynaformer predictor (``predict`` and, optionally, ``health``).
     :param health_fn: ``f(context_current_a, context_voltage_v) -> [PC1, PC2]``; default
         ``predictor.health`` if the predictor has one, else :func:`fallback_health`.
-    :param alpha, beta, gamma: reward weights (>= 0).
-    :param randomize_battery: with a fixed mission, draw q_max and r0 from ``q_range``/``r0_range``
-        each episode.
+    :param alpha: reward weight of a destination's priority (>= 0).
+    :param beta: penalty of a charging stop at the vertiport (>= 0).
+    :param gamma: penalty of an end of discharge (>= 0).
+    :param randomize_battery: with a fixed mission, draw q_max and r0 from ``q_range``/``r0_range`` each episode.
     :param randomize_wind: with a fixed mission, draw every node's wind from U[-39, 39] kt each episode.
-    :param r0_range, q_range, radius_km: ranges for random cells and missions
-        (:mod:`uam_studio.planning.missions.generate` explains the 0.35 ohm default).
+    :param r0_range: a random cell's R0 range (ohm; :mod:`uam_studio.planning.missions.generate` on the 0.35 default).
+    :param q_range: range of a random cell's q_max (C).
+    :param radius_km: how far from the vertiport a random mission's destinations lie (km).
     :param max_steps: truncation length.
     :param safe_return: off (default) is the paper's setting. On, a destination leg after which
         the battery (this env's backend) could not fly home at the least-charge level, a leg that

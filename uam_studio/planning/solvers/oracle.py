@@ -46,7 +46,8 @@ health.
 
 Cost: ``stats["time_s"]`` of each plan; it grows with the feasible sets (a fresh cell with 8
 destinations close by flies tens of thousands of legs) and is almost all battery integration. The
-measured times are in ``benchmarks/RESULTS.md`` (``bench_reference.py``, ``bench_fly.py speed``).
+measured times are in ``benchmarks/RESULTS.md``, "The oracle's reference beyond 8 destinations" (``bench_reference.py``)
+and "Flying the mission" (``bench_fly.py speed``).
 
 The dominance assumption was also checked outside the tests on 44 random 5-destination missions
 over all 4 levels (the default random cells, 8-45 km): the feasible sets with and without pruning
@@ -56,7 +57,8 @@ Larger missions: :func:`oracle_plan` is exact up to :data:`EXACT_MAX` (``N_MAX =
 destinations (``stats["exact"] = True``). For 9-20 it returns the plan of the reference solver,
 OR-Tools routing re-checked on the physics model (:mod:`~uam_studio.planning.solvers.reference`),
 with ``stats["exact"] = False`` and a message saying so: the label search grows about tenfold a
-destination (benchmarks/RESULTS.md has the times). single_flight is one leg, exact at any size.
+destination (benchmarks/RESULTS.md, "The oracle's reference beyond 8 destinations", has the times).
+single_flight is one leg, exact at any size.
 :func:`feasible_sorties` and the cover work on a :class:`LegTable` of any number of slots
 (``legs.slots`` bits in the masks).
 

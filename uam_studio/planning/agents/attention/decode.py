@@ -63,7 +63,8 @@ MULTI_WIDE_MAX_DEST = 10  # multi_charge maps up to this size get the wide searc
 def default_search(scenario: str, n_dest: int) -> tuple[int, int]:
     """``(beam width, moves proposed per beam)`` of the default planner: (16, 4), and (8, 2) for
     multi_charge maps of more than :data:`MULTI_WIDE_MAX_DEST` destinations (about n + sorties steps of physics
-    checks against about n / 3 in single charge: it keeps a 20-destination plan fast; benchmarks/RESULTS.md)."""
+    checks against about n / 3 in single charge: it keeps a 20-destination plan fast; benchmarks/RESULTS.md, "The
+    learned planner")."""
     if scenario_rules(scenario).recharges and n_dest > MULTI_WIDE_MAX_DEST:
         return 8, 2
     return 16, 4

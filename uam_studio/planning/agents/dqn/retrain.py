@@ -69,7 +69,9 @@ def training_setup(
     :param scenario: default: the mission's, else ``single_charge``.
     :param mission: train on this map (the cell's q_max and R0 drawn at random each episode), or
         None for a random mission every episode.
-    :param alpha, beta, gamma: reward weights (default :data:`DQN_REWARD_DEFAULTS`), in [0, 1e6].
+    :param alpha: reward weight of a destination's priority (default :data:`DQN_REWARD_DEFAULTS`), in [0, 1e6].
+    :param beta: penalty of a charging stop (default :data:`DQN_REWARD_DEFAULTS`), in [0, 1e6].
+    :param gamma: penalty of an end of discharge (default :data:`DQN_REWARD_DEFAULTS`), in [0, 1e6].
     :param steps: env transitions (default: :class:`DQNTrainConfig`'s), in [1, 1e7].
     :param safe_return: train with the environment's ``safe_return`` rule (a leg that would leave
         no way home ends the episode with ``-gamma``); off is the paper's setting.

@@ -70,7 +70,7 @@ class DQNTrainConfig:
     seed: int = 0
     n_envs: int = 4  # env copies: decorrelates consecutive samples
     n_workers: int = 1  # 1: all copies here (DummyVecEnv); >= 2: GroupedSubprocVecEnv processes (on 2 cores
-    # slower for DQN: the gradient steps compete with the workers; benchmarks/RESULTS.md)
+    # slower for DQN: the gradient steps compete with the workers; RESULTS.md, "Planning")
     learning_rate: float = 1e-3  # Adam; rl-zoo CartPole uses 2.3e-3, a bit lower is steadier here
     buffer_size: int = 50_000  # holds the whole run at the default budget: small episodes, no staleness issue
     learning_starts: int = 1000  # ~100 random (masked) episodes before the first update
