@@ -6,6 +6,9 @@
   (``docs/site_results.py``); nothing of them is committed under ``docs/``.
 - ``docs/cli.md``'s markers ``<!-- cli: options -->`` and ``<!-- cli: errors -->`` become the parser's
   options and the bad-input examples run at build time (``docs/site_cli.py``).
+- ``UAM_DOCS_EXECUTE_ONLY=02_flight_profiles,12_nasa_cells`` (with ``UAM_DOCS_EXECUTE=1``) executes only the
+  notebooks named (the others are rendered without outputs): the browser test of an executed page
+  (``tests/test_docs_browser.py``) builds the site so, with one notebook run.
 - The notebook pages load nothing from the network: the MathJax and Mermaid loaders that nbconvert's template
   adds are dropped (the notebooks hold no formulas and no diagrams); an executed notebook's figures carry
   BokehJS inline (``BOKEH_RESOURCES=inline``, ``PANEL_INLINE=1`` for the kernels), and the Bokeh and Panel
@@ -46,6 +49,20 @@ _MERMAID = re.compile(r'<script type="module">(?:(?!</script>).)*?mermaid.*?</sc
 _BOKEH_CDN = re.compile(r"https?://cdn\.bokeh\.org/bokeh/(?:release|dev)/(bokeh(?:-[a-z]+)?)-[\w.]+?(\.min)?\.js")
 _PANEL_CDN = re.compile(r"https?://cdn\.holoviz\.org/panel/[\w.]+/dist/([\w./@^+-]+)")
 _VENDOR: dict[str, Path] = {}  # site path under assets/vendor/ -> the installed file it is copied from
+
+
+def on_config(config: Any) -> Any:
+    """``UAM_DOCS_EXECUTE_ONLY`` (comma-separated notebook stems): every other notebook goes to
+    mkdocs-jupyter's ``execute_ignore``."""
+    only = {s.strip() for s in os.environ.get("UAM_DOCS_EXECUTE_ONLY", "").split(",") if s.strip()}
+    if only:
+        unknown = only - {p.stem for p in (ROOT / "notebooks").glob("*.ipynb")}
+        if unknown:
+            raise ValueError(f"UAM_DOCS_EXECUTE_ONLY: no notebook named {sorted(unknown)} in notebooks/")
+        plugin = config["plugins"]["mkdocs-jupyter"]
+        plugin.config["execute_ignore"] = [f"notebooks/{p.name}" for p in sorted((ROOT / "notebooks").glob("*.ipynb"))
+                                           if p.stem not in only]
+    return config
 
 
 def on_files(files: Files, config: Any) -> Files:
