@@ -25,7 +25,8 @@ ROOT = Path(__file__).resolve().parents[1]
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 NOTEBOOK = "02_flight_profiles"
 
-pytestmark = pytest.mark.skipif(not Path(CHROMIUM).exists(), reason="chromium is not installed")
+pytestmark = [pytest.mark.skipif(not Path(CHROMIUM).exists(), reason="chromium is not installed"),
+              pytest.mark.slow]  # a site build and a notebook run: about 25 s
 
 # Every laid-out Bokeh figure on the page: its title and the hex colours of its glyphs (line and fill).
 JS_FIGURES = """() => { const out = [];
