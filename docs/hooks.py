@@ -28,9 +28,6 @@ ROOT = Path(__file__).resolve().parents[1]
 for _path in (str(ROOT / "docs"), str(ROOT)):
     if _path not in sys.path:
         sys.path.insert(0, _path)
-os.environ["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH")] if p])
-os.environ["BOKEH_RESOURCES"] = "inline"  # an executed notebook's figures carry BokehJS, not a CDN link
-os.environ["PANEL_INLINE"] = "1"  # and Panel's notebook loader inlines its JS and CSS
 
 import shutil  # noqa: E402
 
@@ -52,8 +49,13 @@ _VENDOR: dict[str, Path] = {}  # site path under assets/vendor/ -> the installed
 
 
 def on_config(config: Any) -> Any:
-    """``UAM_DOCS_EXECUTE_ONLY`` (comma-separated notebook stems): every other notebook goes to
+    """Set the notebook kernels' environment (a build's only: importing this module changes nothing, so a
+    test that reads its functions leaves a later served app's resources alone), and read
+    ``UAM_DOCS_EXECUTE_ONLY`` (comma-separated notebook stems): every other notebook goes to
     mkdocs-jupyter's ``execute_ignore``."""
+    os.environ["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH")] if p])
+    os.environ["BOKEH_RESOURCES"] = "inline"  # an executed notebook's figures carry BokehJS, not a CDN link
+    os.environ["PANEL_INLINE"] = "1"  # and Panel's notebook loader inlines its JS and CSS
     only = {s.strip() for s in os.environ.get("UAM_DOCS_EXECUTE_ONLY", "").split(",") if s.strip()}
     if only:
         unknown = only - {p.stem for p in (ROOT / "notebooks").glob("*.ipynb")}

@@ -17,7 +17,9 @@ def app_url(tmp_path_factory):
 
     home = tmp_path_factory.mktemp("uam_home")
     try:
-        with ServedApp(home, timeout_s=180) as srv:
+        # the offline notebooks' resource settings left in the shell: the served page still loads only
+        # from the server (the browser tests refuse any other request)
+        with ServedApp(home, timeout_s=180, BOKEH_RESOURCES="inline", PANEL_INLINE="1") as srv:
             yield srv.url
     except RuntimeError as err:
         pytest.fail(str(err))

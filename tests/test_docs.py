@@ -157,3 +157,15 @@ def test_the_librarys_pointers_into_results_name_their_entry():
             if not quoted or not any(h.startswith(quoted.group(1)) for h in headings):
                 bad.append(f"{path.relative_to(ROOT)}:{text.count(chr(10), 0, match.start()) + 1}")
     assert bad == []
+
+
+def test_importing_the_hooks_changes_no_environment_variable():
+    """The kernels' settings (``BOKEH_RESOURCES=inline``...) are a build's, set in ``on_config``: a worker
+    that imports the hooks must not hand them to a served app it starts later. Checked in a fresh process
+    (this one imported the hooks at collection)."""
+    import subprocess
+
+    code = "import os, sys; before = dict(os.environ); import hooks; sys.exit(dict(os.environ) != before)"
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT / "docs", capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]

@@ -89,6 +89,11 @@ def serve(port: int = DEFAULT_PORT, show: bool = True, address: str | None = Non
     """
     address = address or DEFAULT_ADDRESS
     allowed_hosts(port, address, allow_origin)  # ValueError for a bad allow_origin, before binding
+    # The page's JavaScript and CSS come from this server, so the app works with no network. Bokeh's and
+    # Panel's resource settings left in the shell (BOKEH_RESOURCES=inline, PANEL_INLINE=1: the offline
+    # notebooks' settings) would inline BokehJS (a 5 MB page) and send Panel's CSS to its CDN.
+    for name in ("BOKEH_RESOURCES", "PANEL_INLINE"):
+        os.environ.pop(name, None)
     check_can_listen(address, port)
     procs = num_procs if num_procs > 0 else (os.cpu_count() or 1)
     if procs > 1:
