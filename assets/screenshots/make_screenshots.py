@@ -1,13 +1,14 @@
-"""Take the README's screenshots of the Planner, Battery lab and Retrain tabs at 1366x768 (a
+"""Take the site's screenshots of the Planner, Battery lab, Retrain, Fleet and Glossary tabs at 1366x768 (a
 classroom laptop; playwright + Debian's chromium).
 
     python assets/screenshots/make_screenshots.py [--width 1920 --height 1080 --out DIR]
 
 Serves the app with ``panel serve`` on a free port (user folder in a temporary directory), adds a
 destination on the map and waits for the planner comparison, switches to the Battery lab (varying
-R0), runs a short DQN retraining and a short attention-planner retraining, and writes
-``planner.png``, ``battery_lab.png``, ``retrain.png`` and ``retrain_attention.png`` in ``--out``
-(default: next to this file). (The Fly tab's screenshot comes from its browser test.)
+R0), runs a short DQN retraining and a short attention-planner retraining, flies three fleet days and opens
+the Glossary, and writes ``planner.png``, ``battery_lab.png``, ``retrain.png``, ``retrain_attention.png``,
+``fleet_tab.png`` and ``glossary.png`` in ``--out`` (default: next to this file). (The Fly tab's screenshots
+come from its browser tests, with ``UAM_SCREENSHOTS=1``.)
 """
 
 from __future__ import annotations
@@ -108,12 +109,24 @@ def main() -> None:
             page.locator(".uam-train-status").get_by_text("done: 12 epochs").wait_for(timeout=900_000)
             time.sleep(1.5)
             page.screenshot(path=str(out / "retrain_attention.png"))
+
+            page.locator(".bk-tab", has_text="Fleet").click()
+            for day in (1, 2, 3):
+                page.locator(".uam-fleet-run button").click()
+                page.locator(".uam-fleet-status").get_by_text(f"day {day}:").wait_for(timeout=300_000)
+            time.sleep(2)
+            page.screenshot(path=str(out / "fleet_tab.png"))
+
+            page.locator(".bk-tab", has_text="Glossary").click()
+            time.sleep(2)
+            page.screenshot(path=str(out / "glossary.png"))
             browser.close()
     finally:
         proc.terminate()
         proc.wait(20)
         shutil.rmtree(home, ignore_errors=True)
-    for name in ("planner.png", "battery_lab.png", "retrain.png", "retrain_attention.png"):
+    for name in ("planner.png", "battery_lab.png", "retrain.png", "retrain_attention.png", "fleet_tab.png",
+                 "glossary.png"):
         print(f"{name}: {(out / name).stat().st_size / 1024:.0f} KB")
 
 
