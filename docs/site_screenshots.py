@@ -46,6 +46,9 @@ def main(site: Path, out: Path) -> list[str]:
                 page.goto((site / path).resolve().as_uri())
                 page.wait_for_timeout(1500)
                 if scroll_to:
+                    if not page.locator(scroll_to).count():
+                        raise SystemExit(f"{site / path}: no figure drawn (build the site with the notebook "
+                                         "executed: see this script's docstring)")
                     page.locator(scroll_to).first.scroll_into_view_if_needed()
                     page.wait_for_timeout(1000)
                 page.screenshot(path=str(out / name))

@@ -91,13 +91,16 @@ def mission_map(mission: Mission, route: Sequence[str] | None = None, title: str
 
 def curves(series: Mapping[str, tuple[Sequence[float], Sequence[float]]], xlabel: str, ylabel: str,
            hline: float | None = None, title: str = "", width: int = 700, height: int = 320,
-           **opts: Any) -> hv.Overlay:
+           marks: Sequence[Any] = (), **opts: Any) -> hv.Overlay:
     """One ``hv.Curve`` per labelled ``(x, y)`` series, overlaid; ``hline`` draws a dashed
-    horizontal line (for example the 3.0 V cut-off)."""
+    horizontal line (for example the 3.0 V cut-off); ``marks`` are more elements drawn over them (a
+    ``hv.VLine`` at a phase's end). Give marks here rather than ``curves(...) * mark``: a product makes a
+    new overlay, without this one's size, title and legend place."""
     items: list[Any] = [hv.Curve((np.asarray(x), np.asarray(y)), xlabel, ylabel, label=str(name)).opts(
         tools=["hover"]) for name, (x, y) in series.items()]
     if hline is not None:
         items.append(hv.HLine(hline).opts(color="gray", line_dash="dashed", line_width=1))
+    items.extend(marks)
     return hv.Overlay(items).opts(title=title, width=width, height=height, legend_position="right", **opts)
 
 
