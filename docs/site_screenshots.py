@@ -22,11 +22,9 @@ PAGES = {
 }
 
 
-def main(site: Path, out: Path) -> list[str]:
-    """Write one PNG per page of :data:`PAGES` into ``out``; return the refused requests (empty when none)."""
-    from playwright.sync_api import sync_playwright
-
-    out.mkdir(parents=True, exist_ok=True)
+def refuse_outside(page) -> list[str]:
+    """Route every request of the Playwright ``page``: a ``file://`` one goes on, any other is refused and
+    its URL added to the list returned (filled as the page loads)."""
     refused: list[str] = []
 
     def only_local(route) -> None:
@@ -36,13 +34,23 @@ def main(site: Path, out: Path) -> list[str]:
             refused.append(route.request.url)
             route.abort()
 
+    page.route("**/*", only_local)
+    return refused
+
+
+def main(site: Path, out: Path) -> list[str]:
+    """Write one PNG per page of :data:`PAGES` into ``out``; return the refused requests (empty when none)."""
+    from playwright.sync_api import sync_playwright
+
+    out.mkdir(parents=True, exist_ok=True)
+    refused: list[str] = []
     chromium = shutil.which("chromium") or "/usr/bin/chromium"
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=chromium, args=["--no-sandbox"])
         try:
             for name, (path, scroll_to) in PAGES.items():
                 page = browser.new_page(viewport={"width": 1366, "height": 768})
-                page.route("**/*", only_local)
+                page_refused = refuse_outside(page)
                 page.goto((site / path).resolve().as_uri())
                 page.wait_for_timeout(1500)
                 if scroll_to:
@@ -52,6 +60,7 @@ def main(site: Path, out: Path) -> list[str]:
                     page.locator(scroll_to).first.scroll_into_view_if_needed()
                     page.wait_for_timeout(1000)
                 page.screenshot(path=str(out / name))
+                refused += page_refused
                 page.close()
         finally:
             browser.close()

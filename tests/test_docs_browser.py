@@ -22,6 +22,9 @@ pytest.importorskip("playwright")
 pytest.importorskip("mkdocs_jupyter")
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "docs"))
+from site_screenshots import refuse_outside  # noqa: E402
+
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 NOTEBOOK = "02_flight_profiles"
 
@@ -61,18 +64,9 @@ def test_an_executed_notebook_page_draws_its_figures_offline(site, browser):
     page_file = site / "notebooks" / f"{NOTEBOOK}.html"
     html = page_file.read_text()
     assert "cdn.bokeh.org" not in html and "cdn.holoviz.org" not in html and "cdn.jsdelivr" not in html
-    refused: list[str] = []
-
-    def only_local(route) -> None:
-        if route.request.url.startswith("file://"):
-            route.continue_()
-        else:
-            refused.append(route.request.url)
-            route.abort()
-
     page = browser.new_page(viewport={"width": 1366, "height": 768})
     try:
-        page.route("**/*", only_local)
+        refused = refuse_outside(page)
         errors: list[str] = []
         page.on("pageerror", lambda err: errors.append(str(err)))
         page.goto(page_file.as_uri())
