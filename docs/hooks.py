@@ -6,8 +6,8 @@
   (``docs/site_results.py``); nothing of them is committed under ``docs/``.
 - ``docs/cli.md``'s markers ``<!-- cli: options -->`` and ``<!-- cli: errors -->`` become the parser's
   options and the bad-input examples run at build time (``docs/site_cli.py``).
-- ``UAM_DOCS_EXECUTE_ONLY=02_flight_profiles,12_nasa_cells`` (with ``UAM_DOCS_EXECUTE=1``) executes only the
-  notebooks named (the others are rendered without outputs): the browser test of an executed page
+- ``UAM_DOCS_EXECUTE_ONLY=02_flight_profiles,12_nasa_cells`` (with ``UAM_DOCS_EXECUTE=1``; ``true`` and ``yes`` too)
+  executes only the notebooks named (the others are rendered without outputs): the browser test of an executed page
   (``tests/test_docs_browser.py``) builds the site so, with one notebook run.
 - The notebook pages load nothing from the network: the MathJax and Mermaid loaders that nbconvert's template
   adds are dropped (the notebooks hold no formulas and no diagrams); an executed notebook's figures carry
@@ -33,6 +33,7 @@ import shutil  # noqa: E402
 
 import site_cli  # noqa: E402
 import site_results  # noqa: E402
+from mkdocs.exceptions import PluginError  # noqa: E402
 from mkdocs.structure.files import File, Files  # noqa: E402
 
 # a <script> (with its body) whose src is on the network: nbconvert's MathJax and Mermaid loaders
@@ -45,14 +46,21 @@ _MERMAID = re.compile(r'<script type="module">(?:(?!</script>).)*?mermaid.*?</sc
 # Bokeh's and Panel's CDN files, and where the installed packages hold the same files
 _BOKEH_CDN = re.compile(r"https?://cdn\.bokeh\.org/bokeh/(?:release|dev)/(bokeh(?:-[a-z]+)?)-[\w.]+?(\.min)?\.js")
 _PANEL_CDN = re.compile(r"https?://cdn\.holoviz\.org/panel/[\w.]+/dist/([\w./@^+-]+)")
+TRUE, FALSE = {"1", "true", "yes"}, {"", "0", "false", "no"}  # UAM_DOCS_EXECUTE's values
 _VENDOR: dict[str, Path] = {}  # site path under assets/vendor/ -> the installed file it is copied from
 
 
 def on_config(config: Any) -> Any:
     """Set the notebook kernels' environment (a build's only: importing this module changes nothing, so a
-    test that reads its functions leaves a later served app's resources alone), and read
+    test that reads its functions leaves a later served app's resources alone); read ``UAM_DOCS_EXECUTE``
+    (1, true or yes: the notebooks are run; anything else: not, and a value that is neither says so) and
     ``UAM_DOCS_EXECUTE_ONLY`` (comma-separated notebook stems): every other notebook goes to
     mkdocs-jupyter's ``execute_ignore``."""
+    plugin = config["plugins"]["mkdocs-jupyter"]
+    flag = os.environ.get("UAM_DOCS_EXECUTE", "").strip().lower()
+    if flag not in TRUE | FALSE:
+        raise PluginError(f"UAM_DOCS_EXECUTE: {flag!r}; allowed 1/true/yes (run the notebooks) or 0/false/no/empty")
+    plugin.config["execute"] = flag in TRUE
     os.environ["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH")] if p])
     os.environ["BOKEH_RESOURCES"] = "inline"  # an executed notebook's figures carry BokehJS, not a CDN link
     os.environ["PANEL_INLINE"] = "1"  # and Panel's notebook loader inlines its JS and CSS
@@ -60,8 +68,7 @@ def on_config(config: Any) -> Any:
     if only:
         unknown = only - {p.stem for p in (ROOT / "notebooks").glob("*.ipynb")}
         if unknown:
-            raise ValueError(f"UAM_DOCS_EXECUTE_ONLY: no notebook named {sorted(unknown)} in notebooks/")
-        plugin = config["plugins"]["mkdocs-jupyter"]
+            raise PluginError(f"UAM_DOCS_EXECUTE_ONLY: no notebook named {sorted(unknown)} in notebooks/")
         plugin.config["execute_ignore"] = [f"notebooks/{p.name}" for p in sorted((ROOT / "notebooks").glob("*.ipynb"))
                                            if p.stem not in only]
     return config

@@ -3,7 +3,7 @@
     python docs/site_screenshots.py SITE_DIR OUT_DIR
 
 Takes the front page, notebook 02's page scrolled to its first figure (build it executed first:
-``UAM_DOCS_EXECUTE=true UAM_DOCS_EXECUTE_ONLY=02_flight_profiles UAM_FAST=1 mkdocs build --strict``), an API
+``UAM_DOCS_EXECUTE=1 UAM_DOCS_EXECUTE_ONLY=02_flight_profiles UAM_FAST=1 mkdocs build --strict``), an API
 page (the battery layer) and the Results landing page, one PNG each. A request outside the site's folder is
 refused and named.
 """

@@ -53,7 +53,7 @@ JS_ANY_VIEW = "() => window.Bokeh && window.Bokeh.index && [...window.Bokeh.inde
 def site(tmp_path_factory) -> Path:
     """The site, built with notebook 02 executed (fast mode), in a folder of its own."""
     out = tmp_path_factory.mktemp("site")
-    env = {**os.environ, "UAM_DOCS_EXECUTE": "true", "UAM_DOCS_EXECUTE_ONLY": NOTEBOOK, "UAM_FAST": "1"}
+    env = {**os.environ, "UAM_DOCS_EXECUTE": "1", "UAM_DOCS_EXECUTE_ONLY": NOTEBOOK, "UAM_FAST": "1"}
     done = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--quiet", "--site-dir", str(out)],
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
