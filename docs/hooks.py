@@ -61,16 +61,17 @@ def on_config(config: Any) -> Any:
     if flag not in TRUE | FALSE:
         raise PluginError(f"UAM_DOCS_EXECUTE: {flag!r}; allowed 1/true/yes (run the notebooks) or 0/false/no/empty")
     plugin.config["execute"] = flag in TRUE
-    os.environ["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH")] if p])
+    paths = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p and p != str(ROOT)]
+    os.environ["PYTHONPATH"] = os.pathsep.join([str(ROOT), *paths])  # once, however often the site rebuilds
     os.environ["BOKEH_RESOURCES"] = "inline"  # an executed notebook's figures carry BokehJS, not a CDN link
     os.environ["PANEL_INLINE"] = "1"  # and Panel's notebook loader inlines its JS and CSS
     only = {s.strip() for s in os.environ.get("UAM_DOCS_EXECUTE_ONLY", "").split(",") if s.strip()}
     if only:
-        unknown = only - {p.stem for p in (ROOT / "notebooks").glob("*.ipynb")}
+        notebooks = sorted((ROOT / "notebooks").glob("*.ipynb"))
+        unknown = only - {p.stem for p in notebooks}
         if unknown:
             raise PluginError(f"UAM_DOCS_EXECUTE_ONLY: no notebook named {sorted(unknown)} in notebooks/")
-        plugin.config["execute_ignore"] = [f"notebooks/{p.name}" for p in sorted((ROOT / "notebooks").glob("*.ipynb"))
-                                           if p.stem not in only]
+        plugin.config["execute_ignore"] = [f"notebooks/{p.name}" for p in notebooks if p.stem not in only]
     return config
 
 

@@ -10,6 +10,7 @@ import contextlib
 import io
 import os
 from pathlib import Path
+from unittest import mock
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -88,23 +89,24 @@ def command_names() -> list[str]:
     return names
 
 
+def _section(level: str, name: str, parser: argparse.ArgumentParser) -> list[str]:
+    """One command's section: its heading (anchor: the name with '-' for spaces), summary, usage and options."""
+    return [f"{level} `uam-studio {name}` {{#{name.replace(' ', '-')}}}\n", f"{parser.description or ''}\n",
+            f"```text\n{parser.format_usage().strip()}\n```\n", _options_table(parser)]
+
+
 def options_markdown() -> str:
-    """One section per command (and sub-command): its summary, usage and options, from the parser."""
+    """One section per command (and sub-command): its summary, usage and options, from the parser. The usage
+    lines are wrapped at 80 columns on every machine (``COLUMNS`` is set while they are written, then put
+    back)."""
     from uam_studio.cli import build_parser
 
-    os.environ["COLUMNS"] = "80"  # usage lines wrapped at the same width on every machine
-    top = build_parser()
-    out = []
-    for name, parser in _subparsers(top).items():
-        out.append(f"## `uam-studio {name}` {{#{name}}}\n")
-        out.append(f"{parser.description or ''}\n")
-        out.append(f"```text\n{parser.format_usage().strip()}\n```\n")
-        out.append(_options_table(parser))
-        for sub_name, sub in _subparsers(parser).items():
-            out.append(f"### `uam-studio {name} {sub_name}` {{#{name}-{sub_name}}}\n")
-            out.append(f"{sub.description or ''}\n")
-            out.append(f"```text\n{sub.format_usage().strip()}\n```\n")
-            out.append(_options_table(sub))
+    out: list[str] = []
+    with mock.patch.dict(os.environ, {"COLUMNS": "80"}):
+        for name, parser in _subparsers(build_parser()).items():
+            out += _section("##", name, parser)
+            for sub_name, sub in _subparsers(parser).items():
+                out += _section("###", f"{name} {sub_name}", sub)
     return "\n".join(out)
 
 

@@ -67,7 +67,7 @@ class Entry:
 
 
 def anchor(heading: str) -> str:
-    """GitHub's anchor of a Markdown heading: lower case, punctuation dropped, spaces to '-' (the same rule as
+    """GitHub's anchor of a Markdown heading: lower case, punctuation dropped, spaces to '-' (also read by
     ``tests/test_house_rules.py``), so a link into RESULTS.md works on GitHub and on the site."""
     return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
 
@@ -107,6 +107,11 @@ def problems(entries: list[Entry]) -> list[str]:
                 found.append(f"two headings with the anchor #{a}")
             seen.add(a)
     return found
+
+
+def topics_by_anchor(entries: list[Entry]) -> dict[str, str | None]:
+    """Each anchor of the log (an entry's or one of its sections') -> the topic of the entry it is in."""
+    return {a: e.topic for e in entries for a in e.anchors}
 
 
 def _newest_first(entries: list[Entry]) -> list[Entry]:
@@ -152,7 +157,7 @@ def topic_page(topic: str, entries: list[Entry], rows: list[str], header: str) -
 
 def index_page(entries: list[Entry], readme: str) -> str:
     """The scoreboard (benchmarks/README.md, its links sent to the topic pages) and the list of topics."""
-    by_anchor = {a: e.topic for e in entries for a in e.anchors}
+    by_anchor = topics_by_anchor(entries)
     body = readme.split("\n", 1)[1]  # without its "# Benchmarks" title
     body = _LINK.sub(lambda m: f"({by_anchor.get(m.group(1), 'missing')}.md#{m.group(1)})", body)
     body = body.replace("`RESULTS.md`", "`benchmarks/RESULTS.md`")
@@ -166,7 +171,7 @@ def index_page(entries: list[Entry], readme: str) -> str:
 
 def rows_by_topic(entries: list[Entry], rows: list[str]) -> dict[str, list[str]]:
     """Each scoreboard row under the topic of the log entry it links to (a row without a link: none)."""
-    by_anchor = {a: e.topic for e in entries for a in e.anchors}
+    by_anchor = topics_by_anchor(entries)
     out: dict[str, list[str]] = {t: [] for t in TOPICS}
     for row in rows:
         links = _LINK.findall(row)
@@ -183,7 +188,7 @@ def pages() -> dict[str, str]:
         raise ValueError("benchmarks/RESULTS.md: " + "; ".join(found))
     readme = BENCH_README.read_text()
     _, header, rows = _scoreboard(readme)
-    anchors = {a for e in entries for a in e.anchors}
+    anchors = topics_by_anchor(entries)
     dangling = [a for row in rows for a in _LINK.findall(row) if a not in anchors]
     if dangling:
         raise ValueError(f"benchmarks/README.md links to no entry: {dangling}")

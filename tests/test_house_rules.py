@@ -5,9 +5,12 @@ no module is longer than 450 lines."""
 from __future__ import annotations
 
 import re
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "docs"))
+from site_results import anchor  # noqa: E402  GitHub's heading anchors, one rule for the site and these checks
 
 
 def test_every_benchmark_script_is_in_the_readme_table():
@@ -31,11 +34,6 @@ def test_every_module_is_at_most_450_lines():
     assert long == {}, long
 
 
-def _anchor(heading: str) -> str:
-    """GitHub's anchor of a Markdown heading: lower case, punctuation dropped, spaces to '-'."""
-    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
-
-
 def test_the_scoreboard_has_a_row_per_benchmark_and_each_row_links_to_a_log_entry():
     text = (ROOT / "benchmarks" / "README.md").read_text()
     board = text.split("## Scoreboard", 1)[1].split("\n## ", 1)[0]
@@ -43,7 +41,7 @@ def test_the_scoreboard_has_a_row_per_benchmark_and_each_row_links_to_a_log_entr
     scripts = {p.name for p in (ROOT / "benchmarks").glob("bench_*.py")}
     named = {m for line in rows for m in re.findall(r"`(bench_\w+\.py)`", line.split("|")[1])}
     assert scripts - named == set(), f"no scoreboard row: {sorted(scripts - named)}"
-    anchors = {_anchor(h) for h in re.findall(r"^#{2,3} (.+)$", (ROOT / "benchmarks" / "RESULTS.md").read_text(), re.M)}
+    anchors = {anchor(h) for h in re.findall(r"^#{2,3} (.+)$", (ROOT / "benchmarks" / "RESULTS.md").read_text(), re.M)}
     links = [link for line in rows for link in re.findall(r"\(RESULTS\.md#([^)]+)\)", line)]
     assert links and [a for a in links if a not in anchors] == []
 

@@ -66,6 +66,9 @@ def _leg_labels(path: list[tuple[float, float]], altitudes_m: list[float], missi
     return altitude_labels(legs, [(mission.vertiport.x_km, mission.vertiport.y_km), *nodes], ["", *names])
 
 
+FLYING = "flying..."  # the busy mark's label while a flight is computed
+
+
 class FlyView(pn.viewable.Viewer):
     """Controls, map, voltage plot and decision log of a :class:`FlyState`."""
 
@@ -98,7 +101,7 @@ class FlyView(pn.viewable.Viewer):
         self.clock = pn.widgets.FloatSlider(name="Playback time (s)", start=0, end=1, value=0, width=w)
         self.status = pn.pane.Markdown("", css_classes=["uam-fly-status"], sizing_mode="stretch_width")
         self.error = pn.pane.Alert("", alert_type="danger", visible=False, sizing_mode="stretch_width")
-        self.progress = busy_mark(bool(s.running), 110, "flying...")  # its content alone changes: no new layout
+        self.progress = busy_mark(bool(s.running), 110, FLYING)  # its content alone changes: no new layout
         self.log = pn.widgets.Tabulator(pd.DataFrame(columns=["t (s)", "at", "belief from", "q_max (C)", "R0 (ohm)",
                                                               "fit flags", "leg wind vs forecast (kt)",
                                                               "common shift (kt)",
@@ -131,7 +134,7 @@ class FlyView(pn.viewable.Viewer):
         s.param.watch(self._on_record, "record")
         s.param.watch(self._on_time, "t_s")
         s.param.watch(lambda e: setattr(self.play, "value", e.new), "playing")
-        s.param.watch(lambda e: setattr(self.progress, "object", busy_html(bool(e.new), "flying...")), "running")
+        s.param.watch(lambda e: setattr(self.progress, "object", busy_html(bool(e.new), FLYING)), "running")
         s.param.watch(self._on_text, ["status", "error"])
         self._callback: pn.io.PeriodicCallback | None = None
         self._layout = pn.Row(

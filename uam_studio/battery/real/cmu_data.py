@@ -36,6 +36,7 @@ BESIDE_CHECKOUT = beside_checkout("cmu_evtol")
 # The sample that ships with the package: the 1 Hz mission and one resampled life (VAH27).
 SAMPLE = SAMPLES / "cmu_evtol"
 SAMPLE_NOTE = SAMPLE_NOTES["cmu_evtol"]
+CELL_GLOB = "VAH*"  # the dataset's cell files: missions (VAHnn_cc.csv) and resampled lives (VAHnn.csv.mat)
 LIFE_FILES = ("VAH07.csv.mat", "VAH09.csv.mat", "VAH27.csv.mat", "VAH30.csv.mat")
 
 # Segment codes (Ns) of a mission cycle in the dataset.
@@ -249,7 +250,7 @@ def data_folder(path: str | os.PathLike | None = None, needs: str = MISSION_FILE
         text = str(SAMPLE)
     if not text:
         raise InputError("data", f"no dataset folder holds {needs}: the bundled sample has only "
-                         f"{', '.join(sorted(p.name for p in SAMPLE.glob('VAH*')))}; get the CMU eVTOL dataset (DOI "
+                         f"{', '.join(sorted(p.name for p in SAMPLE.glob(CELL_GLOB)))}; get the CMU eVTOL dataset (DOI "
                          f"{DATASET_DOI}, see `uam-studio data`) and point at it with "
                          f"os.environ['{DATA_ENV}'] = '/path/to/cmu_evtol' in a notebook's first cell, "
                          f"export {DATA_ENV}=/path/to/cmu_evtol in a shell, or --data PATH on the command line")

@@ -44,7 +44,7 @@ DATASETS = {
         f"export {nasa_data.DATA_ENV}=DIR (or pass --data DIR)"),
     "cmu": DataSet(
         "cmu", "CMU eVTOL battery dataset (Sony-Murata US18650VTC6, 3 Ah)", cmu_data.DATA_ENV, cmu_data.SAMPLE,
-        "VAH*", "A. Bills et al. (2023), Scientific Data 10, 344; CC BY 4.0",
+        cmu_data.CELL_GLOB, "A. Bills et al. (2023), Scientific Data 10, 344; CC BY 4.0",
         f"Carnegie Mellon University's KiltHub repository, DOI {cmu_data.DATASET_DOI} (raw files); this project "
         f"reads the 1 Hz mission {cmu_data.MISSION_FILE} and four lives resampled into MATLAB files "
         f"({', '.join(cmu_data.LIFE_FILES)}), whose sources the sample's PROVENANCE.md names",

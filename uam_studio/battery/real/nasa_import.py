@@ -113,8 +113,8 @@ def read_nasa_mat(path: str | os.PathLike) -> ImportedCell:
         data = _field(cyc, "data", path, where)
         re = rct = capacity = None
         if kind == "impedance":
-            re = float(np.real(np.asarray(getattr(data, "Re", np.nan)))) if hasattr(data, "Re") else None
-            rct = float(np.real(np.asarray(getattr(data, "Rct", np.nan)))) if hasattr(data, "Rct") else None
+            re = float(np.real(np.asarray(data.Re))) if hasattr(data, "Re") else None
+            rct = float(np.real(np.asarray(data.Rct))) if hasattr(data, "Rct") else None
         if kind == "discharge":
             cols = [_vector(data, f, path, f"{where} (discharge)") for f in DISCHARGE_FIELDS]
             n = cols[0].size
