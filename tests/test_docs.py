@@ -14,6 +14,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 sys.path.insert(0, str(DOCS))
+pytest.importorskip("mkdocs", reason="the site's tools are the docs extra: pip install -e '.[docs]'")
 
 import hooks  # noqa: E402
 import site_cli  # noqa: E402
