@@ -37,24 +37,20 @@ if not os.environ.get("UAM_STUDIO_CMU_DATA"):  # notebook 10 reads the dataset: 
     collect_ignore = ["notebooks/10_real_cells.ipynb"]
 
 
-# Longest files first: with ``-n auto --dist loadgroup --no-loadscope-reorder`` each worker takes the next
-# whole group in this order, so the slow files (browser tests, notebooks, training) start at once instead
+# Longest files first: with ``-n auto --dist loadfile --no-loadscope-reorder`` each worker takes the next
+# whole file in this order, so the slow files (browser tests, notebooks, training) start at once instead
 # of last, and the run does not end waiting on one long file. The seconds per file come from an earlier
 # run (``tests/file_seconds.json``, written by ``python benchmarks/suite_file_seconds.py LOG``); a file
-# not listed goes after the listed ones. Within a file the order is kept.
-#
-# Groups (``xdist_group``): each file is its own group (a notebook's cells share one kernel; a module
-# fixture starts once), except the files in BROWSER_GROUP, which run on one worker so that they share one
-# served app and one Chromium (``app_url`` in tests/conftest.py is session-scoped).
+# not listed goes after the listed ones. Within a file the order is kept. (``--dist loadgroup``, which could
+# send both browser files to one worker, breaks on pytest 9.2: a file's collector is set up again for every
+# test, so each notebook cell gets a new kernel and each module fixture starts again.)
 #
 # ``slow``: the notebooks and every file that took SLOW_FILE_S or more in the table; ``-m "not slow"``
 # runs the rest (DEVELOPING.md, "The fast loop").
 _FILE_SECONDS = Path(ROOT) / "tests" / "file_seconds.json"
-BROWSER_GROUP = ("tests/test_app_browser.py", "tests/test_app_fly_browser.py")
 SLOW_FILE_S = 15.0
 
 
-@pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the groups
 def pytest_collection_modifyitems(config, items):
     try:
         seconds = json.loads(_FILE_SECONDS.read_text())
@@ -62,8 +58,6 @@ def pytest_collection_modifyitems(config, items):
         seconds = {}
     for item in items:
         file = item.nodeid.split("::")[0]
-        if not any(item.iter_markers("xdist_group")):
-            item.add_marker(pytest.mark.xdist_group("browser" if file in BROWSER_GROUP else file))
         if file.startswith("notebooks/") or float(seconds.get(file, 0.0)) >= SLOW_FILE_S:
             item.add_marker(pytest.mark.slow)
     items.sort(key=lambda item: -float(seconds.get(item.nodeid.split("::")[0], 0.0)))

@@ -11,8 +11,8 @@ CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 
 @pytest.fixture(scope="session")
 def app_url(tmp_path_factory):
-    """Serve the app in a subprocess (the way users start it) and yield its URL: one server for both browser
-    files, which the root conftest.py sends to one worker (the ``browser`` xdist group)."""
+    """Serve the app in a subprocess (the way users start it) and yield its URL: one server per worker, shared
+    by both browser files where they run on the same one."""
     from uam_studio.app.serve import ServedApp
 
     home = tmp_path_factory.mktemp("uam_home")
