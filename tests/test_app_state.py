@@ -11,6 +11,7 @@ import re
 import threading
 import time
 import zipfile
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +32,7 @@ from uam_studio.planning.agents.retrain import (
     training_setup,
     user_home,
 )
+from uam_studio.planning.missions.mission import Battery
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "assets" / "example_mission.json"
@@ -773,3 +775,28 @@ def test_retrain_progress_text_and_oracle_reference():
     rs.request_reference(None)
     assert rs.reference is None
     planner.close()
+
+
+def test_a_background_session_shows_a_known_first_plan_at_once_and_plans_a_new_one_in_the_pool():
+    """Served (``background=True``), a session whose first plan is cached (the server's warm-up planned the
+    example mission) is built with it: no busy state, nothing sent after the page. A first plan never seen is
+    planned in the pool, busy until it lands, and equals the plan computed in place."""
+    PlannerState().close()  # the example mission planned in place: now in the shared cache
+    # a cell no other test plans: not in the shared cache yet
+    unseen_mission = replace(mission_from_dict(EXAMPLE_MISSION), battery=Battery(7400.0, 0.0917))
+    in_place = PlannerState(unseen_mission, auto=False)
+    fresh = in_place.request()
+    known = PlannerState(background=True)
+    try:
+        assert known.plan is not None and not known.busy and known.plan_count == 1
+    finally:
+        known.close()
+    unseen = PlannerState(unseen_mission, background=True)
+    try:
+        assert unseen.request() == fresh
+        assert unseen.busy and unseen.plan is None  # planning in the pool (tens of ms at least)
+        assert unseen.wait_idle(120) and not unseen.busy and unseen.plan is not None
+        assert unseen.plan == in_place.replan()["plan"]
+    finally:
+        unseen.close()
+        in_place.close()

@@ -91,6 +91,8 @@ def test_each_session_is_built_once_behind_the_front(two_procs):
 def test_the_front_remembers_which_process_built_a_session_and_skips_an_ended_one():
     procs = AppProcesses([7001, 7002, 7003])
     assert [procs.next() for _ in range(4)] == [0, 1, 2, 0]
+    # files have a turn of their own: a page's files never decide where the next page goes
+    assert [procs.next("file") for _ in range(2)] == [0, 1] and procs.next() == 1
     procs.remember("abc", 2)
     assert procs.of_session("abc") == 2 and procs.of_session("xyz") is None and procs.of_session(None) is None
     procs.alive[1] = False

@@ -10,7 +10,8 @@ build documents, and each app process listens on a loopback port of its own. The
 - a websocket (``/ws``: the page's token rides in its ``Sec-WebSocket-Protocol`` header) to the process
   that built the token's session (any process for a token it never saw), and relays its messages both
   ways unchanged;
-- everything else (static files, the same in every process) to the next process in turn;
+- everything else (static files, the same in every process) to the next process in turn, with a turn
+  of its own: however many files a page asks for, the next page still goes to the next process;
 - ``/liveness``: answered 200 only when every app process answers its own ``/liveness`` (with the same
   query, so ``?endpoint=/`` builds the app once in each).
 
@@ -39,6 +40,7 @@ log = logging.getLogger(__name__)
 TOKEN = re.compile(rb'"token":\s*"([^"]+)"')
 MAX_MESSAGE_BYTES = 1 << 28  # a websocket message (B) relayed either way; Bokeh's own default is 20 MiB
 REMEMBERED_SESSIONS = 100_000  # session ids whose process the front keeps (oldest forgotten first)
+FILE_PATHS = ("/static/", "/favicon.ico")  # requests that never build a document: their own turn
 HOP_BY_HOP = frozenset({"connection", "keep-alive", "proxy-authenticate", "proxy-authorization", "te", "trailer",
                         "trailers", "transfer-encoding", "upgrade", "content-length", "accept-encoding"})
 WEBSOCKET_OWN = frozenset({"sec-websocket-key", "sec-websocket-version", "sec-websocket-extensions",
@@ -58,14 +60,15 @@ class AppProcesses:
             raise ValueError("a front needs at least one app process")
         self.ports = list(ports)
         self.alive = [True] * len(self.ports)
-        self._turn = itertools.cycle(range(len(self.ports)))
+        self._turns = {kind: itertools.cycle(range(len(self.ports))) for kind in ("page", "file")}
         self._sessions: OrderedDict[str, int] = OrderedDict()
 
-    def next(self) -> int:
-        """The next live process in turn (round robin); the first one if none is alive (its request then
-        fails with 502)."""
+    def next(self, kind: str = "page") -> int:
+        """The next live process in turn (round robin) for a ``"page"`` or a ``"file"`` (each kind has its
+        own turn); the first one if none is alive (its request then fails with 502)."""
+        turn = self._turns[kind]
         for _ in range(len(self.ports)):
-            k = next(self._turn)
+            k = next(turn)
             if self.alive[k]:
                 return k
         return 0
@@ -135,7 +138,7 @@ class _HttpRelay(web.RequestHandler):
         self.procs = procs
 
     async def get(self, *_: Any) -> None:
-        k = self.procs.next()
+        k = self.procs.next("file" if self.request.path.startswith(FILE_PATHS) else "page")
         url = f"http://127.0.0.1:{self.procs.ports[k]}{self.request.uri}"
         req = httpclient.HTTPRequest(url, method=self.request.method, headers=_forwarded_headers(self.request.headers),
                                      body=self.request.body if self.request.method == "POST" else None,
@@ -189,7 +192,7 @@ class _WebSocketRelay(websocket.WebSocketHandler):
         session = session_of_token(protocols[1]) if len(protocols) == 2 else None
         k = self.procs.of_session(session)
         if k is None:
-            k = self.procs.next()
+            k = self.procs.next("file")
             if session is not None:
                 log.info("websocket for session %s, which no page through this front built: app process %d",
                          session, k)

@@ -29,7 +29,7 @@ import param
 from uam_studio.app.planner.comparison import COMPARE_MODES
 from uam_studio.app.planner.comparison_state import PlannerComparison
 from uam_studio.app.planner.mission import EXAMPLE_MISSION, rows_to_destinations
-from uam_studio.app.planner.plans import PlanRequest, compute_plan
+from uam_studio.app.planner.plans import PlanRequest, cached_plan, compute_plan, request_key
 from uam_studio.app.services import (
     ACTIVITY,
     APP_EOD_RANGE,
@@ -149,7 +149,13 @@ class PlannerState(PlannerComparison, param.Parameterized):
             self.policy = default_policy(self.scenario)
         self.param.watch(self._on_inputs, list(self.INPUTS))
         if self.auto:
-            self.request_plan()
+            if self.background and cached_plan(request_key(self.request())) is not None:
+                # Known already (the server's warm-up planned the example mission, or another session
+                # this one): applied here, so a served page is built with its plan and nothing of the
+                # plan is sent again after the page.
+                self.replan()
+            else:
+                self.request_plan()
 
     # ------------------------------------------------------------------ mission <-> state
 

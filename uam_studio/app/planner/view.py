@@ -27,7 +27,7 @@ from uam_studio.app.planner.state import PlannerState
 from uam_studio.app.planner.summary import comparison_html, summary_html
 from uam_studio.app.services import APP_EOD_RANGE, APP_Q_RANGE, APP_R0_RANGE
 from uam_studio.app.session import (
-    in_server_session,
+    after_page,
     respond_at_once,
     session_dispatcher,
 )
@@ -197,15 +197,12 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
             "Destinations: edit names, priorities (stars), the wind on legs *to* each one (kt, negative = "
             "tailwind) and dwell times below; tick rows to remove them.", sizing_mode="stretch_width",
             styles=NOTE_STYLE, margin=(0, 10))
-        table = pn.panel(lambda: self.table, defer_load=True, height=230, sizing_mode="stretch_width") \
-            if in_server_session() else self.table
+        # Served, the table and the plots that are not above the fold load right after the page: the
+        # map, the summary, the comparison and the voltage come first.
+        table, *extras = after_page([(self.table, dict(height=230, sizing_mode="stretch_width")),
+                                     (self.altitude_plot, {}), (self.health_plot, {})])
         center = pn.Column(self.map, hint, self.table_error, table, width=MAP_FRAME_PX + 100,
                            css_classes=["uam-map-column"])
-        # Served, the plots that are not above the fold load right after the page (defer_load): the
-        # map, the table, the summary, the comparison and the voltage come first.
-        extras: tuple[pn.viewable.ServableMixin, ...] = (self.altitude_plot, self.health_plot)
-        if in_server_session():
-            extras = tuple(pn.panel(lambda p=p: p, defer_load=True) for p in extras)
         results = pn.Column(pn.Row(heading("Plan"), self.busy), self.summary,
                             self.compare, self.voltage_plot, min_width=WIDE_MIN_PX, sizing_mode="stretch_width",
                             styles={"flex": f"1 1 {WIDE_MIN_PX}px"}, css_classes=["uam-results"])
