@@ -12,6 +12,7 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3 import DQN
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.logger import Logger
 
 import uam_studio.planning.agents.dqn.masked as dqn_mod
 from uam_studio.errors import InputError
@@ -82,7 +83,9 @@ def random_masked_obs(rng: np.random.Generator, n_obs: int) -> np.ndarray:
 def small_model(**kw) -> MaskedDQN:
     env = make_vec_env(VisitEnv, n_envs=2, seed=0)
     kw.setdefault("policy_kwargs", {"net_arch": [32, 32]})
-    return MaskedDQN("MlpPolicy", env, learning_starts=50, buffer_size=1000, seed=0, device="cpu", **kw)
+    model = MaskedDQN("MlpPolicy", env, learning_starts=50, buffer_size=1000, seed=0, device="cpu", **kw)
+    model.set_logger(Logger(folder=None, output_formats=[]))  # SB3's default makes a tempdir/SB3-<time> folder
+    return model
 
 
 def rollout_greedy(model: MaskedDQN) -> tuple[float, int]:

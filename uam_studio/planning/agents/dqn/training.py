@@ -20,6 +20,7 @@ destination names), ``charging_cycles`` (int), ``eod`` (bool), optionally ``reac
 from __future__ import annotations
 
 import os
+import sys
 import threading
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
@@ -29,7 +30,7 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.logger import Logger
+from stable_baselines3.common.logger import HumanOutputFormat, Logger
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from uam_studio.errors import InputError
@@ -265,8 +266,8 @@ def train_dqn(
         )
         if config.init_agent is not None:
             _warm_start(model, config.init_agent)
-        if not verbose:  # SB3's default logger makes an empty tempdir/SB3-<time> folder per run: log nowhere
-            model.set_logger(Logger(folder=None, output_formats=[]))
+        # SB3's default logger makes an empty tempdir/SB3-<time> folder per run: log to stdout or nowhere
+        model.set_logger(Logger(folder=None, output_formats=[HumanOutputFormat(sys.stdout)] if verbose else []))
         callbacks: list[BaseCallback] = [EpisodeStatsCallback(callback, stop_event, keep=False)]
         if progress_bar:
             callbacks.append(TqdmCallback())
