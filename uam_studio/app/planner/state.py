@@ -116,7 +116,9 @@ class PlannerState(PlannerComparison, param.Parameterized):
                  compare: str = "off", **params: Any) -> None:
         """
         :param mission: the starting mission (default :data:`EXAMPLE_MISSION`).
-        :param background: replan in the shared thread pool (served app) instead of in place.
+        :param background: replan in the shared thread pool (served app) instead of in place; a first
+            plan already in the shared cache (:func:`~uam_studio.app.planner.plans.cached_plan`) is applied
+            at once, so a served page is built with it.
         :param dispatch: how a finished background plan is handed back to the session's thread
             (default: applied in the worker thread; the served app passes a next-tick dispatcher).
         :param auto: replan on every accepted change (False: call :meth:`replan` yourself).
