@@ -175,7 +175,9 @@ def test_the_front_keeps_serving_when_an_app_process_ends(two_procs):
     time.sleep(3.0)
     assert [pid for w in workers for pid in child_pids(w)] == []
     os.kill(workers[0], signal.SIGKILL)
-    time.sleep(3.0)
+    deadline = time.monotonic() + 10.0  # the front checks its processes every second
+    while f"(pid {workers[0]}) ended" not in app.log_path.read_text() and time.monotonic() < deadline:
+        time.sleep(0.1)
 
     async def loads() -> list[float]:
         out = []
