@@ -7,8 +7,8 @@
   ``notebooks/``) imports the ``uam_studio`` being tested even when the installed package points at
   another checkout.
 
-* ``OMP_NUM_THREADS=1`` in each pytest-xdist worker (``-n auto`` in ``pyproject.toml``'s addopts): the
-  workers already use every core, and a worker's torch and BLAS (and the CLI, server and notebook
+* ``OMP_NUM_THREADS=1`` in each pytest-xdist worker (``-n auto`` in ``pyproject.toml``'s addopts: one per
+  core, plus one): the workers already use every core, and a worker's torch and BLAS (and the CLI, server and notebook
   processes it starts, which inherit it) would otherwise each start a thread per core.
 
 Kernels inherit these; ``tests/test_notebooks.py`` checks that a kernel sees them.
@@ -49,6 +49,15 @@ if not os.environ.get("UAM_STUDIO_CMU_DATA"):  # notebook 10 reads the dataset: 
 # runs the rest (DEVELOPING.md, "The fast loop").
 _FILE_SECONDS = Path(ROOT) / "tests" / "file_seconds.json"
 SLOW_FILE_S = 15.0
+
+
+# Workers: one per core, plus one. A worker waits on another process for much of its time (the browser
+# and the served app, a notebook's kernel, a CLI run): in one 2-core run, 653 worker-seconds of tests held
+# 260 CPU-seconds in the workers themselves. With two workers on two cores the machine was busy 1.79 cores
+# on average (335 s); with three, 1.90 cores (318 s), for the same CPU time (benchmarks/RESULTS.md, "The
+# suite on three workers"). ``-n N`` on the command line still sets the number.
+def pytest_xdist_auto_num_workers(config):
+    return len(os.sched_getaffinity(0)) + 1 if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1) + 1
 
 
 def pytest_collection_modifyitems(config, items):
