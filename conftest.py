@@ -29,12 +29,11 @@ if not _paths or _paths[0] != ROOT:
     os.environ["PYTHONPATH"] = os.pathsep.join([ROOT, *(p for p in _paths if p != ROOT)])
 
 # The CMU eVTOL dataset, read from beside the checkout (CI has ../shared), never copied into it:
-# the real-cell tests and notebook 10 find it through $UAM_STUDIO_CMU_DATA.
+# the real-cell tests and notebook 10 find it through $UAM_STUDIO_CMU_DATA. Without it, notebook 10 runs
+# on the sample that ships with the package, as on a new user's machine.
 _CMU = Path(ROOT).parent / "shared" / "data" / "cmu_evtol"
 if _CMU.is_dir():
     os.environ.setdefault("UAM_STUDIO_CMU_DATA", str(_CMU))
-if not os.environ.get("UAM_STUDIO_CMU_DATA"):  # notebook 10 reads the dataset: without it, not collected
-    collect_ignore = ["notebooks/10_real_cells.ipynb"]
 
 
 # Longest files first: with ``-n auto --dist loadfile --no-loadscope-reorder`` each worker takes the next
