@@ -54,9 +54,12 @@ SLOW_FILE_S = 15.0
 # and the served app, a notebook's kernel, a CLI run): in one 2-core run, 653 worker-seconds of tests held
 # 260 CPU-seconds in the workers themselves. With two workers on two cores the machine was busy 1.79 cores
 # on average (335 s); with three, 1.90 cores (318 s), for the same CPU time (benchmarks/RESULTS.md, "The
-# suite on three workers"). ``-n N`` on the command line still sets the number.
+# suite on three workers"). The count of cores is xdist's own (``-n auto``: physical cores, ``-n logical``:
+# logical ones); ``-n N`` or ``$PYTEST_XDIST_AUTO_NUM_WORKERS`` still sets the number exactly.
+@pytest.hookimpl(wrapper=True)
 def pytest_xdist_auto_num_workers(config):
-    return len(os.sched_getaffinity(0)) + 1 if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1) + 1
+    cores = yield
+    return cores if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS") else cores + 1
 
 
 def pytest_collection_modifyitems(config, items):
