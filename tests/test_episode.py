@@ -137,10 +137,9 @@ def test_planners_fly_the_battery_only_through_the_episode():
     assert offenders == [], offenders
 
 
-@pytest.mark.parametrize("chunk_s", [64, 700, 5000])
-def test_fly_batch_rows_of_many_lengths_match_simulate_with_their_split_states(chunk_s):
-    """Rows of different lengths, some failing, several integration chunks: per row the same verdict,
-    lowest voltage, end state and split state as :func:`simulate` on that row alone."""
+def test_fly_batch_rows_of_many_lengths_match_simulate_with_their_split_states():
+    """Rows of different lengths, some failing: per row the same verdict, lowest voltage, end state and
+    split state as :func:`simulate` on that row alone (the kernel's other entry point)."""
     cell = Cell("test cell", DEFAULT_CELL, 6000.0, 0.2, 3.2)
     rng = np.random.default_rng(5)
     currents = [rng.uniform(0.5, a, n) for a, n in ((1.5, 300), (3.0, 2500), (2.0, 40), (3.5, 4000),
@@ -148,7 +147,7 @@ def test_fly_batch_rows_of_many_lengths_match_simulate_with_their_split_states(c
     x0 = simulate(np.full(200, 1.0), 1.0, cell.q_max, cell.r0).final_state.as_array()
     x0 = np.repeat(x0, len(currents), axis=0)
     split = np.array([max(1, c.size // 3) for c in currents])
-    ok, x_end, v_min, x_split = fly_batch(currents, x0, cell, split=split, chunk_s=chunk_s)
+    ok, x_end, v_min, x_split = fly_batch(currents, x0, cell, split=split)
     assert 0 < ok.sum() < len(currents)  # some rows reach the cut-off, some do not
     mid = simulate(np.full(200, 1.0), 1.0, cell.q_max, cell.r0).final_state
     for k, c in enumerate(currents):

@@ -317,8 +317,9 @@ def check_can_listen(address: str, port: int) -> None:
 
 
 def warm_up(compare: str | None = None) -> None:
-    """Load the Dynaformer and the health population, and plan the example mission with the default
-    policy, now (server start), so the first session shows its first plan at once. With a
+    """Load the compiled battery kernel (from numba's disk cache, compiling it if the cache is empty), the
+    Dynaformer and the health population, and plan the example mission with the default policy, now
+    (server start), so the first session shows its first plan at once. With a
     comparison runner (``compare``: default :func:`~uam_studio.app.planner.comparison.compare_mode` of a
     server), also start it and compare the example's planners, so the first session's comparison is
     ready too."""
@@ -326,8 +327,10 @@ def warm_up(compare: str | None = None) -> None:
     from uam_studio.app.planner.mission import EXAMPLE_MISSION
     from uam_studio.app.planner.plans import PlanRequest, compute_plan
     from uam_studio.app.services import LEARNED_POLICIES, default_policy, population
+    from uam_studio.battery import kernel
     from uam_studio.planning.missions.mission import mission_from_dict
 
+    kernel.warm_up()
     population()
     mission = mission_from_dict(EXAMPLE_MISSION)
     policy = default_policy(mission.scenario)

@@ -1,4 +1,4 @@
-"""Equations of the Daigle & Kulkarni (2013) model, vectorised over any array shape.
+"""Equations of the Daigle & Kulkarni (2013) model: the one home of the cell model's arithmetic.
 
 Written from the published equations:
 * bulk-to-surface diffusion of Li charge in each electrode;
@@ -6,23 +6,68 @@ Written from the published equations:
 * equilibrium electrode potentials from the Nernst term plus a Redlich-Kister
   expansion (13 terms);
 * a lumped thermal state heated by the overpotential losses and cooled towards
-  ambient.
+  ambient;
+* optional Arrhenius temperature factors of R0 and of the rate constants.
+
+Every function here is element-wise: it takes numpy arrays of any shape (the numpy
+solvers in :mod:`uam_studio.battery.solver`) or plain floats, and each is registered with
+numba (``register_jitable``), so the compiled kernel (:mod:`uam_studio.battery.kernel`)
+calls these same functions on one trajectory's scalars. The cell's numbers reach them as
+:class:`ModelConstants` (:func:`model_constants` of a
+:class:`~uam_studio.battery.parameters.CellParameters`), a named tuple numba can read.
 """
 
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
+from numba import njit
+from numba.extending import register_jitable
 
-from uam_studio.battery.parameters import FARADAY, GAS_CONSTANT, CellParameters
+from uam_studio.battery.parameters import FARADAY, GAS_CONSTANT, CellParameters, arrhenius
 
 _X_EPS = 1e-12  # mole fractions are clipped into (eps, 1-eps); only reached after EOD
 
 
-@lru_cache(maxsize=8)
-def _rk_polynomial(coeffs: tuple[float, ...]) -> tuple[float, ...]:
-    """Coefficients (highest power first) of the Redlich-Kister sum as a polynomial in z = 2x - 1.
+class ModelConstants(NamedTuple):
+    """The numbers of one :class:`CellParameters` as the equations read them (units as there).
+
+    ``an_poly`` and ``ap_poly`` are the Redlich-Kister sums as polynomials in z = 2x - 1, highest power
+    first, divided by the Faraday constant (V); ``bv_gain`` is R / (F alpha) (V/K) and ``rt_f`` R / F (V/K).
+    """
+
+    vol_s_fraction: float
+    inv_vb: float  # 1/m^3
+    inv_vs: float  # 1/m^3
+    t_diffusion_s: float
+    alpha: float
+    bv_gain: float
+    kn: float
+    kp: float
+    sn: float
+    sp: float
+    u0n: float
+    u0p: float
+    rt_f: float
+    an_poly: np.ndarray
+    ap_poly: np.ndarray
+    t_ohmic_s: float
+    t_sn_s: float
+    t_sp_s: float
+    thermal_mass: float
+    thermal_tau_s: float
+    t_ambient_k: float
+    r0_activation_k: float
+    k_activation_k: float
+    t_reference_k: float
+
+
+@lru_cache(maxsize=64)
+def rk_polynomial(coeffs: tuple[float, ...]) -> np.ndarray:
+    """Coefficients (highest power first, leading zeros dropped) of the Redlich-Kister sum with
+    coefficients ``coeffs`` (J/mol) as a polynomial in z = 2x - 1, divided by F (V).
 
     With 2x(1-x) = (1 - z^2)/2, term k >= 1 is (1 + k/2) z^(k+1) - (k/2) z^(k-1) and
     term 0 is z, so the whole sum is one polynomial evaluated by Horner's rule.
@@ -34,47 +79,201 @@ def _rk_polynomial(coeffs: tuple[float, ...]) -> tuple[float, ...]:
         else:
             poly[k + 1] += a * (1.0 + k / 2.0)
             poly[k - 1] -= a * (k / 2.0)
-    return tuple((poly / FARADAY)[::-1])
+    out = (poly / FARADAY)[::-1]
+    nonzero = np.flatnonzero(out != 0.0)
+    out = out[nonzero[0]:] if nonzero.size else out[-1:]
+    out.setflags(write=False)
+    return out
+
+
+@lru_cache(maxsize=32)
+def model_constants(cell: CellParameters) -> ModelConstants:
+    """The :class:`ModelConstants` of ``cell`` (cached: a cell's numbers are fixed)."""
+    return ModelConstants(
+        vol_s_fraction=float(cell.vol_s_fraction), inv_vb=1.0 / cell.vol_b, inv_vs=1.0 / cell.vol_s,
+        t_diffusion_s=float(cell.t_diffusion_s), alpha=float(cell.alpha),
+        bv_gain=GAS_CONSTANT / FARADAY / cell.alpha, kn=float(cell.kn), kp=float(cell.kp), sn=float(cell.sn),
+        sp=float(cell.sp), u0n=float(cell.u0n), u0p=float(cell.u0p), rt_f=GAS_CONSTANT / FARADAY,
+        an_poly=rk_polynomial(tuple(float(a) for a in cell.an)),
+        ap_poly=rk_polynomial(tuple(float(a) for a in cell.ap)),
+        t_ohmic_s=float(cell.t_ohmic_s), t_sn_s=float(cell.t_sn_s), t_sp_s=float(cell.t_sp_s),
+        thermal_mass=float(cell.thermal_mass), thermal_tau_s=float(cell.thermal_tau_s),
+        t_ambient_k=float(cell.t_ambient_k), r0_activation_k=float(cell.r0_activation_k),
+        k_activation_k=float(cell.k_activation_k), t_reference_k=float(cell.t_reference_k),
+    )
+
+
+@register_jitable
+def horner(z, poly):
+    """The polynomial ``poly`` (highest power first) at ``z``."""
+    total = z * 0.0 + poly[0]
+    for k in range(1, len(poly)):
+        total = total * z + poly[k]
+    return total
 
 
 def redlich_kister(x: np.ndarray, coeffs: tuple[float, ...]) -> np.ndarray:
     """Sum over k of A_k/F * ((2x-1)^(k+1) - 2 k x (1-x) (2x-1)^(k-1)) (V)."""
-    poly = _rk_polynomial(tuple(coeffs))
-    z = 2.0 * x - 1.0
-    while len(poly) > 1 and poly[0] == 0.0:
-        poly = poly[1:]
-    total = np.full_like(z, poly[0])
-    for c in poly[1:]:
-        total *= z
-        if c != 0.0:
-            total += c
-    return total
+    return horner(2.0 * np.asarray(x, dtype=float) - 1.0, rk_polynomial(tuple(coeffs)))
 
 
+@register_jitable(inline="always")
 def surface_fractions(qns, qps, q_surface_max):
     """Surface mole fractions (xnS, xpS), clipped into the open interval (0, 1)."""
-    xns = np.clip(qns / q_surface_max, _X_EPS, 1.0 - _X_EPS)
-    xps = np.clip(qps / q_surface_max, _X_EPS, 1.0 - _X_EPS)
+    xns = np.minimum(np.maximum(qns / q_surface_max, _X_EPS), 1.0 - _X_EPS)
+    xps = np.minimum(np.maximum(qps / q_surface_max, _X_EPS), 1.0 - _X_EPS)
     return xns, xps
 
 
-def equilibrium_voltage(xns, xps, tb, cell: CellParameters) -> np.ndarray:
-    """Open-circuit voltage Vep - Ven (V) at surface fractions xns, xps and temperature tb (K)."""
-    rt_f = GAS_CONSTANT * tb / FARADAY
-    ven = cell.u0n + rt_f * np.log((1.0 - xns) / xns) + redlich_kister(xns, cell.an)
-    vep = cell.u0p + rt_f * np.log((1.0 - xps) / xps) + redlich_kister(xps, cell.ap)
+@register_jitable(inline="always")
+def equilibrium_voltage(xns, xps, tb, k):
+    """Open-circuit voltage Vep - Ven (V) at surface fractions xns, xps and temperature tb (K) of the
+    cell whose :class:`ModelConstants` are ``k``."""
+    rt_f = k.rt_f * tb
+    ven = k.u0n + rt_f * np.log((1.0 - xns) / xns) + horner(2.0 * xns - 1.0, k.an_poly)
+    vep = k.u0p + rt_f * np.log((1.0 - xps) / xps) + horner(2.0 * xps - 1.0, k.ap_poly)
     return vep - ven
 
 
-def overpotential_gains(current_a, xns, xps, cell: CellParameters, rate_factor=1.0):
+@register_jitable(inline="always")
+def overpotential_gains(current_a, xns, xps, k, rate_factor):
     """Steady-state surface overpotentials per kelvin, (R/(F alpha)) asinh(J / 2 J0) (V/K).
 
     Multiply by the temperature (K) to get the nominal Vsn and Vsp. ``rate_factor`` scales both rate
-    constants (:meth:`CellParameters.rate_factor` of the cell's temperature).
+    constants (:func:`arrhenius` of the cell's temperature with ``-k.k_activation_k``).
     """
-    c = GAS_CONSTANT / FARADAY / cell.alpha
-    jn0 = cell.kn * rate_factor * ((1.0 - xns) * xns) ** cell.alpha
-    jp0 = cell.kp * rate_factor * ((1.0 - xps) * xps) ** cell.alpha
-    gn = c * np.arcsinh((current_a / cell.sn) / (2.0 * jn0))
-    gp = c * np.arcsinh((current_a / cell.sp) / (2.0 * jp0))
+    if k.alpha == 0.5:  # the published cells' value: a square root, as numpy's ``** 0.5`` takes it
+        jn0 = k.kn * rate_factor * np.sqrt((1.0 - xns) * xns)
+        jp0 = k.kp * rate_factor * np.sqrt((1.0 - xps) * xps)
+    else:
+        jn0 = k.kn * rate_factor * ((1.0 - xns) * xns) ** k.alpha
+        jp0 = k.kp * rate_factor * ((1.0 - xps) * xps) ** k.alpha
+    gn = k.bv_gain * np.arcsinh((current_a / k.sn) / (2.0 * jn0))
+    gp = k.bv_gain * np.arcsinh((current_a / k.sp) / (2.0 * jp0))
     return gn, gp
+
+
+@register_jitable(inline="always")
+def terminal_voltage(tb, vo, vsn, vsp, qns, qps, q_total, k):
+    """Terminal voltage (V) of a state (tb K; vo, vsn, vsp V; qns, qps C) of total charge ``q_total`` (C)."""
+    xns, xps = surface_fractions(qns, qps, q_total * k.vol_s_fraction)
+    return equilibrium_voltage(xns, xps, tb, k) - vo - vsn - vsp
+
+
+@register_jitable(inline="always")
+def euler_step(tb, vo, vsn, vsp, qnb, qns, qpb, qps, current_a, q_total, r0, dt_s, k):
+    """One explicit-Euler step of ``dt_s`` (s) under ``current_a`` (A) from the state (tb K; vo, vsn,
+    vsp V; qnb, qns, qpb, qps C) of a cell with total charge ``q_total`` (C) and resistance ``r0`` (ohm):
+    the next state, in that order."""
+    diff_n = (qnb * k.inv_vb - qns * k.inv_vs) / k.t_diffusion_s
+    diff_p = (qpb * k.inv_vb - qps * k.inv_vs) / k.t_diffusion_s
+    xns, xps = surface_fractions(qns, qps, q_total * k.vol_s_fraction)
+    gn, gp = overpotential_gains(current_a, xns, xps, k, arrhenius(tb, -k.k_activation_k, k.t_reference_k))
+    eta = vo + vsn + vsp
+    return (
+        tb + dt_s * (eta * current_a / k.thermal_mass + (k.t_ambient_k - tb) / k.thermal_tau_s),
+        vo + dt_s * (current_a * r0 * arrhenius(tb, k.r0_activation_k, k.t_reference_k) - vo) / k.t_ohmic_s,
+        vsn + dt_s * (gn * tb - vsn) / k.t_sn_s,
+        vsp + dt_s * (gp * tb - vsp) / k.t_sp_s,
+        qnb - dt_s * diff_n,
+        qns + dt_s * (diff_n - current_a),
+        qpb - dt_s * diff_p,
+        qps + dt_s * (diff_p + current_a),
+    )
+
+
+# The compiled loops (:mod:`uam_studio.battery.kernel` calls them). They live in this file so that numba's disk
+# cache, which is keyed on the source file of the compiled function, is invalidated by any change to the
+# equations above.
+
+@njit(cache=True, nogil=True)
+def run_current(current, x0, q_total, r0, dt_s, k, voltage, states):
+    n_rows, n_steps = current.shape
+    for b in range(n_rows):
+        tb, vo, vsn, vsp, qnb, qns, qpb, qps = x0[b, 0], x0[b, 1], x0[b, 2], x0[b, 3], x0[b, 4], x0[b, 5], \
+            x0[b, 6], x0[b, 7]
+        q, r = q_total[b], r0[b]
+        for t in range(n_steps):
+            tb, vo, vsn, vsp, qnb, qns, qpb, qps = euler_step(tb, vo, vsn, vsp, qnb, qns, qpb, qps,
+                                                              current[b, t], q, r, dt_s, k)
+            voltage[b, t] = terminal_voltage(tb, vo, vsn, vsp, qns, qps, q, k)
+            states[0, b, t] = tb
+            states[1, b, t] = vo
+            states[2, b, t] = vsn
+            states[3, b, t] = vsp
+            states[4, b, t] = qnb
+            states[5, b, t] = qns
+            states[6, b, t] = qpb
+            states[7, b, t] = qps
+
+
+@register_jitable(inline="always")
+def _put(out, b, tb, vo, vsn, vsp, qnb, qns, qpb, qps):
+    """Write a state into row ``b`` of ``out`` [B, 8]."""
+    out[b, 0], out[b, 1], out[b, 2], out[b, 3] = tb, vo, vsn, vsp
+    out[b, 4], out[b, 5], out[b, 6], out[b, 7] = qnb, qns, qpb, qps
+
+
+@njit(cache=True, nogil=True)
+def run_to_cutoff(load, power_mode, x0, q_total, r0, dt_s, k, eod_v, voltage, current, final, k_eod):
+    n_rows, n_steps = load.shape
+    for b in range(n_rows):
+        tb, vo, vsn, vsp, qnb, qns, qpb, qps = x0[b, 0], x0[b, 1], x0[b, 2], x0[b, 3], x0[b, 4], x0[b, 5], \
+            x0[b, 6], x0[b, 7]
+        q, r = q_total[b], r0[b]
+        k_eod[b] = n_steps
+        v = terminal_voltage(tb, vo, vsn, vsp, qns, qps, q, k) if power_mode else 0.0
+        for t in range(n_steps):
+            if power_mode:
+                i = load[b, t] / max(v, 0.5) if v > 0.5 else 0.0
+                current[b, t] = i
+            else:
+                i = load[b, t]
+            n_tb, n_vo, n_vsn, n_vsp, n_qnb, n_qns, n_qpb, n_qps = euler_step(tb, vo, vsn, vsp, qnb, qns, qpb, qps, i,
+                                                                              q, r, dt_s, k)
+            v = terminal_voltage(n_tb, n_vo, n_vsn, n_vsp, n_qns, n_qps, q, k)
+            voltage[b, t] = v
+            if not v >= eod_v:  # below the cut-off, or NaN (uam_studio.battery.eod's rule)
+                k_eod[b] = t
+                # This sample and the rest hold its value, made finite and >= 0 (NaN and inf give 0 V).
+                hold = max(v, 0.0) if abs(v) < np.inf else 0.0
+                for s in range(t, n_steps):
+                    voltage[b, s] = hold
+                if power_mode:
+                    for s in range(t + 1, n_steps):
+                        current[b, s] = 0.0
+                break
+            tb, vo, vsn, vsp, qnb, qns, qpb, qps = n_tb, n_vo, n_vsn, n_vsp, n_qnb, n_qns, n_qpb, n_qps
+        _put(final, b, tb, vo, vsn, vsp, qnb, qns, qpb, qps)  # after the last sample above the cut-off
+
+
+@njit(cache=True, nogil=True)
+def run_rows(flat, starts, lengths, x0, q_total, r0, dt_s, k, eod_v, split, ok, x_end, v_min, x_split):
+    for b in range(lengths.size):
+        tb, vo, vsn, vsp, qnb, qns, qpb, qps = x0[b, 0], x0[b, 1], x0[b, 2], x0[b, 3], x0[b, 4], x0[b, 5], \
+            x0[b, 6], x0[b, 7]
+        for j in range(8):
+            x_end[b, j] = x0[b, j]
+            x_split[b, j] = x0[b, j]
+        ok[b] = True
+        lowest = np.inf
+        off = starts[b]
+        for t in range(lengths[b]):
+            tb, vo, vsn, vsp, qnb, qns, qpb, qps = euler_step(tb, vo, vsn, vsp, qnb, qns, qpb, qps, flat[off + t],
+                                                              q_total, r0, dt_s, k)
+            v = terminal_voltage(tb, vo, vsn, vsp, qns, qps, q_total, k)
+            if v != v:  # NaN: below the cut-off, and the lowest voltage is not a number
+                lowest = v
+                ok[b] = False
+                break
+            lowest = min(lowest, v)
+            if not v >= eod_v:
+                ok[b] = False
+                break
+            if t + 1 == split[b]:
+                x_split[b, 0], x_split[b, 1], x_split[b, 2], x_split[b, 3] = tb, vo, vsn, vsp
+                x_split[b, 4], x_split[b, 5], x_split[b, 6], x_split[b, 7] = qnb, qns, qpb, qps
+        if ok[b]:
+            x_end[b, 0], x_end[b, 1], x_end[b, 2], x_end[b, 3] = tb, vo, vsn, vsp
+            x_end[b, 4], x_end[b, 5], x_end[b, 6], x_end[b, 7] = qnb, qns, qpb, qps
+        v_min[b] = lowest

@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from numba.extending import register_jitable
 
 GAS_CONSTANT = 8.3144621  # J/(mol K)
 FARADAY = 96487.0  # C/mol
@@ -36,6 +37,15 @@ AP = (
     -1.07469e06, 2285.04, 990894.0, 283920.0, -161513.0, -469218.0,
 )
 AN = (86.19,) + (0.0,) * 12
+
+
+@register_jitable(inline="always")
+def arrhenius(tb, activation_k, t_reference_k):
+    """exp(activation_k (1/tb - 1/t_reference_k)) at temperature ``tb`` (K); exactly 1.0 when
+    ``activation_k`` is 0 (a parameter with no temperature dependence)."""
+    if activation_k == 0.0:
+        return 1.0
+    return np.exp(activation_k * (1.0 / tb - 1.0 / t_reference_k))
 
 
 @dataclass(frozen=True)
@@ -107,15 +117,11 @@ class CellParameters:
 
     def r0_factor(self, tb):
         """R0(T) / R0 at cell temperature ``tb`` (K)."""
-        if self.r0_activation_k == 0.0:
-            return 1.0
-        return np.exp(self.r0_activation_k * (1.0 / tb - 1.0 / self.t_reference_k))
+        return arrhenius(tb, self.r0_activation_k, self.t_reference_k)
 
     def rate_factor(self, tb):
         """k(T) / k of both Butler-Volmer rate constants at cell temperature ``tb`` (K)."""
-        if self.k_activation_k == 0.0:
-            return 1.0
-        return np.exp(-self.k_activation_k * (1.0 / tb - 1.0 / self.t_reference_k))
+        return arrhenius(tb, -self.k_activation_k, self.t_reference_k)
 
     def q_total(self, q_max):
         """Total lithium charge qMax = q_max / (xn_max - xn_min) (C)."""

@@ -6,7 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from uam_studio.battery.eod import first_below
+from uam_studio.battery import kernel
+from uam_studio.battery.electrochem import model_constants
 from uam_studio.battery.parameters import (
     DEFAULT_CELL,
     DEFAULT_EOD_V,
@@ -16,7 +17,7 @@ from uam_studio.battery.parameters import (
     Cell,
     CellParameters,
 )
-from uam_studio.battery.solver import integrate_current, output_voltage, step
+from uam_studio.battery.solver import output_voltage
 from uam_studio.battery.state import STATE_NAMES, BatteryState, full_charge
 from uam_studio.errors import InputError, check_range
 
@@ -136,52 +137,13 @@ def _prepare(profile: np.ndarray, q_max, r0, initial_state: BatteryState | None,
     return prof2, q, r, x0, squeeze
 
 
-def _chunk_steps(batch: int) -> int:
-    """Steps integrated per pass: long for few trajectories (less overhead), short for
-    big batches (rows that reached EOD drop out sooner)."""
-    return 4096 if batch < 16 else 768
-
-
-def _integrate_until_eod(current, x0: BatteryState, q_total, r0, eod_v, dt, cell):
-    """Integrate in time chunks, dropping trajectories once they pass the cut-off.
-
-    Returns (voltage [B, T] with garbage after EOD, index of the first sample below
-    eod_v per row (T if none), state after the last valid sample [B, 8]).
-    """
-    b, t = current.shape
-    voltage = np.empty((b, t))
-    state = x0.as_array()
-    k_eod = np.full(b, t)
-    alive = np.arange(b)
-    chunk = _chunk_steps(b)
-    for start in range(0, t, chunk):
-        if alive.size == 0:
-            break
-        stop = min(t, start + chunk)
-        v, seq = integrate_current(current[alive, start:stop], BatteryState.from_array(state[alive]),
-                                   q_total[alive], r0[alive], dt, cell)
-        voltage[alive, start:stop] = v
-        first = first_below(v, eod_v)
-        hit = first >= 0
-        first = np.where(hit, first, stop - start)
-        last = first - 1  # last valid sample of this chunk, -1 if none
-        rows, cols = np.arange(alive.size), np.maximum(last, 0)
-        picked = np.stack([seq[n][rows, cols] for n in STATE_NAMES], axis=-1)
-        state[alive] = np.where((last >= 0)[:, None], picked, state[alive])
-        k_eod[alive[hit]] = start + first[hit]
-        alive = alive[~hit]
-    return voltage, k_eod, state
-
-
 def _finish(time_s, voltage, k_eod, final_state_arr, current, squeeze) -> SimulationResult:
-    """Mask after EOD, remove NaN/inf, squeeze a single trajectory."""
-    b, t = voltage.shape
+    """The result from the kernel's arrays (which already hold the first sub-cut-off value, finite and
+    >= 0, from each row's cut-off sample on); squeeze a single trajectory."""
+    t = voltage.shape[1]
     valid = np.arange(t)[None, :] < k_eod[:, None]
     eod_reached = k_eod < t
     eod_s = np.where(eod_reached, time_s[np.minimum(k_eod, t - 1)], np.nan)
-    # Invalid samples hold the first sub-cut-off value (finite, >= 0).
-    hold = np.nan_to_num(voltage[np.arange(b), np.minimum(k_eod, t - 1)], nan=0.0, posinf=0.0, neginf=0.0)
-    voltage = np.where(valid, voltage, np.clip(hold, 0.0, None)[:, None])
     final_state = BatteryState.from_array(final_state_arr)
     if squeeze:
         return SimulationResult(time_s, voltage[0], valid[0], float(eod_s[0]), final_state,
@@ -216,9 +178,8 @@ def simulate(
     profile = _check_profile("current_a", current_a, CURRENT_LIMIT_A, " A")
     current, q, r, x0, squeeze = _prepare(profile, q_max, r0, initial_state, cell)
     current = np.ascontiguousarray(current)
-    q_total = cell.q_total(q)
-    with np.errstate(all="ignore"):
-        voltage, k_eod, final = _integrate_until_eod(current, x0, q_total, r, eod, dt, cell)
+    voltage, k_eod, final = kernel.integrate_to_cutoff(current, x0.as_array(), cell.q_total(q), r, dt,
+                                                       model_constants(cell), eod)
     time_s = dt * np.arange(1, current.shape[1] + 1)
     return _finish(time_s, voltage, k_eod, final, current, squeeze)
 
@@ -243,40 +204,16 @@ def simulate_constant_power(
 
     The current of step k is P[k] divided by the terminal voltage at the start of
     the step, so the cell draws more current as its voltage sags (a realistic
-    constant-power load; the paper's setting is the constant-current scaling).
+    constant-power load; the paper's setting is the constant-current scaling). The
+    result's ``current_a`` is 0 after a trajectory's cut-off sample.
     """
     dt = check_step(dt_s, cell)
     eod = check_range("eod_v", eod_v, *EOD_RANGE, " V")
     profile = _check_profile("power_w", power_w, CURRENT_LIMIT_A * 4.2, " W")
     power, q, r, x0, squeeze = _prepare(profile, q_max, r0, initial_state, cell)
-    q_total = cell.q_total(q)
-    b, t = power.shape
-    volts = np.empty((b, t))
-    current = np.empty((b, t))
-    seq = {n: np.empty((b, t)) for n in STATE_NAMES}
-    x = x0
-    with np.errstate(all="ignore"):
-        v = output_voltage(x.__dict__, q_total, cell)
-        for k in range(t):
-            i_k = np.where(v > 0.5, power[:, k] / np.maximum(v, 0.5), 0.0)
-            current[:, k] = i_k
-            x = step(x, i_k, q_total, r, dt, cell)
-            v = output_voltage(x.__dict__, q_total, cell)
-            volts[:, k] = v
-            for n in STATE_NAMES:
-                seq[n][:, k] = getattr(x, n)
-            if not np.any(v >= eod):
-                volts[:, k + 1:] = v[:, None]
-                current[:, k + 1:] = 0.0
-                for n in STATE_NAMES:
-                    seq[n][:, k + 1:] = seq[n][:, k:k + 1]
-                break
-    time_s = dt * np.arange(1, t + 1)
-    k_eod = first_below(volts, eod)
-    k_eod = np.where(k_eod >= 0, k_eod, t)
-    seq_arr = np.stack([seq[n] for n in STATE_NAMES], axis=-1)
-    last = k_eod - 1
-    final = np.where((last >= 0)[:, None], seq_arr[np.arange(b), np.maximum(last, 0)], x0.as_array())
+    volts, current, k_eod, final = kernel.integrate_power(power, x0.as_array(), cell.q_total(q), r, dt,
+                                                          model_constants(cell), eod)
+    time_s = dt * np.arange(1, power.shape[1] + 1)
     return _finish(time_s, volts, k_eod, final, current, squeeze)
 
 

@@ -1,20 +1,18 @@
 """Batched time integration of the electrochemistry model (explicit Euler, like progpy).
 
-Current-driven profiles use a *time-vectorised* solver. With the current known in
-advance, the charge states and the ohmic voltage follow linear time-invariant
-first-order recurrences x[k+1] = a x[k] + u[k]: each is a unit lower-bidiagonal
-linear system, which LAPACK's banded triangular solve (``?tbtrs``) evaluates for all
-steps and all trajectories in one call, the same forward substitution as the Euler
-steps (``scipy.signal.lfilter`` agrees to round-off, ~1e-15, but importing it costs
-about 0.7 s a process: it loads ``scipy.stats`` and ``scipy.interpolate``). The
-surface overpotentials depend on temperature and the temperature on the
-overpotentials (one step delayed); that weak loop is solved by a fixed-point
-(Picard) iteration over whole trajectories, which converges to round-off in a few
-passes. The result equals step-by-step Euler to ~1e-12 V (tested against
-:func:`step`, the plain step-by-step reference).
+:func:`integrate_current` and :func:`step` are what the library runs: the first is the compiled kernel
+(:mod:`uam_studio.battery.kernel`, one pass per step and trajectory), the second one Euler step of numpy
+arrays. Both evaluate :func:`uam_studio.battery.electrochem.euler_step`, the model's one home.
 
-Constant-power profiles (current = P / V) need the voltage before each step, so
-they use the step-by-step loop, batched over trajectories.
+:func:`integrate_current_vectorised` is the numpy solver the kernel replaced, kept as a tested reference
+(tests and ``benchmarks/bench_battery.py`` hold the kernel to it). With the current known in advance, the
+charge states and the ohmic voltage follow linear time-invariant first-order recurrences
+x[k+1] = a x[k] + u[k]: each is a unit lower-bidiagonal linear system, which LAPACK's banded triangular
+solve (``?tbtrs``) evaluates for all steps and all trajectories in one call, the same forward
+substitution as the Euler steps. The surface overpotentials depend on temperature and the temperature on
+the overpotentials (one step delayed); that weak loop is solved by a fixed-point (Picard) iteration over
+whole trajectories, which converges to round-off in a few passes. The result equals step-by-step Euler
+to ~1e-12 V.
 """
 
 from __future__ import annotations
@@ -22,9 +20,16 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg.lapack import dtbtrs
 
-from uam_studio.battery.electrochem import equilibrium_voltage, overpotential_gains, surface_fractions
+from uam_studio.battery import kernel
+from uam_studio.battery.electrochem import (
+    euler_step,
+    model_constants,
+    overpotential_gains,
+    surface_fractions,
+    terminal_voltage,
+)
 from uam_studio.battery.parameters import CellParameters
-from uam_studio.battery.state import BatteryState
+from uam_studio.battery.state import STATE_NAMES, BatteryState
 
 # K. The temperature iterates contract by about 1e-3 a pass, so the accepted pass is far closer to
 # the fixed point than this: against a 1e-13 K solve, 1e-5 K moves the voltage by < 1e-11 V
@@ -67,15 +72,23 @@ def _shift(seq_1_to_t: np.ndarray, x0: np.ndarray) -> np.ndarray:
 
 def output_voltage(state_seq: dict, q_total, cell: CellParameters) -> np.ndarray:
     """Terminal voltage (V) from (sequences of) states; q_total broadcastable against them."""
-    q_surface_max = q_total * cell.vol_s_fraction
-    xns, xps = surface_fractions(state_seq["qns"], state_seq["qps"], q_surface_max)
-    ocv = equilibrium_voltage(xns, xps, state_seq["tb"], cell)
-    return ocv - state_seq["vo"] - state_seq["vsn"] - state_seq["vsp"]
+    s = state_seq
+    return terminal_voltage(s["tb"], s["vo"], s["vsn"], s["vsp"], s["qns"], s["qps"], q_total, model_constants(cell))
 
 
 def integrate_current(current: np.ndarray, x0: BatteryState, q_total: np.ndarray,
                       r0: np.ndarray, dt_s: float, cell: CellParameters):
-    """Integrate a known current (A), shape [B, T]. Returns (voltage [B, T], states at 1..T)."""
+    """Integrate a known current (A), shape [B, T], on the compiled kernel. Returns (voltage [B, T], states
+    at 1..T: a dict of [B, T] arrays named as :data:`STATE_NAMES`)."""
+    voltage, seq = kernel.integrate(current, x0.as_array(), q_total, r0, dt_s, model_constants(cell))
+    return voltage, dict(zip(STATE_NAMES, seq))
+
+
+def integrate_current_vectorised(current: np.ndarray, x0: BatteryState, q_total: np.ndarray,
+                                 r0: np.ndarray, dt_s: float, cell: CellParameters):
+    """The time-vectorised numpy solver (module docstring), the kernel's reference: same arguments and
+    result as :func:`integrate_current`."""
+    k = model_constants(cell)
     dt = dt_s
     tdiff = cell.t_diffusion_s
     inv_vb, inv_vs = 1.0 / cell.vol_b, 1.0 / cell.vol_s
@@ -106,14 +119,14 @@ def integrate_current(current: np.ndarray, x0: BatteryState, q_total: np.ndarray
     # Overpotential gains at the start of each step (they need x[k], k = 0..T-1).
     q_surface_max = (q_total * cell.vol_s_fraction)[:, None]
     xns_k, xps_k = surface_fractions(_shift(qns, x0.qns), _shift(qps, x0.qps), q_surface_max)
-    gn, gp = overpotential_gains(current, xns_k, xps_k, cell)
+    gn, gp = overpotential_gains(current, xns_k, xps_k, k, 1.0)
 
     tb_k = np.broadcast_to(x0.tb[:, None], current.shape).copy()
     heat_scale = cell.thermal_tau_s / cell.thermal_mass
     for _ in range(_PICARD_MAX_ITER):
         if cell.temperature_dependent:  # R0 and the rate constants follow the temperature iterate
             vo = _lag(current * r0[:, None] * cell.r0_factor(tb_k), x0.vo, cell.t_ohmic_s, dt)
-            gn, gp = overpotential_gains(current, xns_k, xps_k, cell, cell.rate_factor(tb_k))
+            gn, gp = overpotential_gains(current, xns_k, xps_k, k, cell.rate_factor(tb_k))
         vsn = _lag(gn * tb_k, x0.vsn, cell.t_sn_s, dt)
         vsp = _lag(gp * tb_k, x0.vsp, cell.t_sp_s, dt)
         eta_k = vo[:, :-1] + vsn[:, :-1] + vsp[:, :-1]
@@ -135,20 +148,5 @@ def integrate_current(current: np.ndarray, x0: BatteryState, q_total: np.ndarray
 def step(x: BatteryState, current: np.ndarray, q_total: np.ndarray, r0: np.ndarray,
          dt_s: float, cell: CellParameters) -> BatteryState:
     """One explicit-Euler step of all trajectories under current (A), shape [B]."""
-    inv_vb, inv_vs = 1.0 / cell.vol_b, 1.0 / cell.vol_s
-    diff_n = (x.qnb * inv_vb - x.qns * inv_vs) / cell.t_diffusion_s
-    diff_p = (x.qpb * inv_vb - x.qps * inv_vs) / cell.t_diffusion_s
-    xns, xps = surface_fractions(x.qns, x.qps, q_total * cell.vol_s_fraction)
-    gn, gp = overpotential_gains(current, xns, xps, cell, cell.rate_factor(x.tb))
-    eta = x.vo + x.vsn + x.vsp
-    dt = dt_s
-    return BatteryState(
-        tb=x.tb + dt * (eta * current / cell.thermal_mass + (cell.t_ambient_k - x.tb) / cell.thermal_tau_s),
-        vo=x.vo + dt * (current * r0 * cell.r0_factor(x.tb) - x.vo) / cell.t_ohmic_s,
-        vsn=x.vsn + dt * (gn * x.tb - x.vsn) / cell.t_sn_s,
-        vsp=x.vsp + dt * (gp * x.tb - x.vsp) / cell.t_sp_s,
-        qnb=x.qnb - dt * diff_n,
-        qns=x.qns + dt * (diff_n - current),
-        qpb=x.qpb - dt * diff_p,
-        qps=x.qps + dt * (diff_p + current),
-    )
+    return BatteryState(*euler_step(x.tb, x.vo, x.vsn, x.vsp, x.qnb, x.qns, x.qpb, x.qps, current, q_total, r0,
+                                    dt_s, model_constants(cell)))

@@ -27,88 +27,37 @@ from typing import cast
 
 import numpy as np
 
-from uam_studio.battery import STATE_NAMES, BatteryState, full_charge
-from uam_studio.battery.eod import below_eod
+from uam_studio.battery import STATE_NAMES, full_charge, kernel
+from uam_studio.battery.electrochem import model_constants
 from uam_studio.battery.parameters import Cell
-from uam_studio.battery.solver import integrate_current
 from uam_studio.planning.legs import DT_S, LegTable
 from uam_studio.planning.missions.scenario import Scenario, scenario_rules
 
-_ROW_BATCH = 512  # trajectories integrated together (small blocks stay in cache: faster)
-_CHUNK_S = 128  # samples per integration pass
-
 
 def fly_batch(
-    currents: Sequence[np.ndarray], x0: np.ndarray, cell: Cell,
-    split: np.ndarray | None = None, chunk_s: int = _CHUNK_S,
+    currents: Sequence[np.ndarray], x0: np.ndarray, cell: Cell, split: np.ndarray | None = None,
 ) -> tuple[np.ndarray, ...]:
-    """Fly many legs of different lengths from many states of one ``cell`` in batched integrations.
+    """Fly many legs of different lengths from many states of one ``cell`` on the compiled battery kernel
+    (:func:`uam_studio.battery.kernel.fly_rows`: each row one pass, stopped at its cut-off).
 
     :param currents: B per-cell currents (A, 1 s samples), any lengths.
     :param x0: start states, shape [B, 8] (order of ``STATE_NAMES``).
     :param cell: the parameter set, health (q_max C, R0 ohm) and cut-off (V) flown.
     :param split: optional [B] sample counts (1 to the row's length): also return the state after
         that many samples of each row (e.g. the end of the first of two legs flown as one row).
-    :param chunk_s: samples per integration pass (shorter: rows that fail stop sooner; longer: fewer
-        passes for a few long rows).
     :return: ``(ok [B], x_end [B, 8], v_min [B])``: no sample below the cut-off; state after the
         last sample (the start state where not ok); lowest voltage (V) up to the first sample below
         the cut-off, that sample included (0 where it is NaN). Same numbers as :func:`uam_studio.battery.simulate` leg
-        by leg (same solver). With ``split``, a fourth array ``x_split [B, 8]``: the state after ``split`` samples (the
+        by leg (same kernel). With ``split``, a fourth array ``x_split [B, 8]``: the state after ``split`` samples (the
         start state where the row failed before them).
     """
     b = len(currents)
-    eod_v, params = cell.eod_v, cell.params
-    x_end = np.array(x0, dtype=float, copy=True).reshape(b, len(STATE_NAMES))
-    ok = np.ones(b, dtype=bool)
-    v_min = np.full(b, np.inf)
-    x_split = x_end.copy() if split is not None else None
-    if b == 0:
-        return (ok, x_end, v_min) if x_split is None else (ok, x_end, v_min, x_split)
-    lengths = np.fromiter((c.size for c in currents), dtype=np.int64, count=b)
-    order = np.argsort(lengths, kind="stable")
-    q_total = float(params.q_total(cell.q_max))
-    for s in range(0, b, _ROW_BATCH):
-        rows = order[s:s + _ROW_BATCH]
-        n_rows = rows.size
-        lens = lengths[rows]
-        cur = np.zeros((n_rows, int(lens.max())))
-        for i, r in enumerate(rows):
-            cur[i, : lens[i]] = currents[r]
-        state = x_end[rows]
-        alive = np.arange(n_rows)
-        with np.errstate(all="ignore"):
-            for start in range(0, cur.shape[1], chunk_s):
-                alive = alive[lens[alive] > start]
-                if alive.size == 0:
-                    break
-                stop = min(cur.shape[1], start + chunk_s)
-                width = stop - start
-                v, seq = integrate_current(
-                    cur[alive, start:stop], BatteryState.from_array(state[alive]),
-                    np.full(alive.size, q_total), np.full(alive.size, float(cell.r0)), DT_S, params)
-                n_real = np.minimum(lens[alive] - start, width)
-                real = np.arange(width)[None, :] < n_real[:, None]
-                below = below_eod(v, eod_v) & real
-                hit = below.any(axis=1)
-                flown = real & (np.cumsum(below, axis=1) - below == 0)  # up to the first sample below, it included
-                v_min[rows[alive]] = np.minimum(v_min[rows[alive]], np.where(flown, v, np.inf).min(axis=1))
-                last = n_real - 1
-                idx = np.arange(alive.size)
-                picked = np.stack([seq[n][idx, last] for n in STATE_NAMES], axis=-1)
-                keep = ~hit
-                if x_split is not None:
-                    at = np.asarray(split)[rows[alive]] - 1 - start  # the split's sample in this chunk
-                    k = np.flatnonzero((at >= 0) & (at < width))
-                    k = k[np.cumsum(below[k], axis=1)[np.arange(k.size), at[k]] == 0]  # not failed by then
-                    if k.size:
-                        x_split[rows[alive[k]]] = np.stack([seq[n][k, at[k]] for n in STATE_NAMES], axis=-1)
-                state[alive[keep]] = picked[keep]
-                ok[rows[alive[hit]]] = False
-                alive = alive[keep]
-        x_end[rows] = np.where(ok[rows, None], state, x_end[rows])
+    x_start = np.array(x0, dtype=float, copy=True).reshape(b, len(STATE_NAMES))
+    params = cell.params
+    ok, x_end, v_min, x_split = kernel.fly_rows(currents, x_start, float(params.q_total(cell.q_max)), float(cell.r0),
+                                                DT_S, model_constants(params), float(cell.eod_v), split)
     v_min = np.nan_to_num(v_min, nan=0.0)
-    return (ok, x_end, v_min) if x_split is None else (ok, x_end, v_min, x_split)
+    return (ok, x_end, v_min) if split is None else (ok, x_end, v_min, x_split)
 
 
 @dataclass(frozen=True)
@@ -184,13 +133,13 @@ class Episode:
         return self.fly_currents(currents, states, split)
 
     def fly_currents(self, currents: Sequence[np.ndarray], states: np.ndarray,
-                     split: np.ndarray | None = None, chunk_s: int = _CHUNK_S) -> tuple[np.ndarray, ...]:
+                     split: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
         """:meth:`fly` for given per-cell currents (A, 1 s samples; e.g. legs under other winds, or two
-        legs flown as one row), with :func:`fly_batch`'s ``chunk_s``."""
+        legs flown as one row)."""
         x0 = np.asarray(states, dtype=float)
         if x0.ndim == 1:
             x0 = np.repeat(x0[None, :], len(currents), axis=0)
-        return fly_batch(currents, x0, self.cell, split=split, chunk_s=chunk_s)
+        return fly_batch(currents, x0, self.cell, split=split)
 
     def there_and_home(self, moves: Sequence[tuple[int, int, int | None]], states: np.ndarray) -> np.ndarray:
         """bool [B]: each move ``(from, to, level)`` (level None: the leg's cheapest), then the way home at

@@ -25,7 +25,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from uam_studio.battery.electrochem import equilibrium_voltage, redlich_kister, surface_fractions
+from uam_studio.battery.electrochem import equilibrium_voltage, model_constants, redlich_kister, surface_fractions
 from uam_studio.battery.parameters import ZERO_C, CellParameters
 from uam_studio.battery.simulate import simulate
 from uam_studio.battery.solver import integrate_current
@@ -90,7 +90,8 @@ def _ocv_columns(states: dict, q_total: float, cell: CellParameters) -> tuple[np
     equilibrium voltage without those terms, less the overpotentials."""
     xns, xps = surface_fractions(states["qns"], states["qps"], q_total * cell.vol_s_fraction)
     bare = replace(cell, u0p=0.0, ap=(0.0,) * len(cell.ap))
-    fixed = equilibrium_voltage(xns, xps, states["tb"], bare) - states["vo"] - states["vsn"] - states["vsp"]
+    ocv = equilibrium_voltage(xns, xps, states["tb"], model_constants(bare))
+    fixed = ocv - states["vo"] - states["vsn"] - states["vsp"]
     return _ocv_basis(xps, len(cell.ap)), fixed.ravel()
 
 

@@ -178,7 +178,7 @@ class DecodeSearch:
                 keys.append((i, t))
             if not rows:
                 break
-            ok, _, _, x_there = self.episode.fly_currents(rows, np.stack(x0), split=np.array(split), chunk_s=256)
+            ok, _, _, x_there = self.episode.fly_currents(rows, np.stack(x0), split=np.array(split))
             self.legs_flown += 2 * len(rows)
             if self.reserve is not None:  # the same move under the take-off check's winds, its cheapest level
                 ix = self.tok.leg_index
