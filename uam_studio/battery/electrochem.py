@@ -62,6 +62,15 @@ class ModelConstants(NamedTuple):
     r0_activation_k: float
     k_activation_k: float
     t_reference_k: float
+    # Reciprocals of the divisors above, so that a step multiplies (1/s, 1/(J/K), 1/m^2)
+    inv_t_diffusion: float
+    inv_t_ohmic: float
+    inv_t_sn: float
+    inv_t_sp: float
+    inv_thermal_mass: float
+    inv_thermal_tau: float
+    inv_sn: float
+    inv_sp: float
 
 
 @lru_cache(maxsize=64)
@@ -100,6 +109,9 @@ def model_constants(cell: CellParameters) -> ModelConstants:
         thermal_mass=float(cell.thermal_mass), thermal_tau_s=float(cell.thermal_tau_s),
         t_ambient_k=float(cell.t_ambient_k), r0_activation_k=float(cell.r0_activation_k),
         k_activation_k=float(cell.k_activation_k), t_reference_k=float(cell.t_reference_k),
+        inv_t_diffusion=1.0 / cell.t_diffusion_s, inv_t_ohmic=1.0 / cell.t_ohmic_s, inv_t_sn=1.0 / cell.t_sn_s,
+        inv_t_sp=1.0 / cell.t_sp_s, inv_thermal_mass=1.0 / cell.thermal_mass, inv_thermal_tau=1.0 / cell.thermal_tau_s,
+        inv_sn=1.0 / cell.sn, inv_sp=1.0 / cell.sp,
     )
 
 
@@ -148,33 +160,38 @@ def overpotential_gains(current_a, xns, xps, k, rate_factor):
     else:
         jn0 = k.kn * rate_factor * ((1.0 - xns) * xns) ** k.alpha
         jp0 = k.kp * rate_factor * ((1.0 - xps) * xps) ** k.alpha
-    gn = k.bv_gain * np.arcsinh((current_a / k.sn) / (2.0 * jn0))
-    gp = k.bv_gain * np.arcsinh((current_a / k.sp) / (2.0 * jp0))
+    gn = k.bv_gain * np.arcsinh((current_a * k.inv_sn) / (2.0 * jn0))
+    gp = k.bv_gain * np.arcsinh((current_a * k.inv_sp) / (2.0 * jp0))
     return gn, gp
+
+
+@register_jitable(inline="always")
+def voltage_at(tb, vo, vsn, vsp, xns, xps, k):
+    """Terminal voltage (V) of a state (tb K; vo, vsn, vsp V) whose surface mole fractions are xns, xps."""
+    return equilibrium_voltage(xns, xps, tb, k) - vo - vsn - vsp
 
 
 @register_jitable(inline="always")
 def terminal_voltage(tb, vo, vsn, vsp, qns, qps, q_total, k):
     """Terminal voltage (V) of a state (tb K; vo, vsn, vsp V; qns, qps C) of total charge ``q_total`` (C)."""
     xns, xps = surface_fractions(qns, qps, q_total * k.vol_s_fraction)
-    return equilibrium_voltage(xns, xps, tb, k) - vo - vsn - vsp
+    return voltage_at(tb, vo, vsn, vsp, xns, xps, k)
 
 
 @register_jitable(inline="always")
-def euler_step(tb, vo, vsn, vsp, qnb, qns, qpb, qps, current_a, q_total, r0, dt_s, k):
+def step_at(tb, vo, vsn, vsp, qnb, qns, qpb, qps, xns, xps, current_a, r0, dt_s, k):
     """One explicit-Euler step of ``dt_s`` (s) under ``current_a`` (A) from the state (tb K; vo, vsn,
-    vsp V; qnb, qns, qpb, qps C) of a cell with total charge ``q_total`` (C) and resistance ``r0`` (ohm):
-    the next state, in that order."""
-    diff_n = (qnb * k.inv_vb - qns * k.inv_vs) / k.t_diffusion_s
-    diff_p = (qpb * k.inv_vb - qps * k.inv_vs) / k.t_diffusion_s
-    xns, xps = surface_fractions(qns, qps, q_total * k.vol_s_fraction)
+    vsp V; qnb, qns, qpb, qps C) whose surface mole fractions are xns, xps, of a cell with resistance ``r0``
+    (ohm): the next state, in that order."""
+    diff_n = (qnb * k.inv_vb - qns * k.inv_vs) * k.inv_t_diffusion
+    diff_p = (qpb * k.inv_vb - qps * k.inv_vs) * k.inv_t_diffusion
     gn, gp = overpotential_gains(current_a, xns, xps, k, arrhenius(tb, -k.k_activation_k, k.t_reference_k))
     eta = vo + vsn + vsp
     return (
-        tb + dt_s * (eta * current_a / k.thermal_mass + (k.t_ambient_k - tb) / k.thermal_tau_s),
-        vo + dt_s * (current_a * r0 * arrhenius(tb, k.r0_activation_k, k.t_reference_k) - vo) / k.t_ohmic_s,
-        vsn + dt_s * (gn * tb - vsn) / k.t_sn_s,
-        vsp + dt_s * (gp * tb - vsp) / k.t_sp_s,
+        tb + dt_s * (eta * current_a * k.inv_thermal_mass + (k.t_ambient_k - tb) * k.inv_thermal_tau),
+        vo + dt_s * (current_a * r0 * arrhenius(tb, k.r0_activation_k, k.t_reference_k) - vo) * k.inv_t_ohmic,
+        vsn + dt_s * (gn * tb - vsn) * k.inv_t_sn,
+        vsp + dt_s * (gp * tb - vsp) * k.inv_t_sp,
         qnb - dt_s * diff_n,
         qns + dt_s * (diff_n - current_a),
         qpb - dt_s * diff_p,
@@ -182,21 +199,30 @@ def euler_step(tb, vo, vsn, vsp, qnb, qns, qpb, qps, current_a, q_total, r0, dt_
     )
 
 
+@register_jitable(inline="always")
+def euler_step(tb, vo, vsn, vsp, qnb, qns, qpb, qps, current_a, q_total, r0, dt_s, k):
+    """:func:`step_at` of a cell with total charge ``q_total`` (C), its surface fractions computed here."""
+    xns, xps = surface_fractions(qns, qps, q_total * k.vol_s_fraction)
+    return step_at(tb, vo, vsn, vsp, qnb, qns, qpb, qps, xns, xps, current_a, r0, dt_s, k)
+
+
 # The compiled loops (:mod:`uam_studio.battery.kernel` calls them). They live in this file so that numba's disk
 # cache, which is keyed on the source file of the compiled function, is invalidated by any change to the
 # equations above.
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def run_current(current, x0, q_total, r0, dt_s, k, voltage, states):
     n_rows, n_steps = current.shape
     for b in range(n_rows):
         tb, vo, vsn, vsp, qnb, qns, qpb, qps = x0[b, 0], x0[b, 1], x0[b, 2], x0[b, 3], x0[b, 4], x0[b, 5], \
             x0[b, 6], x0[b, 7]
-        q, r = q_total[b], r0[b]
+        q_s, r = q_total[b] * k.vol_s_fraction, r0[b]
+        xns, xps = surface_fractions(qns, qps, q_s)
         for t in range(n_steps):
-            tb, vo, vsn, vsp, qnb, qns, qpb, qps = euler_step(tb, vo, vsn, vsp, qnb, qns, qpb, qps,
-                                                              current[b, t], q, r, dt_s, k)
-            voltage[b, t] = terminal_voltage(tb, vo, vsn, vsp, qns, qps, q, k)
+            tb, vo, vsn, vsp, qnb, qns, qpb, qps = step_at(tb, vo, vsn, vsp, qnb, qns, qpb, qps, xns, xps,
+                                                           current[b, t], r, dt_s, k)
+            xns, xps = surface_fractions(qns, qps, q_s)
+            voltage[b, t] = voltage_at(tb, vo, vsn, vsp, xns, xps, k)
             states[0, b, t] = tb
             states[1, b, t] = vo
             states[2, b, t] = vsn
@@ -214,24 +240,26 @@ def _put(out, b, tb, vo, vsn, vsp, qnb, qns, qpb, qps):
     out[b, 4], out[b, 5], out[b, 6], out[b, 7] = qnb, qns, qpb, qps
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def run_to_cutoff(load, power_mode, x0, q_total, r0, dt_s, k, eod_v, voltage, current, final, k_eod):
     n_rows, n_steps = load.shape
     for b in range(n_rows):
         tb, vo, vsn, vsp, qnb, qns, qpb, qps = x0[b, 0], x0[b, 1], x0[b, 2], x0[b, 3], x0[b, 4], x0[b, 5], \
             x0[b, 6], x0[b, 7]
-        q, r = q_total[b], r0[b]
+        q_s, r = q_total[b] * k.vol_s_fraction, r0[b]
         k_eod[b] = n_steps
-        v = terminal_voltage(tb, vo, vsn, vsp, qns, qps, q, k) if power_mode else 0.0
+        xns, xps = surface_fractions(qns, qps, q_s)
+        v = voltage_at(tb, vo, vsn, vsp, xns, xps, k)
         for t in range(n_steps):
             if power_mode:
                 i = load[b, t] / max(v, 0.5) if v > 0.5 else 0.0
                 current[b, t] = i
             else:
                 i = load[b, t]
-            n_tb, n_vo, n_vsn, n_vsp, n_qnb, n_qns, n_qpb, n_qps = euler_step(tb, vo, vsn, vsp, qnb, qns, qpb, qps, i,
-                                                                              q, r, dt_s, k)
-            v = terminal_voltage(n_tb, n_vo, n_vsn, n_vsp, n_qns, n_qps, q, k)
+            n_tb, n_vo, n_vsn, n_vsp, n_qnb, n_qns, n_qpb, n_qps = step_at(tb, vo, vsn, vsp, qnb, qns, qpb, qps, xns,
+                                                                           xps, i, r, dt_s, k)
+            xns, xps = surface_fractions(n_qns, n_qps, q_s)
+            v = voltage_at(n_tb, n_vo, n_vsn, n_vsp, xns, xps, k)
             voltage[b, t] = v
             if not v >= eod_v:  # below the cut-off, or NaN (uam_studio.battery.eod's rule)
                 k_eod[b] = t
@@ -247,8 +275,9 @@ def run_to_cutoff(load, power_mode, x0, q_total, r0, dt_s, k, eod_v, voltage, cu
         _put(final, b, tb, vo, vsn, vsp, qnb, qns, qpb, qps)  # after the last sample above the cut-off
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def run_rows(flat, starts, lengths, x0, q_total, r0, dt_s, k, eod_v, split, ok, x_end, v_min, x_split):
+    q_s = q_total * k.vol_s_fraction
     for b in range(lengths.size):
         tb, vo, vsn, vsp, qnb, qns, qpb, qps = x0[b, 0], x0[b, 1], x0[b, 2], x0[b, 3], x0[b, 4], x0[b, 5], \
             x0[b, 6], x0[b, 7]
@@ -258,10 +287,12 @@ def run_rows(flat, starts, lengths, x0, q_total, r0, dt_s, k, eod_v, split, ok, 
         ok[b] = True
         lowest = np.inf
         off = starts[b]
+        xns, xps = surface_fractions(qns, qps, q_s)
         for t in range(lengths[b]):
-            tb, vo, vsn, vsp, qnb, qns, qpb, qps = euler_step(tb, vo, vsn, vsp, qnb, qns, qpb, qps, flat[off + t],
-                                                              q_total, r0, dt_s, k)
-            v = terminal_voltage(tb, vo, vsn, vsp, qns, qps, q_total, k)
+            tb, vo, vsn, vsp, qnb, qns, qpb, qps = step_at(tb, vo, vsn, vsp, qnb, qns, qpb, qps, xns, xps,
+                                                           flat[off + t], r0, dt_s, k)
+            xns, xps = surface_fractions(qns, qps, q_s)
+            v = voltage_at(tb, vo, vsn, vsp, xns, xps, k)
             if v != v:  # NaN: below the cut-off, and the lowest voltage is not a number
                 lowest = v
                 ok[b] = False
