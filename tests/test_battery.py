@@ -17,7 +17,7 @@ from uam_studio.flight import leg_current
 
 
 def _stepwise_voltage(current, q_max, r0, dt=1.0, cell=DEFAULT_CELL):
-    """Plain step-by-step Euler loop: the naive reference for the vectorised solver."""
+    """Plain step-by-step numpy Euler loop: the naive reference for the compiled kernel."""
     q = np.atleast_1d(float(q_max))
     x = full_charge(q, cell)
     q_total = cell.q_total(q)
@@ -34,9 +34,9 @@ def flight_profile():
 
 @pytest.mark.parametrize("q_max,r0,cell", [(5000, 0.017, DEFAULT_CELL), (8000, 0.3, DEFAULT_CELL),
                                           (6500, 0.25, DEFAULT_CELL), (10900, 0.021, VTC6_PARAMS)])
-def test_vectorised_solver_equals_stepwise_euler(q_max, r0, cell):
-    """The time-vectorised solver against the plain Euler loop; the VTC6 set's R0 and rate constants
-    follow the cell's temperature (the Picard iteration's temperature-dependent branch)."""
+def test_the_kernel_equals_stepwise_euler(q_max, r0, cell):
+    """The kernel against the plain numpy Euler loop; the VTC6 set's R0 and rate constants
+    follow the cell's temperature (the Arrhenius terms inside each step)."""
     cur = flight_profile()[:2500]
     res = simulate(cur, q_max=q_max, r0=r0, cell=cell)
     ref = _stepwise_voltage(cur, q_max, r0, cell=cell)
