@@ -144,6 +144,78 @@ def test_any_corruption_is_a_logbook_error_or_a_valid_logbook(book, tmp_path, cu
     assert np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))
 
 
+def _bad_documents(doc: dict) -> list[tuple[str, str, str]]:
+    """(name, JSON text, a word the one-line error must hold): values no logbook can hold."""
+    def edited(change):
+        d = json.loads(json.dumps(doc))
+        change(d)
+        return json.dumps(d)
+
+    fit0 = doc["flights"][0]["fit"]
+    v_w, v_r = fit0["cov_w"][0], fit0["cov_w"][3]
+    return [
+        ("nested 100,000 deep", "[" * 100_000 + "]" * 100_000, "not a logbook"),
+        ("a logbook nested 100,000 deep", json.dumps(doc)[:-1] + ', "pack": ' + "[" * 100_000 + "]" * 100_000 + "}",
+         "nested"),
+        ("nested past the depth", edited(lambda d: d.update(pack=[[[[[["x"]]]]]])), "levels"),
+        ("covariance not positive definite", edited(lambda d: d["flights"][0]["fit"].update(
+            cov_w=[v_w, 2.0 * (v_w * v_r) ** 0.5, 2.0 * (v_w * v_r) ** 0.5, v_r])), "positive-definite"),
+        ("covariance not symmetric", edited(lambda d: d["flights"][0]["fit"].update(cov_w=[v_w, 0.0, 1e-3, v_r])),
+         "symmetric"),
+        ("1e12 C delivered before", edited(lambda d: d.update(delivered_before_c=1e12)), "delivered_before_c"),
+        ("a rest of 300 years", edited(lambda d: d["flights"][0].update(rest_s=1e10)), "rest_s"),
+        ("R0 of 8 ohm", edited(lambda d: d["flights"][0]["fit"].update(r0_ohm=8.0)), "r0_ohm"),
+        ("an unknown key", edited(lambda d: d.update(health_override=1)), "health_override"),
+        ("an unknown flight key", edited(lambda d: d["flights"][0].update(true_q_max=7600)), "true_q_max"),
+        ("an unknown fit key", edited(lambda d: d["flights"][0]["fit"].update(q_max=7600)), "q_max"),
+    ]
+
+
+def test_values_no_logbook_can_hold_get_one_line_naming_the_field_and_its_range(book, tmp_path, capsys):
+    """Nesting past the depth (100,000 levels included), a covariance that is not positive definite, a charge or
+    a rest outside the physical range, unknown keys at any level: one line naming the field and what is allowed,
+    exit 2 from the CLI, the file untouched."""
+    for name, text, word in _bad_documents(book.to_dict()):
+        path = tmp_path / "bad.json"
+        path.write_text(text)
+        before = path.read_bytes()
+        with pytest.raises(LogbookError) as err:
+            Logbook.load(path)
+        msg = str(err.value)
+        assert "\n" not in msg and word in msg and "allowed" in msg, (name, msg)
+        assert main(["logbook", "show", str(path)]) == 2, name
+        out = capsys.readouterr().err.strip()
+        assert out.count("\n") == 0 and word in out, (name, out)
+        assert path.read_bytes() == before
+
+
+_ANY_VALUE = st.recursive(
+    st.none() | st.booleans() | st.floats(allow_nan=True, allow_infinity=True) | st.integers(-10**15, 10**15)
+    | st.text(max_size=5),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=5), inner, max_size=3),
+    max_leaves=12)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(level=st.sampled_from(["doc", "flight", "fit"]), key=st.sampled_from(
+    ["delivered_before_c", "q_nominal_c", "noise_v", "eod_v", "dt_s", "rest_s", "ambient_c", "w", "r0_ohm",
+     "cov_w", "discrepancy_factor", "current_a", "flags", "unexpected"]), value=_ANY_VALUE)
+def test_any_field_set_to_any_value_is_refused_in_one_line_or_read_whole(book, level, key, value):
+    """A field of the document (or a key it does not know) set to any JSON value: refused in one line, or a
+    logbook whose belief is finite."""
+    doc = json.loads(json.dumps(book.to_dict()))
+    target = {"doc": doc, "flight": doc["flights"][0], "fit": doc["flights"][0]["fit"]}[level]
+    target[key] = value
+    try:
+        back = Logbook.from_dict(json.loads(json.dumps(doc)))
+    except LogbookError as err:
+        assert "\n" not in str(err)
+        return
+    mean, cov = logbook_belief(back)
+    assert np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))
+    assert np.all(np.linalg.eigvalsh(cov) > 0)
+
+
 # --------------------------------------------------------------------------- the belief
 
 

@@ -5,7 +5,6 @@ leave-one-cell-out rows and the CLI."""
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -24,22 +23,19 @@ def cells(tmp_path_factory):
 
 
 def test_the_belief_predicts_a_synthetic_life_within_a_percent_and_follows_its_fade(cells):
+    """The life is the physics cell itself (at 19 C; the belief runs it at the logged 24 C), so the model's time at
+    the belief's health along the planned load is near the truth before any correction for the cell's past
+    errors: within 3% once the logbook holds a discharge (a plan as long as the context, whose time to the
+    cut-off is its own length, is 50% short), and the corrected median within 1%."""
     preds = belief_life(cells[0], NASA_18650)
     assert len(preds) == 10 and preds[0].early and not preds[-1].early
+    raw = [abs(p.raw_s - p.true_s) / p.true_s for p in preds[1:]]
+    assert np.all(np.isfinite(raw)) and max(raw) < 0.03
     errs = [abs(p.median_s - p.true_s) / p.true_s for p in preds[1:]]
     assert np.all(np.isfinite(errs)) and np.median(errs) < 0.01
     # the belief sharpens as the logbook grows, and its q_max follows the life's discharges
     assert preds[-1].q_max_sd < 0.5 * preds[0].q_max_sd
     assert np.corrcoef([p.q_max for p in preds[2:]], [p.true_s for p in preds[1:-1]])[0, 1] > 0.5
-
-
-def test_a_prediction_never_reads_its_discharges_voltage_after_the_context(cells):
-    cell = cells[1]
-    last = cell.discharges[-1]
-    after = last.time_s - last.load_time_s > 300.0
-    changed = replace(last, voltage_v=np.where(after, last.voltage_v - 0.3, last.voltage_v))
-    other = replace(cell, discharges=(*cell.discharges[:-1], changed))
-    assert belief_life(other, NASA_18650)[-1].median_s == belief_life(cell, NASA_18650)[-1].median_s
 
 
 def test_rows_are_the_history_methods_and_scored_leave_one_cell_out(cells):

@@ -63,15 +63,6 @@ def test_the_physics_method_predicts_a_synthetic_life_within_a_percent(tmp_path)
     assert np.corrcoef(q, t)[0, 1] > 0.9
 
 
-def test_a_prediction_never_reads_its_discharges_voltage_after_the_context(tmp_path):
-    cell = synthetic_cell(tmp_path, 4, n=4)
-    last = cell.discharges[-1]
-    after = last.time_s - last.load_time_s > 300.0
-    changed = replace(last, voltage_v=np.where(after, last.voltage_v - 0.3, last.voltage_v))
-    other = replace(cell, discharges=(*cell.discharges[:-1], changed))
-    assert predict_life(other, NASA_18650)[-1].median_s == predict_life(cell, NASA_18650)[-1].median_s
-
-
 @needs_data
 def test_the_identification_reads_only_its_cell_and_prints_the_bundled_set(monkeypatch, capsys):
     """``uam-studio identify nasa-cell``: the printed source, run, gives the bundled set; only B0005 is read."""

@@ -31,7 +31,7 @@ from uam_studio.atomic_io import atomic_write_text
 from uam_studio.battery.health.estimate import MIN_CONTEXT_S
 from uam_studio.battery.health.fit import fit_health
 from uam_studio.battery.parameters import DEFAULT_CELL, DEFAULT_Q_MAX, CellParameters
-from uam_studio.battery.simulate import CURRENT_LIMIT_A, DEFAULT_EOD_V
+from uam_studio.battery.simulate import CURRENT_LIMIT_A, DEFAULT_EOD_V, R0_RANGE
 from uam_studio.errors import InputError
 
 __all__ = ["LOGBOOK_FORMAT", "LOGBOOK_VERSION", "FlightFit", "Logbook", "LogbookError", "LoggedFlight", "fit_flight"]
@@ -41,6 +41,13 @@ LOGBOOK_VERSION = 1
 MAX_FLIGHTS = 10_000
 VOLTAGE_RANGE_V = (0.0, 5.0)  # V: a reading of the cell type
 DT_RANGE_S = (0.1, 60.0)  # s: a flight's sample step
+MAX_CYCLES = 10_000  # equivalent full cycles a pack may have delivered before its log: far past any 18650's life
+MAX_REST_S = 10 * 365.25 * 86400.0  # s: ten years on a shelf
+MAX_DEPTH = 5  # nesting of a logbook document: its object, flights, a flight, its fit, the fit's covariance
+# The keys each level of the document may hold (what to_dict writes); any other is refused by name.
+DOC_KEYS = ("format", "version", "pack", "delivered_before_c", "q_nominal_c", "noise_v", "eod_v", "flights")
+FLIGHT_KEYS = ("dt_s", "rest_s", "ambient_c", "current_a", "voltage_v", "fit")
+FIT_KEYS = ("w", "r0_ohm", "cov_w", "discrepancy_factor", "flags")
 
 
 class LogbookError(InputError):
@@ -204,6 +211,9 @@ class Logbook:
         except json.JSONDecodeError as err:
             raise LogbookError(p, f"not a logbook: invalid or truncated JSON at line {err.lineno} column {err.colno}"
                                ) from None
+        except RecursionError:
+            raise LogbookError(p, "not a logbook: nested deeper than Python's parser goes; allowed at most "
+                                  f"{MAX_DEPTH} levels") from None
         return cls.from_dict(doc, p)
 
     @classmethod
@@ -211,6 +221,10 @@ class Logbook:
         """The logbook of a JSON document (:meth:`to_dict`); :class:`LogbookError` naming ``where`` otherwise."""
         if not isinstance(doc, dict) or doc.get("format") != LOGBOOK_FORMAT:
             raise LogbookError(where, f"not a logbook: expected \"format\": \"{LOGBOOK_FORMAT}\"")
+        depth = _depth(doc)
+        if depth > MAX_DEPTH:
+            raise LogbookError(where, f"nested {depth} levels deep; allowed at most {MAX_DEPTH}")
+        _known_keys(where, "the logbook", doc, DOC_KEYS)
         if doc.get("version") != LOGBOOK_VERSION:
             raise LogbookError(where, f"version {doc.get('version')!r}: this uam_studio reads version "
                                       f"{LOGBOOK_VERSION}")
@@ -218,13 +232,34 @@ class Logbook:
         if not isinstance(flights, list) or len(flights) > MAX_FLIGHTS:
             raise LogbookError(where, f"flights: expected a list of at most {MAX_FLIGHTS} flights")
         noise = doc.get("noise_v")
-        book = cls(delivered_before_c=_number(where, "delivered_before_c", doc.get("delivered_before_c"), 0.0, 1e12),
-                   q_nominal_c=_number(where, "q_nominal_c", doc.get("q_nominal_c"), 100.0, 1e6),
+        q_nominal = _number(where, "q_nominal_c", doc.get("q_nominal_c"), 100.0, 1e6)
+        book = cls(delivered_before_c=_number(where, "delivered_before_c", doc.get("delivered_before_c"), 0.0,
+                                              MAX_CYCLES * q_nominal),
+                   q_nominal_c=q_nominal,
                    noise_v=None if noise is None else _number(where, "noise_v", noise, 0.0, 1.0),
                    eod_v=_number(where, "eod_v", doc.get("eod_v"), *VOLTAGE_RANGE_V),
                    pack=str(doc.get("pack", "pack"))[:200])
         out = [_flight(where, k, f) for k, f in enumerate(flights)]
         return replace(book, flights=tuple(out))
+
+
+def _depth(value: Any) -> int:
+    """Levels of lists and objects in a JSON value (a number or a string: 0), counted without recursion."""
+    deepest, stack = 0, [(value, 1)]
+    while stack:
+        item, level = stack.pop()
+        if isinstance(item, dict):
+            item = list(item.values())
+        if isinstance(item, list):
+            deepest = max(deepest, level)
+            stack.extend((x, level + 1) for x in item if isinstance(x, (list, dict)))
+    return deepest
+
+
+def _known_keys(where: str | os.PathLike[str], what: str, obj: dict, allowed: tuple[str, ...]) -> None:
+    unknown = sorted(str(k) for k in obj if k not in allowed)
+    if unknown:
+        raise LogbookError(where, f"{what}: unknown key {unknown[0][:40]!r}; allowed {', '.join(allowed)}")
 
 
 def _series(name: str, value: Any) -> np.ndarray:
@@ -245,6 +280,7 @@ def _number(where: str | os.PathLike[str], name: str, value: Any, lo: float, hi:
 def _flight(where: str | os.PathLike[str], k: int, f: Any) -> LoggedFlight:
     if not isinstance(f, dict):
         raise LogbookError(where, f"flights[{k}]: expected an object")
+    _known_keys(where, f"flights[{k}]", f, FLIGHT_KEYS)
     dt = _number(where, f"flights[{k}].dt_s", f.get("dt_s"), *DT_RANGE_S)
     arrays = []
     for name, (lo, hi) in (("current_a", (-CURRENT_LIMIT_A, CURRENT_LIMIT_A)), ("voltage_v", VOLTAGE_RANGE_V)):
@@ -263,17 +299,20 @@ def _flight(where: str | os.PathLike[str], k: int, f: Any) -> LoggedFlight:
     if fit is not None:
         if not isinstance(fit, dict) or not isinstance(fit.get("cov_w"), list) or len(fit["cov_w"]) != 4:
             raise LogbookError(where, f"flights[{k}].fit: expected w, r0_ohm, cov_w (4 numbers)")
+        _known_keys(where, f"flights[{k}].fit", fit, FIT_KEYS)
         cov = tuple(_number(where, f"flights[{k}].fit.cov_w", c, -1e6, 1e6) for c in fit["cov_w"])
-        if cov[0] <= 0 or cov[3] <= 0:
-            raise LogbookError(where, f"flights[{k}].fit.cov_w: variances must be > 0")
+        symmetric = abs(cov[1] - cov[2]) <= 1e-9 * max(abs(cov[1]), abs(cov[2]), 1e-300)
+        if not (cov[0] > 0 and cov[3] > 0 and symmetric and cov[0] * cov[3] - cov[1] * cov[2] > 0):
+            raise LogbookError(where, f"flights[{k}].fit.cov_w: {list(cov)}; allowed a symmetric positive-definite 2x2 "
+                                      "covariance (variances > 0, |correlation| < 1)")
         flags = fit.get("flags", [])
         stored = FlightFit(_number(where, f"flights[{k}].fit.w", fit.get("w"), 0.01, 100.0),
-                           _number(where, f"flights[{k}].fit.r0_ohm", fit.get("r0_ohm"), 0.0, 10.0),
+                           _number(where, f"flights[{k}].fit.r0_ohm", fit.get("r0_ohm"), *R0_RANGE),
                            (cov[0], cov[1], cov[2], cov[3]),
                            _number(where, f"flights[{k}].fit.discrepancy_factor", fit.get("discrepancy_factor", 1.0),
                                    1.0, 1e6),
                            tuple(str(x) for x in flags) if isinstance(flags, list) else ())
     return LoggedFlight(arrays[0], arrays[1], dt,
-                        _number(where, f"flights[{k}].rest_s", f.get("rest_s"), 0.0, 1e10, nan_ok=True),
+                        _number(where, f"flights[{k}].rest_s", f.get("rest_s"), 0.0, MAX_REST_S, nan_ok=True),
                         _number(where, f"flights[{k}].ambient_c", f.get("ambient_c"), -60.0, 100.0, nan_ok=True),
                         stored)

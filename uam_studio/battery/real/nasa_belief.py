@@ -9,8 +9,10 @@ at twice the time; RESULTS.md, "A pack's logbook and one health belief".) Discha
 the :class:`~uam_studio.battery.health.belief.HealthBelief` over that logbook (the NASA cell's fleet prior, each
 discharge's fit, aged between discharges by the NASA aging law; where the cell has run at the discharge's load and
 ambient before, only those discharges' fits are read, as the physics method reads its last one), sharpened by
-discharge k's own first ``context_s`` of readings; the operator's planned current is the physics method's (the load
-as recorded, its last level carried on). The median is the physics model's time to the cut-off at the belief's mean,
+discharge k's own first ``context_s`` of readings (built from the
+:func:`~uam_studio.battery.real.nasa_predict.known_before` view alone); the operator plans the load every
+model-based method plans (:func:`~uam_studio.battery.real.nasa_physics.planned_current`: the context's load
+continued) from the ambient it knows. The median is the physics model's time to the cut-off at the belief's mean,
 divided by the physics method's own-error factor (:func:`~uam_studio.battery.real.nasa_predict.own_error_factor`:
 the cell's own latest errors at the same load and ambient; the discharges are finished). Its interval and bounds
 are the median times the quantiles of ``true / median`` over the training cells (every cell given but the scored
@@ -38,7 +40,15 @@ from uam_studio.battery.health.prior import fleet_prior
 from uam_studio.battery.parameters import NASA_IDENTIFIED, ZERO_C, Cell
 from uam_studio.battery.real.nasa_data import NasaCell, NasaDischarge, persistence_s, same_conditions
 from uam_studio.battery.real.nasa_eval import ScoredDischarge, condition_of, conservative_quantile, progpy_default_s
-from uam_studio.battery.real.nasa_physics import BIAS_WINDOW, fit_segment, grid_current, time_to_cutoff_s
+from uam_studio.battery.real.nasa_known import KnownDischarge
+from uam_studio.battery.real.nasa_physics import (
+    BIAS_WINDOW,
+    DT_S,
+    fit_segment,
+    grid_current,
+    planned_current,
+    time_to_cutoff_s,
+)
 from uam_studio.battery.real.nasa_predict import (
     EARLY_ERRORS,
     RISKS,
@@ -62,7 +72,8 @@ WALK = 0.3 * SCATTER
 @dataclass(frozen=True)
 class BeliefPrediction:
     """One discharge predicted by :func:`belief_life`: times (s from the first loaded sample) to the cut-off,
-    the median (``median_s``, bias-corrected) and the truth (``true_s``, None if never reached); the believed
+    the median (``median_s``, bias-corrected), the physics model's time at the belief's mean along the planned
+    load before that correction (``raw_s``) and the truth (``true_s``, None if never reached); the believed
     health (q_max C, R0 ohm, and the q_max std C) and whether it is among the cell's first predictions."""
 
     discharge: NasaDischarge
@@ -72,20 +83,33 @@ class BeliefPrediction:
     q_max_sd: float
     r0: float
     early: bool
+    raw_s: float = math.nan
 
 
-def _on_grid(d: NasaDischarge, end_s: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
-    """``d`` on a 1 s grid from its first loaded sample: (current A, voltage V, the cell's temperature at the load
-    K), down to :data:`FIT_ABOVE_V` (and up to ``end_s`` s where given)."""
+def _on_grid(d: NasaDischarge) -> tuple[np.ndarray, np.ndarray]:
+    """Finished discharge ``d`` on a 1 s grid from its first loaded sample: (current A, voltage V), down to
+    :data:`FIT_ABOVE_V` (what its logbook entry holds)."""
     seg = fit_segment(d)
-    n = seg.current_a.size
-    v = np.interp(np.arange(n), seg.observed, seg.voltage_v)
+    v = np.interp(np.arange(seg.current_a.size), seg.observed, seg.voltage_v)
     below = np.flatnonzero(v < FIT_ABOVE_V)
-    n = int(below[0]) if below.size else n
-    if end_s is not None:  # up to the last sample read by then: nothing interpolated from a later one
-        seen = seg.observed[seg.observed <= end_s - 1.0]
-        n = min(n, int(seen.max()) + 1 if seen.size else 0)
-    return seg.current_a[:n], v[:n], seg.t_ambient_k
+    n = int(below[0]) if below.size else seg.current_a.size
+    return seg.current_a[:n], v[:n]
+
+
+def _context_on_grid(known: KnownDischarge) -> tuple[np.ndarray, np.ndarray]:
+    """The readings an operator holds at ``known``'s prediction instant on the same 1 s grid: (current A,
+    voltage V) from the first loaded sample up to the context's last sample, built from ``known`` alone (no
+    sample after the context can reach it), down to :data:`FIT_ABOVE_V`."""
+    cur = grid_current(known.time_s, known.current_a, known.load_start, extend=False)
+    t = known.time_s[known.load_start:] - known.load_time_s
+    obs = np.round(t / DT_S).astype(int) - 1
+    keep = (obs >= 0) & (obs < cur.size)
+    if not keep.any():
+        return cur[:0], cur[:0]
+    v = np.interp(np.arange(cur.size), obs[keep], known.voltage_v[known.load_start:][keep])
+    below = np.flatnonzero(v < FIT_ABOVE_V)
+    n = int(below[0]) if below.size else cur.size
+    return cur[:n], v[:n]
 
 
 def belief_life(cell: NasaCell, cell_type: Cell = NASA_IDENTIFIED, cutoff_v: float = 3.0,
@@ -101,17 +125,18 @@ def belief_life(cell: NasaCell, cell_type: Cell = NASA_IDENTIFIED, cutoff_v: flo
         params = replace(cell_type.params, t_ambient_k=ZERO_C + float(d.ambient_c))
         belief = HealthBelief(None, cutoff_v, prior, _read_at(book, [p for p, _ in past], known), NASA_AGING_LAW,
                               cell=params, scatter=SCATTER, walk=WALK)
-        cur, volt, t0_k = _on_grid(d, context_s)
-        belief.observe(cur, volt)
+        cur, volt = _context_on_grid(known)
+        if cur.size:
+            belief.observe(cur, volt)
         h = belief.health()
-        planned = grid_current(known.time_s, known.current_a, known.load_start, extend=True)
-        raw = time_to_cutoff_s(planned, h.q_max_c, h.r0_ohm, params, t0_k, cutoff_v)
+        raw = time_to_cutoff_s(planned_current(known), h.q_max_c, h.r0_ohm, params, ZERO_C + float(known.ambient_c),
+                               cutoff_v)
         median = raw / own_error_factor(past, known, BIAS_WINDOW)
         true = d.time_to_cutoff_s(cutoff_v)  # the discharge has finished: from here on it is history
         out.append(BeliefPrediction(d, median, true, h.q_max_c, h.q_max_sd_c, h.r0_ohm,
-                                    sum(e is not None for _, e in past) < EARLY_ERRORS))
+                                    sum(e is not None for _, e in past) < EARLY_ERRORS, raw))
         past.append((d, raw / true - 1.0 if true else None))
-        whole_cur, whole_v, _ = _on_grid(d)
+        whole_cur, whole_v = _on_grid(d)
         fit = fit_flight(whole_cur, whole_v, 1.0, None, cutoff_v, params)
         book = replace(book, flights=book.flights + (LoggedFlight(whole_cur.astype(np.float32),
                                                                     whole_v.astype(np.float32), 1.0,

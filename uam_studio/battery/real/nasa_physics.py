@@ -54,7 +54,8 @@ from uam_studio.battery.real.nasa_predict import (
 from uam_studio.battery.simulate import simulate
 
 __all__ = ["BIAS_WINDOW", "IDENTIFY_CELL", "IDENTIFY_DISCHARGES", "LifePrediction", "discharge_health",
-           "fit_segment", "grid_current", "identify_nasa", "nasa_cell_literal", "predict_life", "time_to_cutoff_s"]
+           "fit_segment", "grid_current", "identify_nasa", "nasa_cell_literal", "planned_current", "predict_life",
+           "time_to_cutoff_s"]
 
 IDENTIFY_CELL = "B0005"
 IDENTIFY_DISCHARGES = (0, 1, 2)
@@ -176,11 +177,17 @@ class LifePrediction:
     r0: float
 
 
+def planned_current(known: KnownDischarge) -> np.ndarray:
+    """The current (A, :data:`DT_S` grid from the first loaded sample) an operator plans for the discharge it
+    knows up to ``known``'s context: :func:`~uam_studio.battery.real.nasa_predict.planned_load`, the context's
+    load continued. Every model-based method plans this load."""
+    t, i = planned_load(known, known.load_start)
+    return grid_current(t, i, 0, extend=False)
+
+
 def _predict(known: KnownDischarge, health: tuple[float, float], params: CellParameters, t0_k: float,
              cutoff_v: float) -> float:
-    t, i = planned_load(known, known.load_start)
-    cur = grid_current(t, i, 0, extend=False)
-    return time_to_cutoff_s(cur, health[0], health[1], params, t0_k, cutoff_v)
+    return time_to_cutoff_s(planned_current(known), health[0], health[1], params, t0_k, cutoff_v)
 
 
 def predict_life(cell: NasaCell, cell_type: Cell, cutoff_v: float = 3.0,
