@@ -225,3 +225,16 @@ def test_format_2_weights_still_load_as_the_transformer_encoder(tmp_path):
     assert pred.model.cfg.health == "transformer"
     cur, ci, cv = _ctx()
     assert np.all(np.isfinite(pred.predict(ci[:5], cv[:5], cur)))  # the encoder takes any context length
+
+
+def test_the_predictor_pickles_for_worker_processes_and_predicts_the_same():
+    """Vector environments (SubprocVecEnv, GroupedSubprocVecEnv) pickle the env factories, the predictor in them."""
+    import pickle
+
+    from uam_studio.dynaformer import load_pretrained
+
+    pred = load_pretrained()
+    back = pickle.loads(pickle.dumps(pred))
+    cur = np.full(600, 2.0)
+    ctx_i, ctx_v = np.full(20, 2.9), np.linspace(4.1, 3.95, 20)
+    np.testing.assert_array_equal(back.predict(ctx_i, ctx_v, cur), pred.predict(ctx_i, ctx_v, cur))

@@ -298,3 +298,34 @@ def test_a_real_cells_scatter_and_walk_widen_the_logbooks_belief(book):
     mean2, cov2 = logbook_belief(book, scatter=0.015, walk=0.0045)
     assert np.all(np.diag(cov1) > np.diag(cov0)) and np.all(np.diag(cov2) > np.diag(cov1))
     assert np.allclose(mean0, mean1, rtol=0.05) and np.all(np.isfinite(mean2))
+
+
+def test_a_beliefs_flags_and_health_read_one_fit_whichever_runs_first(monkeypatch):
+    """flags() before health() gives what it gives after; the readings are fitted once however often either runs,
+    and again only when new readings arrive."""
+    calls = []
+    real = belief_module.fit_health
+    monkeypatch.setattr(belief_module, "fit_health", lambda *a, **k: calls.append(1) or real(*a, **k))
+    cur, volt = _flight(4000.0, 0.4, 3.0, 400, 7)  # a cell beyond the fleet's box: its fit is flagged
+    first, second = HealthBelief(0.005, 3.0), HealthBelief(0.005, 3.0)
+    for b in (first, second):
+        b.observe(cur, volt)
+    flags_before = first.flags()
+    assert first.health().q_max_c == first.health().q_max_c and len(calls) == 1
+    second.health()
+    assert second.flags() == flags_before and flags_before  # the same flags, and some
+    assert len(calls) == 2
+    first.observe(cur[:60], volt[:60])
+    first.flags()
+    assert len(calls) == 3
+
+
+def test_extended_keeps_each_flights_ambient_and_fits_on_the_cell_given(book):
+    from uam_studio.battery.parameters import NASA_IDENTIFIED_PARAMS
+
+    records = [_flight(6500.0, 0.05, 2.0, 900, k) for k in range(2)]
+    out = Logbook(noise_v=0.005).extended(records, 1.0, rest_s=60.0, ambient_c=31.0, cell=NASA_IDENTIFIED_PARAMS)
+    assert [f.ambient_c for f in out.flights] == [31.0, 31.0] and [f.rest_s for f in out.flights] == [60.0, 0.0]
+    one = Logbook(noise_v=0.005).appended(*records[0], 1.0, 60.0, 31.0, NASA_IDENTIFIED_PARAMS)
+    assert out.flights[0].fit == one.flights[0].fit
+    assert Logbook(noise_v=0.005).extended(records[:1]).flights[0].fit != one.flights[0].fit

@@ -79,6 +79,16 @@ class DynaformerPredictor:
         self._decoder_quantiles: tuple[float, ...] | None = None
         self._cal_lock = threading.Lock()
 
+    def __getstate__(self) -> dict:
+        """Pickled without its lock (vector environments send the predictor to their worker processes)."""
+        state = dict(self.__dict__)
+        del state["_cal_lock"]
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._cal_lock = threading.Lock()
+
     # ------------------------------------------------------------------ helpers
     @property
     def reads_fitted_health(self) -> bool:

@@ -177,7 +177,7 @@ class HealthBelief:
         self.segment = ChargeReadings()
         self.charges: list[ChargeReadings] = []  # this flight's earlier charges, as read
         self.past: list[HealthEstimate] = []  # the fits of this flight's earlier charges
-        self.estimate: HealthEstimate | None = None  # the latest fit of this charge
+        self._fitted: tuple[ChargeReadings, int, HealthEstimate | None] | None = None  # this charge's fit, by length
 
     @property
     def source(self) -> str:
@@ -205,11 +205,15 @@ class HealthBelief:
 
     def fit(self) -> HealthEstimate | None:
         """The likelihood of this charge's readings (no prior: it is multiplied in once, by
-        :meth:`health`); None below :data:`MIN_FIT_SAMPLES` readings."""
+        :meth:`health`); None below :data:`MIN_FIT_SAMPLES` readings. Fitted once per reading count: every
+        query of the same readings (:meth:`health`, :meth:`flags`) reads the same fit."""
         cur, volt = self.segment.arrays()
-        if cur.size * self.dt_s < MIN_FIT_SAMPLES:
-            return None
-        return fit_health(cur, volt, self.dt_s, noise_v=self.noise_v, eod_v=self.eod_v, cell=self.cell, prior=False)
+        if self._fitted is not None and self._fitted[0] is self.segment and self._fitted[1] == cur.size:
+            return self._fitted[2]
+        est = None if cur.size * self.dt_s < MIN_FIT_SAMPLES else fit_health(
+            cur, volt, self.dt_s, noise_v=self.noise_v, eod_v=self.eod_v, cell=self.cell, prior=False)
+        self._fitted = (self.segment, cur.size, est)
+        return est
 
     def health(self) -> BelievedHealth:
         """The belief from the logbook, all readings so far and the prior. Readings that put the cell beyond its
@@ -220,7 +224,6 @@ class HealthBelief:
         :raises InputError: fewer than :data:`MIN_FIT_SAMPLES` readings in all and no logbook.
         """
         est = self.fit()
-        self.estimate = est if est is not None else self.estimate
         fits = self.past + ([est] if est is not None else [])
         if not fits and self.source == SOURCE_TAKEOFF:
             raise InputError("readings", f"at least {MIN_FIT_SAMPLES} s of readings are needed before planning")
@@ -237,9 +240,11 @@ class HealthBelief:
                               r0_ohm=float(r0), r0_sd_ohm=float(math.sqrt(cov[1, 1])), cov_w=cov)
 
     def flags(self) -> tuple[str, ...]:
-        """The flags of the fits behind the belief (this charge's latest and the earlier charges'), each
-        once, in :func:`~uam_studio.battery.health.quality.fit_flags` order."""
-        fits = self.past + ([self.estimate] if self.estimate is not None else [])
+        """The flags of the fits behind the belief (this charge's readings so far and the earlier charges'), each
+        once, in :func:`~uam_studio.battery.health.quality.fit_flags` order; the same whether or not
+        :meth:`health` has run."""
+        est = self.fit()
+        fits = self.past + ([est] if est is not None else [])
         return fit_flags(any(FLAG_MISFIT in e.flags for e in fits), any(FLAG_OUTSIDE_FLEET in e.flags for e in fits))
 
     def prior_health(self) -> BelievedHealth:

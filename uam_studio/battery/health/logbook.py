@@ -165,12 +165,14 @@ class Logbook:
         return replace(self, flights=self.flights + (flight,))
 
     def extended(self, records: Sequence[tuple[np.ndarray, np.ndarray]], dt_s: float = 1.0,
-                 rest_s: float = math.nan) -> Logbook:
+                 rest_s: float = math.nan, ambient_c: float = math.nan, cell: CellParameters = DEFAULT_CELL
+                 ) -> Logbook:
         """This logbook with several flights appended (``(current A, voltage V)`` each; the first after
-        ``rest_s`` (s), the others back to back)."""
+        ``rest_s`` (s), the others back to back), each at ``ambient_c`` (C) and fitted on ``cell``, as
+        :meth:`appended`."""
         book = self
         for k, (cur, volt) in enumerate(records):
-            book = book.appended(cur, volt, dt_s, rest_s if k == 0 else 0.0)
+            book = book.appended(cur, volt, dt_s, rest_s if k == 0 else 0.0, ambient_c, cell)
         return book
 
     # ------------------------------------------------------------------ files
