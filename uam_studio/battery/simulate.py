@@ -18,7 +18,7 @@ from uam_studio.battery.parameters import (
     CellParameters,
 )
 from uam_studio.battery.solver import output_voltage
-from uam_studio.battery.state import STATE_NAMES, BatteryState, full_charge
+from uam_studio.battery.state import BatteryState, full_charge
 from uam_studio.errors import InputError, check_range
 
 R0_RANGE = (0.0, 5.0)  # ohm; the paper trains on 0.017-0.45
@@ -125,14 +125,15 @@ def _prepare(profile: np.ndarray, q_max, r0, initial_state: BatteryState | None,
     q = np.broadcast_to(q, (b,)).astype(float)
     r = np.broadcast_to(r, (b,)).astype(float)
     if initial_state is None:
-        x0 = full_charge(q, cell)
+        x0 = full_charge(q, cell).as_array()
     else:
         if initial_state.batch_size not in (1, b):
             raise InputError("initial_state", f"batch {initial_state.batch_size} does not match {b}")
-        arr = np.broadcast_to(initial_state.as_array(), (b, len(STATE_NAMES)))
-        if not np.all(np.isfinite(arr)):
+        x0 = initial_state.as_array()
+        if not np.isfinite(x0).all():
             raise InputError("initial_state", "contains NaN or inf")
-        x0 = BatteryState.from_array(arr)
+        if x0.shape[0] != b:
+            x0 = np.repeat(x0, b, axis=0)
     squeeze = profile.ndim == 1 and b == 1 and np.ndim(q_max) == 0 and np.ndim(r0) == 0
     return prof2, q, r, x0, squeeze
 
@@ -178,7 +179,7 @@ def simulate(
     profile = _check_profile("current_a", current_a, CURRENT_LIMIT_A, " A")
     current, q, r, x0, squeeze = _prepare(profile, q_max, r0, initial_state, cell)
     current = np.ascontiguousarray(current)
-    voltage, k_eod, final = kernel.integrate_to_cutoff(current, x0.as_array(), cell.q_total(q), r, dt,
+    voltage, k_eod, final = kernel.integrate_to_cutoff(current, x0, cell.q_total(q), r, dt,
                                                        model_constants(cell), eod)
     time_s = dt * np.arange(1, current.shape[1] + 1)
     return _finish(time_s, voltage, k_eod, final, current, squeeze)
@@ -211,7 +212,7 @@ def simulate_constant_power(
     eod = check_range("eod_v", eod_v, *EOD_RANGE, " V")
     profile = _check_profile("power_w", power_w, CURRENT_LIMIT_A * 4.2, " W")
     power, q, r, x0, squeeze = _prepare(profile, q_max, r0, initial_state, cell)
-    volts, current, k_eod, final = kernel.integrate_power(power, x0.as_array(), cell.q_total(q), r, dt,
+    volts, current, k_eod, final = kernel.integrate_power(power, x0, cell.q_total(q), r, dt,
                                                           model_constants(cell), eod)
     time_s = dt * np.arange(1, power.shape[1] + 1)
     return _finish(time_s, volts, k_eod, final, current, squeeze)
