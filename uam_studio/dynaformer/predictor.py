@@ -52,6 +52,9 @@ from .decoder_error import (
 from .predictor_inputs import MAX_PROFILE_S, as_2d, clamped_latent, leading_rest, to_grid
 
 HEALTH_SOURCES = ("fit", "model")
+# One lock for every predictor's first calibration (rare): a predictor holds none, so it pickles (vector
+# environments send it to their worker processes).
+_CALIBRATION_LOCK = threading.Lock()
 
 
 class DynaformerPredictor:
@@ -77,17 +80,6 @@ class DynaformerPredictor:
         self.chunk = model.cfg.chunk
         self.max_context = model.cfg.max_context
         self._decoder_quantiles: tuple[float, ...] | None = None
-        self._cal_lock = threading.Lock()
-
-    def __getstate__(self) -> dict:
-        """Pickled without its lock (vector environments send the predictor to their worker processes)."""
-        state = dict(self.__dict__)
-        del state["_cal_lock"]
-        return state
-
-    def __setstate__(self, state: dict) -> None:
-        self.__dict__.update(state)
-        self._cal_lock = threading.Lock()
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -328,7 +320,7 @@ class DynaformerPredictor:
         (split-conformal, :func:`decoder_error_scores`). Bundled weights: stored; others: measured on
         first use."""
         lv = check_range("level", level, 0.5, 0.999)
-        with self._cal_lock:
+        with _CALIBRATION_LOCK:
             if self._decoder_quantiles is None:
                 known = BUNDLED_DECODER_LAMBDA.get(file_sha256(self.source))
                 if known is None:
