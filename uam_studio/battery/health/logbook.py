@@ -34,7 +34,8 @@ from uam_studio.battery.parameters import DEFAULT_CELL, DEFAULT_Q_MAX, CellParam
 from uam_studio.battery.simulate import CURRENT_LIMIT_A, DEFAULT_EOD_V, R0_RANGE
 from uam_studio.errors import InputError
 
-__all__ = ["LOGBOOK_FORMAT", "LOGBOOK_VERSION", "FlightFit", "Logbook", "LogbookError", "LoggedFlight", "fit_flight"]
+__all__ = ["LOGBOOK_FORMAT", "LOGBOOK_VERSION", "FlightFit", "Logbook", "LogbookError", "LoggedFlight",
+           "delivered_charge_c", "fit_flight"]
 
 LOGBOOK_FORMAT = "uam_studio.logbook"
 LOGBOOK_VERSION = 1
@@ -97,6 +98,12 @@ def fit_flight(current_a: np.ndarray, voltage_v: np.ndarray, dt_s: float = 1.0, 
                      float(est.discrepancy_factor), tuple(est.flags))
 
 
+def delivered_charge_c(current_a: np.ndarray, dt_s: float) -> float:
+    """The charge (C) a pack delivered over readings ``current_a`` (A, discharge positive) at step ``dt_s`` (s):
+    the aging clock's tick (charging current does not count)."""
+    return float(np.sum(np.clip(current_a, 0.0, None), dtype=float) * dt_s)
+
+
 @dataclass(frozen=True, eq=False)
 class LoggedFlight:
     """One finished flight of the pack, as measured: ``current_a`` (A) and ``voltage_v`` (V; both kept in single
@@ -114,7 +121,7 @@ class LoggedFlight:
     @property
     def charge_c(self) -> float:
         """The charge it delivered (C): its measured current integrated over the record."""
-        return float(np.sum(np.clip(self.current_a, 0.0, None), dtype=float) * self.dt_s)
+        return delivered_charge_c(self.current_a, self.dt_s)
 
     @property
     def duration_s(self) -> float:

@@ -5,8 +5,8 @@ The world's side: each earlier flight is flown by the operator (a new pack's, fr
 its own seed, on the pack as it was then, and its sensors' readings (never the truth) go into the logbook. The
 pack ages by the aging law (:data:`~uam_studio.battery.aging.NASA_AGING_LAW`, the paper's cell's) on its delivered
 charge, so that after the logged flights it is the mission's cell: q_max and R0 of flight ``k`` are the mission's
-times ``c(e_k) / c(e_now)`` and ``r(e_k) / r(e_now)``, ``e`` the equivalent full cycles (delivered charge over
-:data:`~uam_studio.battery.parameters.DEFAULT_Q_MAX`).
+times ``c(e_k) / c(e_now)`` and ``r(e_k) / r(e_now)``, ``e`` the equivalent full cycles (delivered charge,
+:func:`~uam_studio.battery.health.logbook.delivered_charge_c`, over the logbook's ``q_nominal_c``).
 """
 
 from __future__ import annotations
@@ -14,8 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from uam_studio.battery.aging import NASA_AGING_LAW, AgingLaw
-from uam_studio.battery.health.logbook import Logbook
-from uam_studio.battery.parameters import DEFAULT_Q_MAX
+from uam_studio.battery.health.logbook import Logbook, delivered_charge_c
 from uam_studio.errors import check_range, check_seed
 from uam_studio.planning.legs import DT_S
 from uam_studio.planning.missions.mission import Mission
@@ -67,15 +66,15 @@ def simulate_logbook(mission: Mission, flights: int, seed: int = 0, age_efc: flo
         return rec.flown_charges
 
     # the charge of one flight of this mission (on the pack as it is now): the clock of the earlier flights
-    per_flight_c = sum(float(np.sum(np.clip(c, 0.0, None))) * DT_S for c, _ in fly(mission, 0))
+    per_flight_c = sum(delivered_charge_c(c, DT_S) for c, _ in fly(mission, 0))
     before_c = n * per_flight_c
-    now_efc = before_c / DEFAULT_Q_MAX if age_efc is None else check_range("age_efc", age_efc, 0.0, 2000.0)
-    book = Logbook(delivered_before_c=max(now_efc * DEFAULT_Q_MAX - before_c, 0.0), noise_v=book.noise_v,
-                   eod_v=book.eod_v)
+    unit_c = book.q_nominal_c  # the aging clock's unit: a full cycle
+    now_efc = before_c / unit_c if age_efc is None else check_range("age_efc", age_efc, 0.0, 2000.0)
+    book = Logbook(delivered_before_c=max(now_efc * unit_c - before_c, 0.0), noise_v=book.noise_v, eod_v=book.eod_v)
     q_now, r_now = mission.battery.q_max, mission.battery.r0
     c_now, r_ratio_now = float(aging.capacity_fraction(now_efc)), float(aging.resistance_ratio(now_efc))
     for k in range(n):
-        efc = max(now_efc - (n - k) * per_flight_c / DEFAULT_Q_MAX, 0.0)
+        efc = max(now_efc - (n - k) * per_flight_c / unit_c, 0.0)
         q_k = q_now * float(aging.capacity_fraction(efc)) / max(c_now, 1e-6)
         r_k = r_now * float(aging.resistance_ratio(efc)) / r_ratio_now
         book = book.extended(fly(mission.with_battery(q_k, r_k), k), DT_S)
