@@ -41,28 +41,20 @@ class ModelConstants(NamedTuple):
     vol_s_fraction: float
     inv_vb: float  # 1/m^3
     inv_vs: float  # 1/m^3
-    t_diffusion_s: float
     alpha: float
     bv_gain: float
     kn: float
     kp: float
-    sn: float
-    sp: float
     u0n: float
     u0p: float
     rt_f: float
     an_poly: np.ndarray
     ap_poly: np.ndarray
-    t_ohmic_s: float
-    t_sn_s: float
-    t_sp_s: float
-    thermal_mass: float
-    thermal_tau_s: float
     t_ambient_k: float
     r0_activation_k: float
     k_activation_k: float
     t_reference_k: float
-    # Reciprocals of the divisors above, so that a step multiplies (1/s, 1/(J/K), 1/m^2)
+    # The time constants, thermal mass and electrode areas as reciprocals: a step multiplies (1/s, 1/(J/K), 1/m^2)
     inv_t_diffusion: float
     inv_t_ohmic: float
     inv_t_sn: float
@@ -100,13 +92,10 @@ def model_constants(cell: CellParameters) -> ModelConstants:
     """The :class:`ModelConstants` of ``cell`` (cached: a cell's numbers are fixed)."""
     return ModelConstants(
         vol_s_fraction=float(cell.vol_s_fraction), inv_vb=1.0 / cell.vol_b, inv_vs=1.0 / cell.vol_s,
-        t_diffusion_s=float(cell.t_diffusion_s), alpha=float(cell.alpha),
-        bv_gain=GAS_CONSTANT / FARADAY / cell.alpha, kn=float(cell.kn), kp=float(cell.kp), sn=float(cell.sn),
-        sp=float(cell.sp), u0n=float(cell.u0n), u0p=float(cell.u0p), rt_f=GAS_CONSTANT / FARADAY,
+        alpha=float(cell.alpha), bv_gain=GAS_CONSTANT / FARADAY / cell.alpha, kn=float(cell.kn), kp=float(cell.kp),
+        u0n=float(cell.u0n), u0p=float(cell.u0p), rt_f=GAS_CONSTANT / FARADAY,
         an_poly=rk_polynomial(tuple(float(a) for a in cell.an)),
         ap_poly=rk_polynomial(tuple(float(a) for a in cell.ap)),
-        t_ohmic_s=float(cell.t_ohmic_s), t_sn_s=float(cell.t_sn_s), t_sp_s=float(cell.t_sp_s),
-        thermal_mass=float(cell.thermal_mass), thermal_tau_s=float(cell.thermal_tau_s),
         t_ambient_k=float(cell.t_ambient_k), r0_activation_k=float(cell.r0_activation_k),
         k_activation_k=float(cell.k_activation_k), t_reference_k=float(cell.t_reference_k),
         inv_t_diffusion=1.0 / cell.t_diffusion_s, inv_t_ohmic=1.0 / cell.t_ohmic_s, inv_t_sn=1.0 / cell.t_sn_s,
@@ -210,12 +199,24 @@ def euler_step(tb, vo, vsn, vsp, qnb, qns, qpb, qps, current_a, q_total, r0, dt_
 # cache, which is keyed on the source file of the compiled function, is invalidated by any change to the
 # equations above.
 
+@register_jitable(inline="always")
+def _row(x, b):
+    """Row ``b`` of states ``x`` [B, 8]: (tb, vo, vsn, vsp, qnb, qns, qpb, qps)."""
+    return x[b, 0], x[b, 1], x[b, 2], x[b, 3], x[b, 4], x[b, 5], x[b, 6], x[b, 7]
+
+
+@register_jitable(inline="always")
+def _put(out, b, tb, vo, vsn, vsp, qnb, qns, qpb, qps):
+    """Write a state into row ``b`` of ``out`` [B, 8]."""
+    out[b, 0], out[b, 1], out[b, 2], out[b, 3] = tb, vo, vsn, vsp
+    out[b, 4], out[b, 5], out[b, 6], out[b, 7] = qnb, qns, qpb, qps
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def run_current(current, x0, q_total, r0, dt_s, k, voltage, states):
     n_rows, n_steps = current.shape
     for b in range(n_rows):
-        tb, vo, vsn, vsp, qnb, qns, qpb, qps = x0[b, 0], x0[b, 1], x0[b, 2], x0[b, 3], x0[b, 4], x0[b, 5], \
-            x0[b, 6], x0[b, 7]
+        tb, vo, vsn, vsp, qnb, qns, qpb, qps = _row(x0, b)
         q_s, r = q_total[b] * k.vol_s_fraction, r0[b]
         xns, xps = surface_fractions(qns, qps, q_s)
         for t in range(n_steps):
@@ -233,19 +234,11 @@ def run_current(current, x0, q_total, r0, dt_s, k, voltage, states):
             states[7, b, t] = qps
 
 
-@register_jitable(inline="always")
-def _put(out, b, tb, vo, vsn, vsp, qnb, qns, qpb, qps):
-    """Write a state into row ``b`` of ``out`` [B, 8]."""
-    out[b, 0], out[b, 1], out[b, 2], out[b, 3] = tb, vo, vsn, vsp
-    out[b, 4], out[b, 5], out[b, 6], out[b, 7] = qnb, qns, qpb, qps
-
-
 @njit(cache=True, nogil=True, error_model="numpy")
 def run_to_cutoff(load, power_mode, x0, q_total, r0, dt_s, k, eod_v, voltage, current, final, k_eod):
     n_rows, n_steps = load.shape
     for b in range(n_rows):
-        tb, vo, vsn, vsp, qnb, qns, qpb, qps = x0[b, 0], x0[b, 1], x0[b, 2], x0[b, 3], x0[b, 4], x0[b, 5], \
-            x0[b, 6], x0[b, 7]
+        tb, vo, vsn, vsp, qnb, qns, qpb, qps = _row(x0, b)
         q_s, r = q_total[b] * k.vol_s_fraction, r0[b]
         k_eod[b] = n_steps
         xns, xps = surface_fractions(qns, qps, q_s)
@@ -279,8 +272,7 @@ def run_to_cutoff(load, power_mode, x0, q_total, r0, dt_s, k, eod_v, voltage, cu
 def run_rows(flat, starts, lengths, x0, q_total, r0, dt_s, k, eod_v, split, ok, x_end, v_min, x_split):
     q_s = q_total * k.vol_s_fraction
     for b in range(lengths.size):
-        tb, vo, vsn, vsp, qnb, qns, qpb, qps = x0[b, 0], x0[b, 1], x0[b, 2], x0[b, 3], x0[b, 4], x0[b, 5], \
-            x0[b, 6], x0[b, 7]
+        tb, vo, vsn, vsp, qnb, qns, qpb, qps = _row(x0, b)
         for j in range(8):
             x_end[b, j] = x0[b, j]
             x_split[b, j] = x0[b, j]
@@ -302,9 +294,7 @@ def run_rows(flat, starts, lengths, x0, q_total, r0, dt_s, k, eod_v, split, ok, 
                 ok[b] = False
                 break
             if t + 1 == split[b]:
-                x_split[b, 0], x_split[b, 1], x_split[b, 2], x_split[b, 3] = tb, vo, vsn, vsp
-                x_split[b, 4], x_split[b, 5], x_split[b, 6], x_split[b, 7] = qnb, qns, qpb, qps
+                _put(x_split, b, tb, vo, vsn, vsp, qnb, qns, qpb, qps)
         if ok[b]:
-            x_end[b, 0], x_end[b, 1], x_end[b, 2], x_end[b, 3] = tb, vo, vsn, vsp
-            x_end[b, 4], x_end[b, 5], x_end[b, 6], x_end[b, 7] = qnb, qns, qpb, qps
+            _put(x_end, b, tb, vo, vsn, vsp, qnb, qns, qpb, qps)
         v_min[b] = lowest

@@ -2,11 +2,12 @@
 
 Each trajectory is integrated step by step in one compiled pass (numba, ``nopython``): the eight states
 stay in registers, the temperature couples into the same step as in progpy's Euler, and no Python runs
-per step. The arithmetic is :func:`uam_studio.battery.electrochem.euler_step` and
-:func:`~uam_studio.battery.electrochem.terminal_voltage`, the same functions the numpy reference
-(:func:`uam_studio.battery.solver.step`) runs on arrays, so the kernel cannot drift from the equations.
+per step. The arithmetic is :func:`uam_studio.battery.electrochem.step_at` and
+:func:`~uam_studio.battery.electrochem.voltage_at`, the same functions the numpy reference
+(:func:`uam_studio.battery.solver.step`, through ``euler_step``) runs on arrays, so the kernel cannot drift
+from the equations.
 
-Three entry points, each on a batch [B] of trajectories with their own total charge q_total (C) and R0
+Four entry points, each on a batch [B] of trajectories with their own total charge q_total (C) and R0
 (ohm), from states ``x0`` [B, 8] (order of :data:`~uam_studio.battery.state.STATE_NAMES`), steps of
 ``dt_s`` (s):
 
@@ -53,8 +54,8 @@ def fly_rows(currents, x0: np.ndarray, q_total: float, r0: float, dt_s: float, k
     ok = np.empty(n_rows, dtype=np.bool_)
     x_end, x_split = np.empty((n_rows, 8)), np.empty((n_rows, 8))
     v_min = np.empty(n_rows)
-    run_rows(flat, starts, lengths, _f64(x0), float(q_total), float(r0), float(dt_s), k,
-              float(eod_v), cut, ok, x_end, v_min, x_split)
+    run_rows(flat, starts, lengths, _f64(x0), float(q_total), float(r0), float(dt_s), k, float(eod_v), cut, ok, x_end,
+             v_min, x_split)
     return ok, x_end, v_min, x_split
 
 
@@ -83,7 +84,7 @@ def _run_to_cutoff(load, power_mode, x0, q_total, r0, dt_s, k, eod_v):
     final = np.empty((n_rows, 8))
     k_eod = np.empty(n_rows, dtype=np.int64)
     run_to_cutoff(load, power_mode, _f64(x0), _f64(q_total), _f64(r0), float(dt_s), k, float(eod_v), voltage, current,
-               final, k_eod)
+                  final, k_eod)
     return voltage, current, k_eod, final
 
 

@@ -52,7 +52,7 @@ def fly_batch(
         start state where the row failed before them).
     """
     b = len(currents)
-    x_start = np.array(x0, dtype=float, copy=True).reshape(b, len(STATE_NAMES))
+    x_start = np.asarray(x0, dtype=float).reshape(b, len(STATE_NAMES))  # read, never written
     params = cell.params
     ok, x_end, v_min, x_split = kernel.fly_rows(currents, x_start, float(params.q_total(cell.q_max)), float(cell.r0),
                                                 DT_S, model_constants(params), float(cell.eod_v), split)
