@@ -90,10 +90,7 @@ def _on_grid(d: NasaDischarge) -> tuple[np.ndarray, np.ndarray]:
     """Finished discharge ``d`` on a 1 s grid from its first loaded sample: (current A, voltage V), down to
     :data:`FIT_ABOVE_V` (what its logbook entry holds)."""
     seg = fit_segment(d)
-    v = np.interp(np.arange(seg.current_a.size), seg.observed, seg.voltage_v)
-    below = np.flatnonzero(v < FIT_ABOVE_V)
-    n = int(below[0]) if below.size else seg.current_a.size
-    return seg.current_a[:n], v[:n]
+    return _above_fit(seg.current_a, np.interp(np.arange(seg.current_a.size), seg.observed, seg.voltage_v))
 
 
 def _context_on_grid(known: KnownDischarge) -> tuple[np.ndarray, np.ndarray]:
@@ -106,10 +103,14 @@ def _context_on_grid(known: KnownDischarge) -> tuple[np.ndarray, np.ndarray]:
     keep = (obs >= 0) & (obs < cur.size)
     if not keep.any():
         return cur[:0], cur[:0]
-    v = np.interp(np.arange(cur.size), obs[keep], known.voltage_v[known.load_start:][keep])
-    below = np.flatnonzero(v < FIT_ABOVE_V)
-    n = int(below[0]) if below.size else cur.size
-    return cur[:n], v[:n]
+    return _above_fit(cur, np.interp(np.arange(cur.size), obs[keep], known.voltage_v[known.load_start:][keep]))
+
+
+def _above_fit(current_a: np.ndarray, voltage_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Readings (A, V) on the grid up to their first voltage below :data:`FIT_ABOVE_V`."""
+    below = np.flatnonzero(voltage_v < FIT_ABOVE_V)
+    n = int(below[0]) if below.size else voltage_v.size
+    return current_a[:n], voltage_v[:n]
 
 
 def belief_life(cell: NasaCell, cell_type: Cell = NASA_IDENTIFIED, cutoff_v: float = 3.0,
