@@ -33,10 +33,10 @@ def main() -> None:
             for d in range(args.days):
                 s = day_of_life_seed(seed, d)
                 simulate_day(fleet, poisson_demand(s, max_km=far), "aware", s)
-                for t, b, ok in zip(fleet.truth, fleet.belief, fleet.in_service):
+                for t, b, ok in zip(fleet.truth, fleet.beliefs, fleet.in_service):
                     if not ok:
                         continue
-                    z = (t.q_max - b.q_max) / b.q_max_sd
+                    z = (t.q_max - b.health.q_max_c) / b.health.q_max_sd_c
                     n += 1
                     inside += abs(z) <= HEALTH_Z
                     above += z >= -HEALTH_Z

@@ -2,7 +2,7 @@
 that changes"), against the hindsight reference and against the same flights without a reserve.
 
     OMP_NUM_THREADS=1 python benchmarks/bench_weather.py demo            # the README's Fly demo: 15 flights
-    OMP_NUM_THREADS=1 python benchmarks/bench_weather.py fresh [--n 45]  # fresh missions, 4 weathers
+    OMP_NUM_THREADS=1 python benchmarks/bench_weather.py fresh [--n 45] [--world model]  # fresh missions, 4 weathers
     OMP_NUM_THREADS=1 python benchmarks/bench_weather.py ceiling [--n 45]  # what the reserve allows at best
     OMP_NUM_THREADS=1 python benchmarks/bench_weather.py informed [--n 45]  # told the true cell
 
@@ -99,21 +99,41 @@ def _fly(job: tuple) -> tuple | None:
     """(label, reserve, priority, hindsight priority, breached, breach cause, take-off belief, true q_max) of one
     flight, or None when the change came after the flight ended. ``who``: the operator (:func:`_operator`); with
     ``"logbook"`` it flies the pack's logbook ``book``."""
-    label, mission, seed, event, reserve, who, book = job
+    label, mission, seed, event, reserve, who, book, world = job
     try:
         rec = fly_mission(mission, seed=seed, events=[parse_event(event)] if event else [], reserve_kt=reserve,
-                          operator=_operator(who, mission), logbook=book if who == "logbook" else None)
+                          operator=_operator(who, mission), logbook=book if who == "logbook" else None, world=world,
+                          pack=seed)
     except InputError as err:
         if err.field != "event":
             raise
         return None
     return label, reserve, rec.reached_priority, rec.hindsight.priority, rec.breached, rec.breach_cause, \
-        rec.takeoff_belief, mission.battery.q_max
+        rec.takeoff_belief, mission.battery.q_max, rec.first_leg_min_voltage_v
 
 
 def _logbook(job: tuple) -> Logbook:
-    mission, flights, seed = job
-    return simulate_logbook(mission, flights, seed)
+    mission, flights, seed, world, pack = job
+    return simulate_logbook(mission, flights, seed, world=world, pack=pack)
+
+
+def _leg_coverage(rows: list[tuple], who: str) -> None:
+    """The take-off belief's 90% interval of the first leg's lowest voltage (``takeoff_belief``'s
+    ``first_leg_min_voltage_90_v``) against what the world gave (``first_leg_min_voltage_v``), over the
+    no-change flights of ``who`` that flew a leg; a one-sided binomial test of each side's 5% miss rate."""
+    sub = [r for r in rows if r[0] == f"{who}: none" and r[1] == WEATHER_RESERVE_KT and r[8] is not None
+           and "first_leg_min_voltage_90_v" in r[6]]
+    if not sub:
+        return
+    low = sum(r[8] < r[6]["first_leg_min_voltage_90_v"][0] for r in sub)
+    high = sum(r[8] > r[6]["first_leg_min_voltage_90_v"][1] for r in sub)
+    n = len(sub)
+    p_low = binomtest(low, n, 0.05, alternative="greater").pvalue
+    p_high = binomtest(high, n, 0.05, alternative="greater").pvalue
+    me = np.median([r[6]["model_error_v"] for r in sub]) * 1e3
+    print(f"take-off belief ({who}): 90% interval of the first leg's lowest voltage holds what the world gave in "
+          f"{n - low - high} of {n} flights ({(n - low - high) / n:.1%}; goal 85-95%); below it {low} (p {p_low:.2f}), "
+          f"above it {high} (p {p_high:.2f}); median model-error term {me:.1f} mV")
 
 
 def _coverage(rows: list[tuple], who: str) -> None:
@@ -159,9 +179,9 @@ def _table(rows: list[tuple], labels: list[str], skipped: dict[str, int], goals:
         print("changes after the flight's end, not counted: " + ", ".join(f"{k} {v}" for k, v in skipped.items() if v))
 
 
-def demo(workers: int) -> None:
+def demo(workers: int, world: str) -> None:
     mission = load_mission(asset_path("example_mission.json"))
-    jobs = [(f"+25 kt at {t} s", mission, seed, f"wind+25@{t}", reserve, "new pack", None)
+    jobs = [(f"+25 kt at {t} s", mission, seed, f"wind+25@{t}", reserve, "new pack", None, world)
             for reserve in (WEATHER_RESERVE_KT, 0.0) for t in (60, 300, 900) for seed in range(5)]
     t0 = time.perf_counter()
     with ProcessPoolExecutor(workers) as pool:
@@ -185,18 +205,20 @@ def _event(label: str, t_s: float) -> str:
     return "" if label == "none" else f"{label}@{max(1.0, round(t_s)):g}"
 
 
-def fresh(n: int, workers: int, logbook_flights: int = 3, without_reserve: bool = False) -> None:
+def fresh(n: int, workers: int, logbook_flights: int = 3, without_reserve: bool = False, world: str = "varied"
+          ) -> None:
     missions = study_missions(n, 56000, "single_charge")
     t0 = time.perf_counter()
     who = ("new pack", "logbook", "told the cell, checked at take-off")
     with ProcessPoolExecutor(workers) as pool:
         times = _change_times(missions, pool)
-        books = list(pool.map(_logbook, [(m, logbook_flights, 56300 + k) for k, m in enumerate(missions)]))
+        books = list(pool.map(_logbook, [(m, logbook_flights, 56300 + k, world, 56100 + k)
+                                         for k, m in enumerate(missions)]))
         jobs = []
         for w in who:
             for reserve in (WEATHER_RESERVE_KT, 0.0) if without_reserve and w == "new pack" else (WEATHER_RESERVE_KT,):
                 for label in WEATHERS:
-                    jobs += [(f"{w}: {label}", m, 56100 + k, _event(label, times[k]), reserve, w, books[k])
+                    jobs += [(f"{w}: {label}", m, 56100 + k, _event(label, times[k]), reserve, w, books[k], world)
                              for k, m in enumerate(missions)]
         out = list(pool.map(_fly, jobs))
     labels = [f"{w}: {label}" for w in who for label in WEATHERS]
@@ -206,8 +228,8 @@ def fresh(n: int, workers: int, logbook_flights: int = 3, without_reserve: bool 
     # the new pack's goals: the priority it served before the logbook (RESULTS, 2026-11-29), as exact fractions
     goals = {"new pack: none": 248 / 312, "new pack: wind+25": 248 / 284, "new pack: wind-20": 250 / 320,
              "logbook: none": 0.85, "logbook: wind+25": 0.90, "logbook: wind-20": 0.82}
-    print(f"{n} fresh missions; the logbook: {logbook_flights} earlier flights of each mission's pack (seeds 56300+); "
-          "new pack's goals: no worse than before the logbook")
+    print(f"world {world}; {n} fresh missions; the logbook: {logbook_flights} earlier flights of each mission's pack "
+          "(seeds 56300+); new pack's goals: no worse than before the logbook")
     _table(rows, labels, skipped, goals)
     for label in WEATHERS:
         ours = [r for r in rows if r[0] == f"logbook: {label}"]
@@ -219,17 +241,18 @@ def fresh(n: int, workers: int, logbook_flights: int = 3, without_reserve: bool 
                   f"({'within 3%: met' if b - a <= 0.03 else 'NOT within 3%'})")
     for w in ("new pack", "logbook"):
         _coverage(rows, w)
+        _leg_coverage(rows, w)
     print(f"({time.perf_counter() - t0:.0f} s, {workers} processes)")
 
 
-def informed(n: int, workers: int) -> None:
+def informed(n: int, workers: int, world: str = "varied") -> None:
     missions = study_missions(n, 56000, "single_charge")
     weathers = ("none", "wind+25", "wind-20")
     who = ("operator", "told the cell", "told the cell, checked at take-off")
     t0 = time.perf_counter()
     with ProcessPoolExecutor(workers) as pool:
         times = _change_times(missions, pool)
-        jobs = [(f"{w}: {label}", m, 56100 + k, _event(label, times[k]), WEATHER_RESERVE_KT, w, None)
+        jobs = [(f"{w}: {label}", m, 56100 + k, _event(label, times[k]), WEATHER_RESERVE_KT, w, None, world)
                 for w in who for label in weathers for k, m in enumerate(missions)]
         rows = [r for r in pool.map(_fly, jobs) if r is not None]
     _table(rows, [f"{w}: {label}" for w in who for label in weathers], {},
@@ -270,9 +293,10 @@ def ceiling(n: int, workers: int) -> None:
 
 
 def _fly_end(job: tuple) -> float:
-    """The end (s) of a mission's no-change flight (no references): where a change may be drawn."""
+    """The end (s) of a mission's no-change flight (no references) in the model world: where a change may be drawn
+    (the same times in both worlds)."""
     mission, seed = job
-    rec = fly_mission(mission, seed=seed, references=False)
+    rec = fly_mission(mission, seed=seed, references=False, world="model")
     return float(rec.leg_end_s[-1]) if rec.leg_end_s else 1.0
 
 
@@ -283,15 +307,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--logbook-flights", type=int, default=3, help="fresh: earlier flights in each pack's logbook")
     p.add_argument("--without-reserve", action="store_true", help="fresh: the new pack also flown with no reserve")
+    p.add_argument("--world", choices=["varied", "model"], default="varied",
+                   help="the world flown: varied (default; the pack is not its model) or model")
     args = p.parse_args(argv)
     if args.what == "demo":
-        demo(args.workers)
+        demo(args.workers, args.world)
     elif args.what == "ceiling":
         ceiling(args.n, args.workers)
     elif args.what == "informed":
-        informed(args.n, args.workers)
+        informed(args.n, args.workers, args.world)
     else:
-        fresh(args.n, args.workers, args.logbook_flights, args.without_reserve)
+        fresh(args.n, args.workers, args.logbook_flights, args.without_reserve, args.world)
     return 0
 
 

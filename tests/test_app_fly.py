@@ -109,3 +109,20 @@ def test_flown_legs_are_numbered_with_their_altitude_on_the_map(state):
     m = state.mission_flown
     assert label_overlaps(labels, [(m.vertiport.x_km, m.vertiport.y_km), *[(d.x_km, d.y_km) for d in m.destinations]],
                           ["", *[f"{d.name} {'*' * d.priority}" for d in m.destinations]]) == []
+
+
+def test_the_world_choice_reaches_the_flight_and_the_summary_shows_the_first_leg(state):
+    """The tab's world: a pack unlike its model by default, the teaching world on request (the same calls the CLI
+    makes); the landed summary shows the first leg's believed interval, its model-error term and what the world
+    gave."""
+    view = FlyView(state)
+    state.fly()
+    varied = state.record
+    assert varied.world == "varied" and view.world.value == state.world
+    state.t_s = state.end_s
+    assert "first leg's lowest voltage: believed" in state.status and "model error" in state.status
+    view.world.value = "its model (teaching)"
+    state.fly()
+    assert state.record.world == "model" and state.record.route is not None
+    assert state.record.takeoff_belief["first_leg_min_voltage_90_v"] != varied.takeoff_belief[
+        "first_leg_min_voltage_90_v"]

@@ -62,6 +62,9 @@ def test_fly_tab_flies_plays_and_takes_a_wind_change(browser, app_url):
     page.goto(app_url, timeout=TIMEOUT_MS)
     page.locator(".bk-tab", has_text="Fly").click(timeout=TIMEOUT_MS)
     _speed(page, "10")
+    # the README's demo flies the teaching world (the pack its model), chosen as a class would
+    page.locator(".bk-input-group", has_text="The world").locator("select").select_option(
+        "its model (teaching)")
     page.locator("button", has_text="Fly the mission").click(timeout=TIMEOUT_MS)
     status = page.locator(".uam-fly-status")
     status.get_by_text("flying:").wait_for(timeout=TIMEOUT_MS)
@@ -88,6 +91,7 @@ def test_fly_tab_flies_plays_and_takes_a_wind_change(browser, app_url):
     _speed(page, "1000")  # on to the landing: then the result and the references show
     status.get_by_text("hindsight oracle (best known plan)").wait_for(timeout=TIMEOUT_MS)
     status.get_by_text("flown:").wait_for(timeout=TIMEOUT_MS)
+    assert "first leg's lowest voltage: believed" in status.get_by_text("flown:").inner_text()
     assert_drawn(page, "voltage: measured", FLY_VOLTAGE)
     # the playback went on from the injection: the next arrival's re-plan is in the log
     log.get_by_text(re.compile(r"plan (changed|unchanged)")).first.wait_for(timeout=TIMEOUT_MS)
@@ -98,8 +102,8 @@ def test_fly_tab_flies_plays_and_takes_a_wind_change(browser, app_url):
     from uam_studio.planning.operations import WindEvent, fly_mission
 
     mission = PlannerState().mission
-    flown = fly_mission(mission, seed=0, events=[WindEvent(inject_s, 25.0)])
-    calm = fly_mission(mission, seed=0)
+    flown = fly_mission(mission, seed=0, events=[WindEvent(inject_s, 25.0)], world="model")
+    calm = fly_mission(mission, seed=0, world="model")
     cells = page.locator(LEG_WINDS)
     cells.nth(len(flown.events) - 1).wait_for(timeout=TIMEOUT_MS)
     shown = [t.strip() for t in cells.all_inner_texts()]

@@ -14,6 +14,7 @@ from scipy.stats import chi2  # the reference for the library's chi-square quant
 
 from uam_studio.battery import simulate
 from uam_studio.battery.health.belief import HealthBelief
+from uam_studio.battery.health.config import PAPER_BELIEF
 from uam_studio.battery.health.fit import fit_health
 from uam_studio.battery.health.prior import combine, disagrees, fleet_prior, hold_to_fleet
 from uam_studio.battery.health.quality import (
@@ -259,7 +260,7 @@ def test_operator_belief_holds_a_flagged_fit_with_caution():
     cell = replace(DEFAULT_CELL, fleet_q_range=(3000.0, 4000.0))
     rng = np.random.default_rng(4)
     volt = _flight(7500.0, 0.1, 240, cell) + rng.normal(size=240) * 1e-3
-    belief = HealthBelief(1e-3, 3.0, prior=fleet_prior(cell))
+    belief = HealthBelief(1e-3, 3.0, config=replace(PAPER_BELIEF, params=cell))
     belief.observe(CUR, volt)
     health = belief.health()
     est = belief.fit()
@@ -302,7 +303,7 @@ def test_the_operators_decisions_carry_the_fits_flags():
 
     cell = replace(DEFAULT_CELL, fleet_q_range=(3000.0, 4000.0))
     volt = _flight(7500.0, 0.1, 240, cell) + np.random.default_rng(4).normal(size=240) * 1e-3
-    belief = HealthBelief(1e-3, 3.0, prior=fleet_prior(cell))
+    belief = HealthBelief(1e-3, 3.0, config=replace(PAPER_BELIEF, params=cell))
     assert belief.flags() == ()
     belief.observe(CUR, volt + 0.02 * np.sin(np.arange(240) / 20.0))  # a wave the model has no term for
     belief.health()

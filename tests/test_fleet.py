@@ -12,14 +12,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from uam_studio.battery.health.belief import logbook_belief
-from uam_studio.battery.health.logbook import FlightFit
+from uam_studio.battery.health import Logbook
+from uam_studio.battery.health.belief import PackBelief, logbook_belief
+from uam_studio.battery.health.config import fleet_belief_config
+from uam_studio.battery.health.logbook import FlightFit, LoggedFlight
 from uam_studio.cli import main
 from uam_studio.errors import InputError
 from uam_studio.fleet.aging import PackHealth
 from uam_studio.fleet.day import Fleet, simulate_day
 from uam_studio.fleet.demand import Request, load_demand, poisson_demand
-from uam_studio.fleet.dispatch import AircraftView, PackBelief, assign
+from uam_studio.fleet.dispatch import AircraftView, assign
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -50,14 +52,16 @@ def test_a_day_is_seeded_serves_within_the_fleet_and_ages_the_packs(day_demand):
     flown = {entry[1] for entry in a.log}
     for i, t in enumerate(fleet.truth):  # the packs that flew delivered charge and aged
         assert (t.delivered_c > before[i]) == (i in flown)
-    assert all(b.delivered_c >= 0 for b in fleet.belief)
+    assert all(b.delivered_c >= 0 for b in fleet.beliefs)
     json.dumps(a.to_dict(), allow_nan=False)
-    # each aircraft's belief is its pack's logbook's: the one belief, from the flights its sensors logged
-    for i, (b, book) in enumerate(zip(fleet.belief, fleet.logbooks)):
+    # each aircraft's belief is its pack's logbook's, on the fleet's declared configuration: the one belief value,
+    # from the flights its sensors logged (the belief the day read as its logbook grew, and one read from scratch)
+    for i, (b, book) in enumerate(zip(fleet.beliefs, fleet.logbooks)):
         assert len(book) == sum(1 for entry in a.log if entry[1] == i)
-        start = PackBelief.new_pack(book.delivered_before_c, fleet.aging_law)
-        mean, cov = logbook_belief(book, start.prior, fleet.aging_law)
-        assert np.allclose(b.mean, mean, rtol=1e-9) and np.allclose(np.reshape(b.cov, (2, 2)), cov, rtol=1e-6)
+        fresh = PackBelief.of(book, fleet_belief_config(fleet.law))
+        assert b == fresh and b.config.new_pack is not None and b.config.aging is fleet.aging_law
+        mean, cov = logbook_belief(book, fleet_belief_config(fleet.law))
+        assert np.allclose(b.mean, mean, rtol=1e-12) and np.allclose(b.cov_matrix, cov, rtol=1e-12)
 
 
 def test_the_dispatcher_never_reads_the_true_cell(day_demand):
@@ -65,9 +69,10 @@ def test_the_dispatcher_never_reads_the_true_cell(day_demand):
     assignments from the health-aware and the health-blind rules (only hindsight may differ)."""
     strong = [PackHealth(7900.0, 0.10) for _ in range(3)]
     weak = [PackHealth(6200.0, 0.30) for _ in range(3)]
-    beliefs = [PackBelief.new_pack(k * 50 * 7600.0) for k in range(3)]
+    books = [Logbook(delivered_before_c=k * 50 * 7600.0, noise_v=0.005) for k in range(3)]
     for rule in ("aware", "blind"):
-        days = [simulate_day(Fleet(truth, list(beliefs)), day_demand[:3], rule, seed=1) for truth in (strong, weak)]
+        days = [simulate_day(Fleet(truth, logbooks=list(books)), day_demand[:3], rule, seed=1)
+                for truth in (strong, weak)]
         first = [entry[:3] for entry in days[0].log][:3]
         second = [entry[:3] for entry in days[1].log][:3]
         assert first == second, rule
@@ -80,7 +85,8 @@ def test_the_dispatcher_never_reads_the_true_cell(day_demand):
 
 def test_assign_gives_most_stars_first_to_the_tightest_aircraft_that_passes():
     reqs = [Request(0.0, "low", 20.0, 0.0, 1), Request(5.0, "high", 0.0, 20.0, 3)]
-    views = [AircraftView("0", PackBelief.new_pack(), 0), AircraftView("1", PackBelief.new_pack(), 0)]
+    new = PackBelief.start(fleet_belief_config())
+    views = [AircraftView("0", new, 0), AircraftView("1", new, 0)]
     margins = {("high", "0"): 0.3, ("high", "1"): 0.1, ("low", "0"): 0.2, ("low", "1"): -0.1}
     out = assign(reqs, views, lambda r, a: margins[(r.name, a.name)], 0.0)
     assert [(r.name, a.name) for r, a in out] == [("high", "1"), ("low", "0")]
@@ -88,13 +94,18 @@ def test_assign_gives_most_stars_first_to_the_tightest_aircraft_that_passes():
 
 
 def test_the_belief_ages_with_charge_and_learns_from_a_fit():
-    b = PackBelief.new_pack()
+    """The fleet's belief value: a new pack's (the factory's 7600 +- 300 C) aged by 200 cycles is weaker and no
+    surer; a logged flight's fit pulls it to the fit; a flight too short to fit (and no charge) leaves it."""
+    b = PackBelief.start(fleet_belief_config())
+    assert b.health.q_max_c == pytest.approx(7600.0) and b.health.q_max_sd_c == pytest.approx(300.0)
     old = b.aged(7600.0 * 200)
-    assert old.q_max < b.q_max and old.r0 > b.r0 and old.q_max_sd >= b.q_max_sd
+    h, h0 = old.health, b.health
+    assert h.q_max_c < h0.q_max_c and h.r0_ohm > h0.r0_ohm and h.q_max_sd_c >= h0.q_max_sd_c
     w, sd_w = 6500.0 / 6500.0, 6500.0 * 50.0 / 6500.0 ** 2  # a fit of q_max 6500 +- 50 C, R0 0.15 +- 0.005 ohm
-    learned = old.update(FlightFit(w, 0.15, (sd_w ** 2, 0.0, 0.0, 0.005 ** 2)))
-    assert abs(learned.q_max - 6500.0) < abs(old.q_max - 6500.0) and learned.q_max_sd < 50.0
-    assert old.update(None) == old
+    idle = np.zeros(30)
+    learned = old.logged(LoggedFlight(idle, idle + 3.7, fit=FlightFit(w, 0.15, (sd_w ** 2, 0.0, 0.0, 0.005 ** 2))))
+    assert abs(learned.health.q_max_c - 6500.0) < abs(h.q_max_c - 6500.0) and learned.health.q_max_sd_c < 50.0
+    assert old.logged(LoggedFlight(idle, idle + 3.7)) == old
     with pytest.raises(InputError, match="^charge_c: "):
         b.aged(-1.0)
 

@@ -23,11 +23,12 @@ def test_a_new_fleet_flies_nasa_packs_that_age_and_are_believed_to_age_by_the_na
     assert pack.after(pack.q_max0 * (life - pack.efc) * 1.01).retired
     assert not pack.after(pack.q_max0 * (life - pack.efc) * 0.99).retired
     # the belief ages by the same law (its mean moves as the truth's would, from the same start)
-    b0 = fleet.belief[0]
-    b1 = b0.aged(10.0 * b0.q_max_nominal, fleet.aging_law)
-    e0 = b0.delivered_c / b0.q_max_nominal
+    b0 = fleet.belief(0)
+    assert b0.config.aging is fleet.aging_law
+    b1 = b0.aged(10.0 * b0.q_nominal_c)
+    e0 = b0.delivered_c / b0.q_nominal_c
     expect = NASA_AGING_LAW.capacity_fraction(e0 + 10.0) / NASA_AGING_LAW.capacity_fraction(e0)
-    assert b1.q_max / b0.q_max == pytest.approx(float(expect), rel=1e-9)
+    assert b1.health.q_max_c / b0.health.q_max_c == pytest.approx(float(expect), rel=1e-9)
 
 
 def test_an_unknown_cell_type_is_refused_in_one_line_naming_the_law():
@@ -47,7 +48,7 @@ def test_renewal_replaces_exactly_the_retired_packs_with_new_ones(n, seed, night
     for i, (old, new) in enumerate(zip(before, fleet.truth)):
         if i in grounded:
             assert new.delivered_c == 0.0 and new.law is PACK_LAWS[law] and 7300.0 <= new.q_max <= 7900.0
-            assert fleet.belief[i].delivered_c == 0.0
+            assert fleet.belief(i).delivered_c == 0.0 and len(fleet.logbooks[i]) == 0
         else:
             assert new is old
 

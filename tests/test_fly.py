@@ -35,12 +35,13 @@ def example():
 @pytest.fixture(scope="module")
 def flights():
     """12 seeded flights (6 single charge, 6 multi charge, 5-8 destinations), forecast sigma 13 kt,
-    5 mV / 20 mA sensor noise, with their references; missions and seeds apart from the tuning ones.
+    5 mV / 20 mA sensor noise, with their references; missions and seeds apart from the tuning ones; in the
+    teaching world (the pack its model: progpy's own set, which the reference test re-flies).
     The first 6 of each scenario's 20 in ``python benchmarks/bench_fly.py quality --n 20``, which scores
     all 40 (RESULTS.md)."""
     out = []
     for scenario, seed in (("single_charge", 31337), ("multi_charge", 31338)):
-        out += fly_many(study_missions(6, seed, scenario), first_seed=7000)
+        out += fly_many(study_missions(6, seed, scenario), first_seed=7000, world="model")
     return out
 
 
@@ -48,7 +49,7 @@ def flights():
 
 
 def test_record_holds_both_sides(example):
-    rec = fly_mission(example, seed=3)
+    rec = fly_mission(example, seed=3, world="model")  # the pack its model: its q_max is the mission's
     d = rec.to_dict()
     for key in ("route", "altitudes_m", "actual_winds_kts", "events", "breached", "reached_priority",
                 "static", "hindsight"):
@@ -300,9 +301,11 @@ def test_notebook_9_4_a_weak_cell_and_a_headwind_each_fly_less_than_a_healthy_ce
     cause the operator's estimates name (the weak cell is read at the take-off check). The notebook flies
     them without the weather reserve, so that each cause shows alone."""
     mission = load_mission(EXAMPLE)
-    calm = fly_mission(mission, seed=1, forecast_sigma_kt=0.0, reserve_kt=0.0)
-    weak = fly_mission(mission.with_battery(5200.0, 0.25), seed=1, forecast_sigma_kt=0.0, reserve_kt=0.0)
-    windy = fly_mission(mission, seed=1, forecast_sigma_kt=0.0, events=[parse_event("wind+25@600")], reserve_kt=0.0)
+    calm = fly_mission(mission, seed=1, forecast_sigma_kt=0.0, reserve_kt=0.0, world="model")
+    weak = fly_mission(mission.with_battery(5200.0, 0.25), seed=1, forecast_sigma_kt=0.0, reserve_kt=0.0,
+                       world="model")
+    windy = fly_mission(mission, seed=1, forecast_sigma_kt=0.0, events=[parse_event("wind+25@600")], reserve_kt=0.0,
+                        world="model")
     for rec in (weak, windy):
         assert rec.route and not rec.breached
         assert 0 < rec.reached_priority < calm.reached_priority

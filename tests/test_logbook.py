@@ -7,6 +7,7 @@ import json
 import math
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,7 @@ from uam_studio.battery.health import HealthBelief, Logbook, LogbookError
 from uam_studio.battery.health import belief as belief_module
 from uam_studio.battery.health import logbook as logbook_module
 from uam_studio.battery.health.belief import aged_belief, logbook_belief
+from uam_studio.battery.health.config import PAPER_BELIEF
 from uam_studio.battery.health.prior import Q_REF_C, fleet_prior
 from uam_studio.cli import main
 from uam_studio.planning import load_mission
@@ -54,7 +56,7 @@ def example():
 
 @pytest.fixture(scope="module")
 def example_book(example):
-    return simulate_logbook(example, 3, seed=0)
+    return simulate_logbook(example, 3, seed=0, world="model")  # the pack its model: its q_max is the mission's
 
 
 # --------------------------------------------------------------------------- the file
@@ -260,7 +262,7 @@ def test_the_logbook_belief_holds_the_true_cell_and_answers_three_questions(book
 
 
 def test_the_operator_starts_from_the_logbook(example, example_book):
-    rec = fly_mission(example, seed=0, logbook=example_book, references=False)
+    rec = fly_mission(example, seed=0, logbook=example_book, references=False, world="model")
     tb = rec.takeoff_belief
     assert tb["source"] == "logbook" and tb["flights"] == 3
     w, sd = Q_REF_C / tb["q_max_c"], Q_REF_C * tb["q_max_sd_c"] / tb["q_max_c"] ** 2
@@ -294,8 +296,8 @@ def test_a_real_cells_scatter_and_walk_widen_the_logbooks_belief(book):
     """A simulated pack's logbook (scatter and walk 0) against a real cell's: the flight-to-flight scatter and the
     random walk per flight only widen the belief, each in both components."""
     mean0, cov0 = logbook_belief(book)
-    mean1, cov1 = logbook_belief(book, scatter=0.015)
-    mean2, cov2 = logbook_belief(book, scatter=0.015, walk=0.0045)
+    mean1, cov1 = logbook_belief(book, replace(PAPER_BELIEF, scatter=0.015))
+    mean2, cov2 = logbook_belief(book, replace(PAPER_BELIEF, scatter=0.015, walk=0.0045))
     assert np.all(np.diag(cov1) > np.diag(cov0)) and np.all(np.diag(cov2) > np.diag(cov1))
     assert np.allclose(mean0, mean1, rtol=0.05) and np.all(np.isfinite(mean2))
 

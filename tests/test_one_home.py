@@ -80,22 +80,55 @@ def test_each_risk_level_is_defined_once_in_risk_py():
     assert {"HEALTH_Z", "WIND_Z", "DISPATCH_WIND_Z", "INTERVAL_Z"} <= set(homes)
 
 
-def test_one_health_belief_and_its_views():
-    """One class builds a pack's belief about its health (q_max, R0): HealthBelief; the fleet's PackBelief is a view
-    of it: it ages and combines only through the belief module's functions, and holds no precision weighting of its
-    own. (The NASA lives' CapacityBelief, capacity in Ah, and CellBelief, time to the cut-off, are beliefs of other
-    quantities: not yet views of this one, see benchmarks/RESULTS.md.)"""
-    classes = {}
+def _classes_and_calls() -> tuple[dict[str, tuple[str, ast.ClassDef]], list[tuple[str, int, str]]]:
+    """Every class (name -> (module, node)) and every call (module, line, callee name) of the package."""
+    classes, calls = {}, []
     for path in sorted(ROOT.rglob("*.py")):
+        rel = str(path.relative_to(ROOT))
         for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.ClassDef) and node.name.endswith("Belief"):
-                classes[node.name] = (str(path.relative_to(ROOT)), ast.get_source_segment(path.read_text(), node))
-    assert classes["HealthBelief"][0] == "battery/health/belief.py"
-    health_beliefs = {name for name, (_, src) in classes.items() if "r0" in src.lower()}
-    assert health_beliefs == {"HealthBelief", "PackBelief"}, health_beliefs
-    view = classes["PackBelief"][1]
-    assert "aged_belief(" in view and "combine(" in view
-    assert "1.0 /" not in view and "** 2 +" not in view  # no weighting by precision of its own
+            if isinstance(node, ast.ClassDef):
+                classes[node.name] = (rel, node)
+            elif isinstance(node, ast.Call):
+                name = getattr(node.func, "id", getattr(node.func, "attr", None))
+                if name:
+                    calls.append((rel, node.lineno, name))
+    return classes, calls
+
+
+def _builds(cls: ast.ClassDef, type_name: str) -> bool:
+    return any(isinstance(n, ast.Call) and getattr(n.func, "id", None) == type_name for n in ast.walk(cls))
+
+
+def test_one_health_belief_value_and_its_configuration_declared_once():
+    """Read from the code's structure: the classes that build a pack's health belief (a BelievedHealth) are the one
+    belief value (PackBelief, a frozen dataclass: what a logbook says) and the in-flight belief that
+    starts from it (HealthBelief), both in battery/health/belief.py; Gaussians are combined and aged only there and
+    in the prior's home; a BeliefConfig is declared only in battery/health/config.py, an AgingLaw only in
+    battery/aging.py, and a prior built (HealthPrior, fleet_prior) only under battery/health/."""
+    classes, calls = _classes_and_calls()
+    answering = {name for name, (_, node) in classes.items() if _builds(node, "BelievedHealth")}
+    assert answering == {"HealthBelief", "PackBelief"}, answering
+    assert {classes[n][0] for n in answering} == {"battery/health/belief.py"}
+    pack = classes["PackBelief"][1]
+    frozen = [d for d in pack.decorator_list if "frozen=True" in ast.unparse(d)]
+    assert frozen, "PackBelief must be an immutable value"
+    homes = {
+        "combine": {"battery/health/belief.py", "battery/health/prior.py",
+                    "battery/health/estimate.py"},  # a single fit's posterior
+        "aged_belief": {"battery/health/belief.py"},
+        "BeliefConfig": {"battery/health/config.py"},
+        "AgingLaw": {"battery/aging.py", "fleet/aging.py", "fleet/nasa_aging.py"},  # declared; the fits that print it
+        "HealthPrior": {"battery/health/prior.py", "battery/health/config.py", "battery/health/belief.py"},
+        "fleet_prior": {"battery/health/config.py", "battery/health/prior.py",
+                        "battery/health/fit.py"},  # a single fit's default prior, the cell type's box
+    }
+    offenders = [f"{rel}:{line} {name}" for rel, line, name in calls if name in homes and rel not in homes[name]]
+    assert offenders == [], offenders
+    # the fleet keeps logbooks only: no field of Fleet holds a belief
+    fleet = classes["Fleet"][1]
+    fields = [ast.unparse(n.annotation) for n in fleet.body if isinstance(n, ast.AnnAssign) and not
+              ast.unparse(n.target).startswith("_")]
+    assert not any("Belief" in f for f in fields), fields
 
 
 def test_a_planners_take_off_is_simulated_in_one_place():

@@ -92,8 +92,8 @@ def test_a_node_flown_again_is_predicted_from_its_measured_wind():
 
 
 def test_the_operator_turns_home_when_the_reserve_would_be_broken():
-    """The README's demo (example mission, seed 0, +25 kt from 300 s): with the default 25 kt reserve the
-    operator turns home with a destination left and lands safe, where with none it flies on to more
+    """The README's demo (example mission, seed 0, +25 kt from 300 s, the pack its model): with the default 25 kt
+    reserve the operator turns home with a destination left and lands safe, where with none it flies on to more
     destinations and breaches; the record then says the change exceeded the (zero) reserve, not a
     decision error."""
     from uam_studio.classroom import asset_path
@@ -103,8 +103,8 @@ def test_the_operator_turns_home_when_the_reserve_would_be_broken():
 
     mission = load_mission(asset_path("example_mission.json"))
     event = [WindEvent(300.0, 25.0)]
-    kept = fly_mission(mission, seed=0, events=event, references=False)
-    none = fly_mission(mission, seed=0, events=event, references=False, reserve_kt=0.0)
+    kept = fly_mission(mission, seed=0, events=event, references=False, world="model")
+    none = fly_mission(mission, seed=0, events=event, references=False, reserve_kt=0.0, world="model")
     assert kept.reserve_kt == WEATHER_RESERVE_KT and not kept.breached and kept.breach_cause == ""
     assert none.breached and none.breach_cause.startswith("the change exceeded the reserve (+25 kt against a 0 kt")
     visited = [n for n in kept.route if n != VERTIPORT]

@@ -37,6 +37,12 @@ def _add_fly_arguments(p: argparse.ArgumentParser) -> None:
                         "new pack, the fleet prior and the take-off's readings)")
     p.add_argument("--save-logbook", default=None, metavar="FILE",
                    help="write the pack's logbook with this flight appended (atomically; may be --logbook's file)")
+    p.add_argument("--world", choices=["varied", "model"], default="varied",
+                   help="varied (default): the pack is not its model (its own diffusion, open-circuit curve, heat; "
+                        "drifting sensors); model: the pack is exactly its model (for teaching)")
+    p.add_argument("--pack", type=seed_arg, default=None, metavar="N",
+                   help="the pack's number: seeds its own parameters in the varied world (default: --seed); name "
+                        "the number its logbook was made with (logbook new --pack)")
     p.add_argument("--json", action="store_true", help="print the flight record as JSON")
     p.add_argument("--series", action="store_true", help="with --json: include the 1 Hz time series")
 
@@ -52,8 +58,8 @@ def _run_fly(args: argparse.Namespace) -> int:
     given = {"forecast_sigma_kt": args.forecast_sigma, "sensor_noise_mv": args.sensor_noise_mv,
              "sensor_noise_ma": args.sensor_noise_ma, "reserve_kt": args.reserve}
     # an option left out takes the library's default (uam_studio.planning.operations.defaults), not a copy
-    rec = fly_mission(mission, args.policy, seed=args.seed, events=events, logbook=book,
-                      **{k: v for k, v in given.items() if v is not None})
+    rec = fly_mission(mission, args.policy, seed=args.seed, events=events, logbook=book, world=args.world,
+                      pack=args.pack, **{k: v for k, v in given.items() if v is not None})
     if args.save_logbook:
         rec.logbook_after().save(args.save_logbook)
     if args.json:
@@ -62,12 +68,18 @@ def _run_fly(args: argparse.Namespace) -> int:
         return EXIT_OK
     print(f"{mission.name} ({rec.scenario}): seed {rec.seed}, forecast sigma {rec.forecast_sigma_kt:g} kt, "
           f"sensor noise {rec.sensor_noise_mv:g} mV / {rec.sensor_noise_ma:g} mA, events: "
-          f"{', '.join(rec.wind_events) or 'none'}, weather reserve {rec.reserve_kt:g} kt")
+          f"{', '.join(rec.wind_events) or 'none'}, weather reserve {rec.reserve_kt:g} kt, world {rec.world} "
+          f"(pack {rec.pack})")
     tb = rec.takeoff_belief
     if tb:
         print(f"take-off belief from the {tb['source']}" + (f" ({tb['flights']} flights)" if tb["flights"] else "")
               + f": q_max {tb['q_max_c']:.0f} +- {tb['q_max_sd_c']:.0f} C, R0 {tb['r0_ohm']:.4f} +- "
                 f"{tb['r0_sd_ohm']:.4f} ohm")
+        if "first_leg_min_voltage_90_v" in tb and rec.first_leg_min_voltage_v is not None:
+            lo, hi = tb["first_leg_min_voltage_90_v"]
+            print(f"first leg's lowest voltage: believed {lo:.3f}-{hi:.3f} V (90%; model error "
+                  f"{1e3 * tb['model_error_v']:.1f} mV, {tb['model_error_share']:.0%} of its variance), the world gave "
+                  f"{rec.first_leg_min_voltage_v:.3f} V")
     legs = iter(zip(rec.route, rec.altitudes_m, rec.actual_winds_kts, rec.forecast_winds_kts, rec.leg_end_s))
     for d in rec.events:
         print(f"t={d.time_s:>6.0f} s at {d.node}: {d.kind}: {d.reason}")

@@ -19,12 +19,18 @@ def _add_logbook_arguments(p: argparse.ArgumentParser) -> None:
                      help="the pack's equivalent full cycles now (0-2000; default: new at its first logged flight)")
     new.add_argument("--sensor-noise-mv", type=float, default=None, metavar="MV",
                      help="voltage sensor noise std (mV, 0-100; default 5)")
+    new.add_argument("--world", choices=["varied", "model"], default="varied",
+                     help="the world the earlier flights flew in (varied, default: the pack is not its model; model)")
+    new.add_argument("--pack", type=seed_arg, default=None, metavar="N",
+                     help="the pack's number (default: --seed); fly it with the same number (fly --pack)")
     new.add_argument("--out", required=True, metavar="FILE", help="where to write the logbook (JSON)")
     show = sub.add_parser("show", help="a logbook's flights and the belief it gives at the next take-off")
     show.add_argument("logbook", metavar="FILE")
 
 
 def _run_logbook(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from uam_studio.battery.health import Logbook
     from uam_studio.battery.health.belief import HealthBelief
 
@@ -34,7 +40,8 @@ def _run_logbook(args: argparse.Namespace) -> int:
 
         mission = load_mission(args.mission)
         noise = {} if args.sensor_noise_mv is None else {"sensor_noise_mv": args.sensor_noise_mv}
-        book = simulate_logbook(mission, args.flights, args.seed, args.age_efc, **noise)
+        book = simulate_logbook(mission, args.flights, args.seed, args.age_efc, world=args.world, pack=args.pack,
+                                **noise)
         book.save(args.out)
         print(f"wrote {args.out}: {len(book)} flights of {mission.name}'s pack (seed {args.seed})")
     else:
@@ -43,7 +50,13 @@ def _run_logbook(args: argparse.Namespace) -> int:
     h = belief.prior_health()
     print(f"{len(book)} flights, {book.delivered_c() / 3600.0:.2f} Ah delivered in all; belief at the next take-off "
           f"({belief.source}): q_max {h.q_max_c:.0f} +- {h.q_max_sd_c:.0f} C, R0 {h.r0_ohm:.4f} +- "
-          f"{h.r0_sd_ohm:.4f} ohm")
+          f"{h.r0_sd_ohm:.4f} ohm; model error {1e3 * belief.model_error.sd_v:.1f} mV (the cell type's "
+          f"{1e3 * belief.model_error.prior_sd_v:.0f} mV pooled with {belief.model_error.flights} flights' residuals)")
+    if book.flights:  # the share of the model error in the belief's interval of the last flight's lowest voltage
+        last = book.flights[-1]
+        share = belief.model_error_share(np.asarray(last.current_a, dtype=float), 0)
+        print(f"on the last flight's load, the model error is {share:.0%} of the variance of the lowest voltage's "
+              "interval (the rest: the health's uncertainty)")
     return EXIT_OK
 
 

@@ -6,8 +6,9 @@ charge it delivers) and the actual winds (the forecast plus a seeded error). Dis
 round trip at 500 m from full charge, flown on the true cell in the actual winds: below the cut-off
 is a breach (the request scores 0 and the aircraft is grounded for the day). Each flight's noisy readings go
 into its pack's logbook (``Fleet.logbooks``, :class:`~uam_studio.battery.health.logbook.Logbook`) with their
-whole-record fit, which updates the aircraft's belief (the one health belief,
-:func:`~uam_studio.battery.health.belief.logbook_belief`'s steps). Landed, the
+whole-record fit; the fleet keeps the logbooks only, and a dispatcher reads each aircraft's belief derived from its
+logbook (:meth:`Fleet.belief`: the one belief value,
+:class:`~uam_studio.battery.health.belief.PackBelief`, on the fleet's declared configuration). Landed, the
 aircraft charges at 1 C back to full on one of its vertiport's chargers (a queue when all are busy).
 A fleet may be based at several vertiports: each aircraft serves the requests of its own vertiport
 and charges there.
@@ -31,6 +32,8 @@ from typing import Any
 import numpy as np
 import simpy
 
+from uam_studio.battery.health.belief import PackBelief
+from uam_studio.battery.health.config import fleet_belief_config
 from uam_studio.battery.health.logbook import Logbook
 from uam_studio.errors import InputError, check_range, check_seed
 from uam_studio.fleet.aging import AGING_LAW, END_OF_LIFE_FRACTION, AgingLaw, PackHealth
@@ -49,7 +52,6 @@ from uam_studio.fleet.dispatch import (
     EOD_V,
     NOMINAL,
     AircraftView,
-    PackBelief,
     assign,
     round_trip,
     round_trip_margin,
@@ -98,30 +100,47 @@ def day_of_life_seed(seed: int, day: int) -> int:
 
 @dataclass
 class Fleet:
-    """The aircraft: each one's true pack (``truth``, the world's), its own ``belief`` and its pack's ``logbooks``
-    (every flight as its sensors read it; the belief is the logbook's); ``in_service``
+    """The aircraft: each one's true pack (``truth``, the world's) and its pack's ``logbooks`` (every flight as its
+    sensors read it; an aircraft's belief is derived from its logbook, :meth:`belief`); ``in_service``
     false once a pack has retired (below 80% of its first capacity); ``base``: each one's vertiport
-    (default all at vertiport 0); ``law``: the packs' cell type, a key of :data:`PACK_LAWS`."""
+    (default all at vertiport 0); ``law``: the packs' cell type, a key of :data:`PACK_LAWS`; ``logbooks``: default
+    empty ones of packs that have delivered what their truth has (the operator's current sensor logged it)."""
 
     truth: list[PackHealth]
-    belief: list[PackBelief]
     in_service: list[bool] = field(default_factory=list)
     base: list[int] = field(default_factory=list)
     law: str = "nasa"
     logbooks: list[Logbook] = field(default_factory=list)
+    _beliefs: dict[int, tuple[Logbook, PackBelief]] = field(default_factory=dict, init=False, repr=False,
+                                                            compare=False)
 
     def __post_init__(self) -> None:
         pack_law(self.law)
-        if len(self.truth) != len(self.belief) or not 1 <= len(self.truth) <= 50:
-            raise InputError("aircraft", f"{len(self.truth)} aircraft: allowed 1-50, a belief for each")
+        if not 1 <= len(self.truth) <= 50:
+            raise InputError("aircraft", f"{len(self.truth)} aircraft: allowed 1-50")
         if not self.in_service:
             self.in_service = [not t.retired for t in self.truth]
         if not self.base:
             self.base = [0] * len(self.truth)
         if not self.logbooks:
-            self.logbooks = [_new_logbook(b.delivered_c) for b in self.belief]
+            self.logbooks = [_new_logbook(t.delivered_c) for t in self.truth]
+        if len(self.logbooks) != len(self.truth):
+            raise InputError("logbooks", f"{len(self.logbooks)} logbooks for {len(self.truth)} aircraft: one each")
         if len(self.base) != len(self.truth) or not all(0 <= b < MAX_VERTIPORTS for b in self.base):
             raise InputError("vertiports", f"a base vertiport 0-{MAX_VERTIPORTS - 1} for each aircraft")
+
+    def belief(self, i: int) -> PackBelief:
+        """Aircraft ``i``'s belief at its next take-off, derived from its logbook
+        (:meth:`~uam_studio.battery.health.belief.PackBelief.of` on the fleet's declared configuration,
+        :func:`~uam_studio.battery.health.config.fleet_belief_config`, going on from the belief last derived)."""
+        belief = PackBelief.of(self.logbooks[i], fleet_belief_config(self.law), self._beliefs.get(i))
+        self._beliefs[i] = (self.logbooks[i], belief)
+        return belief
+
+    @property
+    def beliefs(self) -> list[PackBelief]:
+        """Every aircraft's :meth:`belief`."""
+        return [self.belief(i) for i in range(len(self.truth))]
 
     @property
     def vertiports(self) -> int:
@@ -147,13 +166,12 @@ class Fleet:
         spread = check_range("age_spread_efc", default_age_spread(law) if age_spread_efc is None else age_spread_efc,
                              0.0, 2000.0)
         rng = np.random.default_rng([check_seed("seed", seed), 42])
-        truth, belief = [], []
+        truth = []
         for _ in range(n):
             q0, r0 = _factory_pack(rng)
             delivered = float(rng.uniform(0.0, spread)) * q0
             truth.append(PackHealth(q0, r0, delivered, law=aging))
-            belief.append(PackBelief.new_pack(delivered, aging))
-        return cls(truth, belief, base=[i % ports for i in range(n)], law=law)
+        return cls(truth, base=[i % ports for i in range(n)], law=law)
 
     def renew_retired(self, seed: int, night: int = 0) -> list[int]:
         """Replace every retired pack by a new one from the factory (its belief: the nominal new pack),
@@ -164,8 +182,8 @@ class Fleet:
         for i in renewed:
             q0, r0 = _factory_pack(rng)
             self.truth[i] = PackHealth(q0, r0, 0.0, law=self.aging_law)
-            self.belief[i] = PackBelief.new_pack(0.0, self.aging_law)
             self.logbooks[i] = _new_logbook(0.0)
+            self._beliefs.pop(i, None)
             self.in_service[i] = True
         return renewed
 
@@ -288,8 +306,9 @@ class OperatingDay:
         key = (req.name, i, a.key)
         if key not in self.cache:
             if self.dispatcher == "aware":
-                b = a.belief
-                self.cache[key] = round_trip_margin(req, b.q_max - HEALTH_Z * b.q_max_sd, b.r0 + HEALTH_Z * b.r0_sd,
+                b = a.belief.health
+                self.cache[key] = round_trip_margin(req, b.q_max_c - HEALTH_Z * b.q_max_sd_c,
+                                                    b.r0_ohm + HEALTH_Z * b.r0_sd_ohm,
                                                     req.wind_kts + DISPATCH_WIND_Z * FORECAST_SIGMA_KT,
                                                     -req.wind_kts + DISPATCH_WIND_Z * FORECAST_SIGMA_KT)
             elif self.dispatcher == "blind":
@@ -304,7 +323,7 @@ class OperatingDay:
         fleet, now = self.fleet, self.env.now
         self.waiting[:] = [r for r in self.waiting if r.t_s + r.window_s >= now]
         for port in range(fleet.vertiports):
-            views = [AircraftView(str(i), fleet.belief[i], self.version[i]) for i in range(self.n)
+            views = [AircraftView(str(i), fleet.belief(i), self.version[i]) for i in range(self.n)
                      if self.free[i] and fleet.base[i] == port]
             asks = [r for r in self.waiting if r.vertiport == port]
             for req, view in assign(asks, views, self.margin, self.required):
@@ -326,14 +345,11 @@ class OperatingDay:
         self.log.append((float(env.now), i, req.name, float(sim.min_voltage_v) - sim.eod_v, flight_s))
         yield env.timeout(flight_s)
         fleet.truth[i] = truth.after(charge)
-        # the flight's readings (the sensors', never the truth) go into the pack's logbook, fitted once there;
-        # the belief takes that fit, then ages by the law over the flight's measured charge (logbook_belief's steps)
+        # the flight's readings (the sensors', never the truth) go into the pack's logbook, fitted once there; the
+        # belief a dispatcher reads next is the logbook's
         measured_i = cur + self.noise.normal(0.0, NOISE_A, k)
         measured_v = np.asarray(sim.voltage_v[:k]) + self.noise.normal(0.0, NOISE_V, k)
-        book = fleet.logbooks[i].appended(measured_i, measured_v, sim.dt_s)
-        fleet.logbooks[i] = book
-        fleet.belief[i] = fleet.belief[i].update(book.flights[-1].fit).aged(book.flights[-1].charge_c,
-                                                                              fleet.aging_law)
+        fleet.logbooks[i] = fleet.logbooks[i].appended(measured_i, measured_v, sim.dt_s)
         self.version[i] += 1
         if breached:
             stats["breaches"] += 1
@@ -431,4 +447,4 @@ def simulate_life(aircraft: int, days: int, seed: int, dispatcher: str, rate_per
     retired += [None] * sum(fleet.in_service)
     return {"dispatcher": dispatcher, "days": [r.to_dict() for r in results], "retired_day": retired,
             "truth": [(t.q_max, t.r0, t.fraction) for t in fleet.truth],
-            "belief": [(b.q_max, b.q_max_sd, b.r0, b.r0_sd) for b in fleet.belief]}
+            "belief": [(h.q_max_c, h.q_max_sd_c, h.r0_ohm, h.r0_sd_ohm) for h in (b.health for b in fleet.beliefs)]}

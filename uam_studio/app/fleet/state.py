@@ -130,9 +130,10 @@ class FleetState(param.Parameterized):
         """Each pack after the days flown under ``dispatcher``: its true q_max (C) and its aircraft's
         belief with the cautious bound the dispatcher uses (HEALTH_Z std)."""
         f = self.fleets[dispatcher]
-        return [{"aircraft": f"#{i + 1}", "true_q_max": t.q_max, "belief_q_max": b.q_max,
-                 "low": b.q_max - HEALTH_Z * b.q_max_sd, "high": b.q_max + HEALTH_Z * b.q_max_sd,
-                 "in_service": s} for i, (t, b, s) in enumerate(zip(f.truth, f.belief, f.in_service))]
+        health = [b.health for b in f.beliefs]
+        return [{"aircraft": f"#{i + 1}", "true_q_max": t.q_max, "belief_q_max": h.q_max_c,
+                 "low": h.q_max_c - HEALTH_Z * h.q_max_sd_c, "high": h.q_max_c + HEALTH_Z * h.q_max_sd_c,
+                 "in_service": s} for i, (t, h, s) in enumerate(zip(f.truth, health, f.in_service))]
 
     def per_day(self) -> dict[str, tuple[list[int], list[int]]]:
         """Served priority per day for each dispatcher: (days, stars); under ``"bound"`` the most stars any

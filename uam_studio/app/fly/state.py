@@ -42,6 +42,8 @@ from uam_studio.wording import charging_cycles_text
 
 SPEEDS = (10, 30, 100, 300, 1000)  # playback speed-ups (simulated s per wall s)
 PACKS = {"a new pack (no logbook)": 0, "its logbook: 3 flights": 3, "its logbook: 10 flights": 10}
+# the world the pack flies (planning.operations.world.WORLDS), by the label the tab shows
+WORLD_LABELS = {"a pack unlike its model": "varied", "its model (teaching)": "model"}
 ERROR_CHARS = 300  # an error line is cut here
 
 
@@ -57,9 +59,10 @@ class _Flight:
 
 
 @functools.lru_cache(maxsize=8)
-def _pack_logbook(mission: Mission, flights: int, seed: int, sensor_noise_mv: float):
-    """The logbook of the mission's pack after ``flights`` earlier flights (the same for the same inputs)."""
-    return simulate_logbook(mission, flights, seed, sensor_noise_mv=sensor_noise_mv)
+def _pack_logbook(mission: Mission, flights: int, seed: int, sensor_noise_mv: float, world: str):
+    """The logbook of the mission's pack after ``flights`` earlier flights in ``world`` (the same for the same
+    inputs; the pack is the flight's, numbered by its seed)."""
+    return simulate_logbook(mission, flights, seed, sensor_noise_mv=sensor_noise_mv, world=world)
 
 
 def _fly(flight: _Flight) -> tuple[_Flight, FlightRecord | None, str]:
@@ -67,7 +70,8 @@ def _fly(flight: _Flight) -> tuple[_Flight, FlightRecord | None, str]:
     try:
         kwargs = flight.kwargs
         if flight.pack_flights:
-            book = _pack_logbook(flight.mission, flight.pack_flights, kwargs["seed"], kwargs["sensor_noise_mv"])
+            book = _pack_logbook(flight.mission, flight.pack_flights, kwargs["seed"], kwargs["sensor_noise_mv"],
+                                 kwargs["world"])
             kwargs = {**kwargs, "logbook": book}
         return flight, fly_mission(flight.mission, **kwargs), ""
     except InputError as exc:
@@ -83,7 +87,8 @@ class FlyState(param.Parameterized):
     """One flight and its playback (see the module docstring).
 
     Inputs: ``pack`` (a key of :data:`PACKS`: a new pack, or one whose logbook holds that many earlier flights of
-    the mission, :func:`~uam_studio.planning.operations.pack_history.simulate_logbook`), ``seed``,
+    the mission, :func:`~uam_studio.planning.operations.pack_history.simulate_logbook`), ``world`` (a key of
+    :data:`WORLD_LABELS`: a pack unlike its model, the default, or one that is its model), ``seed``,
     ``forecast_sigma_kt`` (kt), ``sensor_noise_mv`` (mV), ``reserve_kt`` (kt, the
     operator's weather reserve), ``speed`` (playback speed-up), ``inject_kts`` (kt, the wind change
     :meth:`inject` adds). Outputs: ``record``, ``t_s``
@@ -92,6 +97,7 @@ class FlyState(param.Parameterized):
     """
 
     pack: param.Selector = param.Selector(default=next(iter(PACKS)), objects=list(PACKS))
+    world: param.Selector = param.Selector(default=next(iter(WORLD_LABELS)), objects=list(WORLD_LABELS))
     seed = param.Integer(default=0, bounds=(0, 10**9))
     forecast_sigma_kt = param.Number(default=DEFAULT_FORECAST_SIGMA_KT, bounds=(0.0, MAX_SIGMA_KT))
     sensor_noise_mv = param.Number(default=DEFAULT_SENSOR_NOISE_MV, bounds=(0.0, MAX_NOISE_MV))
@@ -130,7 +136,8 @@ class FlyState(param.Parameterized):
             return
         flight = _Flight(mission, dict(seed=self.seed, forecast_sigma_kt=self.forecast_sigma_kt,
                                        sensor_noise_mv=self.sensor_noise_mv, events=list(self.events),
-                                       reserve_kt=self.reserve_kt), keep_time, PACKS[self.pack])
+                                       reserve_kt=self.reserve_kt, world=WORLD_LABELS[self.world]), keep_time,
+                         PACKS[self.pack])
         self.running = True
         self.status = "flying..."
         if not keep_time:
@@ -252,7 +259,20 @@ class FlyState(param.Parameterized):
         blind = "breached" if r.static.breached else f"priority {r.static.priority}"
         return (f"flown: {own}, {charging_cycles_text(r.charging_cycles)}, min {r.min_voltage_v:.3f} V · "
                 f"blind pre-flight plan: {blind} · "
-                f"hindsight oracle{'' if r.hindsight.exact else ' (best known plan)'}: priority {r.hindsight.priority}")
+                f"hindsight oracle{'' if r.hindsight.exact else ' (best known plan)'}: priority {r.hindsight.priority}"
+                + _first_leg_text(r))
 
 
-__all__ = ["SPEEDS", "FlyState"]
+def _first_leg_text(r: FlightRecord) -> str:
+    """The take-off belief's interval of the first leg's lowest voltage, its model-error term and what the world
+    gave ("" when no leg was flown)."""
+    tb = r.takeoff_belief
+    if "first_leg_min_voltage_90_v" not in tb or r.first_leg_min_voltage_v is None:
+        return ""
+    lo, hi = tb["first_leg_min_voltage_90_v"]
+    return (f" · first leg's lowest voltage: believed {lo:.3f}-{hi:.3f} V (90%; model error "
+            f"{1e3 * tb['model_error_v']:.0f} mV, {tb['model_error_share']:.0%} of its variance), the world gave "
+            f"{r.first_leg_min_voltage_v:.3f} V")
+
+
+__all__ = ["SPEEDS", "WORLD_LABELS", "FlyState"]

@@ -19,7 +19,7 @@ import param
 from bokeh.models import ColumnDataSource, HoverTool, Range1d
 from bokeh.models.annotations import Span  # = bokeh.models.Span, a re-export mypy misses (its stubs lack __all__)
 
-from uam_studio.app.fly.state import PACKS, SPEEDS, FlyState
+from uam_studio.app.fly.state import PACKS, SPEEDS, WORLD_LABELS, FlyState
 from uam_studio.app.planner.map_geometry import altitude_labels, place_label
 from uam_studio.app.style import (
     MEASURED_COLOR,
@@ -83,6 +83,8 @@ class FlyView(pn.viewable.Viewer):
         self.play = pn.widgets.Toggle(name="Play / pause", value=s.playing, width=w)
         self.speed = pn.widgets.Select(name="Playback speed (x)", options=list(SPEEDS), value=s.speed, width=w)
         self.seed = pn.widgets.IntInput(name="World seed", value=s.seed, start=0, width=w)
+        self.world = pn.widgets.Select(name="The world", options=list(WORLD_LABELS), value=s.world, width=w,
+                                       css_classes=["uam-fly-world"])
         self.pack = pn.widgets.Select(name="The aircraft's pack", options=list(PACKS), value=s.pack, width=w,
                                       css_classes=["uam-fly-pack"])
         self.sigma = pn.widgets.FloatSlider(name="Forecast error (kt, std)", start=0, end=40, step=1,
@@ -126,6 +128,7 @@ class FlyView(pn.viewable.Viewer):
         self.speed.param.watch(lambda e: setattr(s, "speed", e.new), "value")
         self.seed.param.watch(lambda e: setattr(s, "seed", e.new), "value")
         self.pack.param.watch(lambda e: setattr(s, "pack", e.new), "value")
+        self.world.param.watch(lambda e: setattr(s, "world", e.new), "value")
         self.sigma.param.watch(lambda e: setattr(s, "forecast_sigma_kt", e.new), "value")
         self.noise.param.watch(lambda e: setattr(s, "sensor_noise_mv", e.new), "value")
         self.reserve.param.watch(lambda e: setattr(s, "reserve_kt", e.new), "value")
@@ -140,7 +143,8 @@ class FlyView(pn.viewable.Viewer):
         self._layout = pn.Row(
             pn.Column(self.fly_button, self.play, self.speed, self.clock, pn.Spacer(height=10),
                       self.inject_kts, self.inject_button, self.clear_button, pn.Spacer(height=10),
-                      self.pack, self.seed, self.sigma, self.noise, self.reserve, pn.Spacer(height=10), self.download,
+                      self.pack, self.world, self.seed, self.sigma, self.noise, self.reserve, pn.Spacer(height=10),
+                      self.download,
                       width=230),
             pn.Column(self.error, pn.Row(self.progress, self.status, sizing_mode="stretch_width"),
                       pn.Row(self.map_pane, self.volt_pane, sizing_mode="stretch_width"),

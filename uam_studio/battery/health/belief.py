@@ -24,25 +24,29 @@ Public API: :class:`HealthBelief`, :class:`BelievedHealth`, :func:`logbook_belie
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from uam_studio.battery.aging import NASA_AGING_LAW, T_REF_C, AgingLaw
+from uam_studio.battery.health.config import AGING_PROCESS_SD, PAPER_BELIEF, BeliefConfig
 from uam_studio.battery.health.estimate import MIN_CONTEXT_S, HealthEstimate, clip_to_box, cov_qr
 from uam_studio.battery.health.fit import fit_health
-from uam_studio.battery.health.intervals import EodInterval, eod_interval_s
-from uam_studio.battery.health.logbook import Logbook
-from uam_studio.battery.health.prior import Q_REF_C, HealthPrior, combine, fleet_prior, hold_to_fleet
+from uam_studio.battery.health.intervals import EodInterval, eod_interval_s, two_sided_z
+from uam_studio.battery.health.logbook import Logbook, LoggedFlight
+from uam_studio.battery.health.prior import Q_REF_C, HealthPrior, combine, hold_to_fleet
 from uam_studio.battery.health.quality import FLAG_MISFIT, FLAG_OUTSIDE_FLEET, FLEET_Z, fit_flags
-from uam_studio.battery.parameters import DEFAULT_CELL, CellParameters
+from uam_studio.battery.parameters import DEFAULT_Q_MAX, CellParameters
+from uam_studio.battery.simulate import CURRENT_LIMIT_A, EOD_RANGE, simulate
 from uam_studio.errors import InputError
 
 __all__ = ["AGING_PROCESS_SD", "MIN_FIT_SAMPLES", "SOURCE_LOGBOOK", "SOURCE_TAKEOFF", "BelievedHealth",
-           "ChargeReadings", "HealthBelief", "aged_belief", "logbook_belief"]
+           "ChargeReadings", "HealthBelief", "ModelError", "PackBelief", "aged_belief", "flight_residual_sd_v",
+           "logbook_belief", "model_error"]
 
-AGING_PROCESS_SD = 0.2  # std of the aging law's error, as a share of each predicted change of q_max and R0
 SOURCE_LOGBOOK = "logbook"  # a belief that started from the pack's logbook
 SOURCE_TAKEOFF = "take-off"  # one that started from the fleet prior: the take-off's readings are all it has
 MIN_FIT_SAMPLES = int(MIN_CONTEXT_S)  # readings (at 1 Hz) before a fit: the fit's shortest context
@@ -122,29 +126,141 @@ def aged_belief(mean: np.ndarray, cov: np.ndarray, delivered_c: float, charge_c:
     return new, a @ np.asarray(cov, dtype=float) @ a + np.diag(step ** 2)
 
 
-def logbook_belief(logbook: Logbook, prior: HealthPrior | None = None, aging: AgingLaw = NASA_AGING_LAW,
-                   process_sd: float = AGING_PROCESS_SD, scatter: float = 0.0,
-                   walk: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """The belief ``(mean [2], cov [2, 2])`` in (w, R0) at the next take-off of the pack whose logbook is
-    ``logbook``: ``prior`` (default: the default cell's fleet) times each flight's stored fit, aged by ``aging`` over
-    each flight's charge (at its ambient temperature where known). Reads the stored fits only: no refit.
+@dataclass(frozen=True)
+class PackBelief:
+    """What a pack's logbook says of its health at the next take-off: one immutable value, changed only by pure
+    methods (:meth:`logged`: a flight's fit multiplied in, then aged over its charge). A Gaussian in (w, R0)
+    (w = 6500 C / q_max) with mean ``mean`` and covariance ``cov`` (row-major, 4 floats), the charge the pack has
+    delivered (``delivered_c``, C, measured), the aging clock's unit (``q_nominal_c``, C) and the cell type's
+    declared ``config``. :meth:`of` builds it from a logbook; :attr:`health` is its
+    :class:`BelievedHealth`. An in-flight :class:`HealthBelief` starts from it; a fleet's dispatcher reads it."""
 
-    A real cell's health also moves from one discharge to the next by more than its fit's std (a rest gives some
-    capacity back, a cold or hot run takes some): ``scatter`` (a share of the mean) is added to each fit's std in
-    both components, and ``walk`` (a share of the mean) is a random walk per flight. Both are 0 for a simulated
-    pack, which ages exactly by its law."""
-    start = prior if prior is not None else fleet_prior()
-    mean, cov = np.array(start.mean, dtype=float), np.array(start.cov, dtype=float)
-    delivered = logbook.delivered_before_c
-    for flight in logbook.flights:
+    mean: tuple[float, float]
+    cov: tuple[float, float, float, float]
+    delivered_c: float
+    q_nominal_c: float
+    config: BeliefConfig = PAPER_BELIEF
+
+    @classmethod
+    def start(cls, config: BeliefConfig = PAPER_BELIEF, delivered_c: float = 0.0,
+              q_nominal_c: float = DEFAULT_Q_MAX) -> PackBelief:
+        """The belief of a pack with an empty logbook that has delivered ``delivered_c`` (C): the cell type's box
+        (``config.prior``), or, where the config declares a new pack's prior (``config.new_pack``), that prior aged
+        by the law over ``delivered_c``."""
+        if config.new_pack is None:
+            return cls._of(config.prior.mean, config.prior.cov, delivered_c, q_nominal_c, config)
+        new = cls._of(config.new_pack.mean, config.new_pack.cov, 0.0, q_nominal_c, config)
+        return new.aged(delivered_c)
+
+    @classmethod
+    def of(cls, logbook: Logbook, config: BeliefConfig = PAPER_BELIEF,
+           since: tuple[Logbook, PackBelief] | None = None) -> PackBelief:
+        """The belief at the next take-off of the pack whose logbook is ``logbook``: :meth:`start`, then
+        :meth:`logged` for each flight. Reads the stored fits only: no refit. ``since``: an earlier logbook of the
+        pack and its belief; where ``logbook`` only grew from it (the same flights first), the belief goes on from
+        there (the same steps)."""
+        belief, done = cls.start(config, logbook.delivered_before_c, logbook.q_nominal_c), 0
+        if since is not None:
+            old, known = since
+            n = len(old)
+            if known.config == config and old.delivered_before_c == logbook.delivered_before_c and len(logbook) >= n \
+                    and (n == 0 or logbook.flights[n - 1] is old.flights[-1]):
+                belief, done = known, n
+        for flight in logbook.flights[done:]:
+            belief = belief.logged(flight)
+        return belief
+
+    @classmethod
+    def _of(cls, mean: np.ndarray, cov: np.ndarray, delivered_c: float, q_nominal_c: float,
+            config: BeliefConfig) -> PackBelief:
+        c = np.asarray(cov, dtype=float)
+        return cls((float(mean[0]), float(mean[1])), (float(c[0, 0]), float(c[0, 1]), float(c[1, 0]), float(c[1, 1])),
+                   float(delivered_c), float(q_nominal_c), config)
+
+    @property
+    def cov_matrix(self) -> np.ndarray:
+        """The 2x2 covariance of (w, R0)."""
+        return np.array(self.cov, dtype=float).reshape(2, 2)
+
+    @property
+    def health(self) -> BelievedHealth:
+        """Its Gaussian as a :class:`BelievedHealth`."""
+        cov = self.cov_matrix
+        return BelievedHealth(inverse_capacity=self.mean[0], inverse_capacity_sd=math.sqrt(cov[0, 0]),
+                              r0_ohm=self.mean[1], r0_sd_ohm=math.sqrt(cov[1, 1]), cov_w=cov)
+
+    @property
+    def prior(self) -> HealthPrior:
+        """The belief as a prior (the start of a flight's :class:`HealthBelief`)."""
+        return HealthPrior(np.array(self.mean), self.cov_matrix)
+
+    def aged(self, charge_c: float, temperature_c: float = T_REF_C) -> PackBelief:
+        """After delivering ``charge_c`` (C) more at ``temperature_c`` (C): :func:`aged_belief` by the config's law
+        and process noise, then its random walk (``config.walk``, a share of the mean)."""
+        if not math.isfinite(charge_c) or charge_c < 0:
+            raise InputError("charge_c", f"{charge_c!r}: allowed a finite charge >= 0 C")
+        cfg = self.config
+        mean, cov = aged_belief(np.array(self.mean), self.cov_matrix, self.delivered_c, charge_c, self.q_nominal_c,
+                                cfg.aging, temperature_c, cfg.process_sd)
+        cov = cov + np.diag((cfg.walk * np.abs(mean)) ** 2)
+        return PackBelief._of(mean, 0.5 * (cov + cov.T), self.delivered_c + charge_c, self.q_nominal_c, cfg)
+
+    def logged(self, flight: LoggedFlight) -> PackBelief:
+        """After one more logged flight: its fit multiplied in (its std widened by ``config.scatter``, a share of
+        the mean; none for a flight too short to fit), then aged over its charge at its ambient temperature (25 C
+        where unknown)."""
+        belief = self
         if flight.fit is not None:
-            fit_cov = flight.fit.cov + np.diag((scatter * np.abs(flight.fit.mean)) ** 2)
-            mean, cov = combine([(mean, cov), (flight.fit.mean, fit_cov)])
+            fit_cov = flight.fit.cov + np.diag((self.config.scatter * np.abs(flight.fit.mean)) ** 2)
+            mean, cov = combine([(np.array(self.mean), self.cov_matrix), (flight.fit.mean, fit_cov)])
+            belief = PackBelief._of(mean, cov, self.delivered_c, self.q_nominal_c, self.config)
         temp = flight.ambient_c if math.isfinite(flight.ambient_c) else T_REF_C
-        mean, cov = aged_belief(mean, cov, delivered, flight.charge_c, logbook.q_nominal_c, aging, temp, process_sd)
-        cov = cov + np.diag((walk * np.abs(mean)) ** 2)
-        delivered += flight.charge_c
-    return mean, 0.5 * (cov + cov.T)
+        return belief.aged(flight.charge_c, temp)
+
+
+def logbook_belief(logbook: Logbook, config: BeliefConfig = PAPER_BELIEF) -> tuple[np.ndarray, np.ndarray]:
+    """``(mean [2], cov [2, 2])`` in (w, R0) of :meth:`PackBelief.of`."""
+    b = PackBelief.of(logbook, config)
+    return np.array(b.mean), b.cov_matrix
+
+
+@dataclass(frozen=True)
+class ModelError:
+    """The belief's model-error term: ``sd_v`` (V), the std of the voltage its model cannot explain once the health
+    is known, pooled from the cell type's prior ``prior_sd_v`` (V, worth ``prior_flights`` flights) and ``flights``
+    logged flights' residuals (:func:`model_error`)."""
+
+    sd_v: float
+    prior_sd_v: float
+    prior_flights: float
+    flights: int
+
+
+def flight_residual_sd_v(flight: LoggedFlight, params: CellParameters) -> float | None:
+    """The std (V) of what ``flight``'s own fit on ``params`` does not explain of its voltage, beyond the sensor's
+    white noise: the residual's mean square less the white noise's (half the mean square of the residual's
+    sample-to-sample change, which a slow model error hardly moves); None for a flight without a fit."""
+    if flight.fit is None:
+        return None
+    cur = np.clip(np.asarray(flight.current_a, dtype=float), -CURRENT_LIMIT_A, CURRENT_LIMIT_A)
+    model = simulate(cur, flight.dt_s, Q_REF_C / flight.fit.w, flight.fit.r0_ohm, eod_v=EOD_RANGE[0],
+                     cell=params).voltage_v
+    k = min(model.size, flight.voltage_v.size)
+    if k < 3:
+        return None
+    r = np.asarray(flight.voltage_v[:k], dtype=float) - model[:k]
+    white = 0.5 * float(np.mean(np.diff(r) ** 2))
+    return math.sqrt(max(float(np.mean(r ** 2)) - white, 0.0))
+
+
+def model_error(logbook: Logbook, config: BeliefConfig = PAPER_BELIEF) -> ModelError:
+    """The model-error term of the pack whose logbook is ``logbook``: the prior's variance
+    (``config.model_error_sd_v``, worth ``config.model_error_flights`` flights) pooled with each fitted flight's
+    residual variance (:func:`flight_residual_sd_v`)."""
+    sds = [s for f in logbook.flights if (s := flight_residual_sd_v(f, config.params)) is not None]
+    k0 = config.model_error_flights
+    var = (k0 * config.model_error_sd_v ** 2 + sum(s * s for s in sds)) / max(k0 + len(sds), 1e-12)
+    return ModelError(math.sqrt(var), config.model_error_sd_v, k0, len(sds))
 
 
 class HealthBelief:
@@ -152,32 +268,48 @@ class HealthBelief:
 
     :param noise_v: the voltage sensor's stated noise std (V), or None to estimate it from the residuals.
     :param eod_v: the cut-off (V).
-    :param prior: the fleet's health box (default: the paper's, the default cell's fleet,
-        :func:`~uam_studio.battery.health.prior.fleet_prior`): the start of a new pack's belief, and the box a
-        belief is held to where readings put the cell beyond its optimistic edge.
-    :param logbook: the pack's logbook (None or empty: a new pack, the belief starts from ``prior``).
-    :param aging: the aging law between the logbook's flights.
+    :param logbook: the pack's logbook (None or empty: a new pack, the belief starts from the cell type's prior).
+    :param config: the cell type's declared configuration (:mod:`uam_studio.battery.health.config`): the parameter
+        set this flight's readings are fitted, and its intervals simulated, on; the prior (the start of a new
+        pack's belief, and the box a belief is held to where readings put the cell beyond its optimistic edge); the
+        aging law and noise between the logbook's flights; the model-error prior.
     :param dt_s: the readings' step (s).
-    :param cell: the parameter set this flight's readings are fitted, and its intervals simulated, on.
-    :param scatter: :func:`logbook_belief`'s flight-to-flight scatter (a share of the mean; 0: a simulated pack).
-    :param walk: :func:`logbook_belief`'s random walk per flight (a share of the mean).
     """
 
-    def __init__(self, noise_v: float | None, eod_v: float, prior: HealthPrior | None = None,
-                 logbook: Logbook | None = None, aging: AgingLaw = NASA_AGING_LAW, dt_s: float = 1.0,
-                 cell: CellParameters = DEFAULT_CELL, scatter: float = 0.0, walk: float = 0.0) -> None:
+    def __init__(self, noise_v: float | None, eod_v: float, logbook: Logbook | None = None,
+                 config: BeliefConfig = PAPER_BELIEF, dt_s: float = 1.0) -> None:
         self.noise_v = noise_v
         self.eod_v = eod_v
         self.dt_s = float(dt_s)
-        self.cell = cell
-        self.prior = prior if prior is not None else fleet_prior()
+        self.config = config
+        self.cell = config.params
+        self.prior = config.prior
         self.logbook = logbook if logbook is not None else Logbook()
-        self.start = (HealthPrior(*logbook_belief(self.logbook, self.prior, aging, scatter=scatter, walk=walk))
-                      if len(self.logbook) else self.prior)
+        self.pack = PackBelief.of(self.logbook, config)  # what the logbook says at take-off
+        self.start = self.pack.prior if len(self.logbook) else self.prior
+        self._logged_error: ModelError | None = None  # from the logbook, on first use: fixed for this flight
         self.segment = ChargeReadings()
         self.charges: list[ChargeReadings] = []  # this flight's earlier charges, as read
         self.past: list[HealthEstimate] = []  # the fits of this flight's earlier charges
         self._fitted: tuple[ChargeReadings, int, HealthEstimate | None] | None = None  # this charge's fit, by length
+
+    @property
+    def logged_error(self) -> ModelError:
+        """The logbook's model-error term (:func:`model_error`), computed once, on first use."""
+        if self._logged_error is None:
+            self._logged_error = model_error(self.logbook, self.config)
+        return self._logged_error
+
+    @property
+    def model_error(self) -> ModelError:
+        """The model-error term now: the logbook's (:func:`model_error`), or, for a belief that holds no logged
+        flight and less than ``config.takeoff_span_s`` of readings, the take-off's
+        (``config.takeoff_model_error_sd_v``)."""
+        n = sum(c.size for c in self.segment.current) + sum(sum(x.size for x in c.current) for c in self.charges)
+        if self.logged_error.flights == 0 and n * self.dt_s < self.config.takeoff_span_s:
+            sd = max(self.config.takeoff_model_error_sd_v, self.logged_error.sd_v)
+            return dataclasses.replace(self.logged_error, sd_v=sd)
+        return self.logged_error
 
     @property
     def source(self) -> str:
@@ -252,6 +384,31 @@ class HealthBelief:
         mean, cov = self.start.mean, self.start.cov
         return BelievedHealth(inverse_capacity=float(mean[0]), inverse_capacity_sd=math.sqrt(cov[0, 0]),
                               r0_ohm=float(mean[1]), r0_sd_ohm=math.sqrt(cov[1, 1]), cov_w=np.array(cov))
+
+    def lowest_voltage(self, currents: Sequence[np.ndarray], after: int, level: float = 0.9
+                       ) -> tuple[float, float, float]:
+        """The ``level`` interval (low, median, high; V) of the lowest voltage after sample ``after`` of a planned
+        load from a full charge (``currents[0]``, A at the belief's step, this charge's readings so far first), on
+        the believed cell: the median at the believed health; the std from the health (the 5 sigma points in
+        (w, R0)), from each pair ``currents[1:]`` (the same load under conditions one std either side, the wind's:
+        half their difference) and from the model-error term (:attr:`model_error`), in quadrature."""
+        h = self.health() if (self.segment.current or self.past) else self.prior_health()
+        pts = h.as_estimate().sigma_points()
+        runs = [(c, q, r) for c, (q, r) in [(currents[0], p) for p in pts] + [(c, pts[0]) for c in currents[1:]]]
+        lows = np.array([float(np.min(simulate(np.clip(c, -CURRENT_LIMIT_A, CURRENT_LIMIT_A), self.dt_s, q, r,
+                                               eod_v=EOD_RANGE[0], cell=self.cell).voltage_v[after:], initial=5.0))
+                         for c, q, r in runs])
+        var = ((lows[1] - lows[2]) / 2) ** 2 + ((lows[3] - lows[4]) / 2) ** 2 + self.model_error.sd_v ** 2
+        var += sum(((lows[k] - lows[k + 1]) / 2) ** 2 for k in range(5, lows.size - 1, 2))
+        z = two_sided_z(level)
+        return float(lows[0] - z * math.sqrt(var)), float(lows[0]), float(lows[0] + z * math.sqrt(var))
+
+    def model_error_share(self, current_a: np.ndarray, after: int) -> float:
+        """The model-error term's share (0-1) of the variance of the lowest voltage of a planned load
+        (:meth:`lowest_voltage`'s, without conditions)."""
+        lo, med, _ = self.lowest_voltage([current_a], after)
+        total = ((med - lo) / two_sided_z(0.9)) ** 2
+        return float(min(self.model_error.sd_v ** 2 / total, 1.0)) if total > 0 else 0.0
 
     def eod_interval(self, current_a: np.ndarray, level: float = 0.9) -> EodInterval:
         """The ``level`` interval (s) of the end of discharge of a planned load ``current_a`` (A at the belief's step,

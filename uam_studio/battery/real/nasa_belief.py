@@ -33,10 +33,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from uam_studio.battery.aging import NASA_AGING_LAW
 from uam_studio.battery.health.belief import HealthBelief
+from uam_studio.battery.health.config import NASA_CELL_BELIEF
 from uam_studio.battery.health.logbook import Logbook, LoggedFlight, fit_flight
-from uam_studio.battery.health.prior import fleet_prior
 from uam_studio.battery.parameters import NASA_IDENTIFIED, ZERO_C, Cell
 from uam_studio.battery.real.nasa_data import NasaCell, NasaDischarge, persistence_s, same_conditions
 from uam_studio.battery.real.nasa_eval import ScoredDischarge, condition_of, conservative_quantile, progpy_default_s
@@ -62,11 +61,6 @@ __all__ = ["FIT_ABOVE_V", "BeliefPrediction", "belief_life", "evaluate_belief"]
 FIT_ABOVE_V = 2.8  # V: a discharge's record is fitted down to here (the model is not run far below its cut-off)
 METHOD = "belief"
 MIN_BAND = 100  # a group with fewer training errors takes the pooled quantiles
-# A real cell's capacity scatters from one discharge to the next about its fade by about 0.027-0.030 Ah of its ~2 Ah
-# (the capacity belief's noise, fleet.nasa_aging._noise, fitted on the NASA lives: RESULTS.md, "The capacity
-# belief's own floor"), and drifts by 0.3 of that a discharge (its DRIFT): the same shares of q_max and R0 here
-SCATTER = 0.015
-WALK = 0.3 * SCATTER
 
 
 @dataclass(frozen=True)
@@ -117,15 +111,14 @@ def belief_life(cell: NasaCell, cell_type: Cell = NASA_IDENTIFIED, cutoff_v: flo
                 context_s: float = 300.0) -> list[BeliefPrediction]:
     """Every discharge of ``cell`` predicted online from the belief over its logbook (module docstring); each reads
     the earlier discharges and a :func:`~uam_studio.battery.real.nasa_predict.known_before` view of its own."""
-    prior = fleet_prior(cell_type.params)
     book = Logbook(q_nominal_c=cell_type.q_max, eod_v=cutoff_v)
     past: list[tuple[NasaDischarge, float | None]] = []
     out = []
     for d in cell.discharges:
         known = known_before(d, context_s)
         params = replace(cell_type.params, t_ambient_k=ZERO_C + float(d.ambient_c))
-        belief = HealthBelief(None, cutoff_v, prior, _read_at(book, [p for p, _ in past], known), NASA_AGING_LAW,
-                              cell=params, scatter=SCATTER, walk=WALK)
+        belief = HealthBelief(None, cutoff_v, _read_at(book, [p for p, _ in past], known),
+                              replace(NASA_CELL_BELIEF, params=params))
         cur, volt = _context_on_grid(known)
         if cur.size:
             belief.observe(cur, volt)

@@ -28,6 +28,7 @@ from typing import Any, cast
 import numpy as np
 
 from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0, simulate
+from uam_studio.battery.health.intervals import two_sided_z
 from uam_studio.battery.health.logbook import Logbook
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_profile
@@ -36,6 +37,7 @@ from uam_studio.planning.legs import DT_S, N_MAX, takeoff_current
 from uam_studio.planning.missions.mission import VERTIPORT, Battery, Destination, Mission, check_destination_count
 from uam_studio.planning.operations.decision import Decision
 from uam_studio.planning.operations.defaults import fit_noise_v
+from uam_studio.planning.operations.leg_interval import leg_lowest_voltage
 from uam_studio.planning.operations.operator import (
     HEALTH_Z,
     IN_FLIGHT_PLANNERS,
@@ -48,6 +50,7 @@ from uam_studio.planning.operations.world import (
     DEFAULT_FORECAST_SIGMA_KT,
     DEFAULT_SENSOR_NOISE_MA,
     DEFAULT_SENSOR_NOISE_MV,
+    DEFAULT_WORLD,
     WindEvent,
     World,
     actual_winds_mission,
@@ -74,6 +77,8 @@ class ReferenceFlight:
 class FlightRecord:
     """One flight, both sides.
 
+    The world: ``world`` (``"varied"`` or ``"model"``) and ``pack`` (the pack's number, which seeds its own
+    parameter set in the varied world).
     Executed: ``route`` (nodes in order; ``"vertiport"`` is a recharge), ``altitudes_m`` (m) and
     ``actual_winds_kts`` (kt) of each leg, ``events`` (each re-plan as a :class:`Decision`),
     ``breached`` (the cell fell below the cut-off), ``breach_cause`` (for a breach: whether the weather
@@ -89,7 +94,11 @@ class FlightRecord:
     time).
     ``takeoff_belief``: the health belief the first decision planned on: ``q_max_c`` and ``q_max_sd_c`` (C),
     ``r0_ohm`` and ``r0_sd_ohm`` (ohm), ``source`` (``"logbook"``: it started from the pack's logbook;
-    ``"take-off"``: from the fleet prior and the take-off's readings) and ``flights`` (in the logbook).
+    ``"take-off"``: from the fleet prior and the take-off's readings), ``flights`` (in the logbook),
+    and, where it chose a first leg, ``model_error_v`` (V, its model-error term then), ``model_error_share`` (the
+    term's share of the interval's variance, 0-1), ``first_leg_min_voltage_90_v``
+    (V, its 90% interval of that leg's lowest voltage) and ``first_leg_min_voltage_median_v`` (V). What the world
+    gave: ``first_leg_min_voltage_v`` (V, the first leg's true lowest voltage; None when no leg was flown).
     :meth:`logbook_after` is the pack's logbook with this flight appended (its readings, one flight per charge).
     """
 
@@ -101,6 +110,8 @@ class FlightRecord:
     sensor_noise_ma: float
     wind_events: list[str]
     reserve_kt: float = 0.0
+    world: str = DEFAULT_WORLD
+    pack: int = 0
     route: list[str] = field(default_factory=list)
     altitudes_m: list[float] = field(default_factory=list)
     actual_winds_kts: list[float] = field(default_factory=list)
@@ -113,6 +124,7 @@ class FlightRecord:
     reached_priority: int = 0
     charging_cycles: int = 0
     min_voltage_v: float = 0.0
+    first_leg_min_voltage_v: float | None = None
     time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     measured_voltage_v: np.ndarray = field(default_factory=lambda: np.zeros(0))
     measured_current_a: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -212,7 +224,8 @@ def _hindsight(mission: Mission, scenario: str, new_world: Callable[[], World], 
     times = sorted({0.0, *(e.start_s for e in world.events)})
     plans = []
     for t in times:
-        plan = oracle_plan(actual_winds_mission(mission, {n: world.wind(n, t) for n in mission.node_names}), scenario)
+        plan = oracle_plan(actual_winds_mission(mission, {n: world.wind(n, t) for n in mission.node_names}), scenario,
+                           params=world.cell.params)
         plans.append((list(plan.route), list(plan.altitudes_m)))
     if not world.events:
         route, alts = plans[0]
@@ -244,7 +257,8 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
                 events: Sequence[WindEvent] = (), scenario: str | None = None,
                 health_z: float = HEALTH_Z, wind_z: float = WIND_Z, plan_wind_z: float = PLAN_WIND_Z,
                 references: bool = True, reserve_kt: float = WEATHER_RESERVE_KT,
-                operator: Callable[..., Operator] = Operator, logbook: Logbook | None = None) -> FlightRecord:
+                operator: Callable[..., Operator] = Operator, logbook: Logbook | None = None,
+                world: str = DEFAULT_WORLD, pack: int | None = None) -> FlightRecord:
     """Fly ``mission`` once: the operator plans from the take-off check, re-plans at every arrival.
 
     :param mission: the mission; its ``battery`` is the world's true cell, its winds the forecast.
@@ -265,6 +279,11 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
         reference study passes another (``benchmarks/bench_weather.py informed``: one told the true cell).
     :param logbook: the pack's logbook (:class:`~uam_studio.battery.health.logbook.Logbook`: its earlier flights,
         as measured); the operator's health belief starts from it. None: a new pack (the fleet prior).
+    :param world: ``"varied"`` (default: the pack is not its model, its sensors drift) or ``"model"`` (the pack is
+        its model; :mod:`~uam_studio.planning.operations.world`). The operator is never told which.
+    :param pack: the pack's number, which seeds its own parameter set in the varied world (None: ``seed``); a
+        logbook made for the same pack (:func:`~uam_studio.planning.operations.pack_history.simulate_logbook`)
+        names the same number.
     :raises InputError: for bad input, naming the field; an event that starts after the flight
         (and its references) ended is an error of field ``event``.
     """
@@ -275,15 +294,15 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
     check_destination_count(len(mission.destinations), N_MAX, "fly")
     scenario = scenario or mission.scenario
     def new_world() -> World:  # the same hidden truth for the operator, the blind plan and hindsight
-        return World(mission, forecast_sigma_kt, sensor_noise_mv, sensor_noise_ma, events, seed)
+        return World(mission, forecast_sigma_kt, sensor_noise_mv, sensor_noise_ma, events, seed, world, pack)
 
-    world = new_world()
+    truth = new_world()
     known = dataclasses.replace(mission, battery=Battery(DEFAULT_Q_MAX, DEFAULT_R0))  # the operator's view
-    book = logbook if logbook is not None else Logbook(noise_v=fit_noise_v(world.sensor_noise_mv), eod_v=mission.eod_v)
-    op = operator(known, scenario, world.forecast_sigma_kt, world.sensor_noise_mv, health_z, wind_z, plan_wind_z,
+    book = logbook if logbook is not None else Logbook(noise_v=fit_noise_v(truth.sensor_noise_mv), eod_v=mission.eod_v)
+    op = operator(known, scenario, truth.forecast_sigma_kt, truth.sensor_noise_mv, health_z, wind_z, plan_wind_z,
                   policy, reserve_kt, logbook=book)
-    rec = FlightRecord(mission.name, scenario, int(seed), world.forecast_sigma_kt, world.sensor_noise_mv,
-                       world.sensor_noise_ma, [e.text for e in world.events], op.reserve_kt,
+    rec = FlightRecord(mission.name, scenario, int(seed), truth.forecast_sigma_kt, truth.sensor_noise_mv,
+                       truth.sensor_noise_ma, [e.text for e in truth.events], op.reserve_kt, truth.world, truth.pack,
                        true_q_max=mission.battery.q_max, true_r0=mission.battery.r0, logbook_before=book)
     takeoff = np.asarray(takeoff_current(), dtype=float)  # every leg's vertical take-off and first climb
     series_t, series_i, series_v, series_true, series_true_i, series_pred = [], [], [], [], [], []
@@ -292,18 +311,19 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
         series_t.append(r.time_s)
         series_i.append(r.current_a)
         series_v.append(r.voltage_v)
-        series_true.append(world.last_true_voltage_v)
-        series_true_i.append(world.last_true_current_a)
+        series_true.append(truth.last_true_voltage_v)
+        series_true_i.append(truth.last_true_current_a)
         series_pred.append(pred)
         op.observe(r.time_s, r.current_a, r.voltage_v)
 
-    r = world.takeoff_check(takeoff)
+    r = truth.takeoff_check(takeoff)
     take(r, r.voltage_v)
-    if world.breached:  # a cell too weak for the take-off: it fails within the check, before any plan
+    if truth.breached:  # a cell too weak for the take-off: it fails within the check, before any plan
         rec.events.append(op.abort(f"take-off check: the cell fell below the {mission.eod_v:g} V cut-off after "
                                    f"{r.time_s.size * DT_S:.0f} s of vertical take-off; nothing is flown"))
     first = True
-    while not world.breached:
+    takeoff_leg = None
+    while not truth.breached:
         d = op.decide()
         rec.events.append(d)
         if d.next_to is None:
@@ -311,9 +331,11 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
         if first:
             op.start_leg_at(0.0)
         pred = _predict_leg(op, d, first)
+        if first:
+            takeoff_leg = (*leg_lowest_voltage(op, d, True), op.health_belief.model_error.sd_v)
         assert d.next_altitude_m is not None  # a decision's next leg has both
-        r = world.fly_leg(d.next_to, d.next_altitude_m)
-        leg = world.legs[-1]
+        r = truth.fly_leg(d.next_to, d.next_altitude_m)
+        leg = truth.legs[-1]
         take(r, _fit_length(pred, r.time_s.size))
         rec.route.append(leg.to)
         rec.altitudes_m.append(leg.altitude_m)
@@ -324,10 +346,11 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
             break
         op.arrived(d.next_to)
         first = False
-    rec.takeoff_belief = _takeoff_belief(rec.events[0], op) if rec.events else {}
+    rec.takeoff_belief = _takeoff_belief(rec.events[0], op, takeoff_leg) if rec.events else {}
+    rec.first_leg_min_voltage_v = float(truth.legs[0].min_voltage_v) if truth.legs else None
     rec.flown_charges = op.health_belief.flown()
-    rec.breached = world.breached
-    rec.breach_cause = breach_cause(world, op.reserve_kt) if rec.breached else ""
+    rec.breached = truth.breached
+    rec.breach_cause = breach_cause(truth, op.reserve_kt) if rec.breached else ""
     rec.reached = [n for n in rec.route if n != VERTIPORT]
     if rec.breached:
         rec.reached = rec.reached[:-1] if rec.route and rec.route[-1] != VERTIPORT else rec.reached
@@ -339,9 +362,9 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
     rec.true_voltage_v = np.concatenate(series_true)
     rec.true_current_a = np.concatenate(series_true_i)
     rec.predicted_voltage_v = np.concatenate(series_pred)
-    rec.min_voltage_v = float(min(leg.min_voltage_v for leg in world.legs)) if world.legs else float(
+    rec.min_voltage_v = float(min(leg.min_voltage_v for leg in truth.legs)) if truth.legs else float(
         rec.true_voltage_v.min())
-    end_s = world.time_s
+    end_s = truth.time_s
     if references:
         first_plan = next((e for e in rec.events if e.kind == "plan"), None)
         static_route = list(first_plan.route) if first_plan else []
@@ -352,8 +375,8 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
                                      0 if static_breached else _priority(mission, static_reached), static_breached)
         end_s = max(end_s, blind.time_s)
         route, alts, priority = _hindsight(mission, scenario, new_world, takeoff, (rec.route, rec.altitudes_m))
-        rec.hindsight = ReferenceFlight(route, alts, priority, exact=not world.events)
-    late = [e for e in world.events if e.start_s > end_s]
+        rec.hindsight = ReferenceFlight(route, alts, priority, exact=not truth.events)
+    late = [e for e in truth.events if e.start_s > end_s]
     if late:
         raise InputError("event", f"{late[0].text} starts at {late[0].start_s:g} s, after the flight ended "
                                   f"({end_s:.0f} s); allowed: a start within the flight")
@@ -361,11 +384,20 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
     return rec
 
 
-def _takeoff_belief(first: Decision, op: Operator) -> dict[str, Any]:
-    """The belief the first decision planned on, with where it started and the logbook's length."""
-    return {"q_max_c": round(first.q_max_c, 3), "q_max_sd_c": round(first.q_max_sd_c, 3),
-            "r0_ohm": round(first.r0_ohm, 6), "r0_sd_ohm": round(first.r0_sd_ohm, 6),
-            "source": op.health_belief.source, "flights": len(op.health_belief.logbook)}
+def _takeoff_belief(first: Decision, op: Operator, leg: tuple[float, float, float, float] | None) -> dict[str, Any]:
+    """The belief the first decision planned on, with where it started and the logbook's length; where it chose a
+    leg (``leg``: the interval's low, median and high, V, and the model-error term then, V), its model-error term
+    and its 90% interval of that leg's lowest voltage."""
+    out = {"q_max_c": round(first.q_max_c, 3), "q_max_sd_c": round(first.q_max_sd_c, 3),
+           "r0_ohm": round(first.r0_ohm, 6), "r0_sd_ohm": round(first.r0_sd_ohm, 6),
+           "source": op.health_belief.source, "flights": len(op.health_belief.logbook)}
+    if leg is not None:
+        out["model_error_v"] = round(leg[3], 6)
+        sd = (leg[2] - leg[0]) / (2 * two_sided_z(0.9))  # the interval's std, V
+        out["model_error_share"] = round(min(leg[3] ** 2 / sd ** 2, 1.0), 4) if sd > 0 else 0.0
+        out["first_leg_min_voltage_90_v"] = [round(leg[0], 5), round(leg[2], 5)]
+        out["first_leg_min_voltage_median_v"] = round(leg[1], 5)
+    return out
 
 
 def _predict_leg(op: Operator, d: Decision, first: bool) -> np.ndarray:

@@ -26,9 +26,8 @@ take-off check and at every arrival) it
    bound for two like legs (``wind_z`` / sqrt 2 std) plus the reserve: a plan that the next take-offs
    would cut short is not chosen. A new pack's take-off plan is searched without it (its cell is still the
    fleet prior: 20 s of readings say little of q_max); a pack with a logbook is checked from the take-off on;
-4. flies that first leg only, and re-plans on arrival.
-
-The margins come from its own uncertainty and from the declared weather reserve.
+4. flies that first leg only, and re-plans on arrival. Its margins: its uncertainty and the weather reserve; the
+   belief's model-error term widens its intervals, not its checks (RESULTS.md, "A world unlike the model").
 """
 
 from __future__ import annotations
@@ -192,7 +191,8 @@ class Operator:
             return full_charge(q_plan)
         return simulate(np.clip(cur, -50, 50), DT_S, q_plan, r_plan, 2.5).final_state
 
-    def _leg_current(self, frm: str, to: str, altitude_m: float, wind_kts: float) -> np.ndarray:
+    def leg_current(self, frm: str, to: str, altitude_m: float, wind_kts: float) -> np.ndarray:
+        """The per-cell current (A, 1 s samples) of the leg ``frm`` -> ``to`` at ``altitude_m`` (m) in ``wind_kts``."""
         m = self.forecast_mission
         dwell = cast(Destination, m.node(to)).dwell_s if to != VERTIPORT else 0.0
         wind = float(np.clip(wind_kts, *WIND_RANGE_KTS))
@@ -227,13 +227,13 @@ class Operator:
             w1 = mean + self.wind_z * sd ** 2 * d1 / norm + self.reserve_kt
             w2 = home_mean + self.wind_z * home_sd ** 2 * d2 / norm + self.reserve_kt
             for a in np.flatnonzero(open_moves[j]):
-                firsts.append((int(j), int(a), self._leg_current(frm, to, ALTITUDES_M[a], w1)))
-                returns.append([(b, self._leg_current(to, VERTIPORT, ALTITUDES_M[b], w2))
+                firsts.append((int(j), int(a), self.leg_current(frm, to, ALTITUDES_M[a], w1)))
+                returns.append([(b, self.leg_current(to, VERTIPORT, ALTITUDES_M[b], w2))
                                 for b in range(n_alt) if legs.feasible[j, VERTIPORT_SLOT, b]])
         if open_moves[VERTIPORT_SLOT].any():
             w = home_mean + self.wind_z * home_sd + self.reserve_kt
             for a in np.flatnonzero(open_moves[VERTIPORT_SLOT]):
-                firsts.append((VERTIPORT_SLOT, int(a), self._leg_current(frm, VERTIPORT, ALTITUDES_M[a], w)))
+                firsts.append((VERTIPORT_SLOT, int(a), self.leg_current(frm, VERTIPORT, ALTITUDES_M[a], w)))
                 returns.append([])
         if not firsts:
             return safe

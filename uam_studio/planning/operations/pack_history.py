@@ -25,6 +25,7 @@ from uam_studio.planning.operations.defaults import (
     fit_noise_v,
 )
 from uam_studio.planning.operations.fly import fly_mission
+from uam_studio.planning.operations.world import DEFAULT_WORLD
 
 __all__ = ["MAX_LOGGED_FLIGHTS", "history_seed", "simulate_logbook"]
 
@@ -41,7 +42,7 @@ def simulate_logbook(mission: Mission, flights: int, seed: int = 0, age_efc: flo
                      forecast_sigma_kt: float = DEFAULT_FORECAST_SIGMA_KT,
                      sensor_noise_mv: float = DEFAULT_SENSOR_NOISE_MV,
                      sensor_noise_ma: float = DEFAULT_SENSOR_NOISE_MA, aging: AgingLaw = NASA_AGING_LAW,
-                     policy: str = "attention") -> Logbook:
+                     policy: str = "attention", world: str = DEFAULT_WORLD, pack: int | None = None) -> Logbook:
     """The logbook of a pack that has flown ``mission`` ``flights`` times before (module docstring).
 
     :param mission: its ``battery`` is the pack now (after the logged flights); its winds the forecast.
@@ -53,16 +54,20 @@ def simulate_logbook(mission: Mission, flights: int, seed: int = 0, age_efc: flo
     :param sensor_noise_ma: current sensor noise std (mA).
     :param aging: how the pack aged.
     :param policy: the planner that flew the earlier flights.
+    :param world: the world the earlier flights flew in (:data:`~uam_studio.planning.operations.world.WORLDS`).
+    :param pack: the pack's number (None: ``seed``): in the varied world, its own parameter set; fly the flight
+        after the logbook with the same number (:func:`~uam_studio.planning.operations.fly.fly_mission`'s ``pack``).
     """
     n = int(check_range("flights", flights, 0, MAX_LOGGED_FLIGHTS))
     seed = check_seed("seed", seed)
+    pack = check_seed("pack", seed if pack is None else pack)
     book = Logbook(noise_v=fit_noise_v(sensor_noise_mv), eod_v=mission.eod_v)
     if n == 0:
         return book
 
     def fly(m: Mission, k: int) -> list[tuple[np.ndarray, np.ndarray]]:
         rec = fly_mission(m, policy, history_seed(seed, k), forecast_sigma_kt, sensor_noise_mv, sensor_noise_ma,
-                          references=False)
+                          references=False, world=world, pack=pack)
         return rec.flown_charges
 
     # the charge of one flight of this mission (on the pack as it is now): the clock of the earlier flights

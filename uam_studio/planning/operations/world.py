@@ -1,5 +1,15 @@
 """The world of one flight: the true cell, the actual winds, scripted events and the sensors.
 
+Two worlds (:data:`WORLDS`):
+
+- ``"varied"`` (:data:`DEFAULT_WORLD`): the pack is not its model. Its parameter set is its own
+  (:func:`~uam_studio.battery.pack_variation.pack_params`: diffusion, surface/bulk split, rate constants, time
+  constants, open-circuit curve and heat drawn around the cell type's, by pack number), and each sensor has a slowly
+  drifting offset beside its white noise (:data:`DRIFT_SD_MV`, :data:`DRIFT_SD_MA`, an Ornstein-Uhlenbeck process
+  with time constant :data:`DRIFT_TAU_S`: assumptions, a calibrated pack sensor's offset of a few mV).
+- ``"model"``: the pack is exactly the cell type's model at the mission's health, the sensors only white noise. For
+  teaching: what the belief does when nothing but q_max and R0 is unknown.
+
 Nothing in :mod:`uam_studio.planning.operations.operator` imports this module or holds a
 :class:`World`: the flight loop (:mod:`~uam_studio.planning.operations.fly`) hands the operator
 only the :class:`Readings` a leg produced and the clock.
@@ -13,8 +23,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.signal import lfilter
 
 from uam_studio.battery import BatteryState, full_charge
+from uam_studio.battery.pack_variation import pack_params
 from uam_studio.battery.simulate import simulate_cell
 from uam_studio.errors import InputError, check_range, check_seed, short_repr
 from uam_studio.flight import TAKEOFF_CONTEXT_S, leg_profile
@@ -33,6 +45,18 @@ MAX_NOISE_MV = 100.0
 MAX_NOISE_MA = 1000.0
 _EVENT = re.compile(r"^wind([+-]\d+(?:\.\d+)?)@(\d+(?:\.\d+)?)$", re.ASCII)  # ASCII digits only
 MAX_EVENTS = 20  # scripted wind changes in one flight
+WORLDS = ("varied", "model")  # the pack is not its model / the pack is its model (module docstring)
+DEFAULT_WORLD = "varied"  # the default: an operator never flies its own model
+DRIFT_SD_MV = 3.0  # mV: std of the voltage sensor's drifting offset (varied world)
+DRIFT_SD_MA = 10.0  # mA: std of the current sensor's drifting offset (varied world)
+DRIFT_TAU_S = 1800.0  # s: the offsets' correlation time
+
+
+def check_world(world: str) -> str:
+    """``world`` if it is one of :data:`WORLDS`; one line naming field ``world`` otherwise."""
+    if world not in WORLDS:
+        raise InputError("world", f"{short_repr(world)}: allowed {', '.join(WORLDS)}")
+    return world
 
 
 @dataclass(frozen=True)
@@ -102,12 +126,16 @@ class World:
     :param sensor_noise_mv: std of the voltage sensor (mV), in [0, 100].
     :param sensor_noise_ma: std of the current sensor (mA), in [0, 1000].
     :param events: scripted :class:`WindEvent` s.
-    :param seed: seeds the forecast errors and the sensor noise.
+    :param seed: seeds the forecast errors and the sensor noise (and the sensors' drift).
+    :param world: ``"varied"`` (default) or ``"model"`` (module docstring).
+    :param pack: the pack's number: seeds its own parameter set in the varied world (None: ``seed``). The same pack
+        flies with the same parameters in every world that names it (its logbook's flights and this one).
     """
 
     def __init__(self, mission: Mission, forecast_sigma_kt: float = DEFAULT_FORECAST_SIGMA_KT,
                  sensor_noise_mv: float = DEFAULT_SENSOR_NOISE_MV, sensor_noise_ma: float = DEFAULT_SENSOR_NOISE_MA,
-                 events: Sequence[WindEvent] = (), seed: int = 0) -> None:
+                 events: Sequence[WindEvent] = (), seed: int = 0, world: str = DEFAULT_WORLD,
+                 pack: int | None = None) -> None:
         self.mission = mission
         self.forecast_sigma_kt = check_range("forecast_sigma_kt", forecast_sigma_kt, 0.0, MAX_SIGMA_KT, " kt")
         self.sensor_noise_mv = check_range("sensor_noise_mv", sensor_noise_mv, 0.0, MAX_NOISE_MV, " mV")
@@ -127,7 +155,15 @@ class World:
         self.base_winds = {name: float(np.clip(mission.node(name).wind_kts + e, lo, hi))
                            for name, e in zip(mission.node_names, errors)}
         self._noise = np.random.default_rng([seed, 0x5E45])
+        self.world = check_world(world)
+        self.pack = check_seed("pack", seed if pack is None else pack)
         self.cell = mission.cell  # the true cell: parameter set, q_max (C), R0 (ohm), cut-off (V)
+        self._drift: np.ndarray | None = None  # the sensors' offsets now (V, A); None: no drift
+        if self.world == "varied":
+            self.cell = dataclasses.replace(self.cell, params=pack_params(self.cell.params, self.pack))
+            drift = np.random.default_rng([seed, 0xD21F])
+            self._drift_rng = drift
+            self._drift = drift.normal(0.0, 1.0, 2) * np.array([DRIFT_SD_MV * 1e-3, DRIFT_SD_MA * 1e-3])
         self.time_s = 0.0
         self.node = VERTIPORT
         self.state: BatteryState = full_charge(self.cell.q_max, self.cell.params)
@@ -147,10 +183,22 @@ class World:
         """Actual wind (kt) on a leg to ``to`` that takes off at ``t_s`` (s)."""
         return float(np.clip(self.base_winds[to] + self.change_kts(t_s), *WIND_RANGE_KTS))
 
+    def _offsets(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """The sensors' drifting offsets (V, A) over the next ``n`` samples (zeros in the model world)."""
+        if self._drift is None or n == 0:
+            return np.zeros(n), np.zeros(n)
+        a = float(np.exp(-DT_S / DRIFT_TAU_S))
+        sd = np.array([DRIFT_SD_MV * 1e-3, DRIFT_SD_MA * 1e-3]) * np.sqrt(1.0 - a * a)
+        kick = self._drift_rng.normal(0.0, 1.0, (2, n)) * sd[:, None]
+        out = np.stack([lfilter([1.0], [1.0, -a], kick[k], zi=[a * self._drift[k]])[0] for k in range(2)])
+        self._drift = out[:, -1].copy()
+        return out[0], out[1]
+
     def _sense(self, current: np.ndarray, voltage: np.ndarray, t0: float, landed: bool) -> Readings:
         n = current.size
-        cur = current + self._noise.normal(0.0, self.sensor_noise_ma * 1e-3, n)
-        volt = voltage + self._noise.normal(0.0, self.sensor_noise_mv * 1e-3, n)
+        off_v, off_a = self._offsets(n)
+        cur = current + self._noise.normal(0.0, self.sensor_noise_ma * 1e-3, n) + off_a
+        volt = voltage + self._noise.normal(0.0, self.sensor_noise_mv * 1e-3, n) + off_v
         return Readings(t0 + DT_S * np.arange(1, n + 1), cur, volt, landed)
 
     def _fly(self, current: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, bool]:
@@ -214,6 +262,7 @@ def actual_winds_mission(mission: Mission, winds: dict[str, float]) -> Mission:
 
 
 __all__ = [
-    "DEFAULT_FORECAST_SIGMA_KT", "DEFAULT_SENSOR_NOISE_MA", "DEFAULT_SENSOR_NOISE_MV", "TAKEOFF_CHECK_S",
+    "DEFAULT_FORECAST_SIGMA_KT", "DEFAULT_SENSOR_NOISE_MA", "DEFAULT_SENSOR_NOISE_MV", "DEFAULT_WORLD", "DRIFT_SD_MA",
+    "DRIFT_SD_MV", "DRIFT_TAU_S", "TAKEOFF_CHECK_S", "WORLDS", "check_world",
     "Readings", "World", "WindEvent", "WorldLeg", "actual_winds_mission", "parse_event",
 ]

@@ -77,6 +77,7 @@ from typing import Any, cast
 
 import numpy as np
 
+from uam_studio.battery.parameters import CellParameters
 from uam_studio.errors import InputError
 from uam_studio.planning.episode import Episode
 from uam_studio.planning.legs import (
@@ -315,7 +316,7 @@ def best_single_sortie(found: dict[int, Sortie], legs: LegTable) -> Sortie:
 
 
 def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iterable[int] = range(N_ALTITUDES),
-                dominance: bool = True) -> Plan:
+                dominance: bool = True, params: CellParameters | None = None) -> Plan:
     """The exact optimal plan of ``mission`` (see the module docstring) as a :class:`Plan`; past
     :data:`EXACT_MAX` destinations (up to 20), the reference solver's plan
     (:mod:`~uam_studio.planning.solvers.reference`), not proven optimal. ``stats["exact"]`` says which.
@@ -324,9 +325,10 @@ def oracle_plan(mission: Mission, scenario: str | None = None, alt_indices: Iter
     :param scenario: overrides ``mission.scenario``.
     :param alt_indices: allowed levels (indices into ``ALTITUDES_M``).
     :param dominance: label pruning (False: exhaustive, for tests on small missions).
+    :param params: the cell's parameter set (default: the mission's); the hindsight reference passes a pack's own.
     """
     t0 = time.perf_counter()
-    setup = prepare_mission(mission, scenario, "oracle")
+    setup = prepare_mission(mission, scenario, "oracle", params)
     if setup.early is not None:  # nothing to plan: the empty answer is exact
         return dataclasses.replace(setup.early, stats={**setup.early.stats, "exact": True})
     assert (setup.mission is not None and setup.full_mission is not None and setup.episode is not None

@@ -7,6 +7,7 @@ the exact answer of a single flight (:func:`safest_single_flight`, :func:`single
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -14,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from uam_studio.battery.parameters import Cell
+from uam_studio.battery.parameters import Cell, CellParameters
 from uam_studio.errors import InputError
 from uam_studio.planning.episode import Episode
 from uam_studio.planning.legs import ALTITUDES_M, MIN_LEG_KM, N_MAX, LegTable, fly_takeoff
@@ -90,10 +91,13 @@ def destination_limit(policy: str) -> int:
     return MAX_DESTINATIONS if info is None else info.max_destinations
 
 
-def prepare_mission(mission: Any, scenario: str | None, policy: str) -> PlanSetup:
+def prepare_mission(mission: Any, scenario: str | None, policy: str,
+                    params: CellParameters | None = None) -> PlanSetup:
     """The planners' shared preamble: validate the mission, pick the scenario, keep at most
     :func:`destination_limit` destinations (the rest get a message), build the leg table and stop
-    early if the battery cannot finish takeoff."""
+    early if the battery cannot finish takeoff. ``params``: the parameter set flown (default: the mission's,
+    :attr:`~uam_studio.planning.missions.mission.Mission.cell`); a reference that knows a pack's own set passes
+    it."""
     mission, msgs = _as_mission(mission)
     if mission is None:
         return PlanSetup(None, None, scenario, msgs, {}, early=Plan(policy, messages=tuple(msgs)))
@@ -116,7 +120,8 @@ def prepare_mission(mission: Any, scenario: str | None, policy: str) -> PlanSetu
                           mission.eod_v)
     info = PLANNERS.get(policy)
     slots = N_MAX if info is not None and info.fixed_slots else max(N_MAX, len(mission.destinations))
-    episode = Episode.of(LegTable(mission, slots=slots), scenario)
+    cell = None if params is None else dataclasses.replace(mission.cell, params=params)
+    episode = Episode.of(LegTable(mission, slots=slots), scenario, cell)
     setup = PlanSetup(mission, full_mission, scenario, msgs, stats, episode=episode)
     fail = takeoff_failure(episode.cell)
     if fail is not None:
