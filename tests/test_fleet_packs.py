@@ -72,3 +72,31 @@ def test_the_fleet_package_exports_the_names_of_a_fleet_study():
             "NASA_AGING_LAW", "PACK_LAWS"} <= set(fleet.__all__)
     assert all(getattr(fleet, name) is not None for name in fleet.__all__)
     assert fleet.Fleet is Fleet and fleet.PACK_LAWS["nasa"] is NASA_AGING_LAW
+
+
+def test_a_fleets_packs_are_not_their_model_by_default_and_keep_their_own_set():
+    """Each pack of a new fleet has its own parameter set (the varied world), the same for the same seed, kept as it
+    ages; a renewed pack gets its own too; ``world="model"`` flies the cell type's set. The dispatchers' beliefs are
+    the same in both worlds before any flight (they never see the set)."""
+    from uam_studio.battery.parameters import DEFAULT_CELL
+
+    varied, again, model = Fleet.new(4, seed=5), Fleet.new(4, seed=5), Fleet.new(4, seed=5, world="model")
+    sets = [t.params for t in varied.truth]
+    assert all(p is not None and p != DEFAULT_CELL for p in sets) and len({repr(p) for p in sets}) == 4
+    assert [t.params for t in again.truth] == sets and all(t.params is None for t in model.truth)
+    assert [(t.q_max, t.r0) for t in varied.truth] == [(t.q_max, t.r0) for t in model.truth]
+    assert varied.truth[0].after(1000.0).params == sets[0]
+    assert varied.beliefs == model.beliefs
+    worn = Fleet.new(3, seed=1, age_spread_efc=1.5 * PACK_LAWS["nasa"].cycles_to(END_OF_LIFE_FRACTION))
+    for i in worn.renew_retired(1, 2):
+        assert worn.truth[i].params is not None and worn.truth[i].params not in sets
+    with pytest.raises(InputError, match="^world: "):
+        Fleet.new(2, seed=0, world="real")
+    # the world flies each pack on its own set: the same requests land at other voltages
+    from uam_studio.fleet.day import simulate_day
+    from uam_studio.fleet.demand import poisson_demand
+
+    demand = poisson_demand(3)[:4]
+    v = simulate_day(Fleet.new(2, seed=5), demand, "hindsight", seed=1).log
+    m = simulate_day(Fleet.new(2, seed=5, world="model"), demand, "hindsight", seed=1).log
+    assert v and m and [e[3] for e in v] != [e[3] for e in m]

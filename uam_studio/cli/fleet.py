@@ -31,6 +31,9 @@ def _add_fleet_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--age-spread", type=float, default=None, metavar="EFC",
                    help="the packs' age at the start: U(0, EFC) equivalent full cycles (0-2000; default 60%% of "
                         "the law's cycles to 80%% capacity: about 54 for nasa, 294 for vtc6)")
+    p.add_argument("--world", choices=["varied", "model"], default="varied",
+                   help="varied (default): each pack has its own parameter set, which no belief models; model: every "
+                        "pack is its cell type's model (for teaching)")
     p.add_argument("--law", choices=["nasa", "vtc6"], default="nasa",
                    help="the packs' cell type and the aging law they follow: nasa (the paper's cell, fitted to the "
                         "NASA PCoE lives; default) or vtc6 (fitted to the CMU lives)")
@@ -90,7 +93,7 @@ def _run_fleet(args: argparse.Namespace) -> int:
     if args.demand is not None:
         demand = load_demand(args.demand)
         for d in dispatchers:
-            fleet = Fleet.new(args.aircraft, args.seed, args.age_spread, args.vertiports, args.law)
+            fleet = Fleet.new(args.aircraft, args.seed, args.age_spread, args.vertiports, args.law, args.world)
             days = [fly_day_of_life(fleet, demand, d, args.seed, k, args.chargers, not args.keep_retired)[0].to_dict()
                     for k in range(int(args.days))]
             out[d] = {"dispatcher": d, "days": days}
@@ -104,7 +107,8 @@ def _run_fleet(args: argparse.Namespace) -> int:
             rows = fleet_study((args.aircraft,), args.days, seeds, dispatchers, args.rate, args.chargers,
                                args.age_spread, workers=args.workers, address=args.address,
                                progress=lambda done, _n: bar.update(done - bar.n), max_km=args.max_km,
-                               vertiports=args.vertiports, law=args.law, renew=not args.keep_retired)
+                               vertiports=args.vertiports, law=args.law, renew=not args.keep_retired,
+                               world=args.world)
         if args.csv is not None:
             _write_csv(args.csv, [{"dispatcher": r["dispatcher"], "seed": r["seed"], "day": d + 1,
                                    **{k: r[k][d] for k in DAY_FIELDS}}
@@ -116,7 +120,8 @@ def _run_fleet(args: argparse.Namespace) -> int:
         print(f"{args.aircraft} aircraft at {args.vertiports} vertiport(s), {args.days} day(s) x {len(seeds)} seed(s) "
               f"from {args.seed}, Poisson {args.rate:g} requests/h up to {args.max_km:g} km, "
               f"{args.chargers} charger(s) per vertiport, {args.law} packs aged U(0, {args.age_spread:.0f}) cycles, "
-              f"{'retired packs grounded' if args.keep_retired else 'a retired pack replaced overnight'}")
+              f"{'retired packs grounded' if args.keep_retired else 'a retired pack replaced overnight'}, "
+              f"world {args.world}")
         print(f"{'dispatcher':10} {'priority/day':>12} {'5-95%':>9} {'served':>7} {'refused':>8} {'breaches':>9} "
               f"{'packs retired':>13} {'mean day':>8} {'bound/day':>9}")
         for r in summarize(rows):

@@ -34,7 +34,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from uam_studio.battery.aging import AGING_LAW, END_OF_LIFE_FRACTION, T_REF_C, AgingLaw
-from uam_studio.battery.parameters import ZERO_C
+from uam_studio.battery.parameters import ZERO_C, CellParameters
 from uam_studio.battery.real.cmu_data import (
     data_folder,
     load_cell_log,
@@ -155,13 +155,15 @@ def leave_one_cell_out(lives: list[LifePoints]) -> list[dict]:
 class PackHealth:
     """A pack's true health as it ages: its first ``q_max0`` (C) and ``r0_0`` (ohm), the charge it has
     delivered (``delivered_c``, C) and its temperature (C). ``q_max`` and ``r0`` follow :data:`AGING_LAW`
-    (or ``law``) on ``efc = delivered_c / q_max0``."""
+    (or ``law``) on ``efc = delivered_c / q_max0``. ``params``: the pack's own parameter set (None: the cell type's,
+    the pack is its model)."""
 
     q_max0: float
     r0_0: float
     delivered_c: float = 0.0
     temperature_c: float = T_REF_C
     law: AgingLaw | None = None
+    params: CellParameters | None = None
 
     @property
     def efc(self) -> float:

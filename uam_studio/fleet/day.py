@@ -1,9 +1,10 @@
 """A fleet's operating day and life as a discrete-event simulation (SimPy), flown in a hidden world.
 
 The world holds each pack's true health (:class:`~uam_studio.fleet.aging.PackHealth`, aging with the
-charge it delivers) and the actual winds (the forecast plus a seeded error). Dispatchers see only
-:class:`~uam_studio.fleet.dispatch.AircraftView` s (each aircraft's own belief). A served request is a
-round trip at 500 m from full charge, flown on the true cell in the actual winds: below the cut-off
+charge it delivers; in the varied world, the default, flown on the pack's own parameter set, which no belief
+models) and the actual winds (the forecast plus a seeded error); the fleet's sensors have white noise only.
+Dispatchers see only :class:`~uam_studio.fleet.dispatch.AircraftView` s (each aircraft's own belief). A served
+request is a round trip at 500 m from full charge, flown on the true cell in the actual winds: below the cut-off
 is a breach (the request scores 0 and the aircraft is grounded for the day). Each flight's noisy readings go
 into its pack's logbook (``Fleet.logbooks``, :class:`~uam_studio.battery.health.logbook.Logbook`) with their
 whole-record fit; the fleet keeps the logbooks only, and a dispatcher reads each aircraft's belief derived from its
@@ -26,22 +27,17 @@ Public API: :func:`simulate_day` (an :class:`OperatingDay` run), :func:`simulate
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import simpy
 
-from uam_studio.battery.health.belief import PackBelief
-from uam_studio.battery.health.config import fleet_belief_config
-from uam_studio.battery.health.logbook import Logbook
 from uam_studio.errors import InputError, check_range, check_seed
-from uam_studio.fleet.aging import AGING_LAW, END_OF_LIFE_FRACTION, AgingLaw, PackHealth
 from uam_studio.fleet.demand import (
     DAY_S,
     DEFAULT_MAX_KM,
     DEFAULT_RATE_PER_H,
-    MAX_VERTIPORTS,
     Request,
     day_seed,
     poisson_demand,
@@ -49,7 +45,6 @@ from uam_studio.fleet.demand import (
 from uam_studio.fleet.dispatch import (
     BLIND_RESERVE_V,
     DISPATCHERS,
-    EOD_V,
     NOMINAL,
     AircraftView,
     assign,
@@ -57,7 +52,16 @@ from uam_studio.fleet.dispatch import (
     round_trip_margin,
 )
 from uam_studio.fleet.hindsight import Job, day_bound
-from uam_studio.fleet.nasa_aging import NASA_AGING_LAW
+from uam_studio.fleet.packs import (
+    AGE_SPREAD_LIFE,
+    NOISE_A,
+    NOISE_V,
+    PACK_LAWS,
+    Fleet,
+    default_age_spread,
+    pack_law,
+)
+from uam_studio.planning.operations.world import DEFAULT_WORLD
 from uam_studio.risk import DISPATCH_WIND_Z, HEALTH_Z
 
 __all__ = ["AGE_SPREAD_LIFE", "DayResult", "END_S", "Fleet", "OperatingDay", "PACK_LAWS",
@@ -65,127 +69,14 @@ __all__ = ["AGE_SPREAD_LIFE", "DayResult", "END_S", "Fleet", "OperatingDay", "PA
            "simulate_life"]
 
 FORECAST_SIGMA_KT = 8.0  # kt: the actual wind is the forecast plus N(0, this)
-NOISE_V, NOISE_A = 0.005, 0.020  # sensor noise std (V, A)
 CHARGE_C_RATE = 1.0  # charge current, in q_max per hour
 END_S = DAY_S + 6 * 3600.0  # s: the simulation's end (flights in the air at the day's end land)
 SEED_STRIDE = 100_003  # day d of the life seeded ``seed`` is seeded ``seed * SEED_STRIDE + d``
-PACK_LAWS: dict[str, AgingLaw] = {"nasa": NASA_AGING_LAW, "vtc6": AGING_LAW}  # how a fleet's packs age, by cell type
-AGE_SPREAD_LIFE = 0.6  # default: the packs have delivered U(0, this share of their law's cycles to 80%)
-FACTORY_Q_MAX_C = (7300.0, 7900.0)  # C: a new pack's q_max, uniform over this range
-FACTORY_R0_OHM = (0.10, 0.13)  # ohm: a new pack's R0, uniform over this range
-
-
-def default_age_spread(law: str = "nasa") -> float:
-    """The packs' default age spread (equivalent full cycles): :data:`AGE_SPREAD_LIFE` of the cycles to
-    80% of the first capacity under ``law`` at 25 C, to a whole cycle (54 for ``"nasa"``, 294 for
-    ``"vtc6"``)."""
-    return float(round(AGE_SPREAD_LIFE * pack_law(law).cycles_to(END_OF_LIFE_FRACTION)))
-
-
-def pack_law(name: str) -> AgingLaw:
-    """The aging law of cell type ``name`` (a key of :data:`PACK_LAWS`); one line naming ``law`` otherwise."""
-    if name not in PACK_LAWS:
-        raise InputError("law", f"{name!r}: allowed {', '.join(PACK_LAWS)}")
-    return PACK_LAWS[name]
-
-
-def _factory_pack(rng: np.random.Generator) -> tuple[float, float]:
-    return float(rng.uniform(*FACTORY_Q_MAX_C)), float(rng.uniform(*FACTORY_R0_OHM))
 
 
 def day_of_life_seed(seed: int, day: int) -> int:
     """The seed of day ``day`` (0-based) of the life seeded ``seed``: its demand and its world."""
     return seed * SEED_STRIDE + day
-
-
-@dataclass
-class Fleet:
-    """The aircraft: each one's true pack (``truth``, the world's) and its pack's ``logbooks`` (every flight as its
-    sensors read it; an aircraft's belief is derived from its logbook, :meth:`belief`); ``in_service``
-    false once a pack has retired (below 80% of its first capacity); ``base``: each one's vertiport
-    (default all at vertiport 0); ``law``: the packs' cell type, a key of :data:`PACK_LAWS`; ``logbooks``: default
-    empty ones of packs that have delivered what their truth has (the operator's current sensor logged it)."""
-
-    truth: list[PackHealth]
-    in_service: list[bool] = field(default_factory=list)
-    base: list[int] = field(default_factory=list)
-    law: str = "nasa"
-    logbooks: list[Logbook] = field(default_factory=list)
-    _beliefs: dict[int, tuple[Logbook, PackBelief]] = field(default_factory=dict, init=False, repr=False,
-                                                            compare=False)
-
-    def __post_init__(self) -> None:
-        pack_law(self.law)
-        if not 1 <= len(self.truth) <= 50:
-            raise InputError("aircraft", f"{len(self.truth)} aircraft: allowed 1-50")
-        if not self.in_service:
-            self.in_service = [not t.retired for t in self.truth]
-        if not self.base:
-            self.base = [0] * len(self.truth)
-        if not self.logbooks:
-            self.logbooks = [_new_logbook(t.delivered_c) for t in self.truth]
-        if len(self.logbooks) != len(self.truth):
-            raise InputError("logbooks", f"{len(self.logbooks)} logbooks for {len(self.truth)} aircraft: one each")
-        if len(self.base) != len(self.truth) or not all(0 <= b < MAX_VERTIPORTS for b in self.base):
-            raise InputError("vertiports", f"a base vertiport 0-{MAX_VERTIPORTS - 1} for each aircraft")
-
-    def belief(self, i: int) -> PackBelief:
-        """Aircraft ``i``'s belief at its next take-off, derived from its logbook
-        (:meth:`~uam_studio.battery.health.belief.PackBelief.of` on the fleet's declared configuration,
-        :func:`~uam_studio.battery.health.config.fleet_belief_config`, going on from the belief last derived)."""
-        belief = PackBelief.of(self.logbooks[i], fleet_belief_config(self.law), self._beliefs.get(i))
-        self._beliefs[i] = (self.logbooks[i], belief)
-        return belief
-
-    @property
-    def beliefs(self) -> list[PackBelief]:
-        """Every aircraft's :meth:`belief`."""
-        return [self.belief(i) for i in range(len(self.truth))]
-
-    @property
-    def vertiports(self) -> int:
-        """How many vertiports the fleet is based at (numbered from 0)."""
-        return max(self.base) + 1
-
-    @property
-    def aging_law(self) -> AgingLaw:
-        """The law the packs age by (and the beliefs with them)."""
-        return PACK_LAWS[self.law]
-
-    @classmethod
-    def new(cls, n: int, seed: int, age_spread_efc: float | None = None, vertiports: int = 1,
-            law: str = "nasa") -> Fleet:
-        """``n`` aircraft whose packs of cell type ``law`` left the factory with q_max ~ U(7300, 7900) C and
-        R0 ~ U(0.10, 0.13) ohm and have since delivered U(0, ``age_spread_efc``) equivalent full cycles
-        (default :func:`default_age_spread`); each belief starts from the nominal new pack aged by the
-        logged throughput. Aircraft ``i`` is based at vertiport ``i % vertiports`` (1-10, at most one per
-        aircraft)."""
-        aging = pack_law(law)
-        n = int(check_range("aircraft", n, 1, 50))
-        ports = int(check_range("vertiports", vertiports, 1, min(MAX_VERTIPORTS, n)))
-        spread = check_range("age_spread_efc", default_age_spread(law) if age_spread_efc is None else age_spread_efc,
-                             0.0, 2000.0)
-        rng = np.random.default_rng([check_seed("seed", seed), 42])
-        truth = []
-        for _ in range(n):
-            q0, r0 = _factory_pack(rng)
-            delivered = float(rng.uniform(0.0, spread)) * q0
-            truth.append(PackHealth(q0, r0, delivered, law=aging))
-        return cls(truth, base=[i % ports for i in range(n)], law=law)
-
-    def renew_retired(self, seed: int, night: int = 0) -> list[int]:
-        """Replace every retired pack by a new one from the factory (its belief: the nominal new pack),
-        drawn with (``seed``, ``night``: the nights since the life began); the aircraft are back in
-        service. Returns the aircraft renewed."""
-        rng = np.random.default_rng([check_seed("seed", seed), 43, int(check_range("night", night, 0, 10**6))])
-        renewed = [i for i, s in enumerate(self.in_service) if not s]
-        for i in renewed:
-            q0, r0 = _factory_pack(rng)
-            self.truth[i] = PackHealth(q0, r0, 0.0, law=self.aging_law)
-            self.logbooks[i] = _new_logbook(0.0)
-            self._beliefs.pop(i, None)
-            self.in_service[i] = True
-        return renewed
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -230,11 +121,6 @@ def _charger_counts(fleet: Fleet, demand: list[Request], chargers: int | Sequenc
     return counts
 
 
-def _new_logbook(delivered_c: float) -> Logbook:
-    """An empty logbook of a pack that has delivered ``delivered_c`` (C), read by the fleet's sensors."""
-    return Logbook(delivered_before_c=delivered_c, noise_v=NOISE_V, eod_v=EOD_V)
-
-
 def _recharge_s(charge_c: float, q_max: float) -> float:
     """Time (s) to put ``charge_c`` (C) back at :data:`CHARGE_C_RATE` on a cell of ``q_max`` (C)."""
     return charge_c / (CHARGE_C_RATE * q_max) * 3600.0
@@ -264,7 +150,7 @@ def _bound(fleet: Fleet, demand: list[Request], winds: dict[str, tuple[float, fl
         for r, req in enumerate(demand):
             if req.vertiport != fleet.base[i]:
                 continue
-            sim = round_trip(req, truth.q_max, truth.r0, *winds[req.name])
+            sim = round_trip(req, truth.q_max, truth.r0, *winds[req.name], truth.params)
             if sim.safe:
                 _, charge, flight_s = _delivered(sim)
                 jobs.append(Job(request=r, aircraft=i, port=req.vertiport, earliest_s=req.t_s,
@@ -315,7 +201,7 @@ class OperatingDay:
                 self.cache[key] = round_trip_margin(req, *NOMINAL, req.wind_kts, -req.wind_kts)
             else:  # hindsight: the truth (the world's), never the aircraft's view
                 t = self.fleet.truth[i]
-                self.cache[key] = round_trip_margin(req, t.q_max, t.r0, *self.winds[req.name])
+                self.cache[key] = round_trip_margin(req, t.q_max, t.r0, *self.winds[req.name], t.params)
         return self.cache[key]
 
     def dispatch(self) -> None:
@@ -336,7 +222,7 @@ class OperatingDay:
         """Aircraft ``i`` flies ``req`` on its true pack in the actual winds, learns, then charges."""
         fleet, env, stats = self.fleet, self.env, self.stats
         truth = fleet.truth[i]
-        sim = round_trip(req, truth.q_max, truth.r0, *self.winds[req.name])
+        sim = round_trip(req, truth.q_max, truth.r0, *self.winds[req.name], truth.params)
         cur, charge, flight_s = _delivered(sim)
         k = len(cur)
         breached = not bool(sim.safe)
@@ -413,7 +299,7 @@ def fly_day_of_life(fleet: Fleet, demand: list[Request], dispatcher: str, seed: 
 def simulate_life(aircraft: int, days: int, seed: int, dispatcher: str, rate_per_h: float = DEFAULT_RATE_PER_H,
                   chargers: int = 2, age_spread_efc: float | None = None,
                   progress: Callable[[int], None] | None = None, max_km: float = DEFAULT_MAX_KM,
-                  vertiports: int = 1, law: str = "nasa", renew: bool = True) -> dict:
+                  vertiports: int = 1, law: str = "nasa", renew: bool = True, world: str = DEFAULT_WORLD) -> dict:
     """A fleet's life over ``days`` operating days of Poisson demand, requests up to ``max_km`` (km) away
     (the same days for every dispatcher with the same ``seed``), the aircraft spread over ``vertiports``
     vertiports of ``chargers`` chargers each, packs of cell type ``law`` aged U(0, ``age_spread_efc``)
@@ -425,7 +311,7 @@ def simulate_life(aircraft: int, days: int, seed: int, dispatcher: str, rate_per
         the end (truth and belief)."""
     days = int(check_range("days", days, 1, 3650))
     seed = check_seed("seed", seed)
-    fleet = Fleet.new(aircraft, seed, age_spread_efc, vertiports, law)
+    fleet = Fleet.new(aircraft, seed, age_spread_efc, vertiports, law, world)
     retired: list[int | None] = [0 for s in fleet.in_service if not s]
     counted = [not s for s in fleet.in_service]
     if renew:

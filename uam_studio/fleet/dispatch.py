@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from uam_studio.battery import DEFAULT_EOD_V
 from uam_studio.battery.health.belief import PackBelief
 from uam_studio.battery.health.config import NEW_PACK_Q_C, NEW_PACK_R0_OHM
-from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE
+from uam_studio.battery.parameters import PAPER_Q_RANGE, PAPER_R0_RANGE, CellParameters
 from uam_studio.fleet.demand import Request
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning import Battery, Destination, Mission, Vertiport, simulate_route
@@ -45,10 +45,11 @@ class AircraftView:
     key: int
 
 
-def round_trip(req: Request, q_max: float, r0: float, wind_out_kts: float, wind_home_kts: float):
+def round_trip(req: Request, q_max: float, r0: float, wind_out_kts: float, wind_home_kts: float,
+               params: CellParameters | None = None):
     """The physics model's round trip vertiport -> request -> vertiport at :data:`ALTITUDE_M` on a
-    cell of ``q_max`` (C), ``r0`` (ohm), in the given winds (kt, + = headwind each way):
-    a :class:`~uam_studio.planning.missions.route.RouteSimulation`."""
+    cell of ``q_max`` (C), ``r0`` (ohm) and parameter set ``params`` (default: the cell type's), in the given winds
+    (kt, + = headwind each way): a :class:`~uam_studio.planning.missions.route.RouteSimulation`."""
     lo, hi = WIND_RANGE_KTS
     (q_lo, q_hi), (r_lo, r_hi) = PAPER_Q_RANGE, PAPER_R0_RANGE  # the paper's health box
     mission = Mission(req.name, Vertiport(0.0, 0.0, float(min(max(wind_home_kts, lo), hi))),
@@ -56,12 +57,13 @@ def round_trip(req: Request, q_max: float, r0: float, wind_out_kts: float, wind_
                                    float(min(max(wind_out_kts, lo), hi))),),
                       "single_charge", Battery(float(min(max(q_max, q_lo), q_hi)), float(min(max(r0, r_lo), r_hi))),
                       EOD_V)
-    return simulate_route(mission, [req.name, "vertiport"], [ALTITUDE_M, ALTITUDE_M])
+    return simulate_route(mission, [req.name, "vertiport"], [ALTITUDE_M, ALTITUDE_M], params=params)
 
 
-def round_trip_margin(req: Request, q_max: float, r0: float, wind_out_kts: float, wind_home_kts: float) -> float:
+def round_trip_margin(req: Request, q_max: float, r0: float, wind_out_kts: float, wind_home_kts: float,
+                      params: CellParameters | None = None) -> float:
     """Lowest voltage of :func:`round_trip` minus the cut-off (V); negative: it would breach."""
-    return float(round_trip(req, q_max, r0, wind_out_kts, wind_home_kts).min_voltage_v) - EOD_V
+    return float(round_trip(req, q_max, r0, wind_out_kts, wind_home_kts, params).min_voltage_v) - EOD_V
 
 
 def assign(waiting: Sequence[Request], free: Sequence[AircraftView],

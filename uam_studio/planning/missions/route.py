@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from uam_studio.battery import EOD_RANGE, Q_MAX_RANGE, R0_RANGE, full_charge, simulate
+from uam_studio.battery.parameters import CellParameters
 from uam_studio.errors import InputError, check_range
 from uam_studio.flight import ALTITUDE_RANGE_M, leg_feasible, leg_profile, min_leg_distance_km
 from uam_studio.flight.profile import MAX_DISTANCE_KM
@@ -222,11 +223,13 @@ def simulate_route(
     r0: float | None = None,
     eod_v: float | None = None,
     dt_s: float = 1.0,
+    params: CellParameters | None = None,
 ) -> RouteSimulation:
     """Fly ``route`` (node names; ``"vertiport"`` recharges) at ``altitudes_m`` (m, one per leg).
 
     ``q_max`` (C), ``r0`` (ohm), ``eod_v`` (V) default to the mission's; ``dt_s`` (s) is
-    the sample step. The whole route is validated before anything is simulated.
+    the sample step; ``params``: the cell's parameter set (default: the mission's, the cell type's; a world's pack
+    passes its own). The whole route is validated before anything is simulated.
 
     :raises InputError: ``route`` for an unknown name, an empty route, more than
         :data:`MAX_ROUTE_LEGS` legs, or a zero-length or over-long leg; ``altitudes`` for a count
@@ -253,7 +256,8 @@ def simulate_route(
             "dt_s", f"{dt_s!r} s gives ~{total:,} samples for this route (limit {MAX_SAMPLES:,}); use a larger step"
         )
 
-    state = full_charge(q)
+    params = mission.cell.params if params is None else params
+    state = full_charge(q, params)
     currents: list[np.ndarray] = []
     voltages: list[np.ndarray] = []
     valids: list[np.ndarray] = []
@@ -266,7 +270,7 @@ def simulate_route(
             results.append(LegResult(g.to, g.altitude_m, None, None, None, False, g.frm, g.distance_km))
             continue
         profile = leg_profile(g.distance_km, g.altitude_m, g.wind_kts, dt, g.dwell_s)
-        res = simulate(profile.current_a, dt, q, r, eod, initial_state=state)
+        res = simulate(profile.current_a, dt, q, r, eod, initial_state=state, cell=params)
         start = steps * dt
         keep = int(np.argmin(res.valid)) + 1 if res.eod_reached else len(profile.current_a)
         currents.append(np.asarray(profile.current_a[:keep], dtype=float))
@@ -280,7 +284,7 @@ def simulate_route(
             continue
         results.append(LegResult(g.to, g.altitude_m, start, steps * dt, v_min, True, g.frm, g.distance_km))
         if g.to == VERTIPORT:
-            state = full_charge(q)
+            state = full_charge(q, params)
             cycles += 1
         else:
             state = res.final_state
