@@ -24,6 +24,7 @@ Three lives make a crude spread: it is a stated world, not a measured distributi
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -59,6 +60,6 @@ def pack_params(params: CellParameters, pack: int) -> CellParameters:
     pack = check_seed("pack", pack)
     rng = np.random.default_rng([pack, 0x9ACC])
     z = np.clip(rng.standard_normal(len(PACK_SPREAD) + 1), -SPREAD_CLIP, SPREAD_CLIP)
-    changes = {name: float(getattr(params, name)) * float(np.exp(sd * zk))
-               for (name, sd), zk in zip(PACK_SPREAD.items(), z)}
+    changes: dict[str, Any] = {name: float(getattr(params, name)) * float(np.exp(sd * zk))
+                               for (name, sd), zk in zip(PACK_SPREAD.items(), z)}
     return replace(params, **changes, u0p=float(params.u0p + OCV_SHIFT_SD_V * z[-1]))
