@@ -126,3 +126,18 @@ def test_the_world_choice_reaches_the_flight_and_the_summary_shows_the_first_leg
     assert state.record.world == "model" and state.record.route is not None
     assert state.record.takeoff_belief["first_leg_min_voltage_90_v"] != varied.takeoff_belief[
         "first_leg_min_voltage_90_v"]
+
+
+def test_the_declared_risk_sets_the_cautions_and_a_hand_moved_reserve_declares_none(state):
+    """Choosing a risk moves the reserve to the one that follows from it and the flight declares that risk; a reserve
+    moved by hand keeps the risk's margins and the flight declares no risk."""
+    from uam_studio.risk import caution
+
+    view = FlyView(state)
+    view.risk.value = 0.01
+    assert state.risk == 0.01 and state.reserve_kt == caution(0.01).reserve_kt == view.reserve.value
+    state.fly()
+    assert state.record.risk == 0.01 and state.record.reserve_kt == caution(0.01).reserve_kt
+    view.reserve.value = 10.0
+    state.fly()
+    assert state.record.risk is None and state.record.reserve_kt == 10.0

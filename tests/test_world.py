@@ -170,3 +170,14 @@ def test_the_model_world_flies_what_it_flew_before_the_varied_world(example):
     np.testing.assert_allclose(r.voltage_v - w.last_true_voltage_v, volt_noise, atol=1e-12)
     np.testing.assert_allclose(r.current_a - w.last_true_current_a, cur_noise, atol=1e-12)
     assert dataclasses.replace(w.cell, name="x").params == DEFAULT_CELL
+
+
+def test_a_sweep_of_one_cell_flies_the_default_world_and_formats_its_row():
+    """``studies.flying.sweep`` (forecast error x sensor noise) in the default world: one mission, one cell, its
+    row in the plain-text table."""
+    from uam_studio.studies.flying import format_rows, sweep
+
+    rows = sweep(sigmas_kt=(0.0,), noises_mv=(5.0,), n=1, n_dest=(4, 4))
+    assert len(rows) == 1 and rows[0]["n"] == 1 and rows[0]["breaches"] == 0
+    table = format_rows(rows).splitlines()
+    assert len(table) == 2 and table[0].split()[:2] == ["sigma", "kt"] and table[1].split()[:2] == ["0", "5"]

@@ -9,14 +9,73 @@ A level is the standard-normal quantile (std) of a one-sided bound; a safety che
 - :data:`DISPATCH_WIND_Z`: the fleet dispatcher's wind to the head side on each leg of a round trip (1%;
   tuned, ``benchmarks/RESULTS.md``, "A fleet's life").
 - :data:`INTERVAL_Z`: the half-width of a two-sided 90% interval (the take-off belief's q_max interval).
+
+A flight's **declared risk** (:data:`DEFAULT_RISK`, ``fly_mission(risk=)``, ``uam-studio fly --risk``) is the one
+number its operator's cautions follow from (:func:`caution`): the health and the wind each ``risk_z(risk)`` std to
+the weak side, and the weather reserve the same quantile of the envelope of in-flight weather changes
+(:data:`WEATHER_CHANGE_SD_KT`). The mapping is declared, not yet calibrated: how often flights at a declared risk
+breach is measured by ``benchmarks/bench_risk.py``.
 """
 
-__all__ = ["DISPATCH_WIND_Z", "HEALTH_Z", "INTERVAL_Z", "ONE_PERCENT_Z", "WIND_Z"]
+import math
+from dataclasses import dataclass
+from statistics import NormalDist
+
+from uam_studio.errors import InputError
+
+__all__ = ["DEFAULT_RISK", "DISPATCH_WIND_Z", "HEALTH_Z", "INTERVAL_Z", "ONE_PERCENT_Z", "RISK_RANGE",
+           "WEATHER_CHANGE_SD_KT", "WEATHER_RESERVE_KT", "WIND_Z", "Caution", "caution", "check_risk", "risk_z"]
 
 FIVE_PERCENT_Z = 1.64  # one-sided 5% (std)
 ONE_PERCENT_Z = 2.33  # one-sided 1% (std)
 
-HEALTH_Z = FIVE_PERCENT_Z
-WIND_Z = FIVE_PERCENT_Z
+# The declared risk a flight takes by default: the one-sided 5% of the bounds its operator has always flown with.
+DEFAULT_RISK = 0.05
+RISK_RANGE = (1e-4, 0.5)  # a declared risk: at least 1e-4 (a reserve within the operator's 60 kt), below 0.5
+# The envelope of in-flight weather changes the weather reserve is held against: a change of every leg's wind
+# ~ N(0, this), so that the default risk's bound is the 25 kt reserve the operator flies with (RESULTS.md, "Weather
+# that changes": 25 kt kept every +25 / -20 kt change safe). An assumption, declared here.
+WEATHER_CHANGE_SD_KT = 25.0 / FIVE_PERCENT_Z
+
+
+def check_risk(risk: float) -> float:
+    """``risk`` as a float if it is a finite number in [0.0001, 0.5); one line naming field ``risk`` otherwise."""
+    allowed = "allowed a probability from 0.0001 to below 0.5 (e.g. 0.05)"
+    if isinstance(risk, bool):
+        raise InputError("risk", f"{risk!r}: {allowed}")
+    try:
+        value = float(risk)
+    except (TypeError, ValueError):
+        raise InputError("risk", f"{str(risk)[:40]!r}: {allowed}") from None
+    if not math.isfinite(value) or not RISK_RANGE[0] <= value < RISK_RANGE[1]:
+        raise InputError("risk", f"{risk!r}: {allowed}")
+    return value
+
+
+def risk_z(risk: float) -> float:
+    """The one-sided standard-normal quantile (std) of a declared ``risk``, to 0.01 std (5%: 1.64, 1%: 2.33)."""
+    return round(NormalDist().inv_cdf(1.0 - check_risk(risk)), 2)
+
+
+@dataclass(frozen=True)
+class Caution:
+    """The operator's cautions at a declared risk: ``health_z`` and ``wind_z`` (std to the weak side) and the
+    weather reserve ``reserve_kt`` (kt of headwind beyond its belief on the next leg and the way home)."""
+
+    risk: float
+    health_z: float
+    wind_z: float
+    reserve_kt: float
+
+
+def caution(risk: float = DEFAULT_RISK) -> Caution:
+    """The cautions that follow from a declared ``risk`` (module docstring)."""
+    z = risk_z(risk)
+    return Caution(float(risk), z, z, round(z * WEATHER_CHANGE_SD_KT, 6))
+
+
+HEALTH_Z = caution().health_z
+WIND_Z = caution().wind_z
+WEATHER_RESERVE_KT = caution().reserve_kt  # kt: 25.0 at the default risk
 DISPATCH_WIND_Z = ONE_PERCENT_Z
 INTERVAL_Z = FIVE_PERCENT_Z  # each side of a 90% interval

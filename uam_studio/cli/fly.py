@@ -37,6 +37,9 @@ def _add_fly_arguments(p: argparse.ArgumentParser) -> None:
                         "new pack, the fleet prior and the take-off's readings)")
     p.add_argument("--save-logbook", default=None, metavar="FILE",
                    help="write the pack's logbook with this flight appended (atomically; may be --logbook's file)")
+    p.add_argument("--risk", type=float, default=None, metavar="P",
+                   help="the flight's declared risk of reaching the cut-off (0.0001 to below 0.5; default 0.05): the "
+                        "operator's health and wind margins and its weather reserve follow from it (over --reserve)")
     p.add_argument("--world", choices=["varied", "model"], default="varied",
                    help="varied (default): the pack is not its model (its own diffusion, open-circuit curve, heat; "
                         "drifting sensors); model: the pack is exactly its model (for teaching)")
@@ -59,7 +62,7 @@ def _run_fly(args: argparse.Namespace) -> int:
              "sensor_noise_ma": args.sensor_noise_ma, "reserve_kt": args.reserve}
     # an option left out takes the library's default (uam_studio.planning.operations.defaults), not a copy
     rec = fly_mission(mission, args.policy, seed=args.seed, events=events, logbook=book, world=args.world,
-                      pack=args.pack, **{k: v for k, v in given.items() if v is not None})
+                      pack=args.pack, risk=args.risk, **{k: v for k, v in given.items() if v is not None})
     if args.save_logbook:
         rec.logbook_after().save(args.save_logbook)
     if args.json:
@@ -68,7 +71,8 @@ def _run_fly(args: argparse.Namespace) -> int:
         return EXIT_OK
     print(f"{mission.name} ({rec.scenario}): seed {rec.seed}, forecast sigma {rec.forecast_sigma_kt:g} kt, "
           f"sensor noise {rec.sensor_noise_mv:g} mV / {rec.sensor_noise_ma:g} mA, events: "
-          f"{', '.join(rec.wind_events) or 'none'}, weather reserve {rec.reserve_kt:g} kt, world {rec.world} "
+          f"{', '.join(rec.wind_events) or 'none'}, weather reserve {rec.reserve_kt:g} kt"
+          + (f" (declared risk {rec.risk:g})" if rec.risk is not None else "") + f", world {rec.world} "
           f"(pack {rec.pack})")
     tb = rec.takeoff_belief
     if tb:

@@ -38,10 +38,12 @@ from uam_studio.planning.operations.world import (
     MAX_NOISE_MV,
     MAX_SIGMA_KT,
 )
+from uam_studio.risk import DEFAULT_RISK, caution
 from uam_studio.wording import charging_cycles_text
 
 SPEEDS = (10, 30, 100, 300, 1000)  # playback speed-ups (simulated s per wall s)
 PACKS = {"a new pack (no logbook)": 0, "its logbook: 3 flights": 3, "its logbook: 10 flights": 10}
+RISKS = (0.01, 0.05, 0.1, 0.2)  # the declared risks the tab offers (uam_studio.risk)
 # the world the pack flies (planning.operations.world.WORLDS), by the label the tab shows
 WORLD_LABELS = {"a pack unlike its model": "varied", "its model (teaching)": "model"}
 ERROR_CHARS = 300  # an error line is cut here
@@ -89,9 +91,10 @@ class FlyState(param.Parameterized):
     Inputs: ``pack`` (a key of :data:`PACKS`: a new pack, or one whose logbook holds that many earlier flights of
     the mission, :func:`~uam_studio.planning.operations.pack_history.simulate_logbook`), ``world`` (a key of
     :data:`WORLD_LABELS`: a pack unlike its model, the default, or one that is its model), ``seed``,
-    ``forecast_sigma_kt`` (kt), ``sensor_noise_mv`` (mV), ``reserve_kt`` (kt, the
-    operator's weather reserve), ``speed`` (playback speed-up), ``inject_kts`` (kt, the wind change
-    :meth:`inject` adds). Outputs: ``record``, ``t_s``
+    ``forecast_sigma_kt`` (kt), ``sensor_noise_mv`` (mV), ``risk`` (the flight's declared risk, one of
+    :data:`RISKS`: choosing one sets the cautions that follow from it, the reserve included), ``reserve_kt`` (kt, the
+    operator's weather reserve; moved by hand, the flight declares no risk), ``speed`` (playback speed-up),
+    ``inject_kts`` (kt, the wind change :meth:`inject` adds). Outputs: ``record``, ``t_s``
     (the playback clock, s), ``mission_flown``, ``running`` (a flight is being computed), ``playing``, ``status``,
     ``error`` (one line).
     """
@@ -101,6 +104,7 @@ class FlyState(param.Parameterized):
     seed = param.Integer(default=0, bounds=(0, 10**9))
     forecast_sigma_kt = param.Number(default=DEFAULT_FORECAST_SIGMA_KT, bounds=(0.0, MAX_SIGMA_KT))
     sensor_noise_mv = param.Number(default=DEFAULT_SENSOR_NOISE_MV, bounds=(0.0, MAX_NOISE_MV))
+    risk: param.Selector = param.Selector(default=DEFAULT_RISK, objects=list(RISKS))
     reserve_kt = param.Number(default=WEATHER_RESERVE_KT, bounds=RESERVE_RANGE_KT)
     speed: param.Selector = param.Selector(default=100, objects=list(SPEEDS))
     inject_kts = param.Number(default=25.0, bounds=(-60.0, 60.0))
@@ -134,10 +138,12 @@ class FlyState(param.Parameterized):
         except InputError as err:
             self.error = one_line(err, ERROR_CHARS)
             return
+        c = caution(self.risk)
+        cautions = ({"risk": self.risk} if self.reserve_kt == c.reserve_kt else
+                    {"health_z": c.health_z, "wind_z": c.wind_z, "reserve_kt": self.reserve_kt})
         flight = _Flight(mission, dict(seed=self.seed, forecast_sigma_kt=self.forecast_sigma_kt,
                                        sensor_noise_mv=self.sensor_noise_mv, events=list(self.events),
-                                       reserve_kt=self.reserve_kt, world=WORLD_LABELS[self.world]), keep_time,
-                         PACKS[self.pack])
+                                       world=WORLD_LABELS[self.world], **cautions), keep_time, PACKS[self.pack])
         self.running = True
         self.status = "flying..."
         if not keep_time:
@@ -161,6 +167,10 @@ class FlyState(param.Parameterized):
         self._show_status()
         if not flight.keep_time:
             self.playing = True
+
+    @param.depends("risk", watch=True)
+    def _risk_cautions(self) -> None:
+        self.reserve_kt = caution(self.risk).reserve_kt
 
     def wait_idle(self, timeout: float = 60.0) -> bool:
         """Block until the newest flight asked for is shown, at most ``timeout`` s (tests; not from the
@@ -275,4 +285,4 @@ def _first_leg_text(r: FlightRecord) -> str:
             f"{r.first_leg_min_voltage_v:.3f} V")
 
 
-__all__ = ["SPEEDS", "WORLD_LABELS", "FlyState"]
+__all__ = ["RISKS", "SPEEDS", "WORLD_LABELS", "FlyState"]

@@ -19,7 +19,7 @@ import param
 from bokeh.models import ColumnDataSource, HoverTool, Range1d
 from bokeh.models.annotations import Span  # = bokeh.models.Span, a re-export mypy misses (its stubs lack __all__)
 
-from uam_studio.app.fly.state import PACKS, SPEEDS, WORLD_LABELS, FlyState
+from uam_studio.app.fly.state import PACKS, RISKS, SPEEDS, WORLD_LABELS, FlyState
 from uam_studio.app.planner.map_geometry import altitude_labels, place_label
 from uam_studio.app.style import (
     MEASURED_COLOR,
@@ -91,7 +91,9 @@ class FlyView(pn.viewable.Viewer):
                                             value=s.forecast_sigma_kt, width=w)
         self.noise = pn.widgets.FloatSlider(name="Voltage sensor noise (mV)", start=0, end=20, step=0.5,
                                             value=s.sensor_noise_mv, width=w)
-        self.reserve = pn.widgets.FloatSlider(name="Weather reserve (kt of headwind)", start=0, end=40, step=5,
+        self.risk = pn.widgets.Select(name="Declared risk (its cautions follow)", options=list(RISKS), value=s.risk,
+                                      width=w, css_classes=["uam-fly-risk"])
+        self.reserve = pn.widgets.FloatSlider(name="Weather reserve (kt of headwind)", start=0, end=40, step=0.5,
                                               value=s.reserve_kt, width=w)
         self.inject_kts = pn.widgets.FloatSlider(name="Wind change (kt, + = headwind)", start=-40, end=40, step=5,
                                                  value=s.inject_kts, width=w)
@@ -132,6 +134,8 @@ class FlyView(pn.viewable.Viewer):
         self.sigma.param.watch(lambda e: setattr(s, "forecast_sigma_kt", e.new), "value")
         self.noise.param.watch(lambda e: setattr(s, "sensor_noise_mv", e.new), "value")
         self.reserve.param.watch(lambda e: setattr(s, "reserve_kt", e.new), "value")
+        self.risk.param.watch(lambda e: setattr(s, "risk", e.new), "value")
+        s.param.watch(lambda e: setattr(self.reserve, "value", e.new), "reserve_kt")
         self.inject_kts.param.watch(lambda e: setattr(s, "inject_kts", e.new), "value")
         self.clock.param.watch(self._on_clock, "value_throttled")
         s.param.watch(self._on_record, "record")
@@ -143,7 +147,8 @@ class FlyView(pn.viewable.Viewer):
         self._layout = pn.Row(
             pn.Column(self.fly_button, self.play, self.speed, self.clock, pn.Spacer(height=10),
                       self.inject_kts, self.inject_button, self.clear_button, pn.Spacer(height=10),
-                      self.pack, self.world, self.seed, self.sigma, self.noise, self.reserve, pn.Spacer(height=10),
+                      self.pack, self.world, self.seed, self.sigma, self.noise, self.risk, self.reserve,
+                      pn.Spacer(height=10),
                       self.download,
                       width=230),
             pn.Column(self.error, pn.Row(self.progress, self.status, sizing_mode="stretch_width"),

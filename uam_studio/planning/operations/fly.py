@@ -22,13 +22,12 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import astuple, dataclass, field
 from typing import Any, cast
 
 import numpy as np
 
 from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0, simulate
-from uam_studio.battery.health.intervals import two_sided_z
 from uam_studio.battery.health.logbook import Logbook
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_profile
@@ -37,7 +36,7 @@ from uam_studio.planning.legs import DT_S, N_MAX, takeoff_current
 from uam_studio.planning.missions.mission import VERTIPORT, Battery, Destination, Mission, check_destination_count
 from uam_studio.planning.operations.decision import Decision
 from uam_studio.planning.operations.defaults import fit_noise_v
-from uam_studio.planning.operations.leg_interval import leg_lowest_voltage
+from uam_studio.planning.operations.leg_interval import leg_lowest_voltage, takeoff_belief
 from uam_studio.planning.operations.operator import (
     HEALTH_Z,
     IN_FLIGHT_PLANNERS,
@@ -56,6 +55,7 @@ from uam_studio.planning.operations.world import (
     actual_winds_mission,
 )
 from uam_studio.planning.solvers.oracle import oracle_plan
+from uam_studio.risk import DEFAULT_RISK, caution
 
 
 @dataclass
@@ -77,6 +77,7 @@ class ReferenceFlight:
 class FlightRecord:
     """One flight, both sides.
 
+    ``risk``: the declared risk its cautions followed from (None: cautions set by hand).
     The world: ``world`` (``"varied"`` or ``"model"``) and ``pack`` (the pack's number, which seeds its own
     parameter set in the varied world).
     Executed: ``route`` (nodes in order; ``"vertiport"`` is a recharge), ``altitudes_m`` (m) and
@@ -112,6 +113,7 @@ class FlightRecord:
     reserve_kt: float = 0.0
     world: str = DEFAULT_WORLD
     pack: int = 0
+    risk: float | None = None
     route: list[str] = field(default_factory=list)
     altitudes_m: list[float] = field(default_factory=list)
     actual_winds_kts: list[float] = field(default_factory=list)
@@ -258,7 +260,7 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
                 health_z: float = HEALTH_Z, wind_z: float = WIND_Z, plan_wind_z: float = PLAN_WIND_Z,
                 references: bool = True, reserve_kt: float = WEATHER_RESERVE_KT,
                 operator: Callable[..., Operator] = Operator, logbook: Logbook | None = None,
-                world: str = DEFAULT_WORLD, pack: int | None = None) -> FlightRecord:
+                world: str = DEFAULT_WORLD, pack: int | None = None, risk: float | None = None) -> FlightRecord:
     """Fly ``mission`` once: the operator plans from the take-off check, re-plans at every arrival.
 
     :param mission: the mission; its ``battery`` is the world's true cell, its winds the forecast.
@@ -284,10 +286,17 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
     :param pack: the pack's number, which seeds its own parameter set in the varied world (None: ``seed``); a
         logbook made for the same pack (:func:`~uam_studio.planning.operations.pack_history.simulate_logbook`)
         names the same number.
+    :param risk: the flight's declared risk (0-0.5, exclusive; :mod:`uam_studio.risk`): when given, ``health_z``,
+        ``wind_z`` and ``reserve_kt`` follow from it (:func:`~uam_studio.risk.caution`) and are not read.
     :raises InputError: for bad input, naming the field; an event that starts after the flight
         (and its references) ended is an error of field ``event``.
     """
     t_wall = time.perf_counter()
+    if risk is not None:
+        c = caution(risk)
+        health_z, wind_z, reserve_kt = c.health_z, c.wind_z, c.reserve_kt
+    declared = risk if risk is not None else (
+        DEFAULT_RISK if (health_z, wind_z, reserve_kt) == astuple(caution())[1:] else None)
     if policy not in IN_FLIGHT_PLANNERS:
         raise InputError("policy", f"{policy!r} is not an in-flight policy; allowed: {', '.join(IN_FLIGHT_PLANNERS)}")
     # the hindsight oracle and policy "oracle": exact, 8 at most
@@ -346,7 +355,7 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
             break
         op.arrived(d.next_to)
         first = False
-    rec.takeoff_belief = _takeoff_belief(rec.events[0], op, takeoff_leg) if rec.events else {}
+    rec.takeoff_belief = takeoff_belief(rec.events[0], op, takeoff_leg) if rec.events else {}
     rec.first_leg_min_voltage_v = float(truth.legs[0].min_voltage_v) if truth.legs else None
     rec.flown_charges = op.health_belief.flown()
     rec.breached = truth.breached
@@ -380,24 +389,9 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
     if late:
         raise InputError("event", f"{late[0].text} starts at {late[0].start_s:g} s, after the flight ended "
                                   f"({end_s:.0f} s); allowed: a start within the flight")
+    rec.risk = declared
     rec.wall_s = time.perf_counter() - t_wall
     return rec
-
-
-def _takeoff_belief(first: Decision, op: Operator, leg: tuple[float, float, float, float] | None) -> dict[str, Any]:
-    """The belief the first decision planned on, with where it started and the logbook's length; where it chose a
-    leg (``leg``: the interval's low, median and high, V, and the model-error term then, V), its model-error term
-    and its 90% interval of that leg's lowest voltage."""
-    out = {"q_max_c": round(first.q_max_c, 3), "q_max_sd_c": round(first.q_max_sd_c, 3),
-           "r0_ohm": round(first.r0_ohm, 6), "r0_sd_ohm": round(first.r0_sd_ohm, 6),
-           "source": op.health_belief.source, "flights": len(op.health_belief.logbook)}
-    if leg is not None:
-        out["model_error_v"] = round(leg[3], 6)
-        sd = (leg[2] - leg[0]) / (2 * two_sided_z(0.9))  # the interval's std, V
-        out["model_error_share"] = round(min(leg[3] ** 2 / sd ** 2, 1.0), 4) if sd > 0 else 0.0
-        out["first_leg_min_voltage_90_v"] = [round(leg[0], 5), round(leg[2], 5)]
-        out["first_leg_min_voltage_median_v"] = round(leg[1], 5)
-    return out
 
 
 def _predict_leg(op: Operator, d: Decision, first: bool) -> np.ndarray:
