@@ -26,6 +26,7 @@ from uam_studio.fleet.day import Fleet, day_of_life_seed, simulate_day
 from uam_studio.fleet.demand import Request, poisson_demand
 from uam_studio.fleet.dispatch import EOD_V, round_trip
 from uam_studio.fleet.packs import NOISE_V
+from uam_studio.planning.operations.world import DEFAULT_WORLD, WORLDS
 from uam_studio.risk import HEALTH_Z
 
 # the NASA packs' regimes of bench_fleet_bound.py (about 90 cycles to 80%: spreads of 54 and 80 cycles)
@@ -40,7 +41,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--days", type=int, default=30)
     ap.add_argument("--seeds", type=int, nargs="+", default=[20, 21], help="never used in tuning")
-    ap.add_argument("--world", choices=["varied", "model"], default="varied")
+    ap.add_argument("--world", choices=WORLDS, default=DEFAULT_WORLD)
     args = ap.parse_args()
     for name, (far, spread) in REGIMES.items():
         inside = above = n = 0

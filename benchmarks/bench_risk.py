@@ -24,6 +24,7 @@ from scipy.stats import binomtest
 
 from uam_studio.errors import InputError
 from uam_studio.planning.operations import fly_mission, parse_event
+from uam_studio.planning.operations.world import DEFAULT_WORLD, WORLDS
 from uam_studio.risk import WEATHER_CHANGE_SD_KT
 from uam_studio.studies.flying import study_missions
 
@@ -44,7 +45,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=60, help="flights per risk level (half single-, half multi-charge)")
     ap.add_argument("--risks", type=float, nargs="+", default=[0.01, 0.05, 0.1, 0.2])
-    ap.add_argument("--world", choices=["varied", "model"], default="varied")
+    ap.add_argument("--world", choices=WORLDS, default=DEFAULT_WORLD)
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
     half = args.n // 2

@@ -62,7 +62,7 @@ from uam_studio.planning.operations import (
 )
 from uam_studio.planning.operations.operator import Operator
 from uam_studio.planning.operations.pack_history import simulate_logbook
-from uam_studio.planning.operations.world import actual_winds_mission
+from uam_studio.planning.operations.world import DEFAULT_WORLD, WORLDS, actual_winds_mission
 from uam_studio.planning.solvers.oracle import oracle_plan
 from uam_studio.risk import INTERVAL_Z, WIND_Z
 from uam_studio.studies.flying import study_missions
@@ -205,7 +205,7 @@ def _event(label: str, t_s: float) -> str:
     return "" if label == "none" else f"{label}@{max(1.0, round(t_s)):g}"
 
 
-def fresh(n: int, workers: int, logbook_flights: int = 3, without_reserve: bool = False, world: str = "varied"
+def fresh(n: int, workers: int, logbook_flights: int = 3, without_reserve: bool = False, world: str = DEFAULT_WORLD
           ) -> None:
     missions = study_missions(n, 56000, "single_charge")
     t0 = time.perf_counter()
@@ -245,7 +245,7 @@ def fresh(n: int, workers: int, logbook_flights: int = 3, without_reserve: bool 
     print(f"({time.perf_counter() - t0:.0f} s, {workers} processes)")
 
 
-def informed(n: int, workers: int, world: str = "varied") -> None:
+def informed(n: int, workers: int, world: str = DEFAULT_WORLD) -> None:
     missions = study_missions(n, 56000, "single_charge")
     weathers = ("none", "wind+25", "wind-20")
     who = ("operator", "told the cell", "told the cell, checked at take-off")
@@ -307,7 +307,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--logbook-flights", type=int, default=3, help="fresh: earlier flights in each pack's logbook")
     p.add_argument("--without-reserve", action="store_true", help="fresh: the new pack also flown with no reserve")
-    p.add_argument("--world", choices=["varied", "model"], default="varied",
+    p.add_argument("--world", choices=WORLDS, default=DEFAULT_WORLD,
                    help="the world flown: varied (default; the pack is not its model) or model")
     args = p.parse_args(argv)
     if args.what == "demo":

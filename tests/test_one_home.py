@@ -96,7 +96,10 @@ def _classes_and_calls() -> tuple[dict[str, tuple[str, ast.ClassDef]], list[tupl
 
 
 def _builds(cls: ast.ClassDef, type_name: str) -> bool:
-    return any(isinstance(n, ast.Call) and getattr(n.func, "id", None) == type_name for n in ast.walk(cls))
+    """Whether ``cls`` calls ``type_name(...)`` or one of its constructors, ``type_name.of(...)``."""
+    def named(f: ast.expr) -> bool:
+        return getattr(f, "id", None) == type_name or getattr(getattr(f, "value", None), "id", None) == type_name
+    return any(isinstance(n, ast.Call) and named(n.func) for n in ast.walk(cls))
 
 
 def test_one_health_belief_value_and_its_configuration_declared_once():

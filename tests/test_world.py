@@ -181,3 +181,10 @@ def test_a_sweep_of_one_cell_flies_the_default_world_and_formats_its_row():
     assert len(rows) == 1 and rows[0]["n"] == 1 and rows[0]["breaches"] == 0
     table = format_rows(rows).splitlines()
     assert len(table) == 2 and table[0].split()[:2] == ["sigma", "kt"] and table[1].split()[:2] == ["0", "5"]
+
+
+def test_the_clis_world_choices_are_the_librarys():
+    """The CLI writes the worlds down so that parsing imports no model: the same worlds, the default first."""
+    from uam_studio.cli.common import WORLD_CHOICES
+
+    assert WORLD_CHOICES == WORLDS and WORLD_CHOICES[0] == DEFAULT_WORLD

@@ -70,6 +70,23 @@ def seed_arg(text: str) -> int:
         raise argparse.ArgumentTypeError(str(err)[len("--seed: "):]) from None
 
 
+# planning.operations.world's WORLDS, the default first (written here so that parsing imports no model;
+# tests/test_world.py holds the two equal)
+WORLD_CHOICES = ("varied", "model")
+
+
+def add_world_arguments(p: argparse.ArgumentParser, what: str, pack: str | None = None) -> None:
+    """``--world`` (``what``: what flies in it) and, where ``pack`` says what the number is read with, ``--pack``."""
+    p.add_argument("--world", choices=WORLD_CHOICES, default=WORLD_CHOICES[0],
+                   help=f"the world {what} in: varied (default; a pack is not its model: its own diffusion, "
+                        "open-circuit curve and heat, drifting sensors) or model (a pack is exactly its cell type's "
+                        "model, for teaching)")
+    if pack is not None:
+        p.add_argument("--pack", type=seed_arg, default=None, metavar="N",
+                       help="the pack's number: seeds its own parameters in the varied world (default: --seed); "
+                            + pack)
+
+
 def add_engine_arguments(p: argparse.ArgumentParser, what: str) -> None:
     """``--workers`` and ``--address``: where :func:`uam_studio.engine.run_tasks` runs ``what``."""
     p.add_argument("--workers", type=int, default=None,

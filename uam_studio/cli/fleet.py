@@ -10,7 +10,7 @@ import json
 import sys
 from pathlib import Path
 
-from uam_studio.cli.common import EXIT_OK, Command, add_engine_arguments, check_workers, seed_arg
+from uam_studio.cli.common import EXIT_OK, Command, add_engine_arguments, add_world_arguments, check_workers, seed_arg
 
 
 def _add_fleet_arguments(p: argparse.ArgumentParser) -> None:
@@ -31,9 +31,7 @@ def _add_fleet_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--age-spread", type=float, default=None, metavar="EFC",
                    help="the packs' age at the start: U(0, EFC) equivalent full cycles (0-2000; default 60%% of "
                         "the law's cycles to 80%% capacity: about 54 for nasa, 294 for vtc6)")
-    p.add_argument("--world", choices=["varied", "model"], default="varied",
-                   help="varied (default): each pack has its own parameter set, which no belief models; model: every "
-                        "pack is its cell type's model (for teaching)")
+    add_world_arguments(p, "the fleet's packs fly")
     p.add_argument("--law", choices=["nasa", "vtc6"], default="nasa",
                    help="the packs' cell type and the aging law they follow: nasa (the paper's cell, fitted to the "
                         "NASA PCoE lives; default) or vtc6 (fitted to the CMU lives)")

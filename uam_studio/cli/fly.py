@@ -7,7 +7,7 @@ import argparse
 import json
 import sys
 
-from uam_studio.cli.common import EXIT_OK, Command, seed_arg
+from uam_studio.cli.common import EXIT_OK, Command, add_world_arguments, seed_arg
 from uam_studio.wording import charging_cycles_text
 
 
@@ -40,12 +40,7 @@ def _add_fly_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--risk", type=float, default=None, metavar="P",
                    help="the flight's declared risk of reaching the cut-off (0.0001 to below 0.5; default 0.05): the "
                         "operator's health and wind margins and its weather reserve follow from it (over --reserve)")
-    p.add_argument("--world", choices=["varied", "model"], default="varied",
-                   help="varied (default): the pack is not its model (its own diffusion, open-circuit curve, heat; "
-                        "drifting sensors); model: the pack is exactly its model (for teaching)")
-    p.add_argument("--pack", type=seed_arg, default=None, metavar="N",
-                   help="the pack's number: seeds its own parameters in the varied world (default: --seed); name "
-                        "the number its logbook was made with (logbook new --pack)")
+    add_world_arguments(p, "the flight flies", pack="name the number its logbook was made with (logbook new --pack)")
     p.add_argument("--json", action="store_true", help="print the flight record as JSON")
     p.add_argument("--series", action="store_true", help="with --json: include the 1 Hz time series")
 

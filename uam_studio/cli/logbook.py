@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import argparse
 
-from uam_studio.cli.common import EXIT_OK, Command, seed_arg
+from uam_studio.cli.common import EXIT_OK, Command, add_world_arguments, seed_arg
 
 
 def _add_logbook_arguments(p: argparse.ArgumentParser) -> None:
@@ -19,10 +19,7 @@ def _add_logbook_arguments(p: argparse.ArgumentParser) -> None:
                      help="the pack's equivalent full cycles now (0-2000; default: new at its first logged flight)")
     new.add_argument("--sensor-noise-mv", type=float, default=None, metavar="MV",
                      help="voltage sensor noise std (mV, 0-100; default 5)")
-    new.add_argument("--world", choices=["varied", "model"], default="varied",
-                     help="the world the earlier flights flew in (varied, default: the pack is not its model; model)")
-    new.add_argument("--pack", type=seed_arg, default=None, metavar="N",
-                     help="the pack's number (default: --seed); fly it with the same number (fly --pack)")
+    add_world_arguments(new, "the earlier flights flew", pack="fly it with the same number (fly --pack)")
     new.add_argument("--out", required=True, metavar="FILE", help="where to write the logbook (JSON)")
     show = sub.add_parser("show", help="a logbook's flights and the belief it gives at the next take-off")
     show.add_argument("logbook", metavar="FILE")

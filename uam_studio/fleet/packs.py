@@ -15,22 +15,21 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from uam_studio.battery.health.belief import PackBelief
-from uam_studio.battery.health.config import fleet_belief_config
+from uam_studio.battery.health.config import FLEET_LAWS, fleet_belief_config
 from uam_studio.battery.health.logbook import Logbook
 from uam_studio.battery.pack_variation import pack_params
 from uam_studio.battery.parameters import DEFAULT_CELL, CellParameters
 from uam_studio.errors import MAX_SEED, InputError, check_range, check_seed
-from uam_studio.fleet.aging import AGING_LAW, END_OF_LIFE_FRACTION, AgingLaw, PackHealth
+from uam_studio.fleet.aging import END_OF_LIFE_FRACTION, AgingLaw, PackHealth
 from uam_studio.fleet.demand import MAX_VERTIPORTS
 from uam_studio.fleet.dispatch import EOD_V
-from uam_studio.fleet.nasa_aging import NASA_AGING_LAW
 from uam_studio.planning.operations.world import DEFAULT_WORLD, check_world
 
 __all__ = ["AGE_SPREAD_LIFE", "FACTORY_Q_MAX_C", "FACTORY_R0_OHM", "NOISE_A", "NOISE_V", "PACK_LAWS", "Fleet",
            "default_age_spread", "pack_law"]
 
 NOISE_V, NOISE_A = 0.005, 0.020  # the fleet's sensor noise std (V, A)
-PACK_LAWS: dict[str, AgingLaw] = {"nasa": NASA_AGING_LAW, "vtc6": AGING_LAW}  # how a fleet's packs age, by cell type
+PACK_LAWS: dict[str, AgingLaw] = FLEET_LAWS  # how a fleet's packs age, by cell type (declared with their belief)
 AGE_SPREAD_LIFE = 0.6  # default: the packs have delivered U(0, this share of their law's cycles to 80%)
 FACTORY_Q_MAX_C = (7300.0, 7900.0)  # C: a new pack's q_max, uniform over this range
 FACTORY_R0_OHM = (0.10, 0.13)  # ohm: a new pack's R0, uniform over this range

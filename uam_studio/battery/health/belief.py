@@ -35,7 +35,7 @@ from uam_studio.battery.aging import NASA_AGING_LAW, T_REF_C, AgingLaw
 from uam_studio.battery.health.config import AGING_PROCESS_SD, PAPER_BELIEF, BeliefConfig
 from uam_studio.battery.health.estimate import MIN_CONTEXT_S, HealthEstimate, clip_to_box, cov_qr
 from uam_studio.battery.health.fit import fit_health
-from uam_studio.battery.health.intervals import EodInterval, eod_interval_s, two_sided_z
+from uam_studio.battery.health.intervals import EodInterval, band_from_sigma_points, eod_interval_s, two_sided_z
 from uam_studio.battery.health.logbook import Logbook, LoggedFlight
 from uam_studio.battery.health.prior import Q_REF_C, HealthPrior, combine, hold_to_fleet
 from uam_studio.battery.health.quality import FLAG_MISFIT, FLAG_OUTSIDE_FLEET, FLEET_Z, fit_flags
@@ -44,8 +44,8 @@ from uam_studio.battery.simulate import CURRENT_LIMIT_A, EOD_RANGE, simulate
 from uam_studio.errors import InputError
 
 __all__ = ["AGING_PROCESS_SD", "MIN_FIT_SAMPLES", "SOURCE_LOGBOOK", "SOURCE_TAKEOFF", "BelievedHealth",
-           "ChargeReadings", "HealthBelief", "ModelError", "PackBelief", "aged_belief", "flight_residual_sd_v",
-           "logbook_belief", "model_error"]
+           "ChargeReadings", "HealthBelief", "ModelError", "PackBelief", "aged_belief", "error_share",
+           "flight_residual_sd_v", "logbook_belief", "model_error"]
 
 SOURCE_LOGBOOK = "logbook"  # a belief that started from the pack's logbook
 SOURCE_TAKEOFF = "take-off"  # one that started from the fleet prior: the take-off's readings are all it has
@@ -63,6 +63,13 @@ class BelievedHealth:
     r0_ohm: float
     r0_sd_ohm: float
     cov_w: np.ndarray | None = field(default=None, compare=False, repr=False)
+
+    @classmethod
+    def of(cls, mean: Sequence[float] | np.ndarray, cov: np.ndarray) -> BelievedHealth:
+        """The belief of the Gaussian ``mean`` (w, R0 ohm) and ``cov`` (2x2, in (w, R0); copied)."""
+        c = np.array(cov, dtype=float)
+        return cls(inverse_capacity=float(mean[0]), inverse_capacity_sd=math.sqrt(c[0, 0]), r0_ohm=float(mean[1]),
+                   r0_sd_ohm=math.sqrt(c[1, 1]), cov_w=c)
 
     @property
     def q_max_c(self) -> float:
@@ -185,9 +192,7 @@ class PackBelief:
     @property
     def health(self) -> BelievedHealth:
         """Its Gaussian as a :class:`BelievedHealth`."""
-        cov = self.cov_matrix
-        return BelievedHealth(inverse_capacity=self.mean[0], inverse_capacity_sd=math.sqrt(cov[0, 0]),
-                              r0_ohm=self.mean[1], r0_sd_ohm=math.sqrt(cov[1, 1]), cov_w=cov)
+        return BelievedHealth.of(self.mean, self.cov_matrix)
 
     @property
     def prior(self) -> HealthPrior:
@@ -261,6 +266,13 @@ def model_error(logbook: Logbook, config: BeliefConfig = PAPER_BELIEF) -> ModelE
     k0 = config.model_error_flights
     var = (k0 * config.model_error_sd_v ** 2 + sum(s * s for s in sds)) / max(k0 + len(sds), 1e-12)
     return ModelError(math.sqrt(var), config.model_error_sd_v, k0, len(sds))
+
+
+def error_share(interval: Sequence[float], error_sd_v: float, level: float = 0.9) -> float:
+    """The share (0-1) of a ``level`` interval's variance (``interval``: low, median, high, V; symmetric about its
+    median) that an error of std ``error_sd_v`` (V) makes up."""
+    sd = (interval[2] - interval[0]) / (2.0 * two_sided_z(level))
+    return float(min(error_sd_v ** 2 / sd ** 2, 1.0)) if sd > 0 else 0.0
 
 
 class HealthBelief:
@@ -367,9 +379,7 @@ class HealthBelief:
             mean, cov = hold_to_fleet(mean, cov, lik_mean, lik_cov, self.prior, FLEET_Z)
         # the Gaussian combination can put the mean a little outside the fit's box (a cell at its edge,
         # R0 = 0 say): the estimate the operator plans with stays inside it
-        w, r0 = clip_to_box(mean)
-        return BelievedHealth(inverse_capacity=float(w), inverse_capacity_sd=float(math.sqrt(cov[0, 0])),
-                              r0_ohm=float(r0), r0_sd_ohm=float(math.sqrt(cov[1, 1])), cov_w=cov)
+        return BelievedHealth.of(clip_to_box(mean), cov)
 
     def flags(self) -> tuple[str, ...]:
         """The flags of the fits behind the belief (this charge's readings so far and the earlier charges'), each
@@ -381,9 +391,7 @@ class HealthBelief:
 
     def prior_health(self) -> BelievedHealth:
         """The belief before this flight's readings: the fleet prior, or the logbook's belief."""
-        mean, cov = self.start.mean, self.start.cov
-        return BelievedHealth(inverse_capacity=float(mean[0]), inverse_capacity_sd=math.sqrt(cov[0, 0]),
-                              r0_ohm=float(mean[1]), r0_sd_ohm=math.sqrt(cov[1, 1]), cov_w=np.array(cov))
+        return BelievedHealth.of(self.start.mean, self.start.cov)
 
     def lowest_voltage(self, currents: Sequence[np.ndarray], after: int, level: float = 0.9
                        ) -> tuple[float, float, float]:
@@ -398,17 +406,14 @@ class HealthBelief:
         lows = np.array([float(np.min(simulate(np.clip(c, -CURRENT_LIMIT_A, CURRENT_LIMIT_A), self.dt_s, q, r,
                                                eod_v=EOD_RANGE[0], cell=self.cell).voltage_v[after:], initial=5.0))
                          for c, q, r in runs])
-        var = ((lows[1] - lows[2]) / 2) ** 2 + ((lows[3] - lows[4]) / 2) ** 2 + self.model_error.sd_v ** 2
-        var += sum(((lows[k] - lows[k + 1]) / 2) ** 2 for k in range(5, lows.size - 1, 2))
-        z = two_sided_z(level)
-        return float(lows[0] - z * math.sqrt(var)), float(lows[0]), float(lows[0] + z * math.sqrt(var))
+        conditions = sum(((lows[k] - lows[k + 1]) / 2) ** 2 for k in range(5, lows.size - 1, 2))
+        lo, med, hi = band_from_sigma_points(lows[:5, None], level, math.sqrt(self.model_error.sd_v ** 2 + conditions))
+        return float(lo[0]), float(med[0]), float(hi[0])
 
     def model_error_share(self, current_a: np.ndarray, after: int) -> float:
-        """The model-error term's share (0-1) of the variance of the lowest voltage of a planned load
-        (:meth:`lowest_voltage`'s, without conditions)."""
-        lo, med, _ = self.lowest_voltage([current_a], after)
-        total = ((med - lo) / two_sided_z(0.9)) ** 2
-        return float(min(self.model_error.sd_v ** 2 / total, 1.0)) if total > 0 else 0.0
+        """The model-error term's share of the variance of the lowest voltage of a planned load
+        (:func:`error_share` of :meth:`lowest_voltage`'s interval, without conditions)."""
+        return error_share(self.lowest_voltage([current_a], after), self.model_error.sd_v)
 
     def eod_interval(self, current_a: np.ndarray, level: float = 0.9) -> EodInterval:
         """The ``level`` interval (s) of the end of discharge of a planned load ``current_a`` (A at the belief's step,

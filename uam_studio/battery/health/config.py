@@ -20,6 +20,7 @@ Public API: :class:`BeliefConfig`, :data:`PAPER_BELIEF`, :data:`NASA_CELL_BELIEF
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -104,7 +105,8 @@ NEW_PACK = HealthPrior(np.array([Q_REF_C / NEW_PACK_Q_C, NEW_PACK_R0_OHM]),
                        np.diag([(Q_REF_C * NEW_PACK_Q_SD_C / NEW_PACK_Q_C ** 2) ** 2, NEW_PACK_R0_SD_OHM ** 2]))
 
 
+@functools.cache
 def fleet_belief_config(law: str = "nasa") -> BeliefConfig:
     """The belief of a fleet's packs: :data:`PAPER_BELIEF` starting from the factory's new pack
-    (:data:`NEW_PACK`) and aging by the fleet's law (a key of :data:`FLEET_LAWS`)."""
+    (:data:`NEW_PACK`) and aging by the fleet's law (a key of :data:`FLEET_LAWS`); one value per law."""
     return dataclasses.replace(PAPER_BELIEF, name=f"fleet of {law} packs", aging=FLEET_LAWS[law], new_pack=NEW_PACK)

@@ -22,7 +22,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import astuple, dataclass, field
+from dataclasses import dataclass, field
 from typing import Any, cast
 
 import numpy as np
@@ -30,13 +30,11 @@ import numpy as np
 from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0, simulate
 from uam_studio.battery.health.logbook import Logbook
 from uam_studio.errors import InputError
-from uam_studio.flight import leg_profile
-from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.legs import DT_S, N_MAX, takeoff_current
 from uam_studio.planning.missions.mission import VERTIPORT, Battery, Destination, Mission, check_destination_count
 from uam_studio.planning.operations.decision import Decision
 from uam_studio.planning.operations.defaults import fit_noise_v
-from uam_studio.planning.operations.leg_interval import leg_lowest_voltage, takeoff_belief
+from uam_studio.planning.operations.leg_interval import leg_load, leg_lowest_voltage, takeoff_belief
 from uam_studio.planning.operations.operator import (
     HEALTH_Z,
     IN_FLIGHT_PLANNERS,
@@ -295,8 +293,10 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
     if risk is not None:
         c = caution(risk)
         health_z, wind_z, reserve_kt = c.health_z, c.wind_z, c.reserve_kt
+    default = caution()
     declared = risk if risk is not None else (
-        DEFAULT_RISK if (health_z, wind_z, reserve_kt) == astuple(caution())[1:] else None)
+        DEFAULT_RISK if (health_z, wind_z, reserve_kt) == (default.health_z, default.wind_z, default.reserve_kt)
+        else None)
     if policy not in IN_FLIGHT_PLANNERS:
         raise InputError("policy", f"{policy!r} is not an in-flight policy; allowed: {', '.join(IN_FLIGHT_PLANNERS)}")
     # the hindsight oracle and policy "oracle": exact, 8 at most
@@ -396,16 +396,8 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
 
 def _predict_leg(op: Operator, d: Decision, first: bool) -> np.ndarray:
     """The operator's predicted voltage (V) for the leg it chose: its median health, predicted wind."""
-    assert d.next_to is not None and d.next_altitude_m is not None  # a decision with a next leg
-    m = op.forecast_mission
-    wind, _ = op.winds.predict(d.next_to)
-    wind = float(np.clip(wind, *WIND_RANGE_KTS))
-    dwell = cast(Destination, m.node(d.next_to)).dwell_s if d.next_to != VERTIPORT else 0.0
-    prof = leg_profile(m.distance_km(d.node, d.next_to), d.next_altitude_m, wind, DT_S, dwell)
-    cur, _ = op.health_belief.segment.arrays()
-    skip = cur.size if first else 0
-    future = np.asarray(prof.current_a, dtype=float)[skip:]
-    hist = np.clip(cur, -50, 50)
+    assert d.next_to is not None  # a decision with a next leg
+    hist, future = leg_load(op, d, first, op.winds.predict(d.next_to)[0])
     res = simulate(np.concatenate([hist, future]), DT_S, d.q_max_c, d.r0_ohm, 2.5)
     return np.asarray(res.voltage_v[hist.size:], dtype=float)
 

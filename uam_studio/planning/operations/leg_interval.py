@@ -8,11 +8,21 @@ from typing import Any
 
 import numpy as np
 
-from uam_studio.battery.health.intervals import two_sided_z
+from uam_studio.battery.health.belief import error_share
 from uam_studio.planning.operations.decision import Decision
 from uam_studio.planning.operations.operator import Operator
 
-__all__ = ["leg_lowest_voltage", "takeoff_belief"]
+__all__ = ["leg_load", "leg_lowest_voltage", "takeoff_belief"]
+
+
+def leg_load(op: Operator, d: Decision, first: bool, wind_kts: float) -> tuple[np.ndarray, np.ndarray]:
+    """The load (A, 1 s samples) of the leg that ``op``'s decision ``d`` chose, in ``wind_kts`` (kt): ``(this
+    charge's readings' current so far, clipped to +-50 A; the leg's planned current after them)``. ``first``: the
+    leg continues the take-off check (its first samples already flown)."""
+    assert d.next_to is not None and d.next_altitude_m is not None  # a decision with a next leg
+    cur, _ = op.health_belief.segment.arrays()
+    skip = cur.size if first else 0
+    return np.clip(cur, -50, 50), op.leg_current(d.node, d.next_to, d.next_altitude_m, wind_kts)[skip:]
 
 
 def leg_lowest_voltage(op: Operator, d: Decision, first: bool, level: float = 0.9) -> tuple[float, float, float]:
@@ -20,14 +30,10 @@ def leg_lowest_voltage(op: Operator, d: Decision, first: bool, level: float = 0.
     chose, on its belief now (:meth:`~uam_studio.battery.health.belief.HealthBelief.lowest_voltage`: the health,
     the leg's predicted wind one std either side, the model-error term). ``first``: the leg continues the take-off
     check (its first samples already flown)."""
-    assert d.next_to is not None and d.next_altitude_m is not None  # a decision with a next leg
-    cur, _ = op.health_belief.segment.arrays()
-    hist = np.clip(cur, -50, 50)
+    assert d.next_to is not None  # a decision with a next leg
     mean, sd = op.winds.predict(d.next_to)
-    skip = cur.size if first else 0
-    loads = [np.concatenate([hist, op.leg_current(d.node, d.next_to, d.next_altitude_m, w)[skip:]])
-             for w in (mean, mean - sd, mean + sd)]
-    return op.health_belief.lowest_voltage(loads, hist.size, level)
+    loads = [leg_load(op, d, first, w) for w in (mean, mean - sd, mean + sd)]
+    return op.health_belief.lowest_voltage([np.concatenate(x) for x in loads], loads[0][0].size, level)
 
 
 def takeoff_belief(first: Decision, op: Operator, leg: tuple[float, float, float, float] | None) -> dict[str, Any]:
@@ -39,8 +45,7 @@ def takeoff_belief(first: Decision, op: Operator, leg: tuple[float, float, float
            "source": op.health_belief.source, "flights": len(op.health_belief.logbook)}
     if leg is not None:
         out["model_error_v"] = round(leg[3], 6)
-        sd = (leg[2] - leg[0]) / (2 * two_sided_z(0.9))  # the interval's std, V
-        out["model_error_share"] = round(min(leg[3] ** 2 / sd ** 2, 1.0), 4) if sd > 0 else 0.0
+        out["model_error_share"] = round(error_share(leg[:3], leg[3]), 4)
         out["first_leg_min_voltage_90_v"] = [round(leg[0], 5), round(leg[2], 5)]
         out["first_leg_min_voltage_median_v"] = round(leg[1], 5)
     return out

@@ -50,6 +50,7 @@ DEFAULT_WORLD = "varied"  # the default: an operator never flies its own model
 DRIFT_SD_MV = 3.0  # mV: std of the voltage sensor's drifting offset (varied world)
 DRIFT_SD_MA = 10.0  # mA: std of the current sensor's drifting offset (varied world)
 DRIFT_TAU_S = 1800.0  # s: the offsets' correlation time
+_DRIFT_SD = np.array([DRIFT_SD_MV * 1e-3, DRIFT_SD_MA * 1e-3])  # V, A: the offsets' std
 
 
 def check_world(world: str) -> str:
@@ -161,9 +162,8 @@ class World:
         self._drift: np.ndarray | None = None  # the sensors' offsets now (V, A); None: no drift
         if self.world == "varied":
             self.cell = dataclasses.replace(self.cell, params=pack_params(self.cell.params, self.pack))
-            drift = np.random.default_rng([seed, 0xD21F])
-            self._drift_rng = drift
-            self._drift = drift.normal(0.0, 1.0, 2) * np.array([DRIFT_SD_MV * 1e-3, DRIFT_SD_MA * 1e-3])
+            self._drift_rng = np.random.default_rng([seed, 0xD21F])
+            self._drift = self._drift_rng.normal(0.0, 1.0, 2) * _DRIFT_SD
         self.time_s = 0.0
         self.node = VERTIPORT
         self.state: BatteryState = full_charge(self.cell.q_max, self.cell.params)
@@ -188,7 +188,7 @@ class World:
         if self._drift is None or n == 0:
             return np.zeros(n), np.zeros(n)
         a = float(np.exp(-DT_S / DRIFT_TAU_S))
-        sd = np.array([DRIFT_SD_MV * 1e-3, DRIFT_SD_MA * 1e-3]) * np.sqrt(1.0 - a * a)
+        sd = _DRIFT_SD * np.sqrt(1.0 - a * a)
         kick = self._drift_rng.normal(0.0, 1.0, (2, n)) * sd[:, None]
         out = np.stack([lfilter([1.0], [1.0, -a], kick[k], zi=[a * self._drift[k]])[0] for k in range(2)])
         self._drift = out[:, -1].copy()
