@@ -93,8 +93,8 @@ class FlyView(pn.viewable.Viewer):
                                             value=s.sensor_noise_mv, width=w)
         self.risk = pn.widgets.Select(name="Declared risk (its cautions follow)", options=list(RISKS), value=s.risk,
                                       width=w, css_classes=["uam-fly-risk"])
-        self.reserve = pn.widgets.FloatSlider(name="Weather reserve (kt of headwind)", start=0, end=40, step=0.5,
-                                              value=s.reserve_kt, width=w)
+        self.reserve = pn.widgets.FloatSlider(name="Weather reserve (kt)", start=0, end=40, step=0.5,
+                                              value=s.reserve_kt, width=w, format="0.0")
         self.inject_kts = pn.widgets.FloatSlider(name="Wind change (kt, + = headwind)", start=-40, end=40, step=5,
                                                  value=s.inject_kts, width=w)
         self.inject_button = pn.widgets.Button(name="Inject wind change now", button_type="warning", width=w)
