@@ -141,3 +141,26 @@ def test_the_declared_risk_sets_the_cautions_and_a_hand_moved_reserve_declares_n
     view.reserve.value = 10.0
     state.fly()
     assert state.record.risk is None and state.record.reserve_kt == 10.0
+
+
+def test_many_flights_draw_the_price_of_safety_in_the_tabs_world(state):
+    """The "many flights" view flies price_of_safety at the tab's risks in the tab's world and draws its levels."""
+    from uam_studio.app.fly.many import FLOOR, ManyFlightsView
+    from uam_studio.planning.operations.safety_price import price_of_safety, risk_levels
+
+    many = state.many
+    assert many.world == "varied" and many.risks == [0.01, 0.05, 0.1, 0.2]
+    state.world = "its model (teaching)"
+    assert many.world == "model"
+    view = ManyFlightsView(many)
+    assert "does the breach rate stay under the risk" in view.note.object
+    many.param.update(per_level=2, risks=[0.05, 0.2])
+    seen = []
+    many.param.watch(lambda e: seen.append(e.new), "done")
+    many.run()
+    assert many.error == "" and not many.running and seen == [1, 2, 3, 4]
+    assert many.levels == risk_levels(price_of_safety([0.05, 0.2], 2, world="model"))
+    assert view.rates.data["risk"] == [0.05, 0.2] and min(view.rates.data["rate"]) >= FLOOR
+    assert view.served.data["operator"] == [v.priority_ratio for v in many.levels]
+    assert list(view.table.value["declared risk"]) == [0.05, 0.2]
+    assert "2 flights per declared risk" in view.note.object and "'model'" in view.note.object

@@ -289,6 +289,29 @@ def test_hold_to_fleet_is_never_more_optimistic_than_the_fleets_best_and_holds_t
     assert np.linalg.eigvalsh(held).min() >= -1e-12
 
 
+@given(lik=st.tuples(st.floats(0.2, 2.0), st.floats(0.0, 0.6)),
+       known=st.tuples(st.floats(0.2, 2.0), st.floats(0.0, 0.6)),
+       sd=st.tuples(st.floats(1e-4, 0.2), st.floats(1e-4, 0.1)))
+def test_a_logbook_that_holds_the_pack_beyond_its_fleet_moves_the_edge_out_to_it(lik, known, sd):
+    """Readings held with a logbook's belief ``known``: never more optimistic than the more optimistic of the fleet's
+    best cell and the logbook's; readings no more optimistic than the logbook are taken as they are."""
+    prior = fleet_prior(DEFAULT_CELL)
+    cov = np.diag(np.square(sd))
+    post_mean, post_cov = combine([(np.array(lik), cov), (np.array(known), cov)])
+    mean, held = hold_to_fleet(post_mean, post_cov, np.array(lik), cov, prior, 2.0, known=np.array(known))
+    edge = np.minimum(prior.mean - np.sqrt(3.0) * np.sqrt(np.diag(prior.cov)), known)
+    for i in range(2):
+        if edge[i] - lik[i] > 2.0 * sd[i]:
+            assert mean[i] >= edge[i] - 1e-12
+        else:
+            assert mean[i] == post_mean[i] and held[i, i] == pytest.approx(post_cov[i, i])
+    # the logbook beyond the fleet's edge: readings that agree with it are not held back to the fleet's best
+    far = prior.mean - 3.0 * np.sqrt(3.0) * np.sqrt(np.diag(prior.cov))
+    tight = np.diag([1e-8, 1e-10])
+    assert np.allclose(hold_to_fleet(far, tight, far, tight, prior, 2.0, known=far)[0], far)
+    assert not np.allclose(hold_to_fleet(far, tight, far, tight, prior, 2.0)[0], far)
+
+
 def test_disagrees_is_per_component():
     prior = fleet_prior(DEFAULT_CELL)
     inside = prior.mean

@@ -7,6 +7,7 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -94,3 +95,65 @@ def test_no_reserve_is_written_outside_the_risks_home():
                             and rel != "risk.py" and (rel, t.id) not in NOT_RISK_RESERVES):
                         offenders.append(f"{rel}: {t.id}")
     assert offenders == [], offenders
+
+
+# --------------------------------------------------------------------------- the fleet's declared risk
+
+
+def test_the_fleet_dispatcher_takes_its_margins_from_the_declared_risk():
+    """The default risk is the dispatcher's tuned margins (health 1.64 std, each leg's wind 2.33 std); a smaller risk
+    never passes a round trip that a larger one refuses (its margin is smaller for every aircraft and request)."""
+    from uam_studio.fleet.day import Fleet, OperatingDay
+    from uam_studio.fleet.demand import poisson_demand
+    from uam_studio.fleet.dispatch import AircraftView
+    from uam_studio.risk import DISPATCH_WIND_Z
+
+    assert (caution().health_z, caution().dispatch_wind_z) == (HEALTH_Z, DISPATCH_WIND_Z) == (1.64, 2.33)
+    demand = poisson_demand(3, rate_per_h=4.0, day_s=3 * 3600.0)
+    fleet = Fleet.new(3, seed=4)
+    margins = {}
+    for risk in (0.01, 0.05, 0.2):
+        day = OperatingDay(fleet, demand, "aware", 1, [2], risk)
+        margins[risk] = [day.margin(r, AircraftView(str(i), fleet.belief(i), 0)) for r in demand for i in range(3)]
+    assert all(a < b < c for a, b, c in zip(margins[0.01], margins[0.05], margins[0.2]))
+
+
+@pytest.mark.parametrize("arg", ["0", "0.5", "nan"])
+def test_fleet_with_a_bad_risk_exits_2_in_one_line(capsys, arg):
+    assert main(["fleet", "--risk", arg]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: risk: ") and "\n" not in err
+
+
+def _check_winds(monkeypatch, reserve_kt: float, sigma_kt: float) -> list[float]:
+    """The winds (kt) the take-off's safety check flies each leg in, for the example mission (winds as forecast)."""
+    from uam_studio.planning.operations.operator import Operator
+
+    mission = load_mission(asset_path("example_mission.json"))
+    op = Operator(mission, forecast_sigma_kt=sigma_kt, reserve_kt=reserve_kt, planner="oracle")
+    seen: list[float] = []
+    real = Operator.leg_current
+
+    def spy(self, frm, to, altitude_m, wind_kts):
+        seen.append(wind_kts - self.winds.predict(to)[0])  # the check's wind above the belief's mean
+        return real(self, frm, to, altitude_m, wind_kts)
+
+    monkeypatch.setattr(Operator, "leg_current", spy)
+    op.observe(np.arange(20.0), np.full(20, 20.0), np.full(20, 3.9))
+    op.decide()
+    return seen
+
+
+def test_the_check_holds_the_weather_change_jointly_with_the_forecasts_error(monkeypatch):
+    """The take-off check's winds: with a perfect forecast each leg gets the whole reserve (the change is common to
+    both legs; the belief keeps a small std of its own); with no reserve, the forecast's joint bound alone; with
+    both, more than either and less than their sum (the two are independent: their quantiles do not add)."""
+    only_change = _check_winds(monkeypatch, 25.0, 0.0)
+    assert only_change and all(25.0 <= w < 26.0 for w in only_change)
+    monkeypatch.undo()
+    only_forecast = _check_winds(monkeypatch, 0.0, 13.0)
+    monkeypatch.undo()
+    both = _check_winds(monkeypatch, 25.0, 13.0)
+    assert len(both) == len(only_forecast) and max(only_forecast) > 1.0
+    for a, b in zip(only_forecast, both):
+        assert max(a, 25.0 * 0.5) < b < a + 25.0

@@ -12,6 +12,8 @@ WebGL, a student's browser without a GPU draws the axes and legends but no line.
   (e.g. the EOD cut-off).
 - :func:`flight_voltage`: one flown mission's measured, predicted and true voltage against the
   cut-off, with the operator's decisions marked on the timeline.
+- :func:`price_of_safety_figure`: the breach rate against the declared risk, and the priority served, of
+  :func:`~uam_studio.planning.operations.safety_price.risk_levels`.
 """
 
 from __future__ import annotations
@@ -26,8 +28,9 @@ import numpy as np
 from uam_studio.battery import DEFAULT_EOD_V
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
 from uam_studio.planning.operations import FlightRecord
+from uam_studio.planning.operations.safety_price import RiskLevel
 
-__all__ = ["curves", "draw_on_canvas", "flight_voltage", "mission_map", "sorties"]
+__all__ = ["curves", "draw_on_canvas", "flight_voltage", "mission_map", "price_of_safety_figure", "sorties"]
 
 
 def draw_on_canvas() -> None:
@@ -128,3 +131,33 @@ def flight_voltage(rec: FlightRecord, eod_v: float = DEFAULT_EOD_V, title: str |
     verdict = "BREACHED" if rec.breached else f"priority {rec.reached_priority}"
     return hv.Overlay(items).opts(title=title or f"{rec.mission}: {verdict}", width=width, height=height,
                                   legend_position="right", ylim=(lo, 4.25))
+
+
+def price_of_safety_figure(levels: Sequence[RiskLevel], width: int = 380, height: int = 300) -> hv.Layout:
+    """Two panels over the declared risk (log axis): the breach rate the flights realised, with its 95% interval,
+    against the line "rate = declared risk" (points under it: the risk is kept); and the priority served over
+    hindsight's, the operator's beside its pre-flight plan flown blind (a breach scores 0)."""
+    risks = np.array([v.risk for v in levels])
+    rate = np.array([v.rate for v in levels])
+    lo, hi = rate - np.array([v.rate_low for v in levels]), np.array([v.rate_high for v in levels]) - rate
+    span = np.array([risks.min() / 1.5, risks.max() * 1.5])
+    floor = 1e-3  # a rate of 0 drawn here on the log axis
+    breach = hv.Overlay([
+        hv.Curve((span, span), "declared risk", "breach rate", label="rate = declared risk").opts(
+            color="gray", line_dash="dashed"),
+        hv.ErrorBars((risks, np.maximum(rate, floor), np.minimum(lo, rate), hi), "declared risk",
+                     ["breach rate", "neg", "pos"]).opts(color=PALETTE[1]),
+        hv.Scatter((risks, np.maximum(rate, floor)), "declared risk", "breach rate", label="flown (95% interval)").opts(
+            color=PALETTE[1], size=9, tools=["hover"]),
+    ]).opts(title="breach rate against the declared risk", logx=True, logy=True, width=width, height=height,
+            legend_position="top_left", ylim=(floor / 1.5, max(1.0, float(hi.max() + rate.max()))))
+    served = hv.Overlay([
+        hv.Curve((risks, [v.priority_ratio for v in levels]), "declared risk", "priority / hindsight",
+                 label="operator").opts(color=PALETTE[0], line_width=2),
+        hv.Scatter((risks, [v.priority_ratio for v in levels]), "declared risk", "priority / hindsight").opts(
+            color=PALETTE[0], size=8, tools=["hover"]),
+        hv.Curve((risks, [v.blind_ratio for v in levels]), "declared risk", "priority / hindsight",
+                 label="pre-flight plan flown blind").opts(color=PALETTE[2], line_dash="dashed"),
+    ]).opts(title="what it serves (breach: 0)", logx=True, width=width, height=height, legend_position="bottom_right",
+            ylim=(0.0, 1.05))
+    return (breach + served).opts(shared_axes=False)

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from uam_studio.cli.common import EXIT_OK, Command, add_engine_arguments, add_world_arguments, check_workers, seed_arg
+from uam_studio.risk import DEFAULT_RISK
 
 
 def _add_fleet_arguments(p: argparse.ArgumentParser) -> None:
@@ -32,6 +33,9 @@ def _add_fleet_arguments(p: argparse.ArgumentParser) -> None:
                    help="the packs' age at the start: U(0, EFC) equivalent full cycles (0-2000; default 60%% of "
                         "the law's cycles to 80%% capacity: about 54 for nasa, 294 for vtc6)")
     add_world_arguments(p, "the fleet's packs fly")
+    p.add_argument("--risk", type=float, default=DEFAULT_RISK, metavar="P",
+                   help="the declared risk the health-aware dispatcher's margins follow from (0.0001 to below 0.5; "
+                        "default 0.05): its health P to the weak side, each leg's wind P/5 to the head side")
     p.add_argument("--law", choices=["nasa", "vtc6"], default="nasa",
                    help="the packs' cell type and the aging law they follow: nasa (the paper's cell, fitted to the "
                         "NASA PCoE lives; default) or vtc6 (fitted to the CMU lives)")
@@ -76,6 +80,7 @@ def _run_fleet(args: argparse.Namespace) -> int:
     from uam_studio.errors import check_range
     from uam_studio.fleet.day import Fleet, default_age_spread, fly_day_of_life
     from uam_studio.fleet.demand import load_demand
+    from uam_studio.risk import check_risk
 
     for flag, value, lo, hi in (("--aircraft", args.aircraft, 1, 50), ("--days", args.days, 1, 3650),
                                 ("--rate", args.rate, 0.0, 60.0), ("--chargers", args.chargers, 1, 50),
@@ -85,6 +90,7 @@ def _run_fleet(args: argparse.Namespace) -> int:
     if args.age_spread is None:
         args.age_spread = default_age_spread(args.law)
     check_range("--age-spread", args.age_spread, 0.0, 2000.0)
+    check_risk(args.risk)
     _check_csv_path(args.csv)
     dispatchers = args.dispatcher or ["aware", "blind", "hindsight"]
     out = {}
@@ -92,7 +98,8 @@ def _run_fleet(args: argparse.Namespace) -> int:
         demand = load_demand(args.demand)
         for d in dispatchers:
             fleet = Fleet.new(args.aircraft, args.seed, args.age_spread, args.vertiports, args.law, args.world)
-            days = [fly_day_of_life(fleet, demand, d, args.seed, k, args.chargers, not args.keep_retired)[0].to_dict()
+            days = [fly_day_of_life(fleet, demand, d, args.seed, k, args.chargers, not args.keep_retired,
+                                    args.risk)[0].to_dict()
                     for k in range(int(args.days))]
             out[d] = {"dispatcher": d, "days": days}
     else:
@@ -106,7 +113,7 @@ def _run_fleet(args: argparse.Namespace) -> int:
                                args.age_spread, workers=args.workers, address=args.address,
                                progress=lambda done, _n: bar.update(done - bar.n), max_km=args.max_km,
                                vertiports=args.vertiports, law=args.law, renew=not args.keep_retired,
-                               world=args.world)
+                               world=args.world, risk=args.risk)
         if args.csv is not None:
             _write_csv(args.csv, [{"dispatcher": r["dispatcher"], "seed": r["seed"], "day": d + 1,
                                    **{k: r[k][d] for k in DAY_FIELDS}}
@@ -119,7 +126,7 @@ def _run_fleet(args: argparse.Namespace) -> int:
               f"from {args.seed}, Poisson {args.rate:g} requests/h up to {args.max_km:g} km, "
               f"{args.chargers} charger(s) per vertiport, {args.law} packs aged U(0, {args.age_spread:.0f}) cycles, "
               f"{'retired packs grounded' if args.keep_retired else 'a retired pack replaced overnight'}, "
-              f"world {args.world}")
+              f"world {args.world}, declared risk {args.risk:g}")
         print(f"{'dispatcher':10} {'priority/day':>12} {'5-95%':>9} {'served':>7} {'refused':>8} {'breaches':>9} "
               f"{'packs retired':>13} {'mean day':>8} {'bound/day':>9}")
         for r in summarize(rows):

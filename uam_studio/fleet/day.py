@@ -62,7 +62,7 @@ from uam_studio.fleet.packs import (
     pack_law,
 )
 from uam_studio.planning.operations.world import DEFAULT_WORLD
-from uam_studio.risk import DISPATCH_WIND_Z, HEALTH_Z
+from uam_studio.risk import DEFAULT_RISK, caution
 
 __all__ = ["AGE_SPREAD_LIFE", "DayResult", "END_S", "Fleet", "OperatingDay", "PACK_LAWS",
            "day_of_life_seed", "default_age_spread", "fly_day_of_life", "hindsight_bound", "pack_law", "simulate_day",
@@ -169,8 +169,10 @@ class OperatingDay:
     :meth:`margin`; the other dispatchers' margins read the aircraft's beliefs.
     """
 
-    def __init__(self, fleet: Fleet, demand: list[Request], dispatcher: str, seed: int, counts: list[int]) -> None:
+    def __init__(self, fleet: Fleet, demand: list[Request], dispatcher: str, seed: int, counts: list[int],
+                 risk: float = DEFAULT_RISK) -> None:
         self.fleet, self.demand, self.dispatcher = fleet, demand, dispatcher
+        self.caution = caution(risk)  # the health-aware dispatcher's margins (uam_studio.risk)
         self.winds = _world_winds(demand, seed)
         self.bound = _bound(fleet, demand, self.winds, counts) if dispatcher == "hindsight" else None
         self.env = simpy.Environment()
@@ -192,11 +194,11 @@ class OperatingDay:
         key = (req.name, i, a.key)
         if key not in self.cache:
             if self.dispatcher == "aware":
-                b = a.belief.health
-                self.cache[key] = round_trip_margin(req, b.q_max_c - HEALTH_Z * b.q_max_sd_c,
-                                                    b.r0_ohm + HEALTH_Z * b.r0_sd_ohm,
-                                                    req.wind_kts + DISPATCH_WIND_Z * FORECAST_SIGMA_KT,
-                                                    -req.wind_kts + DISPATCH_WIND_Z * FORECAST_SIGMA_KT)
+                b, c = a.belief.health, self.caution
+                self.cache[key] = round_trip_margin(req, b.q_max_c - c.health_z * b.q_max_sd_c,
+                                                    b.r0_ohm + c.health_z * b.r0_sd_ohm,
+                                                    req.wind_kts + c.dispatch_wind_z * FORECAST_SIGMA_KT,
+                                                    -req.wind_kts + c.dispatch_wind_z * FORECAST_SIGMA_KT)
             elif self.dispatcher == "blind":
                 self.cache[key] = round_trip_margin(req, *NOMINAL, req.wind_kts, -req.wind_kts)
             else:  # hindsight: the truth (the world's), never the aircraft's view
@@ -275,42 +277,47 @@ class OperatingDay:
 
 
 def simulate_day(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int,
-                 chargers: int | Sequence[int] = 2) -> DayResult:
+                 chargers: int | Sequence[int] = 2, risk: float = DEFAULT_RISK) -> DayResult:
     """Fly one day of ``demand`` with ``fleet`` under ``dispatcher`` (:data:`DISPATCHERS`); the fleet's
     truth and beliefs are updated in place (packs age, beliefs learn). ``chargers``: per vertiport (one
     count for all, or one each, 1-50). Each request is served by an aircraft based at its vertiport.
+    ``risk``: the declared risk the health-aware dispatcher's margins follow from (:func:`uam_studio.risk.caution`).
     Seeded: the same inputs give the same day (:class:`OperatingDay`)."""
     if dispatcher not in DISPATCHERS:
         raise InputError("dispatcher", f"{dispatcher!r}: allowed {', '.join(DISPATCHERS)}")
     counts = _charger_counts(fleet, demand, chargers)
-    return OperatingDay(fleet, demand, dispatcher, day_seed(seed), counts).run()
+    return OperatingDay(fleet, demand, dispatcher, day_seed(seed), counts, risk).run()
 
 
 def fly_day_of_life(fleet: Fleet, demand: list[Request], dispatcher: str, seed: int, day: int,
-                    chargers: int | Sequence[int] = 2, renew: bool = True) -> tuple[DayResult, list[int]]:
+                    chargers: int | Sequence[int] = 2, renew: bool = True, risk: float = DEFAULT_RISK
+                    ) -> tuple[DayResult, list[int]]:
     """Day ``day`` (0-based) of the life seeded ``seed``: :func:`simulate_day` with the day's seed
     (:func:`day_of_life_seed`), then, with ``renew``, each pack that retired replaced overnight
     (:meth:`Fleet.renew_retired`). The one way a life's day is flown (:func:`simulate_life`, the CLI's
     ``--demand`` days, the app's Fleet tab). Returns the day and the aircraft renewed after it."""
-    result = simulate_day(fleet, demand, dispatcher, day_of_life_seed(seed, day), chargers)
+    result = simulate_day(fleet, demand, dispatcher, day_of_life_seed(seed, day), chargers, risk)
     return result, (fleet.renew_retired(seed, day + 1) if renew else [])
 
 
 def simulate_life(aircraft: int, days: int, seed: int, dispatcher: str, rate_per_h: float = DEFAULT_RATE_PER_H,
                   chargers: int = 2, age_spread_efc: float | None = None,
                   progress: Callable[[int], None] | None = None, max_km: float = DEFAULT_MAX_KM,
-                  vertiports: int = 1, law: str = "nasa", renew: bool = True, world: str = DEFAULT_WORLD) -> dict:
+                  vertiports: int = 1, law: str = "nasa", renew: bool = True, world: str = DEFAULT_WORLD,
+                  risk: float = DEFAULT_RISK) -> dict:
     """A fleet's life over ``days`` operating days of Poisson demand, requests up to ``max_km`` (km) away
     (the same days for every dispatcher with the same ``seed``), the aircraft spread over ``vertiports``
     vertiports of ``chargers`` chargers each, packs of cell type ``law`` aged U(0, ``age_spread_efc``)
     equivalent full cycles at the start (default :func:`default_age_spread`). With ``renew`` a retired
-    pack is replaced overnight (and one already retired at the start, before the first day).
+    pack is replaced overnight (and one already retired at the start, before the first day). ``risk``: the declared
+    risk of the health-aware dispatcher (:func:`simulate_day`).
 
     :return: per day its :class:`DayResult` (as a dict); ``retired_day``: for each pack that retired, the
         day it did (0: before the first day), and None for each pack in service at the end; the fleet at
         the end (truth and belief)."""
     days = int(check_range("days", days, 1, 3650))
     seed = check_seed("seed", seed)
+    risk = caution(risk).risk  # before any work: one line naming the risk
     fleet = Fleet.new(aircraft, seed, age_spread_efc, vertiports, law, world)
     retired: list[int | None] = [0 for s in fleet.in_service if not s]
     counted = [not s for s in fleet.in_service]
@@ -320,7 +327,7 @@ def simulate_life(aircraft: int, days: int, seed: int, dispatcher: str, rate_per
     results = []
     for d in range(days):
         demand = poisson_demand(day_of_life_seed(seed, d), rate_per_h, max_km=max_km, vertiports=vertiports)
-        result, renewed = fly_day_of_life(fleet, demand, dispatcher, seed, d, chargers, renew)
+        result, renewed = fly_day_of_life(fleet, demand, dispatcher, seed, d, chargers, renew, risk)
         results.append(result)
         for i in renewed if renew else [i for i, s in enumerate(fleet.in_service) if not s]:  # retired by tonight
             if not counted[i]:

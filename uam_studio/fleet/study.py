@@ -18,16 +18,17 @@ from uam_studio.errors import InputError, check_range, check_seed
 from uam_studio.fleet.day import pack_law, simulate_life
 from uam_studio.fleet.dispatch import DISPATCHERS
 from uam_studio.planning.operations.world import DEFAULT_WORLD, check_world
+from uam_studio.risk import DEFAULT_RISK, check_risk
 
 __all__ = ["fleet_study", "summarize"]
 
 
 def _life_row(size: int, seed: int, dispatcher: str, days: int, rate: float, chargers: int, spread: float | None,
               max_km: float, vertiports: int = 1, law: str = "nasa", renew: bool = True,
-              world: str = DEFAULT_WORLD) -> dict:
+              world: str = DEFAULT_WORLD, risk: float = DEFAULT_RISK) -> dict:
     """One task: a fleet's life, reduced to what the summary needs (picklable, small)."""
     life = simulate_life(size, days, seed, dispatcher, rate, chargers, spread, max_km=max_km, vertiports=vertiports,
-                         law=law, renew=renew, world=world)
+                         law=law, renew=renew, world=world, risk=risk)
     return {"aircraft": size, "seed": seed, "dispatcher": dispatcher,
             "priority": [d["priority"] for d in life["days"]], "refused": [d["refused"] for d in life["days"]],
             "breaches": [d["breaches"] for d in life["days"]], "served": [d["served"] for d in life["days"]],
@@ -38,11 +39,12 @@ def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[
                 dispatchers: Sequence[str] = DISPATCHERS, rate_per_h: float = 4.0, chargers: int = 2,
                 age_spread_efc: float | None = None, workers: int | None = None, address: str | None = None,
                 progress: Callable[[int, int], None] | None = None, max_km: float = 45.0,
-                vertiports: int = 1, law: str = "nasa", renew: bool = True, world: str = DEFAULT_WORLD) -> list[dict]:
+                vertiports: int = 1, law: str = "nasa", renew: bool = True, world: str = DEFAULT_WORLD,
+                risk: float = DEFAULT_RISK) -> list[dict]:
     """Every (fleet size, seed, dispatcher) life as a Dask task (:func:`uam_studio.engine.run_tasks`): on
     the scheduler at ``address`` (``tcp://host:8786``) if given, else on a local cluster of ``workers``
     processes (default: one per core), one thread each. ``workers=0`` runs the tasks here, one after
-    another (no Dask). ``law``, ``renew``, ``world`` and ``age_spread_efc`` (None: the law's default) as in
+    another (no Dask). ``law``, ``renew``, ``world``, ``risk`` and ``age_spread_efc`` (None: the law's default) as in
     :func:`~uam_studio.fleet.day.simulate_life`.
 
     :return: one row per task in task order (sizes, then seeds, then dispatchers): per day its
@@ -59,8 +61,10 @@ def fleet_study(aircraft: Sequence[int] = (6,), days: int = 90, seeds: Sequence[
         raise InputError("seeds", "no task: give at least one fleet size, seed and dispatcher")
     pack_law(law)  # before any task: one line naming the law
     check_world(world)
+    check_risk(risk)
     spread = None if age_spread_efc is None else float(age_spread_efc)
-    args = (days, float(rate_per_h), int(chargers), spread, float(max_km), int(vertiports), law, bool(renew), world)
+    args = (days, float(rate_per_h), int(chargers), spread, float(max_km), int(vertiports), law, bool(renew), world,
+            float(risk))
     return run_tasks(_life_row, [(*t, *args) for t in tasks], workers=workers, address=address,
                      progress=progress, name="fleet-life")
 

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import param
 
+from uam_studio.app.fly.many import ManyFlights
 from uam_studio.app.services import FLIGHT_POOL, LatestWorker, one_line
 from uam_studio.errors import InputError
 from uam_studio.planning import VERTIPORT, Mission
@@ -129,6 +130,12 @@ class FlyState(param.Parameterized):
         self.dispatch = dispatch
         self._worker: LatestWorker[_Flight, tuple[_Flight, FlightRecord | None, str]] = LatestWorker(
             _fly, self._flown, _flight_failed, dispatch=dispatch, pool=FLIGHT_POOL)
+        # the "many flights" view: the price of safety at the risks this tab offers, in the world it selects
+        self.many = ManyFlights(background, dispatch, risks=list(RISKS), world=WORLD_LABELS[self.world])
+
+    @param.depends("world", watch=True)
+    def _many_world(self) -> None:
+        self.many.world = WORLD_LABELS[self.world]
 
     # ------------------------------------------------------------------ flying
     def fly(self, keep_time: bool = False) -> None:

@@ -19,6 +19,7 @@ import param
 from bokeh.models import ColumnDataSource, HoverTool, Range1d
 from bokeh.models.annotations import Span  # = bokeh.models.Span, a re-export mypy misses (its stubs lack __all__)
 
+from uam_studio.app.fly.many import ManyFlightsView
 from uam_studio.app.fly.state import PACKS, RISKS, SPEEDS, WORLD_LABELS, FlyState
 from uam_studio.app.planner.map_geometry import altitude_labels, place_label
 from uam_studio.app.style import (
@@ -154,6 +155,8 @@ class FlyView(pn.viewable.Viewer):
             pn.Column(self.error, pn.Row(self.progress, self.status, sizing_mode="stretch_width"),
                       pn.Row(self.map_pane, self.volt_pane, sizing_mode="stretch_width"),
                       window_height(self.log, LOG_HEIGHT_CSS),
+                      pn.Card(ManyFlightsView(s.many), title="Many flights: the price of safety", collapsed=True,
+                              sizing_mode="stretch_width", css_classes=["uam-many-card"]),
                       sizing_mode="stretch_width"),
             sizing_mode="stretch_width", css_classes=["uam-fly"])
         if s.record is not None:

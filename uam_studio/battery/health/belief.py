@@ -363,7 +363,8 @@ class HealthBelief:
         """The belief from the logbook, all readings so far and the prior. Readings that put the cell beyond its
         prior's box on the optimistic side are held with caution
         (:func:`~uam_studio.battery.health.prior.hold_to_fleet`: a cell better than any of its fleet is planned as
-        the fleet's best, with the difference in its std).
+        the fleet's best, with the difference in its std; a pack whose logbook already holds it beyond that edge is
+        held at its logbook's belief instead).
 
         :raises InputError: fewer than :data:`MIN_FIT_SAMPLES` readings in all and no logbook.
         """
@@ -376,7 +377,8 @@ class HealthBelief:
         if fits:  # readings that put the cell beyond the optimistic edge of its prior's box are held with caution
             lik_mean, lik_cov = combine([(np.array([e.w, e.r0]), e.cov_w / e.discrepancy_factor)
                                          for e in fits])  # face value
-            mean, cov = hold_to_fleet(mean, cov, lik_mean, lik_cov, self.prior, FLEET_Z)
+            mean, cov = hold_to_fleet(mean, cov, lik_mean, lik_cov, self.prior, FLEET_Z,
+                                      self.start.mean if self.source == SOURCE_LOGBOOK else None)
         # the Gaussian combination can put the mean a little outside the fit's box (a cell at its edge,
         # R0 = 0 say): the estimate the operator plans with stays inside it
         return BelievedHealth.of(clip_to_box(mean), cov)

@@ -81,19 +81,22 @@ def combine(parts: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.
 
 
 def hold_to_fleet(mean: np.ndarray, cov: np.ndarray, likelihood_mean: np.ndarray, likelihood_cov: np.ndarray,
-                  prior: HealthPrior, z: float) -> tuple[np.ndarray, np.ndarray]:
+                  prior: HealthPrior, z: float, known: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """A belief ``(mean [2], cov [2, 2])`` in (w, R0) held with caution where the readings alone
     (``likelihood_mean``, ``likelihood_cov``) put the cell more than ``z`` of their std beyond the
     optimistic edge of ``prior``'s box (w below it: q_max above every fleet cell's; R0 below every
     fleet cell's): in that component the mean is moved no further than the fleet's best cell, and the
     variance grows by the squared distance from the readings' value to that mean (so the belief still
     holds both). Components inside the box, or beyond its pessimistic edge, are left as they are; the
-    correlation is kept."""
+    correlation is kept. ``known`` (w, R0): what the pack's own logbook already holds; where it lies beyond the box's
+    optimistic edge, the edge is moved out to it (readings that agree with the pack's history are not held)."""
     mean = np.asarray(mean, dtype=float).copy()
     cov = np.asarray(cov, dtype=float)
     lik = np.asarray(likelihood_mean, dtype=float)
     lik_sd = np.sqrt(np.maximum(np.diag(np.asarray(likelihood_cov, dtype=float)), 0.0))
     edge = prior.mean - prior.half_width  # the box's optimistic edge
+    if known is not None:
+        edge = np.minimum(edge, np.asarray(known, dtype=float))
     beyond = edge - lik > z * lik_sd
     if not beyond.any():
         return mean, cov

@@ -18,14 +18,14 @@ take-off check and at every arrival) it
    default: :func:`~uam_studio.planning.agents.attention.decode.continue_route`) or exactly
    (``planner="oracle"``: :func:`~uam_studio.planning.solvers.oracle.feasible_sorties`), allowing
    only first legs after which the aircraft can still get home on its *cautious* belief: the cell
-   ``health_z`` std to the weak side, and the two legs' winds at a joint one-sided ``wind_z`` bound
-   plus the weather reserve (``reserve_kt`` more headwind on the next leg and on the way home: a change
-   of the weather since the last leg, or before the next, of up to that much never breaches)
-   (:meth:`Operator._safe_moves`). The search asks every later move of the plan to pass the same
-   check at its own take-off, on the expected cell, with each leg's wind at its share of the joint
-   bound for two like legs (``wind_z`` / sqrt 2 std) plus the reserve: a plan that the next take-offs
-   would cut short is not chosen. A new pack's take-off plan is searched without it (its cell is still the
-   fleet prior: 20 s of readings say little of q_max); a pack with a logbook is checked from the take-off on;
+   ``health_z`` std to the weak side, and the two legs' winds at a joint one-sided ``wind_z`` bound of
+   their forecast errors and a change of the weather common to both (the weather reserve ``reserve_kt`` is
+   that change's ``wind_z`` quantile) (:meth:`Operator._safe_moves`). The search asks every later move of
+   the plan to pass the same check at its own take-off, on the expected cell, with each leg's wind at its
+   share of the joint bound for two like legs: ``wind_z`` / sqrt 2 std and the reserve, in quadrature.
+   A plan that the next take-offs would cut short is not chosen. A new pack's take-off plan is searched
+   without it (its cell is still the fleet prior: 20 s of readings say little of q_max); a pack with a
+   logbook is checked from the take-off on;
 4. flies that first leg only, and re-plans on arrival. Its margins: its uncertainty and the weather reserve; the
    belief's model-error term widens its intervals, not its checks (RESULTS.md, "A world unlike the model").
 """
@@ -72,17 +72,16 @@ R0_PLAN_RANGE = (0.005, 1.5)  # ohm
 class Operator:
     """Decides the flight from the forecast and the readings (see the module docstring).
 
-    :param mission: the mission as the operator knows it: forecast winds and the cut-off. Its
-        ``battery`` is never read (the operator's cell is its estimate); the flight loop hands it a
-        mission whose battery is a placeholder.
+    :param mission: the mission as the operator knows it: forecast winds and the cut-off. Its ``battery`` is never
+        read (the operator's cell is its estimate); the flight loop hands it a mission whose battery is a placeholder.
     :param scenario: overrides ``mission.scenario``.
     :param forecast_sigma_kt: the forecast's stated error std (kt).
     :param sensor_noise_mv: the voltage sensor's stated noise std (mV), or None to estimate it.
     :param health_z: margin on the health estimate (std).
     :param wind_z: margin on each unflown leg's wind (std).
     :param planner: ``"attention"`` (the learned planner, default) or ``"oracle"`` (exact search).
-    :param reserve_kt: the weather reserve (kt, 0-60): every take-off keeps the next leg and the way home
-        safe under the cautious belief plus this much more headwind on each.
+    :param reserve_kt: the weather reserve (kt, 0-60): the ``wind_z`` quantile of a change of the weather that every
+        take-off's check holds beside the forecast's error (:meth:`_safe_moves`).
     :param logbook: the pack's logbook (its earlier flights, as measured); None or empty: a new pack.
     """
 
@@ -100,9 +99,7 @@ class Operator:
         check_scenario(scenario := scenario or mission.scenario)
         # the exact search of planner "oracle": 8 at most
         check_destination_count(len(mission.destinations), N_MAX, "fly")
-        self.forecast_mission = mission
-        self.scenario = scenario
-        self.eod_v = mission.eod_v
+        self.forecast_mission, self.scenario, self.eod_v = mission, scenario, mission.eod_v
         self.health_z = check_range("health_z", health_z, 0.0, 5.0)
         self.wind_z = check_range("wind_z", wind_z, 0.0, 5.0)
         self.plan_wind_z = check_range("plan_wind_z", plan_wind_z, 0.0, 5.0)
@@ -111,11 +108,9 @@ class Operator:
         self.health_belief = HealthBelief(self.noise_v, self.eod_v, logbook=logbook, dt_s=DT_S)  # the paper's box
         self.winds = WindBelief({n: mission.node(n).wind_kts for n in mission.node_names}, forecast_sigma_kt)
         self.names = tuple(d.name for d in mission.destinations)
-        self.node = VERTIPORT
+        self.node, self.time_s, self.sorties = VERTIPORT, 0.0, 0
         self.visited: list[str] = []
-        self.time_s = 0.0
         self.decisions: list[Decision] = []
-        self.sorties = 0
         self._last_route: tuple[str, ...] | None = None
         self._leg_start_s = 0.0
         self._leg: tuple[str, str, float] | None = None
@@ -164,8 +159,9 @@ class Operator:
     # ------------------------------------------------------------------ planning
     def _belief(self, health: BelievedHealth, health_z: float, wind_z: float, extra_kt: float = 0.0
                 ) -> tuple[Mission, float, float]:
-        """The mission as believed, ``z`` std to the cautious side: less q_max, more R0, more headwind
-        (and ``extra_kt`` more headwind on every leg)."""
+        """The mission as believed, ``z`` std to the cautious side: less q_max, more R0, more headwind: each leg's
+        predicted wind + the root of the sum of squares of ``wind_z`` std and ``extra_kt`` (kt; the weather
+        reserve's share, independent of the forecast's error)."""
         q_plan = float(np.clip(health.cautious_q_max_c(health_z), *Q_PLAN_RANGE))
         r_plan = float(np.clip(health.cautious_r0_ohm(health_z), *R0_PLAN_RANGE))
         lo, hi = WIND_RANGE_KTS
@@ -173,7 +169,7 @@ class Operator:
 
         def w(node: str) -> float:
             mean, sd = self.winds.predict(node)
-            return float(np.clip(mean + wind_z * sd + extra_kt, lo, hi))
+            return float(np.clip(mean + math.hypot(wind_z * sd, extra_kt), lo, hi))
 
         dests = tuple(dataclasses.replace(d, wind_kts=w(d.name)) for d in m.destinations)
         vp = dataclasses.replace(m.vertiport, wind_kts=w(VERTIPORT))
@@ -201,13 +197,12 @@ class Operator:
     def _safe_moves(self, episode: Episode, here: int, state: np.ndarray, visited: int) -> np.ndarray:
         """bool [N_TARGETS, N_ALTITUDES]: next legs after which the aircraft can still get home.
 
-        Both legs are flown on the cautious belief's episode (its cell) from ``state``. Their winds are the
-        point of a joint one-sided ``wind_z`` bound: the two legs' wind errors are independent
-        Gaussians (std from :meth:`WindBelief.predict`), each leg's charge grows with its wind in
-        proportion to its length, and the bound puts each leg's wind at
-        ``mean + wind_z * sd^2 * d / sqrt(sum(sd^2 d^2))``. A wind already measured has a small std,
-        so all the margin then goes to the unknown one. Both legs then get ``reserve_kt`` more headwind
-        (the weather reserve).
+        Both legs are flown on the cautious belief's episode (its cell) from ``state``, their winds at the point of a
+        joint one-sided ``wind_z`` bound: each leg's wind error is an independent Gaussian (std from
+        :meth:`WindBelief.predict`) plus a change of the weather common to both, N(0, ``reserve_kt / wind_z``) (the
+        reserve is its ``wind_z`` quantile); each leg's charge grows with its wind in proportion to its length d, so
+        the bound puts each leg's wind at ``mean + wind_z * (Sigma d)_leg / sqrt(d' Sigma d)``. A wind already
+        measured has a small std: the margin then goes to the unknown one and to the change.
         """
         legs = episode.legs
         n_alt = len(ALTITUDES_M)
@@ -219,19 +214,23 @@ class Operator:
         # close to the vertiport to fly to directly, as the exact search does)
         open_moves = episode.moves(here, done, among=legs.present[:legs.slots])[0]
         firsts, returns = [], []
+        # a change of the weather, common to both legs: N(0, change_sd) (the reserve is its wind_z quantile)
+        change_sd = self.reserve_kt / self.wind_z if self.wind_z > 0 else 0.0
+        flat = 0.0 if self.wind_z > 0 else self.reserve_kt
         for j in np.flatnonzero(open_moves[:legs.slots].any(axis=1)):
             to = self.names[j]
             mean, sd = self.winds.predict(to)
             d1, d2 = legs.dist[here, j], legs.dist[j, VERTIPORT_SLOT]
-            norm = math.sqrt((sd * d1) ** 2 + (home_sd * d2) ** 2) or 1.0
-            w1 = mean + self.wind_z * sd ** 2 * d1 / norm + self.reserve_kt
-            w2 = home_mean + self.wind_z * home_sd ** 2 * d2 / norm + self.reserve_kt
+            common = change_sd ** 2 * (d1 + d2)
+            norm = math.sqrt((sd * d1) ** 2 + (home_sd * d2) ** 2 + common * (d1 + d2)) or 1.0
+            w1 = mean + self.wind_z * (sd ** 2 * d1 + common) / norm + flat
+            w2 = home_mean + self.wind_z * (home_sd ** 2 * d2 + common) / norm + flat
             for a in np.flatnonzero(open_moves[j]):
                 firsts.append((int(j), int(a), self.leg_current(frm, to, ALTITUDES_M[a], w1)))
                 returns.append([(b, self.leg_current(to, VERTIPORT, ALTITUDES_M[b], w2))
                                 for b in range(n_alt) if legs.feasible[j, VERTIPORT_SLOT, b]])
         if open_moves[VERTIPORT_SLOT].any():
-            w = home_mean + self.wind_z * home_sd + self.reserve_kt
+            w = home_mean + self.wind_z * math.hypot(home_sd, change_sd) + flat
             for a in np.flatnonzero(open_moves[VERTIPORT_SLOT]):
                 firsts.append((VERTIPORT_SLOT, int(a), self.leg_current(frm, VERTIPORT, ALTITUDES_M[a], w)))
                 returns.append([])
@@ -251,8 +250,9 @@ class Operator:
     def _later_check(self, health: BelievedHealth) -> Episode | None:
         """The mission under the check every later take-off of a plan must pass (the plan search's ``checked``):
         each leg at its predicted wind + its share of the joint bound for two like legs (``wind_z`` / sqrt 2
-        std) + the reserve, on the expected cell. None at take-off for a new pack (unless ``check_at_takeoff``): its
-        cell is the fleet prior then, not the cell the later checks fly; a pack with a logbook is checked at once."""
+        std and the reserve in quadrature), on the expected cell. None at take-off for a new pack (unless
+        ``check_at_takeoff``): its cell is the fleet prior then, not the cell the later checks fly; a pack with a
+        logbook is checked at once."""
         if not (self.decisions or self.check_at_takeoff or self.health_belief.source == SOURCE_LOGBOOK):
             return None
         return self._episode(self._belief(health, 0.0, self.wind_z / math.sqrt(2.0), self.reserve_kt)[0])
