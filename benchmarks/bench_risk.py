@@ -1,7 +1,7 @@
 """The price of safety: flights at each declared risk, their breach rate against the risk, and what they serve.
 
     OMP_NUM_THREADS=1 python benchmarks/bench_risk.py [--n 60] [--risks 0.01 0.05 0.1 0.2] [--logbook-flights 3]
-        [--world model]
+        [--world model] [--informed]
 
 For each declared risk (``fly_mission(risk=)``, :func:`uam_studio.risk.caution`), the same ``--n`` flights of
 :func:`uam_studio.planning.operations.safety_price.price_of_safety`: fresh missions of 5-8 destinations, half
@@ -15,16 +15,47 @@ Prints per risk: the breach rate with its 95% Clopper-Pearson interval and a one
 declared risk" (p >= 0.05: consistent), and the priority served against the hindsight reference (a breach scores 0),
 pooled and on single-charge missions, against the pre-flight plan flown blind (its breaches score 0). Runs on two
 processes.
+
+``--informed`` flies the same flights with a reference no operator can be: the operator told its true cell at every
+decision (``bench_weather.InformedOperator``, checked from the take-off on; in the model world that cell is exactly
+the world's), the winds still only believed: what the cautions cost when the health is known.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import time
+from concurrent.futures import ProcessPoolExecutor
 
-from uam_studio.planning.operations.safety_price import format_levels, price_of_safety, risk_levels
+from uam_studio.errors import InputError
+from uam_studio.planning.operations import fly_mission, parse_event
+from uam_studio.planning.operations.safety_price import (
+    RiskFlight,
+    format_levels,
+    group_tests,
+    price_of_safety,
+    risk_flights,
+    risk_levels,
+)
 from uam_studio.planning.operations.world import DEFAULT_WORLD, WORLDS
 from uam_studio.risk import WEATHER_CHANGE_SD_KT
+
+
+def _informed(job: tuple) -> RiskFlight:
+    from bench_weather import InformedOperator  # this folder's: a reference, not library code
+
+    risk, mission, seed, event, world = job
+    op = functools.partial(InformedOperator, q_max=mission.battery.q_max, r0=mission.battery.r0, check_at_takeoff=True)
+    kwargs = dict(seed=seed, pack=seed, risk=risk, world=world, operator=op)
+    try:
+        rec = fly_mission(mission, events=[parse_event(event)], **kwargs)
+    except InputError as err:
+        if err.field != "event":
+            raise
+        rec = fly_mission(mission, **kwargs)
+    return RiskFlight(risk, rec.scenario, rec.reached_priority, rec.static.priority, rec.hindsight.priority,
+                      rec.breached, rec.static.breached)
 
 
 def main() -> None:
@@ -34,13 +65,21 @@ def main() -> None:
     ap.add_argument("--logbook-flights", type=int, default=0, help="earlier flights in each pack's logbook")
     ap.add_argument("--world", choices=WORLDS, default=DEFAULT_WORLD)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--informed", action="store_true", help="the reference told its true cell (module docstring)")
     args = ap.parse_args()
     t0 = time.perf_counter()
-    flights = price_of_safety(args.risks, args.n, args.logbook_flights, args.world, args.workers)
+    if args.informed:
+        jobs = [(r, m, seed, event, args.world) for r in args.risks for m, seed, event in risk_flights(args.n)]
+        with ProcessPoolExecutor(args.workers) as pool:
+            flights = list(pool.map(_informed, jobs))
+        print("the reference told its true cell at every decision (not an operator)")
+    else:
+        flights = price_of_safety(args.risks, args.n, args.logbook_flights, args.world, args.workers)
     half = args.n // 2
     print(f"world {args.world}; {args.n} flights per level ({half} single-charge, {args.n - half} multi-charge), a "
           f"change of N(0, {WEATHER_CHANGE_SD_KT:.1f} kt) in each; logbook: {args.logbook_flights} earlier flights")
     print(format_levels(risk_levels(flights)))
+    print(group_tests(flights))
     print(f"({time.perf_counter() - t0:.0f} s, {args.workers} processes)")
 
 

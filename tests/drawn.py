@@ -19,6 +19,7 @@ import numpy as np
 from uam_studio.app.battery_lab.nasa import NASA_COLORS
 from uam_studio.app.battery_lab.view import EOD_COLOR, FAMILY_COLORS
 from uam_studio.app.fleet.view import COLORS
+from uam_studio.app.fly.many import BLIND_COLOR, DIAGONAL_COLOR, OPERATOR_COLOR, RATE_COLOR
 from uam_studio.app.fly.view import EVENT_COLOR
 from uam_studio.app.planner.map_geometry import FAILED_COLOR
 from uam_studio.app.style import MEASURED_COLOR, PHYSICS_COLOR, PREDICTED_COLOR
@@ -43,6 +44,9 @@ LAB_CURRENT = {"this setting": BLACK}
 FLY_VOLTAGE = {"predicted (operator)": (PREDICTED_COLOR, 1.0), "true (hidden)": (PHYSICS_COLOR, 1.0),
                "measured": (MEASURED_COLOR, 0.8), "EOD cut-off": (FAILED_COLOR, 1.0),
                "wind change": (EVENT_COLOR, 1.0)}
+# The Fly tab's many flights: the breach rate against the declared risk, and the priority served.
+MANY_RATES = {"rate = risk": (DIAGONAL_COLOR, 1.0), "flown (95% interval)": (RATE_COLOR, 1.0)}
+MANY_SERVED = {"operator": (OPERATOR_COLOR, 1.0), "pre-flight plan, blind": (BLIND_COLOR, 1.0)}
 # Retrain's dashed reference line, on each learning-curve figure.
 RETRAIN_ORACLE = {"exact oracle (this map)": ("#333333", 1.0)}
 # The Fleet's per-day chart and its packs' belief against truth.

@@ -12,7 +12,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-from drawn import FLEET_DAYS, FLEET_PACKS, FLY_VOLTAGE, assert_drawn
+from drawn import FLEET_DAYS, FLEET_PACKS, FLY_VOLTAGE, MANY_RATES, MANY_SERVED, assert_drawn
 
 pytest.importorskip("playwright")
 
@@ -192,4 +192,29 @@ def test_fly_tab_flies_a_pack_with_its_logbook(browser, app_url, tmp_path):
     if os.environ.get("UAM_SCREENSHOTS") == "1":
         page.screenshot(path=str(ROOT / "assets" / "screenshots" / "fly_tab_logbook.png"))
     assert page.evaluate("() => document.documentElement.scrollWidth") <= 1366 + 1
+    page.close()
+
+
+def test_fly_tab_flies_many_flights_and_draws_the_price_of_safety(browser, app_url):
+    """The "many flights" card: two flights per declared risk (the slider one step left), flown and drawn: the breach
+    rates against the line rate = risk, the priority served, and one table row per risk."""
+    page = browser.new_page(viewport={"width": 1366, "height": 900})
+    page.goto(app_url, timeout=TIMEOUT_MS)
+    page.locator(".bk-tab", has_text="Fly").click(timeout=TIMEOUT_MS)
+    page.get_by_text("Many flights: the price of safety").click(timeout=TIMEOUT_MS)
+    card = page.locator(".uam-many")
+    card.locator(".noUi-handle").first.press("ArrowLeft", timeout=TIMEOUT_MS)  # 4 -> 2 flights per risk
+    card.get_by_text("Flights per declared risk: 2").wait_for(timeout=TIMEOUT_MS)
+    page.locator("button", has_text="Fly many flights").click(timeout=TIMEOUT_MS)
+    rows = page.locator(".uam-many-table .tabulator-row")
+    rows.nth(3).wait_for(timeout=TIMEOUT_MS)
+    risks = [t.strip() for t in page.locator(
+        '.uam-many-table .tabulator-row .tabulator-cell[tabulator-field="declared risk"]').all_inner_texts()]
+    assert risks == ["0.01", "0.05", "0.1", "0.2"], risks
+    page.get_by_text("2 flights per declared risk").wait_for(timeout=TIMEOUT_MS)
+    card.scroll_into_view_if_needed()
+    assert_drawn(page, "breach rate against the declared risk", MANY_RATES)
+    assert_drawn(page, "priority served / hindsight", MANY_SERVED)
+    if os.environ.get("UAM_SCREENSHOTS") == "1":
+        card.screenshot(path=str(ROOT / "assets" / "screenshots" / "fly_many.png"))
     page.close()

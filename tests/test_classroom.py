@@ -58,3 +58,22 @@ def test_notebook_figures_draw_on_canvas_by_default(monkeypatch):
     plots = importlib.reload(plots)  # what a notebook's import does
     ov = plots.curves({"a": ([0, 1], [3.5, 3.2])}, "t", "V", hline=3.0)
     assert (webgl, hv.renderer("bokeh").get_plot(ov).state.output_backend) == ("webgl", "canvas")
+
+
+def test_the_price_of_safety_figure_draws_each_levels_rate_interval_and_priority():
+    import holoviews as hv
+
+    from uam_studio.classroom.plots import price_of_safety_figure
+    from uam_studio.planning.operations.safety_price import RiskFlight, risk_levels
+
+    flights = [RiskFlight(r, "single_charge", 5, 4, 8, k < n, False) for r, n in ((0.01, 0), (0.2, 3))
+               for k in range(10)]
+    levels = risk_levels(flights)
+    fig = price_of_safety_figure(levels)
+    rates, served = fig
+    bars = next(e for e in rates if isinstance(e, hv.ErrorBars))
+    assert list(bars.dimension_values(0)) == [0.01, 0.2]
+    assert list(bars.dimension_values(1)) == [1e-3, 0.3]  # a rate of 0 drawn at the floor of the log axis
+    assert bars.dimension_values(3)[1] == pytest.approx(levels[1].rate_high - 0.3)
+    operator = next(e for e in served if isinstance(e, hv.Curve) and e.label == "operator")
+    assert list(operator.dimension_values(1)) == [0.625, 0.625]

@@ -16,6 +16,7 @@ from uam_studio.planning.operations.safety_price import (
     CHANGE_WINDOW_S,
     RiskFlight,
     format_levels,
+    group_tests,
     price_of_safety,
     risk_flights,
     risk_levels,
@@ -58,6 +59,9 @@ def test_the_levels_sum_each_risk_with_its_binomial_interval_and_test(flights):
                 v.priority_ratio == pytest.approx(sum(f.priority for f in sub) / hind))
         assert v.blind_breaches == sum(f.blind_breached for f in sub)
     assert format_levels(levels).count("\n") == len(levels) + 1
+    groups = group_tests(flights).splitlines()
+    assert len(groups) == len({(f.risk, f.scenario) for f in flights})
+    assert sum(int(line.split(": ")[1].split(" of ")[0]) for line in groups) == sum(f.breached for f in flights)
 
 
 def test_the_study_flies_what_fly_mission_flies():

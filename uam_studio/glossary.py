@@ -65,11 +65,11 @@ GLOSSARY: dict[str, str] = {
                             "and that a change moves every later leg's wind by the same amount. The Fly log "
                             "says 'the wind changed by about +22 kt since the Hayward leg (p 0.90)' from p "
                             "0.5 on, 'perhaps a change' from p 0.2.",
-    "Weather reserve (kt)": "The headwind beyond its belief that the operator keeps every take-off safe "
-                            "under, as aviation keeps a fuel reserve: the next leg and the way home must stay "
-                            "above the cut-off with that much more headwind on each (default 25 kt). A change "
-                            "of the weather within the reserve does not breach; a breach after a larger one "
-                            "is recorded as 'the change exceeded the reserve', not as a decision error.",
+    "Weather reserve (kt)": "The change of the weather that the operator keeps every take-off safe under, as "
+                            "aviation keeps a fuel reserve: the next leg and the way home must stay above the "
+                            "cut-off with that much more headwind, held together with the forecast's error at the "
+                            "declared risk (default 25 kt, the 5% quantile of the changes it is declared to meet). "
+                            "A breach after a larger change is recorded as 'the change exceeded the reserve'.",
     "Hindsight oracle": "The best plan knowing the true battery and the winds as they actually were at each "
                         "leg's time. With no wind change it is the exact oracle's plan; after an injected "
                         "change it is the best known plan (the oracle's plan for each wind period, and the "

@@ -140,7 +140,8 @@ def price_of_safety_figure(levels: Sequence[RiskLevel], width: int = 380, height
     risks = np.array([v.risk for v in levels])
     rate = np.array([v.rate for v in levels])
     lo, hi = rate - np.array([v.rate_low for v in levels]), np.array([v.rate_high for v in levels]) - rate
-    span = np.array([risks.min() / 1.5, risks.max() * 1.5])
+    span = np.array([risks.min() / 1.6, risks.max() * 1.6])
+    ticks = [(float(r), f"{r:g}") for r in risks]
     floor = 1e-3  # a rate of 0 drawn here on the log axis
     breach = hv.Overlay([
         hv.Curve((span, span), "declared risk", "breach rate", label="rate = declared risk").opts(
@@ -150,7 +151,7 @@ def price_of_safety_figure(levels: Sequence[RiskLevel], width: int = 380, height
         hv.Scatter((risks, np.maximum(rate, floor)), "declared risk", "breach rate", label="flown (95% interval)").opts(
             color=PALETTE[1], size=9, tools=["hover"]),
     ]).opts(title="breach rate against the declared risk", logx=True, logy=True, width=width, height=height,
-            legend_position="top_left", ylim=(floor / 1.5, max(1.0, float(hi.max() + rate.max()))))
+            legend_position="top", xlim=tuple(span), xticks=ticks, ylim=(floor / 1.5, 1.0))
     served = hv.Overlay([
         hv.Curve((risks, [v.priority_ratio for v in levels]), "declared risk", "priority / hindsight",
                  label="operator").opts(color=PALETTE[0], line_width=2),
@@ -158,6 +159,6 @@ def price_of_safety_figure(levels: Sequence[RiskLevel], width: int = 380, height
             color=PALETTE[0], size=8, tools=["hover"]),
         hv.Curve((risks, [v.blind_ratio for v in levels]), "declared risk", "priority / hindsight",
                  label="pre-flight plan flown blind").opts(color=PALETTE[2], line_dash="dashed"),
-    ]).opts(title="what it serves (breach: 0)", logx=True, width=width, height=height, legend_position="bottom_right",
-            ylim=(0.0, 1.05))
+    ]).opts(title="what it serves (breach: 0)", logx=True, width=width, height=height, legend_position="top",
+            xlim=tuple(span), xticks=ticks, ylim=(0.0, 1.05))
     return (breach + served).opts(shared_axes=False)

@@ -15,7 +15,7 @@ from typing import Any, cast
 import pandas as pd
 import panel as pn
 import param
-from bokeh.models import ColumnDataSource, HoverTool
+from bokeh.models import ColumnDataSource, FixedTicker, HoverTool, Range1d
 from bokeh.models.annotations import Whisker  # = bokeh.models.Whisker, a re-export mypy misses
 
 from uam_studio.app.services import FLIGHT_POOL, LatestWorker, one_line
@@ -24,6 +24,8 @@ from uam_studio.errors import InputError
 from uam_studio.planning.operations.safety_price import RiskLevel, price_of_safety, risk_levels
 
 FLOOR = 1e-3  # a breach rate of 0 is drawn here on the log axis
+RATE_COLOR, DIAGONAL_COLOR = "#d62728", "#808080"  # the breach rates flown; the line rate = declared risk
+OPERATOR_COLOR, BLIND_COLOR = "#1f77b4", "#2ca02c"  # priority served: the operator; its pre-flight plan, blind
 COLUMNS = ["declared risk", "flights", "breaches", "breach rate", "95% interval", "p (at most the risk)",
            "priority / hindsight", "single-charge", "blind / hindsight", "blind breaches"]
 
@@ -99,25 +101,36 @@ class ManyFlightsView(pn.viewable.Viewer):
         self.progress = busy_mark(False, 110, "flying...")
         self.note = pn.pane.Markdown("", css_classes=["uam-many-note"], sizing_mode="stretch_width")
         self.table = pn.widgets.Tabulator(pd.DataFrame(columns=COLUMNS), disabled=True, show_index=False,
-                                          sizing_mode="stretch_width", css_classes=["uam-many-table"])
+                                          sizing_mode="stretch_width", css_classes=["uam-many-table"],
+                                          layout="fit_columns")
+        ends = [min(s.risks) / 1.6, max(s.risks) * 1.6]
         self.rates = ColumnDataSource({"risk": [], "rate": [], "low": [], "high": [], "breaches": [], "flights": []})
         self.served = ColumnDataSource({"risk": [], "operator": [], "blind": []})
-        self.diagonal = ColumnDataSource({"x": [], "y": []})
+        self.diagonal = ColumnDataSource({"x": ends, "y": ends})  # drawn before any flight: what to read against
+        x_range = (min(s.risks) / 1.6, max(s.risks) * 1.6)
         rate_fig = page_figure(title="breach rate against the declared risk", width=380, height=300,
                                x_axis_type="log", y_axis_type="log", x_axis_label="declared risk",
-                               y_axis_label="breach rate (0 drawn at 0.001)")
-        rate_fig.line("x", "y", source=self.diagonal, color="gray", line_dash="dashed", legend_label="rate = risk")
-        dots = rate_fig.scatter("risk", "rate", source=self.rates, size=9, color="#d62728",
+                               y_axis_label="breach rate (0 drawn at 0.001)",
+                               x_range=Range1d(start=x_range[0], end=x_range[1]),
+                               y_range=Range1d(start=FLOOR / 2, end=1.0))
+        rate_fig.line("x", "y", source=self.diagonal, color=DIAGONAL_COLOR, line_dash="dashed",
+                      legend_label="rate = risk")
+        dots = rate_fig.scatter("risk", "rate", source=self.rates, size=9, color=RATE_COLOR,
                                 legend_label="flown (95% interval)")
-        rate_fig.add_layout(Whisker(source=self.rates, base="risk", lower="low", upper="high", line_color="#d62728"))
+        rate_fig.add_layout(Whisker(source=self.rates, base="risk", lower="low", upper="high", line_color=RATE_COLOR))
         rate_fig.add_tools(HoverTool(renderers=[dots], tooltips=[("declared risk", "@risk"),
                                                                  ("breaches", "@breaches of @flights")]))
         legend_above(rate_fig)
         served_fig = page_figure(title="priority served / hindsight (breach: 0)", width=380, height=300,
-                                 x_axis_type="log", x_axis_label="declared risk", y_axis_label="priority / hindsight")
-        served_fig.line("risk", "operator", source=self.served, color="#1f77b4", line_width=2, legend_label="operator")
-        served_fig.scatter("risk", "operator", source=self.served, color="#1f77b4", size=8)
-        served_fig.line("risk", "blind", source=self.served, color="#2ca02c", line_dash="dashed",
+                                 x_axis_type="log", x_axis_label="declared risk", y_axis_label="priority / hindsight",
+                                 x_range=Range1d(start=x_range[0], end=x_range[1]),
+                                 y_range=Range1d(start=0.0, end=1.05))
+        for fig in (rate_fig, served_fig):
+            fig.xaxis.ticker = FixedTicker(ticks=list(s.risks))
+        served_fig.line("risk", "operator", source=self.served, color=OPERATOR_COLOR, line_width=2,
+                        legend_label="operator")
+        served_fig.scatter("risk", "operator", source=self.served, color=OPERATOR_COLOR, size=8)
+        served_fig.line("risk", "blind", source=self.served, color=BLIND_COLOR, line_dash="dashed",
                         legend_label="pre-flight plan, blind")
         legend_above(served_fig)
         self.rate_fig, self.served_fig = derived_looks(rate_fig), derived_looks(served_fig)
@@ -155,8 +168,8 @@ class ManyFlightsView(pn.viewable.Viewer):
                            "breaches": [v.breaches for v in levels], "flights": [v.flights for v in levels]}
         self.served.data = {"risk": risks, "operator": [v.priority_ratio for v in levels],
                             "blind": [v.blind_ratio for v in levels]}
-        self.diagonal.data = {"x": [min(risks, default=0.01) / 1.5, max(risks, default=0.2) * 1.5],
-                              "y": [min(risks, default=0.01) / 1.5, max(risks, default=0.2) * 1.5]}
+        ends = [min(risks, default=0.01) / 1.6, max(risks, default=0.2) * 1.6]
+        self.diagonal.data = {"x": ends, "y": ends}
         self.table.value = pd.DataFrame([v.row() for v in levels], columns=COLUMNS)
 
     def __panel__(self) -> pn.viewable.Viewable:

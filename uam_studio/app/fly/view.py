@@ -154,9 +154,9 @@ class FlyView(pn.viewable.Viewer):
                       width=230),
             pn.Column(self.error, pn.Row(self.progress, self.status, sizing_mode="stretch_width"),
                       pn.Row(self.map_pane, self.volt_pane, sizing_mode="stretch_width"),
+                      pn.Card(ManyFlightsView(s.many), title="Many flights: the price of safety (click to open)",
+                              collapsed=True, sizing_mode="stretch_width", css_classes=["uam-many-card"]),
                       window_height(self.log, LOG_HEIGHT_CSS),
-                      pn.Card(ManyFlightsView(s.many), title="Many flights: the price of safety", collapsed=True,
-                              sizing_mode="stretch_width", css_classes=["uam-many-card"]),
                       sizing_mode="stretch_width"),
             sizing_mode="stretch_width", css_classes=["uam-fly"])
         if s.record is not None:

@@ -242,12 +242,14 @@ def _hindsight(mission: Mission, scenario: str, new_world: Callable[[], World], 
 
 def breach_cause(world: World, reserve_kt: float) -> str:
     """Why a flight in ``world`` breached, in one line: the change of the weather the legs flew in
-    exceeded the weather reserve (kt), or it did not and the breach is a decision error."""
+    exceeded the weather reserve (kt), or it did not: the change within the reserve together with the forecast's
+    error and the cell's (the risk the check takes: it holds them jointly), or a decision error."""
     worst = max((world.change_kts(leg.start_s) for leg in world.legs), default=0.0)
     if worst > reserve_kt:
         return f"the change exceeded the reserve ({worst:+g} kt against a {reserve_kt:g} kt reserve)"
-    return (f"a decision error: the weather changed by {worst:+g} kt, within the {reserve_kt:g} kt reserve"
-            if worst else f"a decision error: no change of the weather (reserve {reserve_kt:g} kt)")
+    return (f"within the reserve: the weather changed by {worst:+g} kt (reserve {reserve_kt:g} kt), with the "
+            "forecast's and the cell's errors: the risk taken, or a decision error"
+            if worst else f"a decision error or the risk taken: no change of the weather (reserve {reserve_kt:g} kt)")
 
 
 def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,

@@ -29,7 +29,7 @@ from uam_studio.planning.operations.pack_history import simulate_logbook
 from uam_studio.planning.operations.world import DEFAULT_WORLD, parse_event
 from uam_studio.risk import WEATHER_CHANGE_SD_KT, check_risk
 
-__all__ = ["RiskLevel", "RiskFlight", "format_levels", "price_of_safety", "risk_flights", "risk_levels"]
+__all__ = ["RiskLevel", "RiskFlight", "format_levels", "group_tests", "price_of_safety", "risk_flights", "risk_levels"]
 
 STUDY_SEED = 58000  # missions 58000 (single-charge) and 58001 (multi-charge); worlds and packs +100, changes +200,
 # the logbooks' earlier flights +300: seeds no tuning read
@@ -183,4 +183,17 @@ def format_levels(levels: Sequence[RiskLevel]) -> str:
         lines.append(f"| {v.risk:g} | {v.flights} | {v.breaches} | {v.rate:.3f} ({v.rate_low:.3f}-{v.rate_high:.3f}) "
                      f"| {v.p_at_most:.2f} | {v.priority_ratio:.3f} | {v.single_ratio:.3f} | {v.single_vs_blind:.3f} "
                      f"| {v.blind_ratio:.3f} ({v.blind_breaches}) | {v.blind_single_ratio:.3f} |")
+    return "\n".join(lines)
+
+
+def group_tests(flights: Sequence[RiskFlight]) -> str:
+    """Per declared risk and scenario: flights, breaches and the one-sided binomial test of "at most the declared
+    risk" (p >= 0.05: consistent), one line each."""
+    lines = []
+    for r in dict.fromkeys(f.risk for f in flights):
+        for scenario in dict.fromkeys(f.scenario for f in flights if f.risk == r):
+            sub = [f for f in flights if f.risk == r and f.scenario == scenario]
+            k = sum(f.breached for f in sub)
+            p = binomtest(k, len(sub), r, alternative="greater").pvalue
+            lines.append(f"risk {r:g}, {scenario}: {k} of {len(sub)} breached, p {p:.2f}")
     return "\n".join(lines)
