@@ -3,7 +3,7 @@ sensors, and the flight loop that records both sides.
 
 Public API: :func:`fly_mission` -> :class:`FlightRecord` (its references: :class:`ReferenceFlight`), :class:`World`,
 :class:`Operator`, :func:`parse_event` (``"wind+30@1200"``), :class:`WindEvent`, :func:`record_csv` (the record's series
-as CSV).
+as CSV); the price of safety: :func:`price_of_safety`, :func:`risk_levels`, :func:`format_levels`.
 """
 
 from uam_studio.planning.operations.decision import Decision
@@ -17,6 +17,7 @@ from uam_studio.planning.operations.fly import (
 )
 from uam_studio.planning.operations.operator import WEATHER_RESERVE_KT, Operator
 from uam_studio.planning.operations.pack_history import simulate_logbook
+from uam_studio.planning.operations.safety_price import format_levels, price_of_safety, risk_levels
 from uam_studio.planning.operations.world import (
     DEFAULT_FORECAST_SIGMA_KT,
     DEFAULT_SENSOR_NOISE_MA,
@@ -30,5 +31,6 @@ from uam_studio.planning.operations.world import (
 __all__ = [
     "DEFAULT_FORECAST_SIGMA_KT", "DEFAULT_SENSOR_NOISE_MA", "DEFAULT_SENSOR_NOISE_MV", "Decision",
     "FlightRecord", "Operator", "Readings", "ReferenceFlight", "WEATHER_RESERVE_KT", "WindEvent", "World",
-    "fly_mission", "parse_event", "breach_cause", "position_at", "record_csv", "simulate_logbook",
+    "fly_mission", "parse_event", "breach_cause", "position_at", "record_csv", "simulate_logbook", "format_levels",
+    "price_of_safety", "risk_levels",
 ]
