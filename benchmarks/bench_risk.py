@@ -28,10 +28,9 @@ import functools
 import time
 from concurrent.futures import ProcessPoolExecutor
 
-from uam_studio.errors import InputError
-from uam_studio.planning.operations import fly_mission, parse_event
 from uam_studio.planning.operations.safety_price import (
     RiskFlight,
+    fly_study_flight,
     format_levels,
     group_tests,
     price_of_safety,
@@ -39,7 +38,7 @@ from uam_studio.planning.operations.safety_price import (
     risk_levels,
 )
 from uam_studio.planning.operations.world import DEFAULT_WORLD, WORLDS
-from uam_studio.risk import WEATHER_CHANGE_SD_KT
+from uam_studio.risk import RISK_LEVELS, WEATHER_CHANGE_SD_KT
 
 
 def _informed(job: tuple) -> RiskFlight:
@@ -47,21 +46,13 @@ def _informed(job: tuple) -> RiskFlight:
 
     risk, mission, seed, event, world = job
     op = functools.partial(InformedOperator, q_max=mission.battery.q_max, r0=mission.battery.r0, check_at_takeoff=True)
-    kwargs = dict(seed=seed, pack=seed, risk=risk, world=world, operator=op)
-    try:
-        rec = fly_mission(mission, events=[parse_event(event)], **kwargs)
-    except InputError as err:
-        if err.field != "event":
-            raise
-        rec = fly_mission(mission, **kwargs)
-    return RiskFlight(risk, rec.scenario, rec.reached_priority, rec.static.priority, rec.hindsight.priority,
-                      rec.breached, rec.static.breached)
+    return fly_study_flight(risk, mission, seed, event, world, operator=op)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=60, help="flights per risk level (half single-, half multi-charge)")
-    ap.add_argument("--risks", type=float, nargs="+", default=[0.01, 0.05, 0.1, 0.2])
+    ap.add_argument("--risks", type=float, nargs="+", default=list(RISK_LEVELS))
     ap.add_argument("--logbook-flights", type=int, default=0, help="earlier flights in each pack's logbook")
     ap.add_argument("--world", choices=WORLDS, default=DEFAULT_WORLD)
     ap.add_argument("--workers", type=int, default=2)

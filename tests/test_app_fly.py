@@ -145,8 +145,8 @@ def test_the_declared_risk_sets_the_cautions_and_a_hand_moved_reserve_declares_n
 
 def test_many_flights_draw_the_price_of_safety_in_the_tabs_world(state):
     """The "many flights" view flies price_of_safety at the tab's risks in the tab's world and draws its levels."""
-    from uam_studio.app.fly.many import FLOOR, ManyFlightsView
-    from uam_studio.planning.operations.safety_price import price_of_safety, risk_levels
+    from uam_studio.app.fly.many import ManyFlightsView
+    from uam_studio.planning.operations.safety_price import RATE_FLOOR, price_of_safety, risk_levels
 
     many = state.many
     assert many.world == "varied" and many.risks == [0.01, 0.05, 0.1, 0.2]
@@ -160,7 +160,7 @@ def test_many_flights_draw_the_price_of_safety_in_the_tabs_world(state):
     many.run()
     assert many.error == "" and not many.running and seen == [1, 2, 3, 4]
     assert many.levels == risk_levels(price_of_safety([0.05, 0.2], 2, world="model"))
-    assert view.rates.data["risk"] == [0.05, 0.2] and min(view.rates.data["rate"]) >= FLOOR
+    assert view.rates.data["risk"] == [0.05, 0.2] and min(view.rates.data["rate"]) >= RATE_FLOOR
     assert view.served.data["operator"] == [v.priority_ratio for v in many.levels]
     assert list(view.table.value["declared risk"]) == [0.05, 0.2]
     assert "2 flights per declared risk" in view.note.object and "'model'" in view.note.object

@@ -26,7 +26,7 @@ from statistics import NormalDist
 
 from uam_studio.errors import InputError
 
-__all__ = ["DEFAULT_RISK", "DISPATCH_WIND_Z", "HEALTH_Z", "INTERVAL_Z", "ONE_PERCENT_Z", "RISK_RANGE",
+__all__ = ["DEFAULT_RISK", "RISK_LEVELS", "DISPATCH_WIND_Z", "HEALTH_Z", "INTERVAL_Z", "ONE_PERCENT_Z", "RISK_RANGE",
            "WEATHER_CHANGE_SD_KT", "WEATHER_RESERVE_KT", "WIND_Z", "Caution", "caution", "check_risk", "risk_z"]
 
 FIVE_PERCENT_Z = 1.64  # one-sided 5% (std)
@@ -34,6 +34,7 @@ ONE_PERCENT_Z = 2.33  # one-sided 1% (std)
 
 # The declared risk a flight takes by default: the one-sided 5% of the bounds its operator has always flown with.
 DEFAULT_RISK = 0.05
+RISK_LEVELS = (0.01, 0.05, 0.1, 0.2)  # the declared risks shown side by side (the Fly tab, the price of safety)
 RISK_RANGE = (1e-4, 0.5)  # a declared risk: at least 1e-4 (a reserve within the operator's 60 kt), below 0.5
 # The envelope of in-flight weather changes the weather reserve is held against: a change of every leg's wind
 # ~ N(0, this), so that the default risk's bound is the 25 kt reserve the operator flies with (RESULTS.md, "Weather

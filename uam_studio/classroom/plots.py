@@ -28,7 +28,7 @@ import numpy as np
 from uam_studio.battery import DEFAULT_EOD_V
 from uam_studio.planning.missions.mission import VERTIPORT, Mission
 from uam_studio.planning.operations import FlightRecord
-from uam_studio.planning.operations.safety_price import RiskLevel
+from uam_studio.planning.operations.safety_price import RATE_FLOOR, RiskLevel
 
 __all__ = ["curves", "draw_on_canvas", "flight_voltage", "mission_map", "price_of_safety_figure", "sorties"]
 
@@ -142,7 +142,7 @@ def price_of_safety_figure(levels: Sequence[RiskLevel], width: int = 380, height
     lo, hi = rate - np.array([v.rate_low for v in levels]), np.array([v.rate_high for v in levels]) - rate
     span = np.array([risks.min() / 1.6, risks.max() * 1.6])
     ticks = [(float(r), f"{r:g}") for r in risks]
-    floor = 1e-3  # a rate of 0 drawn here on the log axis
+    floor = RATE_FLOOR
     breach = hv.Overlay([
         hv.Curve((span, span), "declared risk", "breach rate", label="rate = declared risk").opts(
             color="gray", line_dash="dashed"),

@@ -62,7 +62,7 @@ from uam_studio.fleet.packs import (
     pack_law,
 )
 from uam_studio.planning.operations.world import DEFAULT_WORLD
-from uam_studio.risk import DEFAULT_RISK, caution
+from uam_studio.risk import DEFAULT_RISK, caution, check_risk
 
 __all__ = ["AGE_SPREAD_LIFE", "DayResult", "END_S", "Fleet", "OperatingDay", "PACK_LAWS",
            "day_of_life_seed", "default_age_spread", "fly_day_of_life", "hindsight_bound", "pack_law", "simulate_day",
@@ -317,7 +317,7 @@ def simulate_life(aircraft: int, days: int, seed: int, dispatcher: str, rate_per
         the end (truth and belief)."""
     days = int(check_range("days", days, 1, 3650))
     seed = check_seed("seed", seed)
-    risk = caution(risk).risk  # before any work: one line naming the risk
+    check_risk(risk)  # before any work: one line naming the risk
     fleet = Fleet.new(aircraft, seed, age_spread_efc, vertiports, law, world)
     retired: list[int | None] = [0 for s in fleet.in_service if not s]
     counted = [not s for s in fleet.in_service]

@@ -21,9 +21,9 @@ from bokeh.models.annotations import Whisker  # = bokeh.models.Whisker, a re-exp
 from uam_studio.app.services import FLIGHT_POOL, LatestWorker, one_line
 from uam_studio.app.style import busy_html, busy_mark, derived_looks, legend_above, page_figure
 from uam_studio.errors import InputError
-from uam_studio.planning.operations.safety_price import RiskLevel, price_of_safety, risk_levels
+from uam_studio.planning.operations.safety_price import RATE_FLOOR, RiskLevel, price_of_safety, risk_levels
+from uam_studio.risk import RISK_LEVELS
 
-FLOOR = 1e-3  # a breach rate of 0 is drawn here on the log axis
 RATE_COLOR, DIAGONAL_COLOR = "#d62728", "#808080"  # the breach rates flown; the line rate = declared risk
 OPERATOR_COLOR, BLIND_COLOR = "#1f77b4", "#2ca02c"  # priority served: the operator; its pre-flight plan, blind
 COLUMNS = ["declared risk", "flights", "breaches", "breach rate", "95% interval", "p (at most the risk)",
@@ -40,7 +40,7 @@ class ManyFlights(param.Parameterized):
     """
 
     per_level = param.Integer(default=4, bounds=(2, 40))
-    risks = param.List(default=[0.01, 0.05, 0.1, 0.2], item_type=float)
+    risks = param.List(default=list(RISK_LEVELS), item_type=float)
     world = param.String(default="varied")
     levels = param.List(default=[], item_type=RiskLevel)
     done = param.Integer(default=0)
@@ -103,16 +103,16 @@ class ManyFlightsView(pn.viewable.Viewer):
         self.table = pn.widgets.Tabulator(pd.DataFrame(columns=COLUMNS), disabled=True, show_index=False,
                                           sizing_mode="stretch_width", css_classes=["uam-many-table"],
                                           layout="fit_columns")
-        ends = [min(s.risks) / 1.6, max(s.risks) * 1.6]
+        x_range = (min(s.risks) / 1.6, max(s.risks) * 1.6)
         self.rates = ColumnDataSource({"risk": [], "rate": [], "low": [], "high": [], "breaches": [], "flights": []})
         self.served = ColumnDataSource({"risk": [], "operator": [], "blind": []})
-        self.diagonal = ColumnDataSource({"x": ends, "y": ends})  # drawn before any flight: what to read against
-        x_range = (min(s.risks) / 1.6, max(s.risks) * 1.6)
+        # the line rate = risk across the axis, drawn before any flight: what to read against
+        self.diagonal = ColumnDataSource({"x": list(x_range), "y": list(x_range)})
         rate_fig = page_figure(title="breach rate against the declared risk", width=380, height=300,
                                x_axis_type="log", y_axis_type="log", x_axis_label="declared risk",
                                y_axis_label="breach rate (0 drawn at 0.001)",
                                x_range=Range1d(start=x_range[0], end=x_range[1]),
-                               y_range=Range1d(start=FLOOR / 2, end=1.0))
+                               y_range=Range1d(start=RATE_FLOOR / 2, end=1.0))
         rate_fig.line("x", "y", source=self.diagonal, color=DIAGONAL_COLOR, line_dash="dashed",
                       legend_label="rate = risk")
         dots = rate_fig.scatter("risk", "rate", source=self.rates, size=9, color=RATE_COLOR,
@@ -162,14 +162,12 @@ class ManyFlightsView(pn.viewable.Viewer):
     def _on_levels(self, *_: Any) -> None:
         levels = self.state.levels
         risks = [v.risk for v in levels]
-        self.rates.data = {"risk": risks, "rate": [max(v.rate, FLOOR) for v in levels],
-                           "low": [max(v.rate_low, FLOOR) for v in levels],
-                           "high": [max(v.rate_high, FLOOR) for v in levels],
+        self.rates.data = {"risk": risks, "rate": [max(v.rate, RATE_FLOOR) for v in levels],
+                           "low": [max(v.rate_low, RATE_FLOOR) for v in levels],
+                           "high": [max(v.rate_high, RATE_FLOOR) for v in levels],
                            "breaches": [v.breaches for v in levels], "flights": [v.flights for v in levels]}
         self.served.data = {"risk": risks, "operator": [v.priority_ratio for v in levels],
                             "blind": [v.blind_ratio for v in levels]}
-        ends = [min(risks, default=0.01) / 1.6, max(risks, default=0.2) * 1.6]
-        self.diagonal.data = {"x": ends, "y": ends}
         self.table.value = pd.DataFrame([v.row() for v in levels], columns=COLUMNS)
 
     def __panel__(self) -> pn.viewable.Viewable:

@@ -39,12 +39,12 @@ from uam_studio.planning.operations.world import (
     MAX_NOISE_MV,
     MAX_SIGMA_KT,
 )
-from uam_studio.risk import DEFAULT_RISK, caution
+from uam_studio.risk import DEFAULT_RISK, RISK_LEVELS, caution
 from uam_studio.wording import charging_cycles_text
 
 SPEEDS = (10, 30, 100, 300, 1000)  # playback speed-ups (simulated s per wall s)
 PACKS = {"a new pack (no logbook)": 0, "its logbook: 3 flights": 3, "its logbook: 10 flights": 10}
-RISKS = (0.01, 0.05, 0.1, 0.2)  # the declared risks the tab offers (uam_studio.risk)
+RISKS = RISK_LEVELS  # the declared risks the tab offers (uam_studio.risk)
 # the world the pack flies (planning.operations.world.WORLDS), by the label the tab shows
 WORLD_LABELS = {"a pack unlike its model": "varied", "its model (teaching)": "model"}
 ERROR_CHARS = 300  # an error line is cut here

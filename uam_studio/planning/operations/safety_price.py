@@ -25,17 +25,20 @@ from uam_studio.planning.missions.generate import held_out_missions
 from uam_studio.planning.missions.mission import Mission
 from uam_studio.planning.missions.scenario import scenario_rules
 from uam_studio.planning.operations.fly import fly_mission
+from uam_studio.planning.operations.operator import Operator
 from uam_studio.planning.operations.pack_history import simulate_logbook
 from uam_studio.planning.operations.world import DEFAULT_WORLD, parse_event
-from uam_studio.risk import WEATHER_CHANGE_SD_KT, check_risk
+from uam_studio.risk import RISK_LEVELS, WEATHER_CHANGE_SD_KT, check_risk
 
-__all__ = ["RiskLevel", "RiskFlight", "format_levels", "group_tests", "price_of_safety", "risk_flights", "risk_levels"]
+__all__ = ["RATE_FLOOR", "RiskLevel", "RiskFlight", "fly_study_flight", "format_levels", "group_tests",
+           "price_of_safety", "risk_flights", "risk_levels"]
 
 STUDY_SEED = 58000  # missions 58000 (single-charge) and 58001 (multi-charge); worlds and packs +100, changes +200,
 # the logbooks' earlier flights +300: seeds no tuning read
 N_DEST = (5, 8)  # destinations of a mission (held_out_missions' range)
 CHANGE_CLIP_KT = 60.0  # kt
 CHANGE_WINDOW_S = (60.0, 900.0)  # s
+RATE_FLOOR = 1e-3  # where the figures of the price of safety draw a breach rate of 0 on their log axis
 
 
 @dataclass(frozen=True)
@@ -101,9 +104,12 @@ def _logbook(job: tuple[Mission, int, int, int, str]) -> Logbook:
     return simulate_logbook(mission, flights, seed, world=world, pack=pack)
 
 
-def _fly(job: tuple[float, Mission, int, str, str, Logbook | None]) -> RiskFlight:
-    risk, mission, seed, event, world, book = job
-    kwargs: dict[str, Any] = dict(seed=seed, pack=seed, risk=risk, world=world, logbook=book)
+def fly_study_flight(risk: float, mission: Mission, seed: int, event: str, world: str = DEFAULT_WORLD,
+                     logbook: Logbook | None = None, operator: Callable[..., Operator] = Operator) -> RiskFlight:
+    """One flight of the study (:func:`risk_flights`' ``(mission, seed, event)``) at declared ``risk``, flown by
+    ``operator`` (:func:`~uam_studio.planning.operations.fly_mission`'s), on pack ``seed`` with its ``logbook``; a
+    change that comes after the flight has ended is dropped."""
+    kwargs: dict[str, Any] = dict(seed=seed, pack=seed, risk=risk, world=world, logbook=logbook, operator=operator)
     try:
         rec = fly_mission(mission, events=[parse_event(event)], **kwargs)
     except InputError as err:  # the change came after the flight: flown without it
@@ -114,7 +120,11 @@ def _fly(job: tuple[float, Mission, int, str, str, Logbook | None]) -> RiskFligh
                       rec.breached, rec.static.breached)
 
 
-def price_of_safety(risks: Sequence[float] = (0.01, 0.05, 0.1, 0.2), n: int = 60, logbook_flights: int = 0,
+def _fly(job: tuple[float, Mission, int, str, str, Logbook | None]) -> RiskFlight:
+    return fly_study_flight(*job)
+
+
+def price_of_safety(risks: Sequence[float] = RISK_LEVELS, n: int = 60, logbook_flights: int = 0,
                     world: str = DEFAULT_WORLD, workers: int = 1, seed: int = STUDY_SEED,
                     progress: Callable[[int, int], None] | None = None) -> list[RiskFlight]:
     """Fly the study's ``n`` flights (:func:`risk_flights`) at each declared risk in ``risks``.
