@@ -102,7 +102,8 @@ class ManyFlightsView(pn.viewable.Viewer):
         self.note = pn.pane.Markdown("", css_classes=["uam-many-note"], sizing_mode="stretch_width")
         self.table = pn.widgets.Tabulator(pd.DataFrame(columns=COLUMNS), disabled=True, show_index=False,
                                           sizing_mode="stretch_width", css_classes=["uam-many-table"],
-                                          layout="fit_columns")
+                                          layout="fit_columns",  # the headers wrap: each one read whole
+                                          configuration={"columnDefaults": {"headerWordWrap": True}})
         x_range = (min(s.risks) / 1.6, max(s.risks) * 1.6)
         self.rates = ColumnDataSource({"risk": [], "rate": [], "low": [], "high": [], "breaches": [], "flights": []})
         self.served = ColumnDataSource({"risk": [], "operator": [], "blind": []})
