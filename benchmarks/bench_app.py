@@ -8,6 +8,7 @@ training session beside a planning one.
     python benchmarks/bench_app.py concurrency  # browser: two sessions, one retraining, the other replanning
     python benchmarks/bench_app.py flytick      # the Fly tab's playback tick, in process (server side)
     python benchmarks/bench_app.py steps        # browser: 40 slider steps of the Planner against a bare Panel page
+    python benchmarks/bench_app.py fly          # browser: the Fly tab's controls alone against the bare page
     python benchmarks/bench_app.py all --append benchmarks/RESULTS.md
 
 latency: the 8-destination single-charge mission below, the Planner's state and views built on a
@@ -419,31 +420,81 @@ _FLY_CHANGES_JS = """() => { for (const v of window.Bokeh.index.all_views()) { c
       return r.data_source.data.text.length; }
   return 0; }"""
 
+# Every text the Fly tab's status line (the Bokeh model of the pane '.uam-fly-status') takes, in order, kept in
+# window.__uamTexts (a change listener: a text shown for less than a frame is kept too); the watch clears it.
+_FLY_STATUS_JS = """() => { if (window.__uamStatusWatched) return true;
+  for (const v of window.Bokeh.index.all_views()) { const m = v.model, c = m.css_classes;
+    if (c && c.includes('uam-fly-status')) {
+      window.__uamTexts = [];
+      m.connect(m.properties.text.change, () => window.__uamTexts.push(String(m.text || '')));
+      window.__uamStatusWatched = true; return true; } }
+  return false; }"""
+
+_FRAME_WATCH_JS = """([evt, cond]) => {
+  // The page's own clock: from the action (the first ``evt``) to the first frame painted after ``cond()`` held;
+  // ``cond`` (JS source of a function of the page's Bokeh models) is checked at every animation frame from the
+  // action on, and the time taken after that frame (a task queued from its animation-frame callback).
+  window.__uamKey = null; window.__uamPainted = null; window.__uamTexts = [];
+  const holds = eval(cond);
+  document.addEventListener(evt, () => { if (window.__uamKey === null) window.__uamKey = performance.now(); },
+                            {capture: true, once: true});
+  const frame = () => {
+    if (window.__uamKey !== null && holds()) {
+      setTimeout(() => { window.__uamPainted = performance.now(); }, 0);
+      return;
+    }
+    requestAnimationFrame(frame);
+  };
+  requestAnimationFrame(frame);
+}"""
+
+
+def _frame_time(page, click, cond: str) -> float:
+    """Seconds on the page's clock from the pointerdown of ``click()`` to the first frame painted after ``cond``
+    (JS source of a function) held."""
+    page.evaluate(_FRAME_WATCH_JS, ["pointerdown", cond])
+    click()
+    try:
+        page.wait_for_function("() => window.__uamPainted !== null", timeout=30_000)
+    except Exception as err:
+        raise RuntimeError(f"not seen: {cond}; texts {page.evaluate('() => window.__uamTexts')}, action at "
+                           f"{page.evaluate('() => window.__uamKey')}") from err
+    return float(page.evaluate("() => (window.__uamPainted - window.__uamKey) / 1000"))
+
 
 def _fly_controls(page, n: int) -> dict[str, list[float]]:
-    """The Fly tab's controls, each timed (s, Python's clock around playwright's raf polling) until the page
-    shows its result: 'Fly the mission' until its busy mark shows and until the status says "flying:", 'Inject
-    wind change now' until the change is marked on the voltage figure, 'Clear wind changes' until it is gone."""
-    out: dict[str, list[float]] = {"fly (until the busy mark)": [], "fly (until 'flying:')": [],
+    """The Fly tab's controls, each timed on the page's clock (pointerdown to the first frame painted after the
+    page holds the result, as the bare page's steps are timed): 'Fly the mission' (a new world seed each round)
+    until its busy mark shows
+    ("flying..." in the status) and until the status says "flying:" after it (the new flight's first frame),
+    'Inject wind change now' until the change is marked on the voltage figure, 'Clear wind changes' until it is
+    gone."""
+    out: dict[str, list[float]] = {"fly (until the busy mark)": [], "fly (until 'flying:', the first frame)": [],
                                    "inject a wind change": [], "clear it": []}
     page.locator(".bk-tab", has_text="Fly").click()
     status = page.locator(".uam-fly-status")
-    busy = page.locator(".uam-busy[data-busy='true']").filter(has_text="flying...").first
-    for _ in range(n):
-        t0 = time.perf_counter()
-        page.locator("button", has_text="Fly the mission").click()
-        busy.wait_for(timeout=120_000)
-        out["fly (until the busy mark)"].append(time.perf_counter() - t0)
-        status.get_by_text("flying:").wait_for(timeout=120_000)
-        out["fly (until 'flying:')"].append(time.perf_counter() - t0)
-        t0 = time.perf_counter()
-        page.locator("button", has_text="Inject wind change now").click()
-        page.wait_for_function(f"() => ({_FLY_CHANGES_JS})() === 1", polling="raf", timeout=120_000)
-        out["inject a wind change"].append(time.perf_counter() - t0)
-        t0 = time.perf_counter()
-        page.locator("button", has_text="Clear wind changes").click()
-        page.wait_for_function(f"() => ({_FLY_CHANGES_JS})() === 0", polling="raf", timeout=120_000)
-        out["clear it"].append(time.perf_counter() - t0)
+    status.wait_for(state="attached", timeout=120_000)
+    page.wait_for_function(_FLY_STATUS_JS, timeout=120_000)
+    busy = "() => window.__uamTexts.some(t => t.includes('flying...'))"
+    busy_then_flying = ("() => { const t = window.__uamTexts, i = t.findIndex(x => x.includes('flying...'));"
+                        " return i >= 0 && t.slice(i + 1).some(x => x.includes('flying:')); }")
+
+    def button(text: str):
+        return lambda: page.locator("button", has_text=text).click()
+
+    seed = page.locator(".bk-input-group", has_text="World seed").locator("input")
+    for k in range(n):
+        seed.fill(str(1000 + k))  # a new world each time: no flight is asked for twice
+        seed.press("Enter")
+        page.wait_for_timeout(300)
+        out["fly (until 'flying:', the first frame)"].append(_frame_time(page, button("Fly the mission"),
+                                                                          busy_then_flying))
+        out["inject a wind change"].append(
+            _frame_time(page, button("Inject wind change now"), f"() => ({_FLY_CHANGES_JS})() === 1"))
+        out["clear it"].append(
+            _frame_time(page, button("Clear wind changes"), f"() => ({_FLY_CHANGES_JS})() === 0"))
+        out["fly (until the busy mark)"].append(_frame_time(page, button("Fly the mission"), busy))
+        page.wait_for_function(busy_then_flying, timeout=120_000)
     return out
 
 
@@ -468,9 +519,10 @@ def _serve_bare(port: int):
     raise RuntimeError("the bare page did not start")
 
 
-def bench_steps(per_slider: int, compare: str | None = None) -> list[str]:
+def bench_steps(per_slider: int, compare: str | None = None, flies: int = 4, planner: bool = True) -> list[str]:
     """Slider steps in the browser: the app's Planner (q_max, R0, EOD, wind home; half the steps one way, then
-    back: new values first, then values seen) against a bare Panel page of the same shape, in the same run.
+    back: new values first, then values seen; left out unless ``planner``) and the Fly tab's controls (``flies``
+    rounds of :func:`_fly_controls`) against a bare Panel page of the same shape, in the same run.
     The first step after each page opens is included."""
     from playwright.sync_api import sync_playwright
 
@@ -490,36 +542,52 @@ def bench_steps(per_slider: int, compare: str | None = None) -> list[str]:
             page = browser.new_page(viewport={"width": 1366, "height": 768})
             page.goto(srv.url)
             _first_plan(page)
-            app: dict[str, list[float]] = {name: _slider_steps(page, name, pattern) for name in sliders}
-            clicks, winds, drags = _edits(page, 5)
-            page.locator("button", has_text="Reset to the example").click()  # the Fly tab flies the example
-            page.locator(".uam-plan-summary[data-busy='false']:not([data-inputs*='|D1:'])").wait_for(timeout=120_000)
-            fly = _fly_controls(page, 4)
+            app: dict[str, list[float]] = {}
+            if planner:
+                app = {name: _slider_steps(page, name, pattern) for name in sliders}
+                clicks, winds, drags = _edits(page, 5)
+                page.locator("button", has_text="Reset to the example").click()  # the Fly tab flies the example
+                page.locator(".uam-plan-summary[data-busy='false']:not([data-inputs*='|D1:'])").wait_for(
+                    timeout=120_000)
+            fly = _fly_controls(page, flies)
             browser.close()
     finally:
         proc.kill()
-    every = [t for ts in app.values() for t in ts]
-
     def q(x: list[float], p: float) -> float:
         return float(np.percentile(np.array(x) * 1000.0, p))
 
     lines.append(f"  bare page: p50 {q(bare, 50):.0f} ms, p95 {q(bare, 95):.0f} ms, max {max(bare) * 1000:.0f} ms "
                  f"(n={len(bare)})")
+    if planner:
+        lines += _planner_lines(app, clicks, winds, drags, q(bare, 95), max(bare))
+    for name, ts in fly.items():
+        goal = "goal <= 2" if "first frame" in name or "inject" in name else "no goal"
+        lines.append(f"  app, Fly tab, {name}: p50 {q(ts, 50):.0f} ms, p95 {q(ts, 95):.0f} ms; p95 / bare p95 "
+                     f"{q(ts, 95) / q(bare, 95):.2f} ({goal}); each: {', '.join(f'{t * 1000:.0f}' for t in ts)} ms")
+    return lines
+
+
+def _planner_lines(app: dict[str, list[float]], clicks: list[float], winds: list[float], drags: list[float],
+                   bare_p95_ms: float, bare_max: float) -> list[str]:
+    """bench_steps' lines on the Planner: each slider, all its steps, map clicks, table edits, quick drags."""
+    every = [t for ts in app.values() for t in ts]
+
+    def q(x: list[float], p: float) -> float:
+        return float(np.percentile(np.array(x) * 1000.0, p))
+
+    lines = []
     for name, ts in app.items():
         lines.append(f"  app, {name}: p50 {q(ts, 50):.0f} ms, p95 {q(ts, 95):.0f} ms, max {max(ts) * 1000:.0f} ms; "
                      f"each: {', '.join(f'{t * 1000:.0f}' for t in ts)}")
     lines.append(f"  app, all {len(every)}: p50 {q(every, 50):.0f} ms, p95 {q(every, 95):.0f} ms, max "
-                 f"{max(every) * 1000:.0f} ms; p95 / bare p95 {q(every, 95) / q(bare, 95):.2f} (goal <= 2), max / "
-                 f"bare max {max(every) / max(bare):.2f} (goal <= 3)")
+                 f"{max(every) * 1000:.0f} ms; p95 / bare p95 {q(every, 95) / bare_p95_ms:.2f} (goal <= 2), max / "
+                 f"bare max {max(every) / bare_max:.2f} (goal <= 3)")
     for name, ts in (("map click (a destination added)", clicks), ("table edit (its wind)", winds)):
         lines.append(f"  app, {name}: p50 {q(ts, 50):.0f} ms, p95 {q(ts, 95):.0f} ms, max {max(ts) * 1000:.0f} ms; "
-                     f"p95 / bare p95 {q(ts, 95) / q(bare, 95):.2f} (goal <= 3)")
+                     f"p95 / bare p95 {q(ts, 95) / bare_p95_ms:.2f} (goal <= 3)")
     lines.append(f"  app, quick drag of 10 q_max steps, last key -> last value's plan: "
                  f"{', '.join(f'{t * 1000:.0f}' for t in drags)} ms; max / bare p95 "
-                 f"{max(drags) * 1000 / q(bare, 95):.2f} (goal <= 3)")
-    for name, ts in fly.items():
-        lines.append(f"  app, Fly tab, {name}: {', '.join(f'{t * 1000:.0f}' for t in ts)} ms (click -> shown, "
-                     "playwright's clock; no goal)")
+                 f"{max(drags) * 1000 / bare_p95_ms:.2f} (goal <= 3)")
     return lines
 
 
@@ -599,9 +667,11 @@ def bench_flytick(n: int) -> list[str]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=["latency", "pageload", "replan", "lab", "concurrency", "flytick", "steps", "all"],
+    ap.add_argument("what", choices=["latency", "pageload", "replan", "lab", "concurrency", "flytick", "steps", "fly",
+                                    "all"],
                     nargs="?", default="all")
     ap.add_argument("--n", type=int, default=40, help="slider changes per policy (latency)")
+    ap.add_argument("--flies", type=int, default=4, help="rounds of the Fly tab's controls (steps, fly)")
     ap.add_argument("--n-oracle", type=int, default=8, help="slider changes for the oracle (seconds each)")
     ap.add_argument("--loads", type=int, default=5, help="page loads (pageload)")
     ap.add_argument("--k", type=int, default=15, help="replans per phase (replan, concurrency) or changes (lab)")
@@ -619,7 +689,9 @@ def main() -> None:
         lines += bench_latency(args.n, args.n_oracle, compares)
     if args.what == "steps":
         for compare in (None, *compares):
-            lines += bench_steps(10, compare)
+            lines += bench_steps(10, compare, args.flies)
+    elif args.what == "fly":
+        lines += bench_steps(10, flies=args.flies, planner=False)
     elif args.what == "all":
         lines += bench_steps(10)
     if args.what in ("pageload", "all"):

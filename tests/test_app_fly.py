@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import pytest
@@ -10,6 +11,7 @@ from uam_studio.app.fly.state import FlyState
 from uam_studio.app.fly.view import FlyView
 from uam_studio.errors import InputError
 from uam_studio.planning import load_mission
+from uam_studio.planning.operations import fly_mission
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "assets" / "example_mission.json"
 
@@ -41,6 +43,58 @@ def test_fly_plays_back_and_moves_the_aircraft(state):
     state.tick(1.0)
     assert not state.playing  # the end stops the playback
     assert view.__panel__() is not None
+
+
+def test_the_flight_shows_from_its_first_leg_and_before_its_references():
+    """Served (background): the flight shows from its first leg on while the rest is flown; then the whole flight;
+    its references, which only the landing shows, come after it, and a landing before them says so. A flight,
+    a part of one or references no longer asked for are dropped."""
+    mission = load_mission(EXAMPLE)
+    held: list = []  # callbacks handed to the session's thread, run when the test says
+    state = FlyState(lambda: mission, background=True, dispatch=held.append)
+
+    def wait_for(n: int) -> None:
+        deadline = time.monotonic() + 60.0
+        while len(held) < n and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert len(held) >= n
+
+    def deliver_next() -> None:
+        wait_for(1)
+        held.pop(0)()
+
+    full = fly_mission(mission, seed=state.seed, risk=state.risk)
+    state.fly()
+    deliver_next()  # the first leg
+    part = state.record
+    assert not state.complete and not state.running and state.playing and part.route == full.route[:1]
+    assert part.time_s[-1] == full.leg_end_s[0] and state.status.startswith("flying: 0.0 min")
+    state.tick(100.0)  # past the legs shown: the clock waits at their end, the playback goes on
+    assert state.t_s == state.end_s == full.leg_end_s[0] and state.playing and not state.landed
+    assert "the results show at the landing" in state.status
+    deliver_next()  # the whole flight
+    first = state.record
+    assert state.complete and first.route == full.route and not state.references and state.t_s == full.leg_end_s[0]
+    assert first.static.route == [] and first.hindsight.route == []  # not flown yet
+    state.t_s = state.end_s  # landed before the references came
+    assert "being flown" in state.status and "hindsight oracle" not in state.status
+    deliver_next()  # its references
+    assert state.references and state.record is not first and state.record.time_s is first.time_s
+    assert state.record.hindsight.route and "hindsight oracle" in state.status
+    assert (state.record.static, state.record.hindsight) == (full.static, full.hindsight)
+    state.seed = 1
+    state.fly()
+    wait_for(2)  # the second flight's first leg and whole flight
+    state.seed = 2
+    state.fly()  # a third flight meanwhile
+    held.pop(0)()  # the second flight's first leg: dropped
+    held.pop(0)()  # the second flight: dropped
+    assert state.record.seed == 0 and state.running
+    deliver_next()  # the third flight's first leg
+    assert state.record.seed == 2 and not state.complete
+    deliver_next()  # the third flight
+    deliver_next()  # its references
+    assert state.references and state.complete and state.record.seed == 2 and state.record.hindsight.route
 
 
 def test_injected_wind_change_reflies_from_the_playback_time(state):

@@ -11,15 +11,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from uam_studio.errors import InputError
 from uam_studio.flight import leg_profile
 from uam_studio.planning import load_mission
 from uam_studio.planning.legs import takeoff_current
 from uam_studio.planning.missions.mission import VERTIPORT, Battery
-from uam_studio.planning.operations import Operator, World, fly_mission, parse_event
+from uam_studio.planning.operations import Operator, World, fly_mission, parse_event, with_references
 from uam_studio.planning.operations import world as world_module
-from uam_studio.planning.operations.fly import _fly_fixed
+from uam_studio.planning.operations.references import fly_fixed as _fly_fixed
 from uam_studio.studies.flying import fly_many, study_missions, summarize
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -328,6 +330,37 @@ def test_hindsight_with_an_event_flies_the_winds_of_each_legs_time_and_never_tra
     world = World(mission, 0.0, rec.sensor_noise_mv, rec.sensor_noise_ma, [parse_event(event)], 1)
     breached, reached = _fly_fixed(world, rec.hindsight.route, rec.hindsight.altitudes_m, takeoff_current())
     assert not breached and sum(mission.node(n).priority for n in reached) == rec.hindsight.priority
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 10**6), pack=st.one_of(st.none(), st.integers(0, 10**6)),
+       world=st.sampled_from(["varied", "model"]), sigma=st.floats(0.0, 30.0),
+       change=st.one_of(st.none(), st.tuples(st.integers(0, 1500), st.floats(-40.0, 40.0))),
+       risk=st.sampled_from([0.01, 0.05, 0.2]))
+def test_a_flight_in_parts_is_the_flight(example, seed, pack, world, sigma, change, risk):
+    """The Fly tab shows a flight from its first leg and before its references. Each part ``progress`` gets is
+    the flight's beginning, up to a landing, with no result yet; ``with_references`` on a record flown without
+    them gives the references ``fly_mission`` gives the same inputs, the record otherwise untouched."""
+    events = [parse_event(f"wind{change[1]:+.1f}@{change[0]}")] if change else []
+    kw = dict(seed=seed, pack=pack, world=world, forecast_sigma_kt=sigma, events=events, risk=risk)
+    parts: list = []
+    bare = fly_mission(example, references=False, progress=parts.append, **kw)
+    assert len(parts) == len(bare.route) - (1 if bare.breached else 0)
+    for k, part in enumerate(parts, start=1):
+        n = part.time_s.size
+        assert part.route == bare.route[:k] and part.leg_end_s == bare.leg_end_s[:k]
+        assert part.time_s[-1] == part.leg_end_s[-1]
+        assert part.events == bare.events[:len(part.events)] and 0 < len(part.events) <= k
+        for name in ("time_s", "measured_voltage_v", "measured_current_a", "predicted_voltage_v", "true_voltage_v",
+                     "true_current_a"):
+            assert np.array_equal(getattr(part, name), getattr(bare, name)[:n])
+        assert part.reached == [] and part.reached_priority == 0 and not part.breached
+    later = with_references(example, bare)
+    full = fly_mission(example, **kw)
+    assert (later.static, later.hindsight) == (full.static, full.hindsight)
+    assert later.static.route or bare.breached or not [e for e in bare.events if e.kind == "plan"]
+    assert later is not bare and bare.hindsight.route == [] and later.route == bare.route
+    assert (later.time_s is bare.time_s) and later.reached_priority == bare.reached_priority
 
 
 def test_each_decision_says_what_its_leg_measured_and_a_wind_change_shows_up_as_it_happened(example):

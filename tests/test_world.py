@@ -130,7 +130,7 @@ def test_the_record_holds_the_first_legs_interval_and_what_the_world_gave(exampl
 
 def test_the_hindsight_reference_knows_the_packs_own_parameters(example, monkeypatch):
     """Hindsight plans on the world's cell, the pack's own set (it breaches no more than the operator could)."""
-    from uam_studio.planning.operations import fly as fly_module
+    from uam_studio.planning.operations import references as fly_module
 
     seen = []
     real = fly_module.oracle_plan

@@ -49,7 +49,8 @@ def session_dispatcher(delay_ms: int = 0) -> Callable[[Callable[[], None]], None
     call from any thread), or None outside a server session.
 
     Worker threads (planning, training) hand their results back through it, so every change to
-    widgets, panes and plots happens on the session's own thread. A delay lets the event loop send
+    widgets, panes and plots happens on the session's own thread, and a callback's changes reach the browser as
+    one batch (``pn.io.hold``: each batch costs the browser a page layout). A delay lets the event loop send
     the changes made so far to the browser first.
     """
     if not in_server_session():
@@ -60,7 +61,7 @@ def session_dispatcher(delay_ms: int = 0) -> Callable[[Callable[[], None]], None
 
     def dispatch(cb: Callable[[], None]) -> None:
         def run() -> None:
-            with set_curdoc(doc):
+            with set_curdoc(doc), pn.io.hold(doc):  # the result's changes reach the browser as one batch
                 cb()
 
         try:

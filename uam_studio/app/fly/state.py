@@ -6,12 +6,16 @@ events), the :class:`~uam_studio.planning.operations.FlightRecord` of the last f
 playback clock. Injecting a wind change re-flies the mission with one more event starting at the
 playback time: everything before it is the same flight (same seeds), so the playback goes on from
 where it was. Flights run in the flights' own thread pool, the newest request winning
-(:class:`~uam_studio.app.services.LatestWorker`).
+(:class:`~uam_studio.app.services.LatestWorker`). A flight is shown from its first leg on (for a wind change,
+from the first leg that reaches the playback time) while the rest of it is flown; its references (the blind
+pre-flight plan and hindsight, :func:`~uam_studio.planning.operations.with_references`), which only the landing
+shows, are flown after it.
 """
 
 from __future__ import annotations
 
 import functools
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -30,6 +34,7 @@ from uam_studio.planning.operations import (
     fly_mission,
     parse_event,
     position_at,
+    with_references,
 )
 from uam_studio.planning.operations.operator import RESERVE_RANGE_KT
 from uam_studio.planning.operations.pack_history import simulate_logbook
@@ -59,6 +64,7 @@ class _Flight:
     kwargs: dict[str, Any]
     keep_time: bool
     pack_flights: int = 0
+    from_s: float = 0.0  # s: the playback time the flight so far must reach before it is shown
 
 
 @functools.lru_cache(maxsize=8)
@@ -68,15 +74,17 @@ def _pack_logbook(mission: Mission, flights: int, seed: int, sensor_noise_mv: fl
     return simulate_logbook(mission, flights, seed, sensor_noise_mv=sensor_noise_mv, world=world)
 
 
-def _fly(flight: _Flight) -> tuple[_Flight, FlightRecord | None, str]:
-    """``(flight, its record, '')``, or ``(flight, None, one line)`` for bad input."""
+def _fly(flight: _Flight, progress: Callable[[FlightRecord], None] | None = None,
+         ) -> tuple[_Flight, FlightRecord | None, str]:
+    """``(flight, its record, '')``, or ``(flight, None, one line)`` for bad input; ``progress`` gets the flight
+    so far after each leg (``fly_mission``'s)."""
     try:
         kwargs = flight.kwargs
         if flight.pack_flights:
             book = _pack_logbook(flight.mission, flight.pack_flights, kwargs["seed"], kwargs["sensor_noise_mv"],
                                  kwargs["world"])
             kwargs = {**kwargs, "logbook": book}
-        return flight, fly_mission(flight.mission, **kwargs), ""
+        return flight, fly_mission(flight.mission, references=False, progress=progress, **kwargs), ""
     except InputError as exc:
         return flight, None, one_line(exc, ERROR_CHARS)
 
@@ -84,6 +92,18 @@ def _fly(flight: _Flight) -> tuple[_Flight, FlightRecord | None, str]:
 def _flight_failed(flight: _Flight, exc: BaseException) -> tuple[_Flight, FlightRecord | None, str]:
     """A flight that raised: never a traceback in the app (the server log has it)."""
     return flight, None, f"flight failed: {type(exc).__name__}: {one_line(exc, ERROR_CHARS)}"
+
+
+_Shown = tuple[Mission, FlightRecord]  # a flight shown: its mission and its record, flown without references
+
+
+def _fly_references(shown: _Shown) -> tuple[_Shown, FlightRecord | None, str]:
+    """``(shown, its record with the references flown, '')``."""
+    return shown, with_references(*shown), ""
+
+
+def _references_failed(shown: _Shown, exc: BaseException) -> tuple[_Shown, FlightRecord | None, str]:
+    return shown, None, f"references failed: {type(exc).__name__}: {one_line(exc, ERROR_CHARS)}"
 
 
 class FlyState(param.Parameterized):
@@ -95,8 +115,11 @@ class FlyState(param.Parameterized):
     ``forecast_sigma_kt`` (kt), ``sensor_noise_mv`` (mV), ``risk`` (the flight's declared risk, one of
     :data:`RISKS`: choosing one sets the cautions that follow from it, the reserve included), ``reserve_kt`` (kt, the
     operator's weather reserve; moved by hand, the flight declares no risk), ``speed`` (playback speed-up),
-    ``inject_kts`` (kt, the wind change :meth:`inject` adds). Outputs: ``record``, ``t_s``
-    (the playback clock, s), ``mission_flown``, ``running`` (a flight is being computed), ``playing``, ``status``,
+    ``inject_kts`` (kt, the wind change :meth:`inject` adds). Outputs: ``record``, ``complete`` (the record holds
+    the whole flight; False while the legs after the shown ones are flown), ``t_s``
+    (the playback clock, s), ``mission_flown``, ``running`` (a flight is being computed, none of it shown yet),
+    ``references`` (the
+    record's references are flown: the record is replaced by one that holds them), ``playing``, ``status``,
     ``error`` (one line).
     """
 
@@ -114,6 +137,8 @@ class FlyState(param.Parameterized):
     mission_flown = param.ClassSelector(class_=Mission, default=None, allow_None=True)
     t_s = param.Number(default=0.0, bounds=(0.0, None))
     running = param.Boolean(default=False)
+    complete = param.Boolean(default=True)
+    references = param.Boolean(default=False)
     playing = param.Boolean(default=False)
     status = param.String(default="")
     error = param.String(default="")
@@ -129,7 +154,11 @@ class FlyState(param.Parameterized):
         self.background = background
         self.dispatch = dispatch
         self._worker: LatestWorker[_Flight, tuple[_Flight, FlightRecord | None, str]] = LatestWorker(
-            _fly, self._flown, _flight_failed, dispatch=dispatch, pool=FLIGHT_POOL)
+            self._compute, self._flown, _flight_failed, dispatch=dispatch, pool=FLIGHT_POOL)
+        self._asked: _Flight | None = None  # the newest flight asked for
+        self._shown: _Flight | None = None  # the flight shown (a part of it, or all)
+        self._refs: LatestWorker[_Shown, tuple[_Shown, FlightRecord | None, str]] = LatestWorker(
+            _fly_references, self._references_flown, _references_failed, dispatch=dispatch, pool=FLIGHT_POOL)
         # the "many flights" view: the price of safety at the risks this tab offers, in the world it selects
         self.many = ManyFlights(background, dispatch, risks=list(RISKS), world=WORLD_LABELS[self.world])
 
@@ -150,15 +179,48 @@ class FlyState(param.Parameterized):
                     {"health_z": c.health_z, "wind_z": c.wind_z, "reserve_kt": self.reserve_kt})
         flight = _Flight(mission, dict(seed=self.seed, forecast_sigma_kt=self.forecast_sigma_kt,
                                        sensor_noise_mv=self.sensor_noise_mv, events=list(self.events),
-                                       world=WORLD_LABELS[self.world], **cautions), keep_time, PACKS[self.pack])
+                                       world=WORLD_LABELS[self.world], **cautions), keep_time, PACKS[self.pack],
+                         self.t_s if keep_time else 0.0)
+        self._asked = flight
         self.running = True
         self.status = "flying..."
         if not keep_time:
-            self.param.update(t_s=0.0, playing=False)
+            self.playing = False  # the shown flight waits, as it is, for the new one
         if self.background:
             self._worker.submit(flight)
         else:
             self._worker.run(flight)
+
+    def _compute(self, flight: _Flight) -> tuple[_Flight, FlightRecord | None, str]:
+        """Fly ``flight``, handing the flight so far to the session's thread once it reaches ``flight.from_s``."""
+        handed = False
+
+        def progress(so_far: FlightRecord) -> None:
+            nonlocal handed
+            if not handed and so_far.time_s.size and so_far.time_s[-1] >= flight.from_s:
+                handed = True
+                show = functools.partial(self._first_legs, flight, so_far)
+                self.dispatch(show) if self.dispatch is not None else show()
+
+        return _fly(flight, progress)
+
+    def _first_legs(self, flight: _Flight, so_far: FlightRecord) -> None:
+        """Show the flight so far, unless a newer flight was asked for meanwhile."""
+        if flight is not self._asked:
+            return
+        self.running = False
+        self.error = ""
+        self._show(flight, so_far, complete=False)
+
+    def _show(self, flight: _Flight, rec: FlightRecord, complete: bool) -> None:
+        """Show ``rec``, a part of ``flight`` or all of it; the playback starts again at a flight's first showing
+        unless the flight keeps the time."""
+        update: dict[str, Any] = dict(record=rec, mission_flown=flight.mission, complete=complete, references=False)
+        if flight is not self._shown and not flight.keep_time:
+            update.update(t_s=0.0, playing=True)
+        self._shown = flight
+        self.param.update(**update)
+        self._show_status()
 
     def _flown(self, res: tuple[_Flight, FlightRecord | None, str], latest: bool) -> None:
         """Show a computed flight, unless a newer one was asked for meanwhile."""
@@ -168,12 +230,28 @@ class FlyState(param.Parameterized):
         self.running = False
         if err:
             self.error, self.status = err, ""
+            if not self.complete:  # the legs shown of a flight that failed after them
+                self.param.update(record=None, complete=True, playing=False)
             return
         self.error = ""
-        self.param.update(record=rec, mission_flown=flight.mission)
+        assert rec is not None  # a flight without an error has its record
+        self._show(flight, rec, complete=True)
+        if self.background:
+            self._refs.submit((flight.mission, rec))
+        else:
+            self._refs.run((flight.mission, rec))
+
+    def _references_flown(self, res: tuple[_Shown, FlightRecord | None, str], latest: bool) -> None:
+        """Put the references into the shown record, unless another flight is shown meanwhile (it asked for its
+        own references when it was shown: these are then not the latest)."""
+        _shown, rec, err = res
+        if not latest:
+            return
+        if err:
+            self.error = err
+            return
+        self.param.update(record=rec, references=True)
         self._show_status()
-        if not flight.keep_time:
-            self.playing = True
 
     @param.depends("risk", watch=True)
     def _risk_cautions(self) -> None:
@@ -182,7 +260,8 @@ class FlyState(param.Parameterized):
     def wait_idle(self, timeout: float = 60.0) -> bool:
         """Block until the newest flight asked for is shown, at most ``timeout`` s (tests; not from the
         session's own thread when a dispatcher schedules on it)."""
-        return self._worker.wait_idle(timeout)
+        deadline = time.monotonic() + timeout
+        return self._worker.wait_idle(timeout) and self._refs.wait_idle(max(deadline - time.monotonic(), 0.0))
 
     def inject(self) -> None:
         """Add a wind change of ``inject_kts`` from the playback time on, and re-fly from there."""
@@ -209,7 +288,7 @@ class FlyState(param.Parameterized):
             return
         t = min(self.end_s, self.t_s + wall_s * float(self.speed))
         self.t_s = t
-        if t >= self.end_s:
+        if t >= self.end_s and self.complete:
             self.playing = False
 
     def position(self) -> tuple[float, float, int]:
@@ -242,7 +321,7 @@ class FlyState(param.Parameterized):
     @property
     def landed(self) -> bool:
         """The playback has reached the flight's end: its result may be shown."""
-        return self.record is not None and self.t_s >= self.end_s
+        return self.record is not None and self.complete and self.t_s >= self.end_s
 
     def series_until(self) -> dict[str, Any]:
         """The record's series up to the playback time (time in min): ``measured``, ``true`` and
@@ -270,12 +349,15 @@ class FlyState(param.Parameterized):
             return ""
         if not self.landed:
             reached = [to for to, end in zip(r.route, r.leg_end_s) if end <= self.t_s and to != VERTIPORT]
-            return (f"flying: {self.t_s / 60:.1f} of {self.end_s / 60:.1f} min · reached so far: "
+            of = f" of {self.end_s / 60:.1f}" if self.complete else ""
+            return (f"flying: {self.t_s / 60:.1f}{of} min · reached so far: "
                     f"{', '.join(reached) or 'none'} · the results show at the landing")
         own = f"BREACHED the cut-off (priority 0; {r.breach_cause})" if r.breached else f"priority {r.reached_priority}"
+        flown = f"flown: {own}, {charging_cycles_text(r.charging_cycles)}, min {r.min_voltage_v:.3f} V · "
+        if not self.references:
+            return flown + "the blind pre-flight plan and hindsight are being flown" + _first_leg_text(r)
         blind = "breached" if r.static.breached else f"priority {r.static.priority}"
-        return (f"flown: {own}, {charging_cycles_text(r.charging_cycles)}, min {r.min_voltage_v:.3f} V · "
-                f"blind pre-flight plan: {blind} · "
+        return (flown + f"blind pre-flight plan: {blind} · "
                 f"hindsight oracle{'' if r.hindsight.exact else ' (best known plan)'}: priority {r.hindsight.priority}"
                 + _first_leg_text(r))
 

@@ -121,6 +121,7 @@ class FlyView(pn.viewable.Viewer):
                                                 "fit flags": 70, "leg wind vs forecast (kt)": 150,
                                                 "common shift (kt)": 110, "wind changed (p)": 95, "next": 85})
         self._shown = (-1, -1, -1)
+        self._log_rows: list[dict[str, Any]] = []  # the rows the decision log shows
         self._figures()
         self.map_pane = pn.pane.Bokeh(self.map_fig, width=MAP_PX + 10, height=MAP_PX + 10)
         self.volt_pane = pn.pane.Bokeh(self.volt_fig, sizing_mode="stretch_width", height=MAP_PX)
@@ -139,8 +140,7 @@ class FlyView(pn.viewable.Viewer):
         s.param.watch(lambda e: setattr(self.reserve, "value", e.new), "reserve_kt")
         self.inject_kts.param.watch(lambda e: setattr(s, "inject_kts", e.new), "value")
         self.clock.param.watch(self._on_clock, "value_throttled")
-        s.param.watch(self._on_record, "record")
-        s.param.watch(self._on_time, "t_s")
+        s.param.watch(self._on_flight, ["record", "t_s"])  # once for both when a flight shows (param.update)
         s.param.watch(lambda e: setattr(self.play, "value", e.new), "playing")
         s.param.watch(lambda e: setattr(self.progress, "object", busy_html(bool(e.new), FLYING)), "running")
         s.param.watch(self._on_text, ["status", "error"])
@@ -160,7 +160,7 @@ class FlyView(pn.viewable.Viewer):
                       sizing_mode="stretch_width"),
             sizing_mode="stretch_width", css_classes=["uam-fly"])
         if s.record is not None:
-            self._on_record()
+            self._draw_record()
 
     # ------------------------------------------------------------------ figures
     def _figures(self) -> None:
@@ -213,7 +213,7 @@ class FlyView(pn.viewable.Viewer):
 
     def _draw_flight(self) -> None:
         """Set the figures to the current record (or the Planner's mission before a flight): the places,
-        the axes' ranges, the cut-off line and the title; the playback's own data is :meth:`_on_time`'s."""
+        the axes' ranges, the cut-off line and the title; the playback's own data is :meth:`_draw_time`'s."""
         s = self.state
         m = s.mission_flown if s.mission_flown is not None else s._mission()
         xs = [d.x_km for d in m.destinations]
@@ -241,18 +241,27 @@ class FlyView(pn.viewable.Viewer):
         self.cutoff.data = {"x": [0.0, end_min], "y": [eod, eod]}
 
     # ------------------------------------------------------------------ updates
-    def _on_record(self, *_: Any) -> None:
+    def _on_flight(self, *events: param.parameterized.Event) -> None:
+        """Draw a new record (or the same flight with its references put in: nothing drawn changes) or the
+        playback's time, as one batch of model changes (each batch costs the browser a page layout)."""
+        new = next((e for e in events if e.name == "record"), None)
+        same = new is not None and new.old is not None and new.new is not None and new.new.time_s is new.old.time_s
+        with pn.io.hold():
+            if new is not None and not same:
+                self._draw_record()
+            elif len(events) > 1 or new is None:  # the time moved (the same flight with its references: nothing)
+                self._draw_time()
+
+    def _draw_record(self) -> None:
         s = self.state
         self.download.disabled = s.record is None
         self.clock.end = max(1.0, s.end_s)
         self._draw_flight()
         self._shown = (-1, -1, -1)
-        self._on_time()
+        self._draw_time()
         self._ensure_timer()
 
-    def _on_time(self, *_: Any) -> None:
-        """Show the flight up to the playback time: the path flown, the aircraft, the leg labels, the
-        series and decisions so far, the wind changes started, the time line and the log."""
+    def _draw_time(self) -> None:
         s = self.state
         if s.record is None:
             return
@@ -281,7 +290,9 @@ class FlyView(pn.viewable.Viewer):
         self.changes.data = {"x": [c[0] for c in changes], "y": [4.22] * len(changes),
                              "text": [c[1] for c in changes], "y0": [self.volt_fig.y_range.start] * len(changes)}
         rows = s.decisions_until()
-        self.log.value = pd.DataFrame(rows) if rows else self.log.value.iloc[0:0]
+        if rows != self._log_rows:  # the table is the costliest model to redraw in the browser
+            self._log_rows = rows
+            self.log.value = pd.DataFrame(rows) if rows else self.log.value.iloc[0:0]
 
     def _record_csv(self) -> io.StringIO:
         """The shown flight's record as CSV (:func:`~uam_studio.planning.operations.record_csv`)."""
@@ -298,9 +309,17 @@ class FlyView(pn.viewable.Viewer):
         self.error.visible = bool(s.error)
 
     def _ensure_timer(self) -> None:
+        """Start the playback timer, or start it again when a new flight begins: its first tick then comes a whole
+        period after the flight's first frame, not while the browser draws it."""
         if self._callback is None and pn.state.curdoc is not None and pn.state.curdoc.session_context is not None:
-            self._callback = pn.state.add_periodic_callback(lambda: self.state.tick(TICK_MS / 1000.0),
-                                                            period=TICK_MS)
+            self._callback = pn.state.add_periodic_callback(self._tick, period=TICK_MS)
+        elif self._callback is not None and self.state.t_s == 0.0:
+            self._callback.stop()
+            self._callback.start()
+
+    def _tick(self) -> None:
+        with pn.io.hold():  # the tick's changes (figures, clock, status) in one batch
+            self.state.tick(TICK_MS / 1000.0)
 
     def close(self) -> None:
         """Stop the playback timer."""

@@ -5,14 +5,9 @@ The loop is the only place that touches both sides. It takes the sensor readings
 :class:`~uam_studio.planning.operations.operator.Operator`, and it flies the legs the operator
 chooses. The operator gets the mission with its forecast winds and a placeholder cell.
 
-Two references are flown in the same world (same actual winds, same events):
-
-* the **blind** plan: the operator's pre-flight plan (after the take-off check) flown to the end
-  with no re-planning;
-* the **hindsight** reference: the best plan knowing the true cell and the actual winds as they
-  were at each leg's time. With no scripted event it is the exact oracle's plan; with events, the
-  best of the exact plans for each period of constant winds and the route flown, each flown in the
-  same world (see :func:`_hindsight`).
+Two references are flown in the same world (:mod:`~uam_studio.planning.operations.references`): the operator's
+pre-flight plan flown blind, and hindsight. :func:`fly_mission` flies them unless told not to;
+:func:`with_references` flies them later for a record flown without (the Fly tab shows the flight first).
 
 A flight that breaches the cut-off scores 0 priority.
 """
@@ -23,7 +18,7 @@ import dataclasses
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
@@ -31,7 +26,7 @@ from uam_studio.battery import DEFAULT_Q_MAX, DEFAULT_R0, simulate
 from uam_studio.battery.health.logbook import Logbook
 from uam_studio.errors import InputError
 from uam_studio.planning.legs import DT_S, N_MAX, takeoff_current
-from uam_studio.planning.missions.mission import VERTIPORT, Battery, Destination, Mission, check_destination_count
+from uam_studio.planning.missions.mission import VERTIPORT, Battery, Mission, check_destination_count
 from uam_studio.planning.operations.decision import Decision
 from uam_studio.planning.operations.defaults import fit_noise_v
 from uam_studio.planning.operations.leg_interval import leg_load, leg_lowest_voltage, takeoff_belief
@@ -43,6 +38,7 @@ from uam_studio.planning.operations.operator import (
     WIND_Z,
     Operator,
 )
+from uam_studio.planning.operations.references import ReferenceFlight, fly_references, priority_of
 from uam_studio.planning.operations.world import (
     DEFAULT_FORECAST_SIGMA_KT,
     DEFAULT_SENSOR_NOISE_MA,
@@ -50,25 +46,9 @@ from uam_studio.planning.operations.world import (
     DEFAULT_WORLD,
     WindEvent,
     World,
-    actual_winds_mission,
+    parse_event,
 )
-from uam_studio.planning.solvers.oracle import oracle_plan
 from uam_studio.risk import DEFAULT_RISK, caution
-
-
-@dataclass
-class ReferenceFlight:
-    """A reference flown in the same world as the operator (:class:`FlightRecord`'s ``static`` and
-    ``hindsight``): ``route`` (nodes in order; ``"vertiport"`` is a recharge), ``altitudes_m`` (m) of each
-    leg, ``priority`` (the priority it served; 0 when it breached), ``breached`` (the cell fell below the
-    cut-off), ``exact`` (the exact oracle's plan of the true cell and the actual winds; False for the
-    pre-flight plan, and for hindsight when scripted events make it the best of several candidate plans)."""
-
-    route: list[str] = field(default_factory=list)
-    altitudes_m: list[float] = field(default_factory=list)
-    priority: int = 0
-    breached: bool = False
-    exact: bool = False
 
 
 @dataclass
@@ -186,60 +166,6 @@ def record_csv(rec: FlightRecord) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _priority(mission: Mission, reached: Sequence[str]) -> int:
-    return int(sum(cast(Destination, mission.node(n)).priority for n in reached if n != VERTIPORT))
-
-
-def _fly_fixed(world: World, route: Sequence[str], alts: Sequence[float],
-               takeoff: np.ndarray) -> tuple[bool, list[str]]:
-    """Fly ``route`` blind in ``world``; returns (breached, destinations reached)."""
-    reached: list[str] = []
-    if not route:
-        return False, reached
-    world.takeoff_check(takeoff)
-    if world.breached:
-        return True, reached
-    for to, alt in zip(route, alts):
-        r = world.fly_leg(to, alt)
-        if not r.landed:
-            return True, reached
-        if to != VERTIPORT:
-            reached.append(to)
-    return False, reached
-
-
-def _hindsight(mission: Mission, scenario: str, new_world: Callable[[], World], takeoff: np.ndarray,
-               flown: tuple[Sequence[str], Sequence[float]]) -> tuple[list[str], list[float], int]:
-    """The hindsight reference: (route, altitudes (m), priority) of the best plan knowing the true
-    cell and the actual winds as they were when each leg was flown.
-
-    With no scripted event the winds never change, and it is the exact oracle's plan for the true
-    cell and the actual winds. With events, a leg's wind depends on when it is flown, which the
-    oracle's search does not model. The candidates are then the exact plan for each period of
-    constant winds (before the first event, after each event) and the route flown; each is flown
-    blind in a fresh world with the same seed (the winds change at the events' times), and the best
-    priority wins (a breach scores 0). It is the best of those plans, not a proven optimum.
-    """
-    world = new_world()
-    times = sorted({0.0, *(e.start_s for e in world.events)})
-    plans = []
-    for t in times:
-        plan = oracle_plan(actual_winds_mission(mission, {n: world.wind(n, t) for n in mission.node_names}), scenario,
-                           params=world.cell.params)
-        plans.append((list(plan.route), list(plan.altitudes_m)))
-    if not world.events:
-        route, alts = plans[0]
-        return route, alts, _priority(mission, route)
-    best: tuple[list[str], list[float], int] | None = None
-    for route, alts in [*plans, (list(flown[0]), list(flown[1]))]:
-        breached, reached = _fly_fixed(new_world(), route, alts, takeoff)
-        priority = 0 if breached else _priority(mission, reached)
-        if best is None or priority > best[2]:
-            best = (route, alts, priority)
-    assert best is not None
-    return best
-
-
 def breach_cause(world: World, reserve_kt: float) -> str:
     """Why a flight in ``world`` breached, in one line: the change of the weather the legs flew in
     exceeded the weather reserve (kt), or it did not: the change within the reserve together with the forecast's
@@ -260,7 +186,8 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
                 health_z: float = HEALTH_Z, wind_z: float = WIND_Z, plan_wind_z: float = PLAN_WIND_Z,
                 references: bool = True, reserve_kt: float = WEATHER_RESERVE_KT,
                 operator: Callable[..., Operator] = Operator, logbook: Logbook | None = None,
-                world: str = DEFAULT_WORLD, pack: int | None = None, risk: float | None = None) -> FlightRecord:
+                world: str = DEFAULT_WORLD, pack: int | None = None, risk: float | None = None,
+                progress: Callable[[FlightRecord], None] | None = None) -> FlightRecord:
     """Fly ``mission`` once: the operator plans from the take-off check, re-plans at every arrival.
 
     :param mission: the mission; its ``battery`` is the world's true cell, its winds the forecast.
@@ -288,6 +215,9 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
         names the same number.
     :param risk: the flight's declared risk (0-0.5, exclusive; :mod:`uam_studio.risk`): when given, ``health_z``,
         ``wind_z`` and ``reserve_kt`` follow from it (:func:`~uam_studio.risk.caution`) and are not read.
+    :param progress: called after each leg that landed with the flight so far: a new record holding the legs,
+        decisions and series until that landing, and no result yet (the Fly tab shows a flight from its first
+        leg on while the rest is flown).
     :raises InputError: for bad input, naming the field; an event that starts after the flight
         (and its references) ended is an error of field ``event``.
     """
@@ -316,15 +246,12 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
                        truth.sensor_noise_ma, [e.text for e in truth.events], op.reserve_kt, truth.world, truth.pack,
                        true_q_max=mission.battery.q_max, true_r0=mission.battery.r0, logbook_before=book)
     takeoff = np.asarray(takeoff_current(), dtype=float)  # every leg's vertical take-off and first climb
-    series_t, series_i, series_v, series_true, series_true_i, series_pred = [], [], [], [], [], []
+    series: dict[str, list[np.ndarray]] = {name: [] for name in RECORD_CSV_COLUMNS}
 
     def take(r, pred: np.ndarray) -> None:
-        series_t.append(r.time_s)
-        series_i.append(r.current_a)
-        series_v.append(r.voltage_v)
-        series_true.append(truth.last_true_voltage_v)
-        series_true_i.append(truth.last_true_current_a)
-        series_pred.append(pred)
+        for name, x in zip(RECORD_CSV_COLUMNS, (r.time_s, r.voltage_v, r.current_a, pred, truth.last_true_voltage_v,
+                                                truth.last_true_current_a)):
+            series[name].append(x)
         op.observe(r.time_s, r.current_a, r.voltage_v)
 
     r = truth.takeoff_check(takeoff)
@@ -355,6 +282,11 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
         rec.leg_end_s.append(leg.end_s)
         if not r.landed:
             break
+        if progress is not None:
+            so_far: dict[str, Any] = {name: list(getattr(rec, name)) for name in (
+                "route", "altitudes_m", "actual_winds_kts", "forecast_winds_kts", "leg_end_s", "events")}
+            so_far.update({name: np.concatenate(parts) for name, parts in series.items()})
+            progress(dataclasses.replace(rec, **so_far))
         op.arrived(d.next_to)
         first = False
     rec.takeoff_belief = takeoff_belief(rec.events[0], op, takeoff_leg) if rec.events else {}
@@ -365,28 +297,19 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
     rec.reached = [n for n in rec.route if n != VERTIPORT]
     if rec.breached:
         rec.reached = rec.reached[:-1] if rec.route and rec.route[-1] != VERTIPORT else rec.reached
-    rec.reached_priority = 0 if rec.breached else _priority(mission, rec.reached)
+    rec.reached_priority = 0 if rec.breached else priority_of(mission, rec.reached)
     rec.charging_cycles = sum(1 for n in rec.route if n == VERTIPORT)
-    rec.time_s = np.concatenate(series_t)
-    rec.measured_current_a = np.concatenate(series_i)
-    rec.measured_voltage_v = np.concatenate(series_v)
-    rec.true_voltage_v = np.concatenate(series_true)
-    rec.true_current_a = np.concatenate(series_true_i)
-    rec.predicted_voltage_v = np.concatenate(series_pred)
+    for name, parts in series.items():
+        setattr(rec, name, np.concatenate(parts))
     rec.min_voltage_v = float(min(leg.min_voltage_v for leg in truth.legs)) if truth.legs else float(
         rec.true_voltage_v.min())
     end_s = truth.time_s
     if references:
         first_plan = next((e for e in rec.events if e.kind == "plan"), None)
-        static_route = list(first_plan.route) if first_plan else []
-        static_alts = list(first_plan.altitudes_m) if first_plan else []
-        blind = new_world()
-        static_breached, static_reached = _fly_fixed(blind, static_route, static_alts, takeoff)
-        rec.static = ReferenceFlight(static_route, static_alts,
-                                     0 if static_breached else _priority(mission, static_reached), static_breached)
-        end_s = max(end_s, blind.time_s)
-        route, alts, priority = _hindsight(mission, scenario, new_world, takeoff, (rec.route, rec.altitudes_m))
-        rec.hindsight = ReferenceFlight(route, alts, priority, exact=not truth.events)
+        planned = (first_plan.route, first_plan.altitudes_m) if first_plan else ((), ())
+        rec.static, rec.hindsight, blind_end_s = fly_references(mission, scenario, new_world, takeoff, planned,
+                                                                (rec.route, rec.altitudes_m))
+        end_s = max(end_s, blind_end_s)
     late = [e for e in truth.events if e.start_s > end_s]
     if late:
         raise InputError("event", f"{late[0].text} starts at {late[0].start_s:g} s, after the flight ended "
@@ -394,6 +317,21 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
     rec.risk = declared
     rec.wall_s = time.perf_counter() - t_wall
     return rec
+
+
+def with_references(mission: Mission, rec: FlightRecord) -> FlightRecord:
+    """``rec`` with its references (``static``, ``hindsight``) flown: a new record, the same as ``fly_mission``
+    with ``references=True`` gives for the same inputs. ``rec`` is a flight of ``mission`` flown with
+    ``references=False``; its world is made again from its own settings (seed, noise, events, world, pack)."""
+    def new_world() -> World:
+        return World(mission, rec.forecast_sigma_kt, rec.sensor_noise_mv, rec.sensor_noise_ma,
+                     [parse_event(e) for e in rec.wind_events], rec.seed, rec.world, rec.pack)
+
+    first_plan = next((e for e in rec.events if e.kind == "plan"), None)
+    planned = (first_plan.route, first_plan.altitudes_m) if first_plan else ((), ())
+    static, hindsight, _ = fly_references(mission, rec.scenario, new_world, np.asarray(takeoff_current(), dtype=float),
+                                          planned, (rec.route, rec.altitudes_m))
+    return dataclasses.replace(rec, static=static, hindsight=hindsight)
 
 
 def _predict_leg(op: Operator, d: Decision, first: bool) -> np.ndarray:
