@@ -467,10 +467,10 @@ def _fly_controls(page, n: int) -> dict[str, list[float]]:
     page holds the result, as the bare page's steps are timed): 'Fly the mission' (a new world seed each round)
     until its busy mark shows
     ("flying..." in the status) and until the status says "flying:" after it (the new flight's first frame),
-    'Inject wind change now' until the change is marked on the voltage figure, 'Clear wind changes' until it is
-    gone."""
+    'Inject wind change now' until the change is marked on the voltage figure (early in the flight, and again past
+    half of it, where the flight until the change is flown again first), 'Clear wind changes' until it is gone."""
     out: dict[str, list[float]] = {"fly (until the busy mark)": [], "fly (until 'flying:', the first frame)": [],
-                                   "inject a wind change": [], "clear it": []}
+                                   "inject a wind change": [], "clear it": [], "inject a wind change mid-flight": []}
     page.locator(".bk-tab", has_text="Fly").click()
     status = page.locator(".uam-fly-status")
     status.wait_for(state="attached", timeout=120_000)
@@ -483,6 +483,10 @@ def _fly_controls(page, n: int) -> dict[str, list[float]]:
         return lambda: page.locator("button", has_text=text).click()
 
     seed = page.locator(".bk-input-group", has_text="World seed").locator("input")
+    speed = page.locator(".bk-input-group", has_text="Playback speed").locator("select")
+    past_half = ("() => { const t = window.__uamTexts,"
+                 " m = t.length ? /flying: ([0-9.]+) of ([0-9.]+)/.exec(t[t.length - 1]) : null;"
+                 " return m !== null && +m[1] >= +m[2] / 2; }")
     for k in range(n):
         seed.fill(str(1000 + k))  # a new world each time: no flight is asked for twice
         seed.press("Enter")
@@ -495,6 +499,12 @@ def _fly_controls(page, n: int) -> dict[str, list[float]]:
             _frame_time(page, button("Clear wind changes"), f"() => ({_FLY_CHANGES_JS})() === 0"))
         out["fly (until the busy mark)"].append(_frame_time(page, button("Fly the mission"), busy))
         page.wait_for_function(busy_then_flying, timeout=120_000)
+        speed.select_option("1000")  # to half the flight quickly, then a wind change there
+        page.wait_for_function(past_half, timeout=120_000)
+        out["inject a wind change mid-flight"].append(
+            _frame_time(page, button("Inject wind change now"), f"() => ({_FLY_CHANGES_JS})() === 1"))
+        speed.select_option("100")
+        _frame_time(page, button("Clear wind changes"), f"() => ({_FLY_CHANGES_JS})() === 0")
     return out
 
 

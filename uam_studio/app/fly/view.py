@@ -10,6 +10,7 @@ time. Everything comes from :class:`~uam_studio.app.fly.state.FlyState`; this vi
 from __future__ import annotations
 
 import io
+from collections.abc import Callable
 from typing import Any, cast
 
 import numpy as np
@@ -70,6 +71,12 @@ def _leg_labels(path: list[tuple[float, float]], altitudes_m: list[float], missi
 FLYING = "flying..."  # the busy mark's label while a flight is computed
 
 
+def _held(action: Callable[[], None]) -> None:
+    """``action()``, its changes (the busy mark, the status) sent to the browser as one batch."""
+    with pn.io.hold():
+        action()
+
+
 class FlyView(pn.viewable.Viewer):
     """Controls, map, voltage plot and decision log of a :class:`FlyState`."""
 
@@ -125,9 +132,9 @@ class FlyView(pn.viewable.Viewer):
         self._figures()
         self.map_pane = pn.pane.Bokeh(self.map_fig, width=MAP_PX + 10, height=MAP_PX + 10)
         self.volt_pane = pn.pane.Bokeh(self.volt_fig, sizing_mode="stretch_width", height=MAP_PX)
-        self.fly_button.on_click(lambda _e: s.fly())
-        self.inject_button.on_click(lambda _e: s.inject())
-        self.clear_button.on_click(lambda _e: s.clear_events())
+        self.fly_button.on_click(lambda _e: _held(s.fly))
+        self.inject_button.on_click(lambda _e: _held(s.inject))
+        self.clear_button.on_click(lambda _e: _held(s.clear_events))
         self.play.param.watch(lambda e: setattr(s, "playing", e.new), "value")
         self.speed.param.watch(lambda e: setattr(s, "speed", e.new), "value")
         self.seed.param.watch(lambda e: setattr(s, "seed", e.new), "value")

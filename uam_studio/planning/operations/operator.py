@@ -214,8 +214,7 @@ class Operator:
         # close to the vertiport to fly to directly, as the exact search does)
         open_moves = episode.moves(here, done, among=legs.present[:legs.slots])[0]
         firsts, returns = [], []
-        # a change of the weather, common to both legs: N(0, change_sd) (the reserve is its wind_z quantile)
-        change_sd = self.reserve_kt / self.wind_z if self.wind_z > 0 else 0.0
+        change_sd = self.reserve_kt / self.wind_z if self.wind_z > 0 else 0.0  # the common change's std
         flat = 0.0 if self.wind_z > 0 else self.reserve_kt
         for j in np.flatnonzero(open_moves[:legs.slots].any(axis=1)):
             to = self.names[j]
@@ -225,10 +224,11 @@ class Operator:
             norm = math.sqrt((sd * d1) ** 2 + (home_sd * d2) ** 2 + common * (d1 + d2)) or 1.0
             w1 = mean + self.wind_z * (sd ** 2 * d1 + common) / norm + flat
             w2 = home_mean + self.wind_z * (home_sd ** 2 * d2 + common) / norm + flat
+            rets = [(b, self.leg_current(to, VERTIPORT, ALTITUDES_M[b], w2))
+                    for b in range(n_alt) if legs.feasible[j, VERTIPORT_SLOT, b]]  # the same after each altitude
             for a in np.flatnonzero(open_moves[j]):
                 firsts.append((int(j), int(a), self.leg_current(frm, to, ALTITUDES_M[a], w1)))
-                returns.append([(b, self.leg_current(to, VERTIPORT, ALTITUDES_M[b], w2))
-                                for b in range(n_alt) if legs.feasible[j, VERTIPORT_SLOT, b]])
+                returns.append(rets)
         if open_moves[VERTIPORT_SLOT].any():
             w = home_mean + self.wind_z * math.hypot(home_sd, change_sd) + flat
             for a in np.flatnonzero(open_moves[VERTIPORT_SLOT]):
