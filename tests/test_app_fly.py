@@ -111,6 +111,9 @@ def test_injected_wind_change_reflies_from_the_playback_time(state):
     # the flight up to the change is the same flight
     k = int((after.time_s <= 1000.0).sum())
     assert (after.measured_voltage_v[:k] == before.measured_voltage_v[:k]).all()
+    state.t_s = 1500.7  # a change injected between two whole seconds is marked at once
+    state.inject()
+    assert state.series_until()["changes"][-1] == (1500 / 60, "wind +30 kt from the next take-off")
     state.clear_events()
     assert state.events == [] and state.record.wind_events == []
 

@@ -109,9 +109,10 @@ def test_the_model_error_is_learned_from_the_logbook(example):
     assert model_error(varied_book).sd_v > model_error(model_book).sd_v
     new = HealthBelief(0.005, 3.0)
     assert new.model_error.sd_v == PAPER_BELIEF.takeoff_model_error_sd_v
+    assert new.model_error.below_v == PAPER_BELIEF.takeoff_model_error_low_sd_v > new.model_error.sd_v  # skewed
     cur, volt = varied_rec.flown_charges[0]
     new.observe(cur, volt)
-    assert new.model_error.sd_v == PAPER_BELIEF.model_error_sd_v  # a flight's worth read: the cell type's prior
+    assert new.model_error.sd_v == new.model_error.below_v == PAPER_BELIEF.model_error_sd_v  # a flight's worth read
     assert HealthBelief(0.005, 3.0, logbook=varied_book).model_error.flights == len(varied_book)
 
 
@@ -121,7 +122,10 @@ def test_the_record_holds_the_first_legs_interval_and_what_the_world_gave(exampl
     rec = fly_mission(example, seed=1, references=False)
     tb = rec.takeoff_belief
     lo, hi = tb["first_leg_min_voltage_90_v"]
-    assert lo < tb["first_leg_min_voltage_median_v"] < hi and tb["model_error_v"] > 0
+    med = tb["first_leg_min_voltage_median_v"]
+    assert lo < med < hi and tb["model_error_v"] > 0 and 0 < tb["model_error_share"] <= 1
+    # a new pack's take-off belief: the term's skew (the world gives far less more often) widens the low side
+    assert tb["model_error_low_v"] == PAPER_BELIEF.takeoff_model_error_low_sd_v and med - lo > 2 * (hi - med)
     assert rec.first_leg_min_voltage_v == pytest.approx(min(rec.true_voltage_v[:int(rec.leg_end_s[0])]), abs=1e-9)
     d = rec.to_dict(series=False)
     assert d["world"] == "varied" and d["pack"] == 1

@@ -264,11 +264,12 @@ class FlyState(param.Parameterized):
         return self._worker.wait_idle(timeout) and self._refs.wait_idle(max(deadline - time.monotonic(), 0.0))
 
     def inject(self) -> None:
-        """Add a wind change of ``inject_kts`` from the playback time on, and re-fly from there."""
+        """Add a wind change of ``inject_kts`` from the playback time on (its whole second: the change is marked at
+        once), and re-fly from there."""
         if self.record is None:
             self.error = "fly first: the wind change starts at the playback time"
             return
-        self.events = [*self.events, WindEvent(round(self.t_s), float(self.inject_kts))]
+        self.events = [*self.events, WindEvent(int(self.t_s), float(self.inject_kts))]
         self.fly(keep_time=True)
 
     def clear_events(self) -> None:
@@ -369,9 +370,10 @@ def _first_leg_text(r: FlightRecord) -> str:
     if "first_leg_min_voltage_90_v" not in tb or r.first_leg_min_voltage_v is None:
         return ""
     lo, hi = tb["first_leg_min_voltage_90_v"]
-    return (f" · first leg's lowest voltage: believed {lo:.3f}-{hi:.3f} V (90%; model error "
-            f"{1e3 * tb['model_error_v']:.0f} mV, {tb['model_error_share']:.0%} of its variance), the world gave "
-            f"{r.first_leg_min_voltage_v:.3f} V")
+    above, below = 1e3 * tb["model_error_v"], 1e3 * tb.get("model_error_low_v", tb["model_error_v"])
+    error = f"{above:.0f} mV" if round(below) == round(above) else f"{above:.0f} mV above, {below:.0f} mV below"
+    return (f" · first leg's lowest voltage: believed {lo:.3f}-{hi:.3f} V (90%; model error {error}, "
+            f"{tb['model_error_share']:.0%} of its variance), the world gave {r.first_leg_min_voltage_v:.3f} V")
 
 
 __all__ = ["RISKS", "SPEEDS", "WORLD_LABELS", "FlyState"]

@@ -233,12 +233,19 @@ def logbook_belief(logbook: Logbook, config: BeliefConfig = PAPER_BELIEF) -> tup
 class ModelError:
     """The belief's model-error term: ``sd_v`` (V), the std of the voltage its model cannot explain once the health
     is known, pooled from the cell type's prior ``prior_sd_v`` (V, worth ``prior_flights`` flights) and ``flights``
-    logged flights' residuals (:func:`model_error`)."""
+    logged flights' residuals (:func:`model_error`); ``low_sd_v`` (V), its std below the median where the error is
+    skewed (a take-off's belief), 0 where it is not."""
 
     sd_v: float
     prior_sd_v: float
     prior_flights: float
     flights: int
+    low_sd_v: float = 0.0
+
+    @property
+    def below_v(self) -> float:
+        """The term's std below the median (V)."""
+        return max(self.low_sd_v, self.sd_v)
 
 
 def flight_residual_sd_v(flight: LoggedFlight, params: CellParameters) -> float | None:
@@ -268,11 +275,13 @@ def model_error(logbook: Logbook, config: BeliefConfig = PAPER_BELIEF) -> ModelE
     return ModelError(math.sqrt(var), config.model_error_sd_v, k0, len(sds))
 
 
-def error_share(interval: Sequence[float], error_sd_v: float, level: float = 0.9) -> float:
-    """The share (0-1) of a ``level`` interval's variance (``interval``: low, median, high, V; symmetric about its
-    median) that an error of std ``error_sd_v`` (V) makes up."""
-    sd = (interval[2] - interval[0]) / (2.0 * two_sided_z(level))
-    return float(min(error_sd_v ** 2 / sd ** 2, 1.0)) if sd > 0 else 0.0
+def error_share(interval: Sequence[float], error: ModelError, level: float = 0.9) -> float:
+    """The share (0-1) of a ``level`` interval's variance (``interval``: low, median, high, V) that the model-error
+    term ``error`` makes up, each side's (its std above and below the median) over that side's, averaged."""
+    z = two_sided_z(level)
+    shares = [min(e ** 2 / (w / z) ** 2, 1.0) if w > 0 else 0.0
+              for e, w in ((error.below_v, interval[1] - interval[0]), (error.sd_v, interval[2] - interval[1]))]
+    return float(sum(shares) / 2)
 
 
 class HealthBelief:
@@ -316,11 +325,11 @@ class HealthBelief:
     def model_error(self) -> ModelError:
         """The model-error term now: the logbook's (:func:`model_error`), or, for a belief that holds no logged
         flight and less than ``config.takeoff_span_s`` of readings, the take-off's
-        (``config.takeoff_model_error_sd_v``)."""
+        (``config.takeoff_model_error_sd_v``, below the median ``config.takeoff_model_error_low_sd_v``)."""
         n = sum(c.size for c in self.segment.current) + sum(sum(x.size for x in c.current) for c in self.charges)
         if self.logged_error.flights == 0 and n * self.dt_s < self.config.takeoff_span_s:
             sd = max(self.config.takeoff_model_error_sd_v, self.logged_error.sd_v)
-            return dataclasses.replace(self.logged_error, sd_v=sd)
+            return dataclasses.replace(self.logged_error, sd_v=sd, low_sd_v=self.config.takeoff_model_error_low_sd_v)
         return self.logged_error
 
     @property
@@ -401,7 +410,8 @@ class HealthBelief:
         load from a full charge (``currents[0]``, A at the belief's step, this charge's readings so far first), on
         the believed cell: the median at the believed health; the std from the health (the 5 sigma points in
         (w, R0)), from each pair ``currents[1:]`` (the same load under conditions one std either side, the wind's:
-        half their difference) and from the model-error term (:attr:`model_error`), in quadrature."""
+        half their difference) and from the model-error term (:attr:`model_error`; its own std below the median), in
+        quadrature."""
         h = self.health() if (self.segment.current or self.past) else self.prior_health()
         pts = h.as_estimate().sigma_points()
         runs = [(c, q, r) for c, (q, r) in [(currents[0], p) for p in pts] + [(c, pts[0]) for c in currents[1:]]]
@@ -409,13 +419,15 @@ class HealthBelief:
                                                eod_v=EOD_RANGE[0], cell=self.cell).voltage_v[after:], initial=5.0))
                          for c, q, r in runs])
         conditions = sum(((lows[k] - lows[k + 1]) / 2) ** 2 for k in range(5, lows.size - 1, 2))
-        lo, med, hi = band_from_sigma_points(lows[:5, None], level, math.sqrt(self.model_error.sd_v ** 2 + conditions))
+        err = self.model_error
+        _, med, hi = band_from_sigma_points(lows[:5, None], level, math.sqrt(err.sd_v ** 2 + conditions))
+        lo = band_from_sigma_points(lows[:5, None], level, math.sqrt(err.below_v ** 2 + conditions))[0]
         return float(lo[0]), float(med[0]), float(hi[0])
 
     def model_error_share(self, current_a: np.ndarray, after: int) -> float:
         """The model-error term's share of the variance of the lowest voltage of a planned load
         (:func:`error_share` of :meth:`lowest_voltage`'s interval, without conditions)."""
-        return error_share(self.lowest_voltage([current_a], after), self.model_error.sd_v)
+        return error_share(self.lowest_voltage([current_a], after), self.model_error)
 
     def eod_interval(self, current_a: np.ndarray, level: float = 0.9) -> EodInterval:
         """The ``level`` interval (s) of the end of discharge of a planned load ``current_a`` (A at the belief's step,

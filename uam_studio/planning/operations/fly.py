@@ -270,7 +270,7 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
             op.start_leg_at(0.0)
         pred = _predict_leg(op, d, first)
         if first:
-            takeoff_leg = (*leg_lowest_voltage(op, d, True), op.health_belief.model_error.sd_v)
+            takeoff_leg = (*leg_lowest_voltage(op, d, True), op.health_belief.model_error)
         assert d.next_altitude_m is not None  # a decision's next leg has both
         r = truth.fly_leg(d.next_to, d.next_altitude_m)
         leg = truth.legs[-1]

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from uam_studio.battery.health.belief import error_share
+from uam_studio.battery.health.belief import ModelError, error_share
 from uam_studio.planning.operations.decision import Decision
 from uam_studio.planning.operations.operator import Operator
 
@@ -36,16 +36,20 @@ def leg_lowest_voltage(op: Operator, d: Decision, first: bool, level: float = 0.
     return op.health_belief.lowest_voltage([np.concatenate(x) for x in loads], loads[0][0].size, level)
 
 
-def takeoff_belief(first: Decision, op: Operator, leg: tuple[float, float, float, float] | None) -> dict[str, Any]:
+def takeoff_belief(first: Decision, op: Operator, leg: tuple[float, float, float, ModelError] | None
+                   ) -> dict[str, Any]:
     """The belief the first decision planned on, with where it started and the logbook's length; where it chose a
-    leg (``leg``: the interval's low, median and high, V, and the model-error term then, V), its model-error term
-    and its 90% interval of that leg's lowest voltage."""
+    leg (``leg``: the interval's low, median and high, V, and the model-error term then), its model-error term
+    (its std above the median and below it, V, and its share of the interval's variance) and its 90% interval of
+    that leg's lowest voltage."""
     out = {"q_max_c": round(first.q_max_c, 3), "q_max_sd_c": round(first.q_max_sd_c, 3),
            "r0_ohm": round(first.r0_ohm, 6), "r0_sd_ohm": round(first.r0_sd_ohm, 6),
            "source": op.health_belief.source, "flights": len(op.health_belief.logbook)}
     if leg is not None:
-        out["model_error_v"] = round(leg[3], 6)
-        out["model_error_share"] = round(error_share(leg[:3], leg[3]), 4)
+        lo, med, hi, err = leg
+        out["model_error_v"] = round(err.sd_v, 6)
+        out["model_error_low_v"] = round(err.below_v, 6)
+        out["model_error_share"] = round(error_share((lo, med, hi), err), 4)
         out["first_leg_min_voltage_90_v"] = [round(leg[0], 5), round(leg[2], 5)]
         out["first_leg_min_voltage_median_v"] = round(leg[1], 5)
     return out
