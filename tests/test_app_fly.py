@@ -95,6 +95,33 @@ def test_the_flight_shows_from_its_first_leg_and_before_its_references():
     deliver_next()  # the third flight
     deliver_next()  # its references
     assert state.references and state.complete and state.record.seed == 2 and state.record.hindsight.route
+    # a wind change: the flight until the landing of the leg in the air shows at once, the change marked
+    state.t_s = 1000.5
+    shown = state.record
+    state.inject()
+    now = state.record  # nothing delivered from the pool yet
+    assert now is not shown and now.wind_events == ["wind+25@1000"] and not state.complete and state.t_s == 1000.5
+    assert now.leg_end_s[-1] >= 1000.5 and state.series_until()["changes"] == [(1000 / 60, "wind +25 kt from the next "
+                                                                                             "take-off")]
+    deliver_next()  # the re-flown flight from the leg that reaches the playback time
+    deliver_next()  # all of it
+    assert state.complete and state.record.wind_events == ["wind+25@1000"] and state.t_s == 1000.5
+
+
+def test_a_flight_stops_at_a_landing_once_a_newer_one_is_asked_for():
+    """A flight whose request is no longer the newest stops at its next landing (a wind change asked for while the
+    flight before it is computed need not wait for all of it); nothing of it is shown."""
+    mission = load_mission(EXAMPLE)
+    held: list = []
+    state = FlyState(lambda: mission, background=True, dispatch=held.append)
+    state.fly()
+    asked = state._asked
+    state._asked = None  # as if a newer flight had been asked for
+    flight, rec, err = state._compute(asked)
+    assert flight is asked and rec is None and err == "superseded"
+    state._asked = asked
+    _, rec, err = state._compute(asked)
+    assert err == "" and rec.route and len(held) >= 1  # the newest runs to its end, its first leg handed over
 
 
 def test_injected_wind_change_reflies_from_the_playback_time(state):

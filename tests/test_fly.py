@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from uam_studio.errors import InputError
@@ -19,7 +19,14 @@ from uam_studio.flight import leg_profile
 from uam_studio.planning import load_mission
 from uam_studio.planning.legs import takeoff_current
 from uam_studio.planning.missions.mission import VERTIPORT, Battery
-from uam_studio.planning.operations import Operator, World, fly_mission, parse_event, with_references
+from uam_studio.planning.operations import (
+    Operator,
+    World,
+    flight_before,
+    fly_mission,
+    parse_event,
+    with_references,
+)
 from uam_studio.planning.operations import world as world_module
 from uam_studio.planning.operations.references import fly_fixed as _fly_fixed
 from uam_studio.studies.flying import fly_many, study_missions, summarize
@@ -361,6 +368,46 @@ def test_a_flight_in_parts_is_the_flight(example, seed, pack, world, sigma, chan
     assert later.static.route or bare.breached or not [e for e in bare.events if e.kind == "plan"]
     assert later is not bare and bare.hindsight.route == [] and later.route == bare.route
     assert (later.time_s is bare.time_s) and later.reached_priority == bare.reached_priority
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 10**6), world=st.sampled_from(["varied", "model"]), at=st.floats(0.0, 1.0),
+       delta=st.floats(-40.0, 40.0), earlier=st.booleans())
+def test_the_flight_before_a_change_is_the_flight_with_it(example, seed, world, at, delta, earlier):
+    """``flight_before(record, event)`` (what the Fly tab shows the moment a change is injected) is, leg for leg and
+    reading for reading, what ``fly_mission`` flies with the event, up to its last leg taken off before the change."""
+    first = [parse_event("wind+10@900")] if earlier else []
+    try:
+        rec = fly_mission(example, seed=seed, world=world, events=first, references=False)
+    except InputError as err:  # a flight over before the earlier change (a cell that fails its take-off check)
+        assume(err.field != "event")
+        raise
+    event = parse_event(f"wind{delta:+.1f}@{int(at * rec.time_s[-1])}")
+    before = flight_before(rec, event)
+    parts: list = []
+    again = fly_mission(example, seed=seed, world=world, events=[*first, event], references=False,
+                        progress=parts.append)
+    if before is None:
+        assert event.start_s == 0
+        return
+    k = len(before.route)
+    part = parts[k - 1] if k <= len(parts) else again  # the re-flown flight's part up to that landing
+    assert before.wind_events == again.wind_events and before.route == part.route[:k] == again.route[:k]
+    assert before.leg_end_s == again.leg_end_s[:k] and before.actual_winds_kts == again.actual_winds_kts[:k]
+    untimed = [[dataclasses.replace(d, compute_s=0.0) for d in r.events] for r in (before, part)]
+    assert untimed[0] == untimed[1]  # the same decisions (their wall times aside)
+    n = before.time_s.size
+    for name in ("time_s", "measured_voltage_v", "measured_current_a", "predicted_voltage_v", "true_voltage_v",
+                 "true_current_a"):
+        assert np.array_equal(getattr(before, name), getattr(again, name)[:n]), name
+    assert before.time_s[-1] == before.leg_end_s[-1] and not before.breached and before.reached == []
+
+
+def test_nothing_is_before_a_change_when_no_leg_was_flown(example):
+    """A cell too weak for its take-off check flies no leg: nothing of it stands before a change."""
+    weak = dataclasses.replace(example, battery=Battery(5200.0, 0.44))
+    rec = fly_mission(weak, seed=1, world="model", references=False)
+    assert rec.route == [] and flight_before(rec, parse_event("wind+10@5")) is None
 
 
 def test_each_decision_says_what_its_leg_measured_and_a_wind_change_shows_up_as_it_happened(example):

@@ -31,6 +31,7 @@ from uam_studio.planning.operations import (
     WEATHER_RESERVE_KT,
     FlightRecord,
     WindEvent,
+    flight_before,
     fly_mission,
     parse_event,
     position_at,
@@ -74,6 +75,10 @@ def _pack_logbook(mission: Mission, flights: int, seed: int, sensor_noise_mv: fl
     return simulate_logbook(mission, flights, seed, sensor_noise_mv=sensor_noise_mv, world=world)
 
 
+class _Superseded(Exception):
+    """A flight stopped because a newer one was asked for."""
+
+
 def _fly(flight: _Flight, progress: Callable[[FlightRecord], None] | None = None,
          ) -> tuple[_Flight, FlightRecord | None, str]:
     """``(flight, its record, '')``, or ``(flight, None, one line)`` for bad input; ``progress`` gets the flight
@@ -87,6 +92,8 @@ def _fly(flight: _Flight, progress: Callable[[FlightRecord], None] | None = None
         return flight, fly_mission(flight.mission, references=False, progress=progress, **kwargs), ""
     except InputError as exc:
         return flight, None, one_line(exc, ERROR_CHARS)
+    except _Superseded:
+        return flight, None, "superseded"  # never shown: a newer flight was asked for
 
 
 def _flight_failed(flight: _Flight, exc: BaseException) -> tuple[_Flight, FlightRecord | None, str]:
@@ -167,8 +174,9 @@ class FlyState(param.Parameterized):
         self.many.world = WORLD_LABELS[self.world]
 
     # ------------------------------------------------------------------ flying
-    def fly(self, keep_time: bool = False) -> None:
-        """Fly the Planner's mission with the current settings (the playback restarts unless ``keep_time``)."""
+    def fly(self, keep_time: bool = False, before: FlightRecord | None = None) -> None:
+        """Fly the Planner's mission with the current settings (the playback restarts unless ``keep_time``);
+        ``before``, the part of the flight known already, is shown at once."""
         try:
             mission = self._mission()
         except InputError as err:
@@ -186,6 +194,8 @@ class FlyState(param.Parameterized):
         self.status = "flying..."
         if not keep_time:
             self.playing = False  # the shown flight waits, as it is, for the new one
+        if before is not None:
+            self._first_legs(flight, before)
         if self.background:
             self._worker.submit(flight)
         else:
@@ -197,6 +207,8 @@ class FlyState(param.Parameterized):
 
         def progress(so_far: FlightRecord) -> None:
             nonlocal handed
+            if flight is not self._asked:  # a newer flight was asked for: stop here, at a landing
+                raise _Superseded
             if not handed and so_far.time_s.size and so_far.time_s[-1] >= flight.from_s:
                 handed = True
                 show = functools.partial(self._first_legs, flight, so_far)
@@ -264,13 +276,16 @@ class FlyState(param.Parameterized):
         return self._worker.wait_idle(timeout) and self._refs.wait_idle(max(deadline - time.monotonic(), 0.0))
 
     def inject(self) -> None:
-        """Add a wind change of ``inject_kts`` from the playback time on (its whole second: the change is marked at
-        once), and re-fly from there."""
+        """Add a wind change of ``inject_kts`` from the playback time on (its whole second) and re-fly from there;
+        meanwhile the flight shown until the landing of the leg in the air, with the change marked
+        (:func:`~uam_studio.planning.operations.flight_before`: the re-flown flight is the same until then)."""
         if self.record is None:
             self.error = "fly first: the wind change starts at the playback time"
             return
-        self.events = [*self.events, WindEvent(int(self.t_s), float(self.inject_kts))]
-        self.fly(keep_time=True)
+        event = WindEvent(int(self.t_s), float(self.inject_kts))
+        before = flight_before(self.record, event)  # a part of a flight holds the leg in the air too
+        self.events = [*self.events, event]
+        self.fly(keep_time=True, before=before)
 
     def clear_events(self) -> None:
         """Remove the injected wind changes and fly again."""

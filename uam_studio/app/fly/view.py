@@ -243,9 +243,12 @@ class FlyView(pn.viewable.Viewer):
             lo, title = (min(eod, float(r.true_voltage_v.min())) - 0.08,
                          "voltage: measured vs predicted, and the cut-off")
         self.volt_fig.title.text = title
-        self.volt_fig.x_range.update(start=0.0, end=end_min)
-        self.volt_fig.y_range.update(start=lo, end=4.25)
-        self.cutoff.data = {"x": [0.0, end_min], "y": [eod, eod]}
+        if not s.complete:  # a part of a flight: the axes only grow until it is all known (one layout, not three)
+            end_min, lo = max(end_min, self.volt_fig.x_range.end), min(lo, self.volt_fig.y_range.start)
+        if (end_min, lo) != (self.volt_fig.x_range.end, self.volt_fig.y_range.start):
+            self.volt_fig.x_range.update(start=0.0, end=end_min)
+            self.volt_fig.y_range.update(start=lo, end=4.25)
+            self.cutoff.data = {"x": [0.0, end_min], "y": [eod, eod]}
 
     # ------------------------------------------------------------------ updates
     def _on_flight(self, *events: param.parameterized.Event) -> None:
@@ -262,7 +265,7 @@ class FlyView(pn.viewable.Viewer):
     def _draw_record(self) -> None:
         s = self.state
         self.download.disabled = s.record is None
-        self.clock.end = max(1.0, s.end_s)
+        self.clock.end = max(1.0, s.end_s, 0.0 if s.complete else self.clock.end)
         self._draw_flight()
         self._shown = (-1, -1, -1)
         self._draw_time()

@@ -2,7 +2,7 @@
 sensors, and the flight loop that records both sides.
 
 Public API: :func:`fly_mission` -> :class:`FlightRecord` (its references: :class:`ReferenceFlight`, or later:
-:func:`with_references`), :class:`World`,
+:func:`with_references`; the part a weather change leaves as it was: :func:`flight_before`), :class:`World`,
 :class:`Operator`, :func:`parse_event` (``"wind+30@1200"``), :class:`WindEvent`, :func:`record_csv` (the record's series
 as CSV); the price of safety: :func:`price_of_safety`, :func:`risk_levels`, :func:`format_levels`.
 """
@@ -12,6 +12,7 @@ from uam_studio.planning.operations.fly import (
     FlightRecord,
     ReferenceFlight,
     breach_cause,
+    flight_before,
     fly_mission,
     position_at,
     record_csv,
@@ -33,6 +34,6 @@ from uam_studio.planning.operations.world import (
 __all__ = [
     "DEFAULT_FORECAST_SIGMA_KT", "DEFAULT_SENSOR_NOISE_MA", "DEFAULT_SENSOR_NOISE_MV", "Decision",
     "FlightRecord", "Operator", "Readings", "ReferenceFlight", "WEATHER_RESERVE_KT", "WindEvent", "World",
-    "fly_mission", "parse_event", "breach_cause", "position_at", "record_csv", "simulate_logbook", "format_levels",
-    "price_of_safety", "risk_levels", "with_references",
+    "flight_before", "fly_mission", "parse_event", "breach_cause", "position_at", "record_csv", "simulate_logbook",
+    "format_levels", "price_of_safety", "risk_levels", "with_references",
 ]

@@ -334,6 +334,28 @@ def with_references(mission: Mission, rec: FlightRecord) -> FlightRecord:
     return dataclasses.replace(rec, static=static, hindsight=hindsight)
 
 
+def flight_before(rec: FlightRecord, event: WindEvent) -> FlightRecord | None:
+    """``rec``'s flight until the landing of its last leg that took off before ``event`` starts, with the event
+    added to its wind changes: what :func:`fly_mission` flies with the event too, up to there (the same seeds; a
+    change reaches the legs that take off from its start on), as ``progress`` hands it (no result yet). None when no
+    leg took off before the event starts. A leg takes off where the one before it landed (the first at 0 s, with its
+    take-off check)."""
+    starts = [0.0, *rec.leg_end_s[:-1]][:len(rec.leg_end_s)]  # no leg flown (a failed take-off check): none
+    k = sum(1 for t in starts if t < event.start_s)
+    if k == 0:
+        return None
+    end = rec.leg_end_s[k - 1]
+    n = int(np.searchsorted(rec.time_s, end, side="right"))
+    changes = sorted([*map(parse_event, rec.wind_events), event], key=lambda e: e.start_s)
+    return FlightRecord(rec.mission, rec.scenario, rec.seed, rec.forecast_sigma_kt, rec.sensor_noise_mv,
+                        rec.sensor_noise_ma, [e.text for e in changes], rec.reserve_kt, rec.world, rec.pack,
+                        rec.risk, route=rec.route[:k], altitudes_m=rec.altitudes_m[:k],
+                        actual_winds_kts=rec.actual_winds_kts[:k], forecast_winds_kts=rec.forecast_winds_kts[:k],
+                        leg_end_s=rec.leg_end_s[:k], events=[d for d in rec.events if d.time_s < end],
+                        true_q_max=rec.true_q_max, true_r0=rec.true_r0, logbook_before=rec.logbook_before,
+                        **{name: getattr(rec, name)[:n] for name in RECORD_CSV_COLUMNS})
+
+
 def _predict_leg(op: Operator, d: Decision, first: bool) -> np.ndarray:
     """The operator's predicted voltage (V) for the leg it chose: its median health, predicted wind."""
     assert d.next_to is not None  # a decision with a next leg
