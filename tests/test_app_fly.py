@@ -106,6 +106,12 @@ def test_the_flight_shows_from_its_first_leg_and_before_its_references():
     deliver_next()  # the re-flown flight from the leg that reaches the playback time
     deliver_next()  # all of it
     assert state.complete and state.record.wind_events == ["wind+25@1000"] and state.t_s == 1000.5
+    # a change injected while a newer flight is flown, before it shows: nothing of the shown one is taken for it
+    deliver_next()  # the references
+    state.seed = 3
+    state.fly()
+    state.inject()
+    assert state.record.seed == 2 and state.running  # still the old flight, not a part passed off as the new one
 
 
 def test_a_flight_stops_at_a_landing_once_a_newer_one_is_asked_for():

@@ -283,7 +283,8 @@ class FlyState(param.Parameterized):
             self.error = "fly first: the wind change starts at the playback time"
             return
         event = WindEvent(int(self.t_s), float(self.inject_kts))
-        before = flight_before(self.record, event)  # a part of a flight holds the leg in the air too
+        # the shown flight (or its part, which holds the leg in the air too), unless a newer one is being flown
+        before = flight_before(self.record, event) if self._shown is self._asked else None
         self.events = [*self.events, event]
         self.fly(keep_time=True, before=before)
 
