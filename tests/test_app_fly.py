@@ -180,6 +180,21 @@ def test_the_record_and_the_plan_save_as_csv(state):
     assert all(float(r[4]) >= 3.0 for r in legs)  # the safe plan's physics voltage
 
 
+def test_the_cut_off_line_follows_the_missions_cut_off(state):
+    """The voltage figure's cut-off line is the flown mission's, also when the axes stay as they were (two cut-offs
+    above the flight's lowest voltage give the same axes)."""
+    import dataclasses
+
+    view = FlyView(state)
+    state.fly()
+    rec, mission = state.record, state.mission_flown
+    low = float(rec.true_voltage_v.min())
+    for eod in (low + 0.05, low + 0.1):
+        other = dataclasses.replace(mission, eod_v=round(eod, 3))
+        state.param.update(record=dataclasses.replace(rec, time_s=rec.time_s.copy()), mission_flown=other)
+        assert list(view.cutoff.data["y"]) == [other.eod_v, other.eod_v]
+
+
 def test_flown_legs_are_numbered_with_their_altitude_on_the_map(state):
     from uam_studio.app.fly.view import _leg_labels
 

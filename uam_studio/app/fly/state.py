@@ -125,9 +125,8 @@ class FlyState(param.Parameterized):
     ``inject_kts`` (kt, the wind change :meth:`inject` adds). Outputs: ``record``, ``complete`` (the record holds
     the whole flight; False while the legs after the shown ones are flown), ``t_s``
     (the playback clock, s), ``mission_flown``, ``running`` (a flight is being computed, none of it shown yet),
-    ``references`` (the
-    record's references are flown: the record is replaced by one that holds them), ``playing``, ``status``,
-    ``error`` (one line).
+    ``references`` (the record's references are flown: the record is replaced by one that holds them),
+    ``playing``, ``status``, ``error`` (one line).
     """
 
     pack: param.Selector = param.Selector(default=next(iter(PACKS)), objects=list(PACKS))

@@ -248,7 +248,9 @@ class FlyView(pn.viewable.Viewer):
         if (end_min, lo) != (self.volt_fig.x_range.end, self.volt_fig.y_range.start):
             self.volt_fig.x_range.update(start=0.0, end=end_min)
             self.volt_fig.y_range.update(start=lo, end=4.25)
-            self.cutoff.data = {"x": [0.0, end_min], "y": [eod, eod]}
+        cutoff = {"x": [0.0, end_min], "y": [eod, eod]}
+        if dict(self.cutoff.data) != cutoff:  # its own check: the cut-off moves without the axes when both flights
+            self.cutoff.data = cutoff  # fell below it
 
     # ------------------------------------------------------------------ updates
     def _on_flight(self, *events: param.parameterized.Event) -> None:

@@ -305,10 +305,7 @@ def fly_mission(mission: Mission, policy: str = "attention", seed: int = 0,
         rec.true_voltage_v.min())
     end_s = truth.time_s
     if references:
-        first_plan = next((e for e in rec.events if e.kind == "plan"), None)
-        planned = (first_plan.route, first_plan.altitudes_m) if first_plan else ((), ())
-        rec.static, rec.hindsight, blind_end_s = fly_references(mission, scenario, new_world, takeoff, planned,
-                                                                (rec.route, rec.altitudes_m))
+        rec.static, rec.hindsight, blind_end_s = _references(mission, rec, new_world, takeoff)
         end_s = max(end_s, blind_end_s)
     late = [e for e in truth.events if e.start_s > end_s]
     if late:
@@ -327,11 +324,17 @@ def with_references(mission: Mission, rec: FlightRecord) -> FlightRecord:
         return World(mission, rec.forecast_sigma_kt, rec.sensor_noise_mv, rec.sensor_noise_ma,
                      [parse_event(e) for e in rec.wind_events], rec.seed, rec.world, rec.pack)
 
+    static, hindsight, _ = _references(mission, rec, new_world, np.asarray(takeoff_current(), dtype=float))
+    return dataclasses.replace(rec, static=static, hindsight=hindsight)
+
+
+def _references(mission: Mission, rec: FlightRecord, new_world: Callable[[], World], takeoff: np.ndarray
+                ) -> tuple[ReferenceFlight, ReferenceFlight, float]:
+    """:func:`~uam_studio.planning.operations.references.fly_references` of ``rec``: its first plan flown blind
+    and hindsight, in ``new_world()``; with the blind flight's end (s)."""
     first_plan = next((e for e in rec.events if e.kind == "plan"), None)
     planned = (first_plan.route, first_plan.altitudes_m) if first_plan else ((), ())
-    static, hindsight, _ = fly_references(mission, rec.scenario, new_world, np.asarray(takeoff_current(), dtype=float),
-                                          planned, (rec.route, rec.altitudes_m))
-    return dataclasses.replace(rec, static=static, hindsight=hindsight)
+    return fly_references(mission, rec.scenario, new_world, takeoff, planned, (rec.route, rec.altitudes_m))
 
 
 def flight_before(rec: FlightRecord, event: WindEvent) -> FlightRecord | None:

@@ -50,6 +50,6 @@ def takeoff_belief(first: Decision, op: Operator, leg: tuple[float, float, float
         out["model_error_v"] = round(err.sd_v, 6)
         out["model_error_low_v"] = round(err.below_v, 6)
         out["model_error_share"] = round(error_share((lo, med, hi), err), 4)
-        out["first_leg_min_voltage_90_v"] = [round(leg[0], 5), round(leg[2], 5)]
-        out["first_leg_min_voltage_median_v"] = round(leg[1], 5)
+        out["first_leg_min_voltage_90_v"] = [round(lo, 5), round(hi, 5)]
+        out["first_leg_min_voltage_median_v"] = round(med, 5)
     return out
