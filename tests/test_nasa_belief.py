@@ -47,6 +47,20 @@ def test_rows_are_the_history_methods_and_scored_leave_one_cell_out(cells):
     json.dumps([r.as_dict() for r in rows], allow_nan=False)
 
 
+def test_no_high_end_passes_the_history_methods_cap(cells, monkeypatch):
+    """A group whose training errors run wild (a crashed run among them) still gives an interval as the history
+    method's: ordered, of some width, none of it past ``high_cap_s``. Its quantiles are made wild here."""
+    import uam_studio.battery.real.nasa_belief as nb
+    from uam_studio.battery.real.nasa_predict import high_cap_s, known_before
+
+    monkeypatch.setattr(nb, "_quantiles", lambda errors: (-1.0, -0.5, 0.0, 3.0))
+    rows = nb.evaluate_belief(cells, progpy=False)
+    by_index = {(c.name, d.index): d for c in cells for d in c.discharges}
+    for r in rows:
+        cap = high_cap_s(known_before(by_index[r.cell, r.discharge], r.context_s), r.median_s)
+        assert r.bound99_s <= r.bound95_s <= r.low_s <= r.median_s <= r.high_s <= cap + 1e-9 and r.low_s < r.high_s
+
+
 def test_cli_evaluate_nasa_method_belief(cells, capsys):
     folder = Path(cells[0].path).parent
     assert main(["evaluate", "nasa", "--data", str(folder), "--method", "belief", "--json"]) == 0

@@ -21,7 +21,7 @@ from uam_studio.battery.real.nasa_predict import (
     EARLY_ERRORS,
     HORIZON_S,
     CellBelief,
-    _interval,
+    as_prediction,
     high_cap_s,
     known_before,
     min_width_s,
@@ -256,7 +256,7 @@ def test_every_interval_is_finite_wide_and_capped(lives, q, k, context):
     interval: finite, low < high, none before the context's end, high at most the stated cap, bounds at
     or below the low end and the median inside."""
     known = known_before(lives[0].discharges[k], context)
-    p = _interval(known, np.array(q), "history", None)
+    p = as_prediction(known, np.array(q), "history", None)
     vals = (p.bound99_s, p.bound95_s, p.low_s, p.median_s, p.high_s)
     assert all(np.isfinite(vals))
     assert seen_s(known) <= p.bound99_s <= p.bound95_s <= p.low_s <= p.median_s <= p.high_s

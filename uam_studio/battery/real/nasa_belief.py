@@ -21,7 +21,10 @@ one: leave one cell out) in the prediction's group: a cell's first
 :data:`~uam_studio.battery.real.nasa_predict.EARLY_ERRORS` predictions take those of the training cells' first
 predictions, the others those of all their later ones; once the cell has
 :data:`~uam_studio.battery.real.nasa_predict.SCALE_WINDOW` errors of its own (finished discharges), its interval and
-bounds are widened to its own latest errors' quantiles where those run wider. The rows are
+bounds are widened to its own latest errors' quantiles where those run wider. They are made an interval as the
+history method's are (:func:`~uam_studio.battery.real.nasa_predict.as_prediction`: none past
+:func:`~uam_studio.battery.real.nasa_predict.high_cap_s`, the median included, none before the context's end, at
+least :func:`~uam_studio.battery.real.nasa_predict.min_width_s` wide). The rows are
 :class:`~uam_studio.battery.real.nasa_eval.ScoredDischarge` s, as the history method's.
 
 Public API: :func:`belief_life` (one cell's raw predictions), :func:`evaluate_belief` (rows for a folder of cells).
@@ -52,6 +55,7 @@ from uam_studio.battery.real.nasa_predict import (
     EARLY_ERRORS,
     RISKS,
     SCALE_WINDOW,
+    as_prediction,
     known_before,
     own_error_factor,
 )
@@ -196,10 +200,11 @@ def evaluate_belief(cells: list[NasaCell], cutoff_v: float = 3.0, context_s: flo
             own.append(math.log(p.true_s / p.median_s))
             if k % every:
                 continue
-            b99, b95, _, hi = (p.median_s * math.exp(x) for x in q)
             d = p.discharge
+            b99, b95, _, hi = (p.median_s * math.exp(x) for x in q)
+            e = as_prediction(known_before(d, context_s), np.array([b99, b95, p.median_s, hi]), METHOD)
             rows.append(ScoredDischarge(
-                c.name, d.index, d.ambient_c, condition_of(d), context_s, p.true_s, p.median_s, min(b95, p.median_s),
-                max(hi, p.median_s), min(b95, p.median_s), min(b99, p.median_s), persistence_s(c, k, cutoff_v),
+                c.name, d.index, d.ambient_c, condition_of(d), context_s, p.true_s, e.median_s, e.low_s, e.high_s,
+                e.bound95_s, e.bound99_s, persistence_s(c, k, cutoff_v),
                 progpy_default_s(d, cutoff_v) if progpy else None, METHOD, None, fit))
     return rows

@@ -56,7 +56,8 @@ from uam_studio.battery.real.nasa_known import (
 )
 
 __all__ = ["CAP_AH", "CAP_RATIO", "EARLY_ERRORS", "HORIZON_S", "OWN_ERROR_WINDOW", "RISKS", "UNSEEN_WIDEN",
-           "CellBelief", "EodPrediction", "KnownDischarge", "NasaEodModel", "ambient_band", "charge_to_cutoff_ah",
+           "CellBelief", "EodPrediction", "KnownDischarge", "NasaEodModel", "ambient_band", "as_prediction",
+           "charge_to_cutoff_ah",
            "context_voltage_v", "high_cap_s", "history_log_change", "known_before", "min_width_s", "own_error_factor",
            "planned_load", "rest_feature", "seen_s", "time_for_charge_s", "voltage_shift_v"]
 
@@ -344,7 +345,7 @@ class CellBelief:
             q, unseen = self._prior(known)
             flag = unseen or flag
             method = "prior"
-        return _interval(known, q, method, flag)
+        return as_prediction(known, q, method, flag)
 
     def walk(self, discharges: Iterable[NasaDischarge]) -> Iterator[tuple[int, NasaDischarge, KnownDischarge,
                                                                            EodPrediction, float]]:
@@ -381,7 +382,7 @@ class CellBelief:
         self.finished.append(d)
 
 
-def _interval(known: KnownDischarge, q: np.ndarray, method: str, flag: str | None) -> EodPrediction:
+def as_prediction(known: KnownDischarge, q: np.ndarray, method: str, flag: str | None = None) -> EodPrediction:
     """The quantiles ``q`` (s, at :data:`RISKS`) as a prediction that is an interval: none before the
     context's end (the cut-off was not reached within it), the high end at most :func:`high_cap_s`, every
     value finite, and the 90% interval at least :func:`min_width_s` wide."""
