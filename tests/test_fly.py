@@ -21,6 +21,7 @@ from uam_studio.planning.legs import takeoff_current
 from uam_studio.planning.missions.mission import VERTIPORT, Battery
 from uam_studio.planning.operations import (
     Operator,
+    WindEvent,
     World,
     flight_before,
     fly_mission,
@@ -248,6 +249,16 @@ def test_unknown_event_is_refused(text):
     with pytest.raises(InputError) as err:
         parse_event(text)
     assert err.value.field == "event"
+
+
+@settings(max_examples=200, deadline=None)
+@given(start=st.floats(0.0, 7 * 86_400.0), delta=st.floats(-78.0, 78.0))
+def test_an_events_text_reads_back_as_the_event(start, delta):
+    """A record keeps its events as text, and ``with_references`` flies its world again from them: the text must
+    read back exactly (``:g`` kept 6 digits: 12.3456789 kt read back as 12.3457, and 1e-05 kt did not read back)."""
+    event = WindEvent(start, delta)
+    assert parse_event(event.text) == event
+    assert WindEvent(1200.0, 30.0).text == "wind+30@1200" and WindEvent(900.5, -20.0).text == "wind-20@900.5"
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:

@@ -71,8 +71,12 @@ class WindEvent:
 
     @property
     def text(self) -> str:
-        """The event in the CLI's syntax, e.g. ``wind+30@1200``."""
-        return f"wind{self.delta_kts:+g}@{self.start_s:g}"
+        """The event in the CLI's syntax, e.g. ``wind+30@1200``: each number as its shortest decimal that reads back
+        exactly (:func:`parse_event` of it is this event: a record's events fly the same world again)."""
+        def num(x: float, sign: bool = False) -> str:
+            return np.format_float_positional(x, trim="-", sign=sign)
+
+        return f"wind{num(self.delta_kts, True)}@{num(self.start_s)}"
 
 
 def parse_event(text: str) -> WindEvent:
