@@ -430,6 +430,13 @@ _FLY_STATUS_JS = """() => { if (window.__uamStatusWatched) return true;
       window.__uamStatusWatched = true; return true; } }
   return false; }"""
 
+# The Fly tab computes no flight: its status line does not say "flying..." (a click on "Fly the mission" while it
+# does would not change the status, and its busy mark would not be seen). A cleared wind change flies the flight
+# again, and the page can take the next click before that flight is shown.
+_FLY_IDLE_JS = """() => { for (const v of window.Bokeh.index.all_views()) { const m = v.model, c = m.css_classes;
+    if (c && c.includes('uam-fly-status')) return !String(m.text || '').includes('flying...'); }
+  return false; }"""
+
 _FRAME_WATCH_JS = """([evt, cond]) => {
   // The page's own clock: from the action (the first ``evt``) to the first frame painted after ``cond()`` held;
   // ``cond`` (JS source of a function of the page's Bokeh models) is checked at every animation frame from the
@@ -491,12 +498,14 @@ def _fly_controls(page, n: int) -> dict[str, list[float]]:
         seed.fill(str(1000 + k))  # a new world each time: no flight is asked for twice
         seed.press("Enter")
         page.wait_for_timeout(300)
+        page.wait_for_function(_FLY_IDLE_JS, timeout=120_000)
         out["fly (until 'flying:', the first frame)"].append(_frame_time(page, button("Fly the mission"),
                                                                           busy_then_flying))
         out["inject a wind change"].append(
             _frame_time(page, button("Inject wind change now"), f"() => ({_FLY_CHANGES_JS})() === 1"))
         out["clear it"].append(
             _frame_time(page, button("Clear wind changes"), f"() => ({_FLY_CHANGES_JS})() === 0"))
+        page.wait_for_function(_FLY_IDLE_JS, timeout=120_000)
         out["fly (until the busy mark)"].append(_frame_time(page, button("Fly the mission"), busy))
         page.wait_for_function(busy_then_flying, timeout=120_000)
         speed.select_option("1000")  # to half the flight quickly, then a wind change there

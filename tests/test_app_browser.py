@@ -237,6 +237,40 @@ def test_planner_map_table_slider_update_route_and_summary(page, app_url):
     assert outside == []
 
 
+# Every figure of the page painted again with nothing moved; the <style> elements written meanwhile (a
+# MutationObserver on the document and every shadow root), and each figure's paint time (ms).
+JS_REPAINT_WRITES = """async () => {
+  const roots = [document], seen = new Set();
+  const walk = (root) => { for (const el of root.querySelectorAll('*'))
+    if (el.shadowRoot && !seen.has(el.shadowRoot)) { seen.add(el.shadowRoot); roots.push(el.shadowRoot);
+                                                       walk(el.shadowRoot); } };
+  walk(document);
+  const writes = [];
+  const obs = new MutationObserver((records) => { for (const r of records) {
+    const t = r.target.nodeType === 3 ? r.target.parentNode : r.target;
+    if (t && t.tagName === 'STYLE') writes.push(r.type); } });
+  for (const root of roots) obs.observe(root, {childList: true, characterData: true, subtree: true});
+  const figures = [...window.Bokeh.index.all_views()].filter(v => v.model.type === 'Figure' && v.is_displayed);
+  const paint_ms = [];
+  for (const v of figures) { const t = performance.now(); v.request_paint(); v.paint();
+                             paint_ms.push(performance.now() - t); }
+  await new Promise(r => setTimeout(r, 0));
+  obs.disconnect();
+  return {figures: figures.length, writes: writes.length, paint_ms}; }"""
+
+
+def test_a_repaint_that_moves_nothing_writes_no_stylesheet(page, app_url):
+    """BokehJS 3.9 writes every part's position stylesheet at every paint, each write a restyle of the page
+    (uam_studio.app.panel_compat.paint_without_restyling): with the fix, a repaint writes none, and draws."""
+    _open(page, app_url)
+    page.wait_for_function("() => window.Bokeh.require('core/dom').InlineStyleSheet.prototype._uam_same_text_kept "
+                           "=== true")
+    out = page.evaluate(JS_REPAINT_WRITES)
+    assert out["figures"] >= 3, out  # the Planner's map and its voltage and altitude figures
+    assert out["writes"] == 0, out
+    assert_drawn(page, "Voltage: physics", PLANNER_VOLTAGE)
+
+
 def test_invalid_mission_file_is_a_clear_message_and_keeps_the_mission(page, app_url):
     _open(page, app_url)
     summary = page.locator(".uam-plan-summary[data-busy='false']")

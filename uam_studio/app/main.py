@@ -18,7 +18,7 @@ from typing import Any
 
 import panel as pn
 
-from uam_studio.app.panel_compat import keep_stylesheets_local
+from uam_studio.app.panel_compat import keep_stylesheets_local, paint_without_restyling
 from uam_studio.app.planner.comparison import compare_mode
 from uam_studio.app.planner.state import PlannerState
 from uam_studio.app.session import configure_server_threads, in_server_session, session_dispatcher
@@ -157,6 +157,8 @@ def create_app(template: bool | None = None) -> pn.viewable.Viewable | pn.templa
     draw_on_canvas()
     keep_stylesheets_local()
     session = new_session()
+    if session.served:
+        paint_without_restyling(pn.state.curdoc)
     tabs = []
     for i, (title, build) in enumerate(TABS):
         if i == 0:
