@@ -151,6 +151,34 @@ def test_injected_wind_change_reflies_from_the_playback_time(state):
     assert state.events == [] and state.record.wind_events == []
 
 
+def test_a_redraw_sends_only_the_sources_that_changed(state):
+    """A source set is sent to the browser and its figure drawn again there: the same flight drawn again (as at a
+    flight's completion, or a wind change's, when the part shown is the same) sets no source; the playback moving
+    on sets the ones that moved, and an injected change its mark."""
+    from bokeh.document import Document
+
+    view = FlyView(state)
+    doc = Document()
+    doc.add_root(view.__panel__().get_root(doc))  # in a document, as served: Bokeh then sends every set
+    state.fly()
+    state.t_s = 600.0
+    sources = {"dests": view.dests, "vertiport": view.vertiport, "seen": view.seen, "pos": view.pos,
+               "legs": view.leg_labels, "cutoff": view.cutoff, "marks": view.marks, "changes": view.changes,
+               **{f"curve {k}": src for k, src in view.curves.items()}}
+    sent: list[str] = []
+    for name, src in sources.items():
+        src.on_change("data", lambda _attr, _old, _new, name=name: sent.append(name))
+    view._draw_record()
+    assert sent == []
+    state.t_s = 700.0
+    assert {"pos", "curve measured", "curve true", "curve predicted"} <= set(sent)
+    assert not {"dests", "vertiport", "cutoff", "changes"} & set(sent)
+    sent.clear()
+    state.inject_kts = 20.0
+    state.inject()  # the flight before the change is the one shown: its mark, and the axes' growth, at most
+    assert "changes" in sent and not {"dests", "vertiport", "seen", "pos"} & set(sent)
+
+
 def test_bad_mission_is_a_line_not_a_traceback():
     def broken():
         raise InputError("destinations", "a mission needs at least 1 destination")

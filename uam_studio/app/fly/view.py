@@ -71,6 +71,17 @@ def _leg_labels(path: list[tuple[float, float]], altitudes_m: list[float], missi
 FLYING = "flying..."  # the busy mark's label while a flight is computed
 
 
+def _replace(source: ColumnDataSource, data: dict[str, Any]) -> None:
+    """Set ``source.data`` to ``data`` unless it holds the same columns already. Bokeh sends every set of a
+    document's source to the browser, equal or not, and the browser draws its figure again: a flight's completion,
+    or a wind change's, would otherwise send every source of the part already shown (11 of them)."""
+    old = source.data
+    if old.keys() == data.keys() and all(len(old[k]) == len(v) and np.array_equal(np.asarray(old[k]), np.asarray(v))
+                                         for k, v in data.items()):
+        return
+    source.data = data
+
+
 def _held(action: Callable[[], None]) -> None:
     """``action()``, its changes (the busy mark, the status) sent to the browser as one batch."""
     with pn.io.hold():
@@ -225,8 +236,9 @@ class FlyView(pn.viewable.Viewer):
         m = s.mission_flown if s.mission_flown is not None else s._mission()
         xs = [d.x_km for d in m.destinations]
         ys = [d.y_km for d in m.destinations]
-        self.dests.data = {"x_km": xs, "y_km": ys, "name": [place_label(d.name, d.priority) for d in m.destinations]}
-        self.vertiport.data = {"x_km": [m.vertiport.x_km], "y_km": [m.vertiport.y_km]}
+        names = [place_label(d.name, d.priority) for d in m.destinations]
+        _replace(self.dests, {"x_km": xs, "y_km": ys, "name": names})
+        _replace(self.vertiport, {"x_km": [m.vertiport.x_km], "y_km": [m.vertiport.y_km]})
         pad = 8.0
         allx, ally = np.array(xs + [m.vertiport.x_km]), np.array(ys + [m.vertiport.y_km])
         x0, x1, y0, y1 = allx.min() - pad, allx.max() + pad, ally.min() - pad, ally.max() + 2 * pad  # room for names
@@ -248,9 +260,8 @@ class FlyView(pn.viewable.Viewer):
         if (end_min, lo) != (self.volt_fig.x_range.end, self.volt_fig.y_range.start):
             self.volt_fig.x_range.update(start=0.0, end=end_min)
             self.volt_fig.y_range.update(start=lo, end=4.25)
-        cutoff = {"x": [0.0, end_min], "y": [eod, eod]}
-        if dict(self.cutoff.data) != cutoff:  # its own check: the cut-off moves without the axes when both flights
-            self.cutoff.data = cutoff  # fell below it
+        # the cut-off moves without the axes when both flights fell below it
+        _replace(self.cutoff, {"x": [0.0, end_min], "y": [eod, eod]})
 
     # ------------------------------------------------------------------ updates
     def _on_flight(self, *events: param.parameterized.Event) -> None:
@@ -283,24 +294,25 @@ class FlyView(pn.viewable.Viewer):
         assert m is not None  # set with the record (FlyState._flown updates both at once)
         nodes = [VERTIPORT] + list(s.record.route)
         path = [(m.node(n).x_km, m.node(n).y_km) for n in nodes[: max(leg, 0) + 1]] + [(x, y)]
-        self.seen.data = {"x_km": [p[0] for p in path], "y_km": [p[1] for p in path]}
-        self.pos.data = {"x_km": [x], "y_km": [y]}
+        _replace(self.seen, {"x_km": [p[0] for p in path], "y_km": [p[1] for p in path]})
+        _replace(self.pos, {"x_km": [x], "y_km": [y]})
         series = s.series_until()
         for key, _label, _style in VOLTAGE_SERIES:  # not `_`: the name of this method's *args
             t, v = series[key]
-            self.curves[key].data = {"time_min": np.asarray(t, dtype=float), "voltage_v": np.asarray(v, dtype=float)}
+            _replace(self.curves[key], {"time_min": np.asarray(t, dtype=float),
+                                        "voltage_v": np.asarray(v, dtype=float)})
         self.now_line.location = float(s.t_s) / 60.0
         shown = (leg, len(series["decisions"]), len(series["changes"]))
         if shown == self._shown:  # the labels, marks and log change only at a new leg, decision or change
             return
         self._shown = shown
-        self.leg_labels.data = _leg_labels(path, s.record.altitudes_m, m)
+        _replace(self.leg_labels, _leg_labels(path, s.record.altitudes_m, m))
         decisions = series["decisions"]
-        self.marks.data = {"time_min": [d[0] for d in decisions], "voltage_v": [d[1] for d in decisions],
-                           "decision": [d[2] for d in decisions]}
+        _replace(self.marks, {"time_min": [d[0] for d in decisions], "voltage_v": [d[1] for d in decisions],
+                              "decision": [d[2] for d in decisions]})
         changes = series["changes"]
-        self.changes.data = {"x": [c[0] for c in changes], "y": [4.22] * len(changes),
-                             "text": [c[1] for c in changes], "y0": [self.volt_fig.y_range.start] * len(changes)}
+        _replace(self.changes, {"x": [c[0] for c in changes], "y": [4.22] * len(changes),
+                                "text": [c[1] for c in changes], "y0": [self.volt_fig.y_range.start] * len(changes)})
         rows = s.decisions_until()
         if rows != self._log_rows:  # the table is the costliest model to redraw in the browser
             self._log_rows = rows
