@@ -19,10 +19,8 @@ element, whether or not it moved, and then reads each part's colours from the br
 ``<style>`` element written, even with the text it had, makes the browser compute the page's style again at
 the next read: 6-9 times per paint of a Fly figure, 7-13 ms of each figure's 12-20 ms paint on a 2-core
 machine (chromium, in-page timing; ``benchmarks/RESULTS.md``, "A figure's paint restyles the page once"). The
-fix, run in the page once the document is ready, writes a part's position stylesheet (BokehJS marks it
-``data-css="position"``) only when its text changes; a paint that moves nothing then costs 2-4 ms. Every other
-stylesheet is written as BokehJS asks. Its cost: the Battery lab's changes, made back to back, are applied about
-20 ms later at the median (the same entry).
+fix, run in the page once the document is ready, writes a BokehJS inline stylesheet only when its text
+changes; a paint that moves nothing then costs 2.5-4 ms.
 """
 
 from __future__ import annotations
@@ -48,8 +46,8 @@ def keep_stylesheets_local() -> None:
     Reactive._get_properties = _get_properties  # type: ignore[method-assign]  # the patch itself
 
 
-# Run in the browser (a CustomJS of the document's ``document_ready``): a part's position stylesheet keeps its text
-# when asked to write the same text again. ``window.Bokeh.require`` is BokehJS's module loader; on a BokehJS
+# Run in the browser (a CustomJS of the document's ``document_ready``): BokehJS's inline stylesheets keep their
+# text when asked to write the same text again. ``window.Bokeh.require`` is BokehJS's module loader; on a BokehJS
 # without ``core/dom``'s InlineStyleSheet this does nothing (tests/test_app_browser.py checks it is installed).
 SAME_TEXT_KEPT_JS = """
 const dom = window.Bokeh && window.Bokeh.require ? window.Bokeh.require("core/dom") : null
@@ -57,7 +55,7 @@ const sheet = dom && dom.InlineStyleSheet ? dom.InlineStyleSheet.prototype : nul
 if (sheet != null && typeof sheet._update === "function" && !sheet._uam_same_text_kept) {
   const write = sheet._update
   sheet._update = function (css) {
-    if (this.el.dataset.css !== "position" || this.el.textContent !== css)
+    if (this.el.textContent !== css)
       write.call(this, css)
   }
   sheet._uam_same_text_kept = true
