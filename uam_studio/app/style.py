@@ -1,10 +1,12 @@
-"""Small shared pieces of the views' look: section headings, note text, and Bokeh hooks of the plots."""
+"""Small shared pieces of the views' look: section headings, note text, Bokeh hooks of the plots, and the check
+that plot data changed."""
 
 from __future__ import annotations
 
 import html
 from typing import Any
 
+import numpy as np
 import panel as pn
 
 NOTE_STYLE = {"font-size": "12px", "color": "#555"}
@@ -111,3 +113,18 @@ def legend_above(fig: Any) -> None:
     the empty band Bokeh leaves around it."""
     fig.add_layout(fig.legend[0], "above")
     fig.legend.orientation, fig.legend.margin, fig.legend.padding = "horizontal", 0, 4
+
+
+def same_plot_data(a: Any, b: Any) -> bool:
+    """Deep equality of plot data (dicts, lists, tuples, arrays, numbers): a view sets a Bokeh source or draws a
+    figure only when its data changed, as Bokeh sends every set of a document's source to the browser, equal or not."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(same_plot_data(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple, np.ndarray)) and isinstance(b, (list, tuple, np.ndarray)):
+        if len(a) != len(b):
+            return False
+        if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+            x, y = np.asarray(a), np.asarray(b)
+            return x.shape == y.shape and x.dtype == y.dtype and bool(np.array_equal(x, y))
+        return all(same_plot_data(x, y) for x, y in zip(a, b))
+    return type(a) is type(b) and a == b

@@ -33,6 +33,7 @@ from uam_studio.app.style import (
     derived_looks,
     legend_above,
     page_figure,
+    same_plot_data,
     window_height,
 )
 from uam_studio.planning import VERTIPORT, Mission
@@ -72,14 +73,11 @@ FLYING = "flying..."  # the busy mark's label while a flight is computed
 
 
 def _replace(source: ColumnDataSource, data: dict[str, Any]) -> None:
-    """Set ``source.data`` to ``data`` unless it holds the same columns already. Bokeh sends every set of a
-    document's source to the browser, equal or not, and the browser draws its figure again: a flight's completion,
-    or a wind change's, would otherwise send every source of the part already shown (11 of them)."""
-    old = source.data
-    if old.keys() == data.keys() and all(len(old[k]) == len(v) and np.array_equal(np.asarray(old[k]), np.asarray(v))
-                                         for k, v in data.items()):
-        return
-    source.data = data
+    """Set ``source.data`` to ``data`` unless it holds the same columns already
+    (:func:`~uam_studio.app.style.same_plot_data`): a flight's completion, or a wind change's, would otherwise send
+    every source of the part already shown (11 of them)."""
+    if not same_plot_data(dict(source.data), data):
+        source.data = data
 
 
 def _held(action: Callable[[], None]) -> None:

@@ -31,7 +31,7 @@ from uam_studio.app.session import (
     respond_at_once,
     session_dispatcher,
 )
-from uam_studio.app.style import NOTE_STYLE, busy_html, busy_mark, heading
+from uam_studio.app.style import NOTE_STYLE, busy_html, busy_mark, heading, same_plot_data
 from uam_studio.flight.tables import WIND_RANGE_KTS
 from uam_studio.planning.missions.mission import COORD_RANGE_KM, SCENARIOS
 from uam_studio.planning.planner import plan_csv  # its module: mypy reads uam_studio.planning's lazy names as object
@@ -42,20 +42,6 @@ silence(FIXED_SIZING_MODE, True)
 
 COLUMNS = ["name", "x_km", "y_km", "priority", "wind_kts", "dwell_s"]
 MAP_HALF_KM = 80.0
-
-
-def _equal(a: Any, b: Any) -> bool:
-    """Deep equality of plot data (dicts, lists, tuples, arrays, numbers)."""
-    if isinstance(a, dict) and isinstance(b, dict):
-        return a.keys() == b.keys() and all(_equal(a[k], b[k]) for k in a)
-    if isinstance(a, (list, tuple, np.ndarray)) and isinstance(b, (list, tuple, np.ndarray)):
-        if len(a) != len(b):
-            return False
-        if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-            x, y = np.asarray(a), np.asarray(b)
-            return x.shape == y.shape and x.dtype == y.dtype and bool(np.array_equal(x, y))
-        return all(_equal(x, y) for x, y in zip(a, b))
-    return type(a) is type(b) and a == b
 
 
 def _same_frame(a: pd.DataFrame, b: pd.DataFrame) -> bool:
@@ -271,7 +257,7 @@ class PlannerView(PlannerPlots, pn.viewable.Viewer):
     def _send(self, key: str, draw: Callable[[Any], None], data: Any) -> None:
         """Draw ``data`` with ``draw`` (a figure's ``_draw_*`` method) unless it equals the last data
         drawn under ``key`` (comparing is cheaper than redrawing)."""
-        if key in self._sent and _equal(self._sent[key], data):
+        if key in self._sent and same_plot_data(self._sent[key], data):
             return
         self._sent[key] = data
         draw(data)
