@@ -421,21 +421,20 @@ _FLY_CHANGES_JS = """() => { for (const v of window.Bokeh.index.all_views()) { c
   return 0; }"""
 
 # Every text the Fly tab's status line (the Bokeh model of the pane '.uam-fly-status') takes, in order, kept in
-# window.__uamTexts (a change listener: a text shown for less than a frame is kept too); the watch clears it.
+# window.__uamTexts (a change listener: a text shown for less than a frame is kept too; the watch clears it); the
+# model itself in window.__uamStatus.
 _FLY_STATUS_JS = """() => { if (window.__uamStatusWatched) return true;
   for (const v of window.Bokeh.index.all_views()) { const m = v.model, c = m.css_classes;
     if (c && c.includes('uam-fly-status')) {
       window.__uamTexts = [];
       m.connect(m.properties.text.change, () => window.__uamTexts.push(String(m.text || '')));
-      window.__uamStatusWatched = true; return true; } }
+      window.__uamStatus = m; window.__uamStatusWatched = true; return true; } }
   return false; }"""
 
 # The Fly tab computes no flight: its status line does not say "flying..." (a click on "Fly the mission" while it
 # does would not change the status, and its busy mark would not be seen). A cleared wind change flies the flight
 # again, and the page can take the next click before that flight is shown.
-_FLY_IDLE_JS = """() => { for (const v of window.Bokeh.index.all_views()) { const m = v.model, c = m.css_classes;
-    if (c && c.includes('uam-fly-status')) return !String(m.text || '').includes('flying...'); }
-  return false; }"""
+_FLY_IDLE_JS = "() => !String(window.__uamStatus.text || '').includes('flying...')"  # after _FLY_STATUS_JS
 
 _FRAME_WATCH_JS = """([evt, cond]) => {
   // The page's own clock: from the action (the first ``evt``) to the first frame painted after ``cond()`` held;
