@@ -265,6 +265,9 @@ def test_a_repaint_that_moves_nothing_writes_no_stylesheet(page, app_url):
     _open(page, app_url)
     page.wait_for_function("() => window.Bokeh.require('core/dom').InlineStyleSheet.prototype._uam_same_text_kept "
                            "=== true")
+    # the Planner's figures laid out (the page can take the summary before the last of them is displayed)
+    page.wait_for_function("() => [...window.Bokeh.index.all_views()].filter(v => v.model.type === 'Figure' "
+                           "&& v.is_displayed).length >= 3")
     out = page.evaluate(JS_REPAINT_WRITES)
     assert out["figures"] >= 3, out  # the Planner's map and its voltage and altitude figures
     assert out["writes"] == 0, out
